@@ -1,0 +1,27 @@
+//! coop-rt: the real-time building blocks every station process stands on.
+//!
+//! - [`shm`]: named shared-memory segments with a validated, versioned header; lock-free SPSC rings
+//!   in them (rtrb's algorithm, one producer and one consumer enforced across processes); shared blocks.
+//! - [`sched`]: affinity, SCHED_FIFO/RR/OTHER, `mlockall`, stack pre-faulting, and a report of what is in
+//!   force, falling back loudly when a privilege is missing.
+//! - [`timer`]: a periodic timer on absolute CLOCK_MONOTONIC deadlines with overrun counting.
+//! - [`stats`]: live loop statistics another process reads without disturbing the loop.
+//!
+//! Real-time contract: after construction, `Producer::push`, `Consumer::pop`/`pop_newest`,
+//! `PeriodicTimer::wait` and `LoopStats::record` do not allocate, lock or log, and make no system call
+//! but the timer's `clock_nanosleep` (`rt/tests/alloc_free.rs` checks the allocation part). Everything
+//! else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
+//!
+//! `unsafe` lives only in [`shm`] and [`sched`] (H2); every block says why it is sound.
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod process;
+#[cfg(not(loom))]
+pub mod sched;
+pub mod shm;
+#[cfg(not(loom))]
+pub use shm::stats;
+pub mod sync;
+#[cfg(not(loom))]
+pub mod timer;

@@ -1,0 +1,105 @@
+//! One shared struct in a segment, read and written through atomics: the control block and live loop
+//! statistics, which another process reads without disturbing the loop.
+
+use std::marker::PhantomData;
+use std::time::Duration;
+
+use super::header::{OpenError, SegmentKind};
+use super::pod::TypeIdentity;
+use super::segment::{CreateError, RawSegment, SegmentName};
+
+/// Marks a struct that processes share by reference in a segment.
+///
+/// # Safety
+/// Implement only for a `#[repr(C)]` type that
+/// - is made of atomics from [`crate::sync`] (and arrays of them) and nothing else;
+/// - is a valid value when all-zero (a fresh segment is zeroed) and for every bit pattern (a hostile
+///   or stale writer can store anything);
+/// - has a [`TYPE_NAME`](ShmShared::TYPE_NAME) that changes whenever its layout changes.
+pub unsafe trait ShmShared: Sync + Send + 'static {
+    /// The layout's stable name, hashed into the segment header.
+    const TYPE_NAME: &'static str;
+}
+
+fn identity<B: ShmShared>() -> TypeIdentity {
+    TypeIdentity {
+        name: B::TYPE_NAME,
+        name_hash: super::pod::fnv1a64(B::TYPE_NAME.as_bytes()),
+        size: core::mem::size_of::<B>() as u64,
+        align: core::mem::align_of::<B>() as u64,
+    }
+}
+
+/// A segment holding one `B`. The creator's handle unlinks the name on drop.
+pub struct BlockSegment<B> {
+    seg: RawSegment,
+    _b: PhantomData<B>,
+}
+
+impl<B> std::fmt::Debug for BlockSegment<B> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BlockSegment")
+            .field("name", &self.seg.map.name())
+            .finish()
+    }
+}
+
+fn block_len<B>(capacity: u64) -> Option<usize> {
+    (capacity == 1).then_some(core::mem::size_of::<B>())
+}
+
+impl<B: ShmShared> BlockSegment<B> {
+    /// Creates segment `name` holding a zeroed `B`.
+    ///
+    /// # Errors
+    /// [`CreateError::Exists`] if the name is taken (never reused), [`CreateError::Os`] otherwise.
+    pub fn create(name: &SegmentName) -> Result<Self, CreateError> {
+        const { assert!(core::mem::align_of::<B>() <= super::header::HEADER_LEN) };
+        let seg = RawSegment::create(
+            name,
+            SegmentKind::Block,
+            identity::<B>(),
+            1,
+            core::mem::size_of::<B>(),
+            |_| {},
+        )?;
+        Ok(Self {
+            seg,
+            _b: PhantomData,
+        })
+    }
+
+    /// Opens segment `name`, waiting up to `ready_timeout` for its creator, and validates its header.
+    ///
+    /// # Errors
+    /// An [`OpenError`] naming the first header field that does not match, or the stale creator.
+    pub fn open(name: &SegmentName, ready_timeout: Duration) -> Result<Self, OpenError> {
+        let seg = RawSegment::open(
+            name,
+            SegmentKind::Block,
+            identity::<B>(),
+            Some(1),
+            ready_timeout,
+            block_len::<B>,
+        )?;
+        Ok(Self {
+            seg,
+            _b: PhantomData,
+        })
+    }
+
+    /// The segment's name.
+    pub fn name(&self) -> &str {
+        self.seg.map.name()
+    }
+}
+
+impl<B: ShmShared> core::ops::Deref for BlockSegment<B> {
+    type Target = B;
+    fn deref(&self) -> &B {
+        // SAFETY: the payload holds exactly size_of::<B>() bytes (length validated at open, set at create),
+        // 128-byte aligned (>= align_of B, asserted at create); B is valid for any bytes and shared only
+        // through atomics (ShmShared), and the mapping lives as long as `self`.
+        unsafe { &*(self.seg.map.payload() as *const B) }
+    }
+}
