@@ -4,12 +4,61 @@
 //! model-checked ones so `loom::model` can explore every interleaving of push, pop and abandon.
 //! `clippy.toml` forbids naming `core::sync::atomic` types anywhere else.
 
+pub use core::sync::atomic::Ordering;
+
 #[cfg(not(loom))]
 #[allow(clippy::disallowed_types)]
-pub use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
-
+type Inner64 = core::sync::atomic::AtomicU64;
 #[cfg(loom)]
-pub use loom::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
+type Inner64 = loom::sync::atomic::AtomicU64;
+
+/// A 64-bit atomic: `core`'s, or loom's under `--cfg loom`. `#[repr(transparent)]`, so in shared memory
+/// it is exactly a `u64`, and any bit pattern is a valid value.
+#[derive(Debug, Default)]
+#[repr(transparent)]
+pub struct AtomicU64(Inner64);
+
+impl AtomicU64 {
+    /// A new atomic holding `v`.
+    #[cfg(not(loom))]
+    pub const fn new(v: u64) -> Self {
+        Self(Inner64::new(v))
+    }
+    /// A new atomic holding `v`.
+    #[cfg(loom)]
+    pub fn new(v: u64) -> Self {
+        Self(Inner64::new(v))
+    }
+    /// Loads the value.
+    #[inline(always)]
+    pub fn load(&self, order: Ordering) -> u64 {
+        self.0.load(order)
+    }
+    /// Stores `v`.
+    #[inline(always)]
+    pub fn store(&self, v: u64, order: Ordering) {
+        self.0.store(v, order)
+    }
+    /// Stores `new` if the value is `current`; returns the previous value either way.
+    ///
+    /// # Errors
+    /// The value found, when it was not `current`.
+    #[inline(always)]
+    pub fn compare_exchange(
+        &self,
+        current: u64,
+        new: u64,
+        success: Ordering,
+        failure: Ordering,
+    ) -> Result<u64, u64> {
+        self.0.compare_exchange(current, new, success, failure)
+    }
+    /// Adds `v` (wrapping), returning the previous value.
+    #[inline(always)]
+    pub fn fetch_add(&self, v: u64, order: Ordering) -> u64 {
+        self.0.fetch_add(v, order)
+    }
+}
 
 /// A cell whose contents are handed across threads or processes by the ring protocol.
 ///

@@ -1,1 +1,115 @@
-//! placeholder
+//! Helpers for coop-haptics' multi-process tests: unique names so tests run in parallel without
+//! sharing a segment, bounded waits that fail with what was seen, and child processes that are killed
+//! (never leaked) when a test fails.
+#![forbid(unsafe_code)]
+
+use coop_rt::sync::{AtomicU64, Ordering};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A session name unique to this test process and call: `t<pid>x<n>`.
+pub fn unique_session() -> String {
+    static N: AtomicU64 = AtomicU64::new(0);
+    format!(
+        "t{}x{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Polls `f` until it returns `Some`, or panics after `limit` naming `what` and the last value seen.
+///
+/// # Panics
+/// When `limit` passes first.
+pub fn wait_until<T>(what: &str, limit: Duration, mut f: impl FnMut() -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(
+            start.elapsed() < limit,
+            "timed out after {limit:?} waiting for {what}"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// A child process that is SIGKILLed and reaped when dropped, so a failing test leaves no process.
+#[derive(Debug)]
+pub struct Reaped(pub Option<Child>);
+
+impl Reaped {
+    /// Spawns `cmd` with stdout piped.
+    ///
+    /// # Panics
+    /// If the program cannot be started.
+    pub fn spawn(cmd: &mut Command) -> Self {
+        Self(Some(
+            cmd.stdout(Stdio::piped())
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot start {cmd:?}: {e}")),
+        ))
+    }
+    /// The child's pid.
+    pub fn pid(&self) -> u32 {
+        self.0.as_ref().map_or(0, Child::id)
+    }
+    /// Sends SIGKILL.
+    pub fn kill(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+        }
+    }
+    /// Waits for exit and returns (success, stdout).
+    ///
+    /// # Panics
+    /// If waiting fails.
+    pub fn finish(mut self) -> (std::process::ExitStatus, String) {
+        let child = self.0.take().expect("child present");
+        let out = child.wait_with_output().expect("wait for child");
+        (
+            out.status,
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+        )
+    }
+}
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.0.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Reads the first line a child printed on stdout (fixtures print `ready` once set up).
+///
+/// # Panics
+/// If the child closed stdout without a line.
+pub fn first_line(child: &mut Reaped) -> String {
+    use std::io::BufRead;
+    let out = child
+        .0
+        .as_mut()
+        .and_then(|c| c.stdout.as_mut())
+        .expect("piped stdout");
+    let mut line = String::new();
+    std::io::BufReader::new(out)
+        .read_line(&mut line)
+        .expect("read child stdout");
+    assert!(!line.is_empty(), "child exited before printing a line");
+    line.trim().to_owned()
+}
+
+/// Names of every entry in /dev/shm that starts with `prefix`.
+pub fn shm_entries(prefix: &str) -> Vec<String> {
+    std::fs::read_dir("/dev/shm")
+        .map(|d| {
+            d.filter_map(|e| e.ok()?.file_name().into_string().ok())
+                .filter(|n| n.starts_with(prefix))
+                .collect()
+        })
+        .unwrap_or_default()
+}

@@ -67,3 +67,43 @@ fn check_component<'a>(what: &'static str, value: &'a str) -> Result<&'a str, Na
         })
     }
 }
+
+impl std::str::FromStr for SegmentName {
+    type Err = NameError;
+    /// Parses a full name, `coop_<session>_<station>_<what>`, checking each component.
+    fn from_str(s: &str) -> Result<Self, NameError> {
+        let bad = || NameError {
+            what: "segment name",
+            value: s.to_owned(),
+        };
+        let rest = s.strip_prefix(PREFIX).ok_or_else(bad)?;
+        let mut parts = rest.split('_');
+        match (parts.next(), parts.next(), parts.next(), parts.next()) {
+            (Some(session), Some(station), Some(what), None) => Self::new(session, station, what),
+            _ => Err(bad()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_build_and_parse() {
+        let n = SegmentName::new("s1", "alice", "tool").expect("valid");
+        assert_eq!(n.as_str(), "coop_s1_alice_tool");
+        assert_eq!("coop_s1_alice_tool".parse::<SegmentName>(), Ok(n));
+        for bad in [
+            "coop_a_b",
+            "coop_a_b_c_d",
+            "x_a_b_c",
+            "coop_a/b_c_d",
+            "coop__b_c",
+        ] {
+            assert!(bad.parse::<SegmentName>().is_err(), "{bad}");
+        }
+        assert!(SegmentName::new("a_b", "c", "d").is_err());
+        assert!(SegmentName::new(&"x".repeat(49), "c", "d").is_err());
+    }
+}
