@@ -248,9 +248,35 @@ fn current_cpus() -> Vec<usize> {
     }
 }
 
-/// CPUs this process may run on (its affinity mask at the time of the call).
+/// CPUs this process may be pinned to: the cgroup's effective cpuset, or else the online CPUs.
+///
+/// Not the calling thread's mask: a thread already pinned to one CPU may still pin a new thread to
+/// another.
 pub fn allowed_cpus() -> Vec<usize> {
-    current_cpus()
+    [
+        "/sys/fs/cgroup/cpuset.cpus.effective",
+        "/sys/devices/system/cpu/online",
+    ]
+    .iter()
+    .find_map(|p| {
+        std::fs::read_to_string(p)
+            .ok()
+            .and_then(|s| parse_cpu_ranges(s.trim()))
+    })
+    .filter(|v| !v.is_empty())
+    .unwrap_or_else(current_cpus)
+}
+
+/// Parses the kernel's CPU list format (`0-3,5`).
+fn parse_cpu_ranges(s: &str) -> Option<Vec<usize>> {
+    let mut cpus = Vec::new();
+    for part in s.split(',').filter(|p| !p.is_empty()) {
+        match part.split_once('-') {
+            Some((a, b)) => cpus.extend(a.parse::<usize>().ok()?..=b.parse().ok()?),
+            None => cpus.push(part.parse().ok()?),
+        }
+    }
+    Some(cpus)
 }
 
 /// Locks all current and future memory of the process (`mlockall(MCL_CURRENT | MCL_FUTURE)`) so the
@@ -308,25 +334,14 @@ pub struct DmaLatencyGuard {
 /// Asks the kernel to keep CPU wake-up latency at 0 µs for as long as the guard lives.
 ///
 /// # Errors
-/// A [`Warning`] when the file cannot be opened (not root, or no PM QoS interface).
-pub fn hold_cpu_dma_latency_zero() -> Result<DmaLatencyGuard, Warning> {
+/// The I/O error when the file cannot be opened or written (not root, or no PM QoS interface).
+pub fn hold_cpu_dma_latency_zero() -> std::io::Result<DmaLatencyGuard> {
     use std::io::Write;
-    let open = || -> std::io::Result<std::fs::File> {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .open("/dev/cpu_dma_latency")?;
-        f.write_all(&0i32.to_ne_bytes())?;
-        Ok(f)
-    };
-    open()
-        .map(|f| DmaLatencyGuard { _file: f })
-        .map_err(|e| Warning {
-            key: "dma_latency",
-            message: format!(
-                "cannot hold /dev/cpu_dma_latency at 0 ({e}); CPUs may enter deep idle states. \
-                 Fix: run as root"
-            ),
-        })
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")?;
+    f.write_all(&0i32.to_ne_bytes())?;
+    Ok(DmaLatencyGuard { _file: f })
 }
 
 /// What the kernel offers real-time loops.
@@ -424,6 +439,13 @@ mod tests {
         assert_eq!(in_force.policy, Policy::Other);
         assert_eq!(in_force.cpus, vec![cpus[0]]);
         assert!(warnings.is_empty(), "{warnings:?}");
+    }
+
+    #[test]
+    fn kernel_cpu_lists_parse() {
+        assert_eq!(parse_cpu_ranges("0-3,5"), Some(vec![0, 1, 2, 3, 5]));
+        assert_eq!(parse_cpu_ranges("1"), Some(vec![1]));
+        assert_eq!(parse_cpu_ranges("x"), None);
     }
 
     #[test]

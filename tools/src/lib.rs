@@ -1,1 +1,14 @@
-//! placeholder
+//! coop-tools: the command-line programs of coop-haptics, as thin `main`s over library modules.
+//!
+//! - [`latency`]: the wake-up latency tool users of cyclictest already know (issue 3).
+//! - [`ringbench`]: the shared-memory ring against rtrb between two cores (issue 3).
+//!
+//! The binaries set up real-time threads but contain no real-time code of their own beyond the
+//! measured loops, which follow coop-rt's contract (no allocation, lock, logging or system call but
+//! the timer sleep inside the loop).
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod latency;
+pub mod ringbench;

@@ -1,0 +1,7 @@
+//! `ringbench`: shared-memory ring across processes vs rtrb across threads. See `ringbench --help`.
+
+use clap::Parser;
+
+fn main() -> anyhow::Result<()> {
+    coop_tools::ringbench::run(&coop_tools::ringbench::Args::parse())
+}

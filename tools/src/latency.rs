@@ -1,0 +1,631 @@
+//! `latency`: wake-up latency of periodic real-time threads, measured as cyclictest does (H16).
+//!
+//! Each measuring thread applies the requested policy, priority and affinity (falling back loudly when
+//! denied), then sleeps to absolute deadlines `interval` apart and records `actual wake − deadline` in
+//! an hdrhistogram created and pre-faulted before the loop. Deadlines missed because a wake came too
+//! late are counted as overruns and their latency is recorded too (no coordinated omission). The header
+//! reports what is *in force*, read back from the kernel, not what was asked for.
+
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::{mpsc, Arc, Barrier};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use clap::{ArgAction, Parser};
+use coop_rt::sched::{self, InForce, Policy, Request, Warning};
+use coop_rt::sync::{AtomicU64, Ordering};
+use coop_rt::timer::{monotonic_ns, PeriodicTimer};
+use hdrhistogram::Histogram;
+
+use crate::cli::{parse_cpu_list, parse_duration, StopFlag};
+
+/// Largest latency the histogram holds: 10 s (larger samples saturate at this value; max is kept).
+const HIST_MAX_NS: u64 = 10_000_000_000;
+/// Missed deadlines recorded per wake at most; the rest are still counted as overruns.
+const MISSED_RECORD_CAP: u64 = 10_000;
+/// Stack pre-faulted for each measuring thread.
+const PREFAULT_STACK: usize = 256 * 1024;
+
+/// Command line of `latency`. Flags follow cyclictest's; `-h` is `--histogram` as there, and help is
+/// `--help` only.
+#[derive(Debug, Clone, Parser)]
+#[command(
+    name = "latency",
+    version,
+    disable_help_flag = true,
+    about = "Measure wake-up latency of periodic real-time threads (cyclictest-compatible).",
+    long_about = "Measure wake-up latency of periodic real-time threads, the way cyclictest does.\n\n\
+        Each thread sleeps to absolute CLOCK_MONOTONIC deadlines INTERVAL apart with \
+        clock_nanosleep(TIMER_ABSTIME) and records actual wake minus deadline. Output: '#' header \
+        lines with what is in force (policy, priority, affinity, mlock, kernel preempt model), a \
+        cyclictest line per thread (T: P: I: C: Min: Act: Avg: Max:, microseconds), then percentiles \
+        from an hdrhistogram. Missed deadlines are counted as overruns, never hidden.\n\n\
+        Defaults differ from cyclictest in one way: the policy is SCHED_FIFO priority 80, since \
+        that is what coop-haptics' servo loops run at. Without the privilege for it the tool warns \
+        once and measures under SCHED_OTHER, saying so in the header. Stop early with Ctrl-C.",
+    after_help = "Examples:\n  latency -D 5s -q                 5 s, one thread, FIFO 80, summary only\n  \
+        latency -i 1000 -p 80 -a 1 -m -D 60s --json out.json\n  latency -t -a -h 100 -l 10000      one thread per CPU, pinned, histogram to 100 us"
+)]
+pub struct Args {
+    /// Period of each thread in microseconds.
+    #[arg(short = 'i', long = "interval", value_name = "US", default_value_t = 1000,
+          value_parser = clap::value_parser!(u64).range(10..=10_000_000))]
+    pub interval_us: u64,
+    /// Cycles per thread, then stop (0 = no limit).
+    #[arg(short = 'l', long, value_name = "N", default_value_t = 0)]
+    pub loops: u64,
+    /// Run for this long: a number with unit s, m, h or d (seconds if none).
+    #[arg(short = 'D', long, value_name = "TIME", value_parser = parse_duration)]
+    pub duration: Option<Duration>,
+    /// Priority: 1..=99 for fifo and rr [default: 80], 0 for other.
+    #[arg(short = 'p', long, value_name = "PRIO")]
+    pub priority: Option<i32>,
+    /// Scheduling policy: fifo, rr or other.
+    #[arg(long, value_name = "POLICY", default_value = "fifo", value_parser = parse_policy)]
+    pub policy: Policy,
+    /// Pin threads to CPUs (e.g. 1, 0-1, 0,1), round-robin; `-a` alone pins thread N to CPU N.
+    #[arg(short = 'a', long, value_name = "CPUS", num_args = 0..=1, default_missing_value = "auto")]
+    pub affinity: Option<String>,
+    /// Number of measuring threads; `-t` alone runs one per allowed CPU.
+    #[arg(short = 't', long, value_name = "N", num_args = 0..=1, default_value = "1",
+          default_missing_value = "0")]
+    pub threads: usize,
+    /// Lock all memory (mlockall) before measuring.
+    #[arg(short = 'm', long)]
+    pub mlockall: bool,
+    /// Quiet: print only the summary at the end, no live updates.
+    #[arg(short = 'q', long)]
+    pub quiet: bool,
+    /// Print a histogram of 1 us buckets up to US microseconds at the end.
+    #[arg(short = 'h', long = "histogram", value_name = "US",
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub histogram: Option<u32>,
+    /// Write the results as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Do not hold /dev/cpu_dma_latency at 0 us (saves power, adds idle-exit latency).
+    #[arg(long)]
+    pub laptop: bool,
+    /// Print help.
+    #[arg(long, action = ArgAction::Help)]
+    pub help: Option<bool>,
+}
+
+fn parse_policy(s: &str) -> Result<Policy, String> {
+    s.parse()
+}
+
+/// Live figures a measuring thread publishes for the monitor (single writer, relaxed).
+#[derive(Debug, Default)]
+struct Live {
+    cycles: AtomicU64,
+    last_ns: AtomicU64,
+    min_ns: AtomicU64,
+    max_ns: AtomicU64,
+    sum_ns: AtomicU64,
+    overruns: AtomicU64,
+}
+
+/// What one measuring thread found.
+#[derive(Debug, Clone)]
+pub struct ThreadResult {
+    /// Thread number, from 0.
+    pub index: usize,
+    /// Kernel thread id.
+    pub tid: i32,
+    /// Policy, priority and CPUs in force while measuring.
+    pub in_force: InForce,
+    /// Cycles measured.
+    pub cycles: u64,
+    /// Deadlines missed.
+    pub overruns: u64,
+    /// Smallest latency, ns.
+    pub min_ns: u64,
+    /// Latest latency, ns.
+    pub last_ns: u64,
+    /// Sum of latencies, ns.
+    pub sum_ns: u64,
+    /// All latencies (and those of missed deadlines), ns.
+    pub hist: Histogram<u64>,
+}
+
+impl ThreadResult {
+    fn avg_ns(&self) -> u64 {
+        self.sum_ns.checked_div(self.cycles).unwrap_or(0)
+    }
+    fn pct_us(&self, q: f64) -> f64 {
+        self.hist.value_at_quantile(q) as f64 / 1_000.0
+    }
+}
+
+/// What a whole run found.
+#[derive(Debug)]
+pub struct Report {
+    /// The command line, for the JSON.
+    pub cmdline: String,
+    /// Per thread.
+    pub threads: Vec<ThreadResult>,
+    /// Privilege warnings, each once.
+    pub warnings: Vec<Warning>,
+    /// Memory locked in force.
+    pub mlocked: bool,
+    /// Whether /dev/cpu_dma_latency is held at 0, or why not.
+    pub dma_latency: Result<(), String>,
+    /// Kernel facts.
+    pub kernel: sched::KernelInfo,
+    /// Whether the run was stopped by a signal.
+    pub interrupted: bool,
+}
+
+fn thread_requests(args: &Args) -> anyhow::Result<Vec<Request>> {
+    let allowed = sched::allowed_cpus();
+    let n = if args.threads == 0 {
+        allowed.len().max(1)
+    } else {
+        args.threads
+    };
+    if n > 256 {
+        bail!("--threads {n} is more than 256");
+    }
+    let list = match args.affinity.as_deref() {
+        None => None,
+        Some("auto") => Some(allowed.clone()),
+        Some(s) => Some(parse_cpu_list(s).map_err(anyhow::Error::msg)?),
+    };
+    let priority = args
+        .priority
+        .unwrap_or(if args.policy.is_realtime() { 80 } else { 0 });
+    let mut reqs = Vec::with_capacity(n);
+    for i in 0..n {
+        let req = Request {
+            policy: args.policy,
+            priority,
+            cpus: list.as_ref().map(|l| vec![l[i % l.len()]]),
+            prefault_stack_bytes: PREFAULT_STACK,
+        };
+        req.validate()?;
+        reqs.push(req);
+    }
+    Ok(reqs)
+}
+
+/// Runs the measurement: sets up, prints the header (unless `print` is false), measures, and returns
+/// the report. Live lines go to stdout when it is a terminal and `--quiet` is not given.
+///
+/// # Errors
+/// A bad request (priority out of range, CPU not allowed) or a failure to start threads.
+pub fn run(args: &Args, cmdline: String, print: bool) -> anyhow::Result<Report> {
+    let reqs = thread_requests(args)?;
+    let stop =
+        StopFlag::on_sigint_sigterm().context("blocking SIGINT/SIGTERM for the stop flag")?;
+    let mut warnings = Vec::new();
+    if args.mlockall {
+        if let Err(w) = sched::lock_memory() {
+            warnings.push(w);
+        }
+    }
+    let dma = if args.laptop {
+        Err("not requested (--laptop)".to_owned())
+    } else {
+        sched::hold_cpu_dma_latency_zero().map_err(|e| e.kind().to_string())
+    };
+    let period = Duration::from_micros(args.interval_us);
+    let live: Arc<Vec<Live>> = Arc::new((0..reqs.len()).map(|_| Live::default()).collect());
+    let barrier = Arc::new(Barrier::new(reqs.len() + 1));
+    let (setup_tx, setup_rx) = mpsc::channel();
+    let end_after = args.duration;
+    let loops = args.loops;
+    let mut handles = Vec::new();
+    for (index, req) in reqs.into_iter().enumerate() {
+        let (live, barrier, setup_tx, stop) = (
+            live.clone(),
+            barrier.clone(),
+            setup_tx.clone(),
+            stop.clone(),
+        );
+        let handle = std::thread::Builder::new()
+            .name(format!("latency-{index}"))
+            .spawn(move || {
+                let setup = sched::apply_to_current_thread(&req);
+                let (in_force, warns) = match setup {
+                    Ok(v) => v,
+                    Err(e) => {
+                        let _ = setup_tx.send(Err(e.to_string()));
+                        return None;
+                    }
+                };
+                let mut hist = Histogram::<u64>::new_with_bounds(1, HIST_MAX_NS, 3)
+                    .expect("1..10 s with 3 digits is a valid histogram");
+                // Touch every counter page now so the loop never page-faults on first use.
+                hist.reset();
+                let tid = nix::unistd::gettid().as_raw();
+                let _ = setup_tx.send(Ok((index, in_force.clone(), warns)));
+                barrier.wait();
+                let r = measure(&live[index], &mut hist, period, loops, end_after, &stop);
+                Some(ThreadResult {
+                    index,
+                    tid,
+                    in_force,
+                    cycles: r.0,
+                    overruns: r.1,
+                    min_ns: r.2,
+                    last_ns: r.3,
+                    sum_ns: r.4,
+                    hist,
+                })
+            })
+            .context("starting a measuring thread")?;
+        handles.push(handle);
+    }
+    drop(setup_tx);
+    let mut in_force = Vec::new();
+    // Exactly one setup message per thread: each keeps its sender while it measures, so iterating
+    // until the channel closes would wait for the whole run.
+    for _ in 0..handles.len() {
+        let msg = setup_rx
+            .recv()
+            .context("a measuring thread died during setup")?;
+        match msg {
+            Ok((i, f, w)) => {
+                in_force.push((i, f));
+                for w in w {
+                    if !warnings.iter().any(|x: &Warning| x.key == w.key) {
+                        warnings.push(w);
+                    }
+                }
+            }
+            Err(e) => {
+                stop.raise();
+                bail!("{e}");
+            }
+        }
+    }
+    in_force.sort_by_key(|(i, _)| *i);
+    let kernel = sched::kernel_info();
+    let mlocked = sched::memory_locked();
+    if print {
+        for w in &warnings {
+            eprintln!("{w}");
+        }
+        print_header(
+            args,
+            &kernel,
+            &in_force,
+            mlocked,
+            &dma.as_ref().map(drop).map_err(Clone::clone),
+        );
+    }
+    barrier.wait();
+    let started = Instant::now();
+    let live_lines = print && !args.quiet && std::io::stdout().is_terminal();
+    let mut printed = false;
+    while handles.iter().any(|h| !h.is_finished()) {
+        std::thread::sleep(Duration::from_millis(100));
+        if end_after.is_some_and(|d| started.elapsed() >= d + Duration::from_millis(200)) {
+            stop.raise(); // threads stop on their own at the deadline; this is the backstop
+        }
+        if live_lines {
+            print_live(&live, &in_force, args.interval_us, printed);
+            printed = true;
+        }
+    }
+    let interrupted = stop.is_raised() && end_after.is_none_or(|d| started.elapsed() < d);
+    let mut threads: Vec<ThreadResult> = handles
+        .into_iter()
+        .filter_map(|h| h.join().ok().flatten())
+        .collect();
+    threads.sort_by_key(|t| t.index);
+    Ok(Report {
+        cmdline,
+        threads,
+        warnings,
+        mlocked,
+        dma_latency: dma.map(drop),
+        kernel,
+        interrupted,
+    })
+}
+
+/// The measuring loop of one thread. Returns (cycles, overruns, min, last, sum).
+fn measure(
+    live: &Live,
+    hist: &mut Histogram<u64>,
+    period: Duration,
+    loops: u64,
+    end_after: Option<Duration>,
+    stop: &StopFlag,
+) -> (u64, u64, u64, u64, u64) {
+    let start = monotonic_ns();
+    let end_ns = end_after.map_or(u64::MAX, |d| start.saturating_add(d.as_nanos() as u64));
+    let mut timer = PeriodicTimer::starting_at(start, period);
+    let period_ns = timer.period_ns();
+    let (mut cycles, mut overruns, mut min, mut sum, mut max) = (0u64, 0u64, u64::MAX, 0u64, 0);
+    let mut last;
+    loop {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep.
+        let w = timer.wait();
+        let lat = w.latency_ns;
+        hist.saturating_record(lat.max(1));
+        // Deadlines that passed while we were late: record their latency too (no coordinated omission).
+        for k in 1..=w.missed.min(MISSED_RECORD_CAP) {
+            hist.saturating_record(lat.saturating_sub(k * period_ns).max(1));
+        }
+        cycles += 1;
+        overruns += w.missed;
+        min = min.min(lat);
+        max = max.max(lat);
+        last = lat;
+        sum = sum.wrapping_add(lat);
+        live.cycles.store(cycles, Ordering::Relaxed);
+        live.last_ns.store(lat, Ordering::Relaxed);
+        live.min_ns.store(min, Ordering::Relaxed);
+        live.max_ns.store(max, Ordering::Relaxed);
+        live.sum_ns.store(sum, Ordering::Relaxed);
+        live.overruns.store(overruns, Ordering::Relaxed);
+        if (loops > 0 && cycles >= loops) || w.woke_ns >= end_ns || stop.is_raised() {
+            break;
+        }
+    }
+    (
+        cycles,
+        overruns,
+        if cycles == 0 { 0 } else { min },
+        last,
+        sum,
+    )
+}
+
+fn us(ns: u64) -> u64 {
+    (ns + 500) / 1_000
+}
+
+fn print_header(
+    args: &Args,
+    k: &sched::KernelInfo,
+    in_force: &[(usize, InForce)],
+    mlocked: bool,
+    dma: &Result<(), String>,
+) {
+    println!(
+        "# latency (coop-haptics {}): wake-up latency, cyclictest semantics",
+        env!("CARGO_PKG_VERSION")
+    );
+    println!(
+        "# kernel: {} preempt: {} realtime: {} rt-throttling: {}/{} us",
+        k.release,
+        k.preempt,
+        if k.realtime { "yes" } else { "no" },
+        k.rt_runtime_us,
+        k.rt_period_us
+    );
+    let requested_prio = args
+        .priority
+        .unwrap_or(if args.policy.is_realtime() { 80 } else { 0 });
+    for (i, f) in in_force {
+        println!(
+            "# T:{i:2} policy: {} priority: {} (requested {} {}) affinity: {}",
+            f.policy,
+            f.priority,
+            args.policy,
+            requested_prio,
+            cpus_text(&f.cpus)
+        );
+    }
+    println!(
+        "# mlockall: {} /dev/cpu_dma_latency: {}",
+        if mlocked { "yes" } else { "no" },
+        match dma {
+            Ok(()) => "0 us (held)".to_owned(),
+            Err(e) => format!("not held ({e})"),
+        }
+    );
+    let limit = match (args.loops, args.duration) {
+        (0, None) => "until Ctrl-C".to_owned(),
+        (l, None) => format!("{l} loops"),
+        (0, Some(d)) => format!("{} s", d.as_secs_f64()),
+        (l, Some(d)) => format!("{l} loops or {} s", d.as_secs_f64()),
+    };
+    println!(
+        "# interval: {} us threads: {} run: {limit}",
+        args.interval_us,
+        in_force.len()
+    );
+}
+
+fn cpus_text(cpus: &[usize]) -> String {
+    cpus.iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+fn print_live(live: &[Live], in_force: &[(usize, InForce)], interval_us: u64, again: bool) {
+    let mut out = std::io::stdout().lock();
+    if again {
+        let _ = write!(out, "\x1b[{}A", live.len());
+    }
+    for (i, l) in live.iter().enumerate() {
+        let c = l.cycles.load(Ordering::Relaxed);
+        let prio = in_force.get(i).map_or(0, |(_, f)| f.priority);
+        let _ =
+            writeln!(
+            out,
+            "T:{i:2} P:{prio:2} I:{interval_us} C:{c:8} Min:{:7} Act:{:5} Avg:{:5} Max:{:8}\x1b[K",
+            us(if c == 0 { 0 } else { l.min_ns.load(Ordering::Relaxed) }),
+            us(l.last_ns.load(Ordering::Relaxed)),
+            us(l.sum_ns.load(Ordering::Relaxed).checked_div(c).unwrap_or(0)),
+            us(l.max_ns.load(Ordering::Relaxed)),
+        );
+    }
+    let _ = out.flush();
+}
+
+/// Prints the per-thread cyclictest lines, percentiles and (with `-h`) the histogram.
+pub fn print_report(args: &Args, r: &Report) {
+    if r.interrupted {
+        println!("# stopped by signal");
+    }
+    for t in &r.threads {
+        println!(
+            "T:{:2} ({:6}) P:{:2} I:{} C:{:8} Min:{:7} Act:{:5} Avg:{:5} Max:{:8}",
+            t.index,
+            t.tid,
+            t.in_force.priority,
+            args.interval_us,
+            t.cycles,
+            us(t.min_ns),
+            us(t.last_ns),
+            us(t.avg_ns()),
+            us(t.hist.max()),
+        );
+    }
+    for t in &r.threads {
+        println!(
+            "# T:{:2} latency us: p50 {:.1} p99 {:.1} p99.9 {:.1} p99.99 {:.1} max {:.1} overruns {}",
+            t.index,
+            t.pct_us(0.5),
+            t.pct_us(0.99),
+            t.pct_us(0.999),
+            t.pct_us(0.9999),
+            t.hist.max() as f64 / 1_000.0,
+            t.overruns
+        );
+    }
+    if let Some(limit) = args.histogram {
+        println!("# Histogram");
+        for b in 0..u64::from(limit) {
+            let cols: Vec<String> = r
+                .threads
+                .iter()
+                .map(|t| format!("{:06}", bucket(&t.hist, b)))
+                .collect();
+            println!("{b:06} {}", cols.join("\t"));
+        }
+        let col = |f: &dyn Fn(&ThreadResult) -> u64| {
+            r.threads
+                .iter()
+                .map(|t| format!(" {:05}", f(t)))
+                .collect::<String>()
+        };
+        println!("# Total:{}", col(&|t| t.hist.len()));
+        println!("# Min Latencies:{}", col(&|t| us(t.min_ns)));
+        println!("# Avg Latencies:{}", col(&|t| us(t.avg_ns())));
+        println!("# Max Latencies:{}", col(&|t| us(t.hist.max())));
+        println!(
+            "# Histogram Overflows:{}",
+            col(&|t| t.hist.count_between(u64::from(limit) * 1_000, HIST_MAX_NS))
+        );
+    }
+}
+
+/// Samples in the 1 µs bucket `b` (latencies in [b, b+1) µs).
+fn bucket(h: &Histogram<u64>, b: u64) -> u64 {
+    h.count_between(b * 1_000, b * 1_000 + 999)
+}
+
+/// The report as JSON: cyclictest's top-level keys (`file_version`, `cmdline`, `sysinfo`, `thread`,
+/// `return_code`) plus percentiles and what was in force.
+pub fn report_json(args: &Args, r: &Report) -> serde_json::Value {
+    let threads: serde_json::Map<String, serde_json::Value> = r
+        .threads
+        .iter()
+        .map(|t| {
+            let hist: serde_json::Map<String, serde_json::Value> = (0..=us(t.hist.max()))
+                .filter_map(|b| {
+                    let n = bucket(&t.hist, b);
+                    (n > 0).then(|| (b.to_string(), n.into()))
+                })
+                .collect();
+            (
+                t.index.to_string(),
+                serde_json::json!({
+                    "tid": t.tid,
+                    "policy": t.in_force.policy.to_string(),
+                    "priority": t.in_force.priority,
+                    "cpus": t.in_force.cpus,
+                    "interval_us": args.interval_us,
+                    "cycles": t.cycles,
+                    "overruns": t.overruns,
+                    "min_us": t.min_ns as f64 / 1_000.0,
+                    "avg_us": t.avg_ns() as f64 / 1_000.0,
+                    "max_us": t.hist.max() as f64 / 1_000.0,
+                    "p50_us": t.pct_us(0.5),
+                    "p99_us": t.pct_us(0.99),
+                    "p999_us": t.pct_us(0.999),
+                    "p9999_us": t.pct_us(0.9999),
+                    "histogram_us": hist,
+                }),
+            )
+        })
+        .collect();
+    serde_json::json!({
+        "file_version": 1,
+        "tool": "coop-haptics latency",
+        "cmdline": r.cmdline,
+        "sysinfo": {
+            "kernel": r.kernel.release,
+            "preempt": r.kernel.preempt,
+            "realtime": r.kernel.realtime,
+            "rt_runtime_us": r.kernel.rt_runtime_us,
+            "rt_period_us": r.kernel.rt_period_us,
+            "cpus_allowed": sched::allowed_cpus(),
+        },
+        "in_force": {
+            "mlockall": r.mlocked,
+            "cpu_dma_latency_held": r.dma_latency.is_ok(),
+        },
+        "warnings": r.warnings.iter().map(|w| w.message.clone()).collect::<Vec<_>>(),
+        "interrupted": r.interrupted,
+        "thread": threads,
+        "return_code": 0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_parse_like_cyclictest() {
+        let a = Args::try_parse_from([
+            "latency", "-i", "500", "-l", "10", "-p", "70", "-a", "1", "-t", "2", "-m", "-q", "-h",
+            "50", "--json", "x.json",
+        ])
+        .expect("valid flags");
+        assert_eq!(
+            (a.interval_us, a.loops, a.priority, a.threads),
+            (500, 10, Some(70), 2)
+        );
+        assert_eq!(a.affinity.as_deref(), Some("1"));
+        assert!(a.mlockall && a.quiet);
+        assert_eq!(a.histogram, Some(50));
+        let a = Args::try_parse_from(["latency", "-t", "-a", "-D", "1m"]).expect("valid flags");
+        assert_eq!((a.threads, a.affinity.as_deref()), (0, Some("auto")));
+        assert_eq!(a.duration, Some(Duration::from_secs(60)));
+        for bad in [
+            vec!["latency", "-i", "0"],
+            vec!["latency", "-D", "5x"],
+            vec!["latency", "--policy", "deadline"],
+            vec!["latency", "--bogus"],
+        ] {
+            assert!(Args::try_parse_from(&bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn bad_priority_and_cpu_are_errors_before_anything_runs() {
+        let a = Args::try_parse_from(["latency", "-p", "120"]).expect("parses");
+        assert!(thread_requests(&a)
+            .unwrap_err()
+            .to_string()
+            .contains("priority 120"));
+        let a = Args::try_parse_from(["latency", "-a", "4000"]).expect("parses");
+        assert!(thread_requests(&a)
+            .unwrap_err()
+            .to_string()
+            .contains("CPU 4000"));
+        let a = Args::try_parse_from(["latency", "--policy", "other", "-p", "5"]).expect("parses");
+        assert!(thread_requests(&a).is_err());
+    }
+}
