@@ -258,6 +258,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pong_name = SegmentName::new(&session, "bench", "pong")?;
     let ping = RingSegment::<SeqMsg>::create(&ping_name, args.capacity)?;
     let pong = RingSegment::<SeqMsg>::create(&pong_name, args.capacity)?;
+    unlink_on_signal(vec![ping_name.clone(), pong_name.clone()])?;
     pin(a)?;
     let mut child = Command::new(std::env::current_exe()?)
         .args([
@@ -301,6 +302,29 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let s = figures(&h_shm, total, t_shm);
     let r = figures(&h_rtrb, total, t_rtrb);
     report(args, a, b, rounds, &s, &r);
+    Ok(())
+}
+
+/// Busy-polling loops never look at a stop flag, so on SIGINT/SIGTERM a watcher thread unlinks the
+/// rings itself and exits: a benchmark stopped by Ctrl-C or `timeout` leaves nothing in /dev/shm.
+/// (The pong process dies with us through its parent-death signal.)
+fn unlink_on_signal(names: Vec<SegmentName>) -> anyhow::Result<()> {
+    use nix::sys::signal::{SigSet, SigmaskHow, Signal};
+    let mut set = SigSet::empty();
+    set.add(Signal::SIGINT);
+    set.add(Signal::SIGTERM);
+    nix::sys::signal::pthread_sigmask(SigmaskHow::SIG_BLOCK, Some(&set), None)?;
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            if let Ok(sig) = set.wait() {
+                for n in &names {
+                    let _ = nix::sys::mman::shm_unlink(n.as_str());
+                }
+                eprintln!("ringbench: stopped by {sig}; rings removed");
+                std::process::exit(128 + sig as i32);
+            }
+        })?;
     Ok(())
 }
 
