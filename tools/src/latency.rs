@@ -494,11 +494,11 @@ pub fn print_report(args: &Args, r: &Report) {
     }
     if let Some(limit) = args.histogram {
         println!("# Histogram");
+        let buckets: Vec<_> = r.threads.iter().map(|t| us_buckets(&t.hist)).collect();
         for b in 0..u64::from(limit) {
-            let cols: Vec<String> = r
-                .threads
+            let cols: Vec<String> = buckets
                 .iter()
-                .map(|t| format!("{:06}", bucket(&t.hist, b)))
+                .map(|m| format!("{:06}", m.get(&b).copied().unwrap_or(0)))
                 .collect();
             println!("{b:06} {}", cols.join("\t"));
         }
@@ -514,14 +514,23 @@ pub fn print_report(args: &Args, r: &Report) {
         println!("# Max Latencies:{}", col(&|t| us(t.hist.max())));
         println!(
             "# Histogram Overflows:{}",
-            col(&|t| t.hist.count_between(u64::from(limit) * 1_000, HIST_MAX_NS))
+            col(&|t| us_buckets(&t.hist)
+                .range(u64::from(limit)..)
+                .map(|(_, n)| n)
+                .sum())
         );
     }
 }
 
-/// Samples in the 1 µs bucket `b` (latencies in [b, b+1) µs).
-fn bucket(h: &Histogram<u64>, b: u64) -> u64 {
-    h.count_between(b * 1_000, b * 1_000 + 999)
+/// The samples in 1 µs buckets. Each hdrhistogram sub-bucket goes wholly to the µs bucket of its
+/// median value (`count_between` on µs boundaries would count a straddling sub-bucket twice).
+fn us_buckets(h: &Histogram<u64>) -> std::collections::BTreeMap<u64, u64> {
+    let mut out = std::collections::BTreeMap::new();
+    for v in h.iter_recorded() {
+        let us = h.median_equivalent(v.value_iterated_to()) / 1_000;
+        *out.entry(us).or_insert(0) += v.count_at_value();
+    }
+    out
 }
 
 /// The report as JSON: cyclictest's top-level keys (`file_version`, `cmdline`, `sysinfo`, `thread`,
@@ -531,11 +540,9 @@ pub fn report_json(args: &Args, r: &Report) -> serde_json::Value {
         .threads
         .iter()
         .map(|t| {
-            let hist: serde_json::Map<String, serde_json::Value> = (0..=us(t.hist.max()))
-                .filter_map(|b| {
-                    let n = bucket(&t.hist, b);
-                    (n > 0).then(|| (b.to_string(), n.into()))
-                })
+            let hist: serde_json::Map<String, serde_json::Value> = us_buckets(&t.hist)
+                .into_iter()
+                .map(|(b, n)| (b.to_string(), n.into()))
                 .collect();
             (
                 t.index.to_string(),

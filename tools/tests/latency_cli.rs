@@ -152,7 +152,11 @@ fn json_holds_the_same_figures() {
         .sum();
     // Every cycle, plus every deadline missed while late (no coordinated omission).
     let overruns = t["overruns"].as_u64().expect("overruns");
-    assert_eq!(total, 300 + overruns, "histogram holds every cycle and missed deadline");
+    assert_eq!(
+        total,
+        300 + overruns,
+        "histogram holds every cycle and missed deadline"
+    );
     // The printed line says the same cycle count.
     assert!(
         out.lines()
