@@ -1,0 +1,436 @@
+//! Consistency methods: how each site's copy of the object is kept in step with the others'.
+//!
+//! A method is a [`Consistency`]: it integrates the site's copy on each physics tick, says what the site
+//! reports to the others, and handles their reports. Two are implemented; coupling between copies,
+//! local lag or rollback plug in the same way.
+//!
+//! - [`Naive`] — Eq. 8 across the network: every site integrates its own copy with its own user's
+//!   force plus the *latest received* forces of the others, and only forces are exchanged. With delay
+//!   and different rates the copies see different force histories and diverge (the paper's first
+//!   experiment).
+//! - [`Paper`] — Eq. 10/11: a site integrates its copy with its **own** user's force only (and the
+//!   environment), reports its state with the time of that state, and **adopts** any received state
+//!   newer than the newest it has adopted, dead-reckoned from the state's time to now.
+//!
+//! **Dead reckoning** ([`dead_reckon`]), order selectable: 0 adopts the state as it was; 1 extrapolates
+//! with constant velocity; 2 also with the sender's acceleration *from gravity and the environment*
+//! (not from its user's transient push, which the receiver cannot predict). "Gravity-aware": a state in
+//! free flight falls along the parabola, and a state resting on the floor, whose support cancels
+//! gravity, stays put. An extrapolated state is never left inside the environment: it is moved out of
+//! any plane it penetrates and its velocity into the plane removed.
+
+use crate::body::{self, BodyState, MassProps, Vec3, Wrench};
+use crate::contact::{
+    environment_wrench, ContactForce, ContactParams, EnvContactState, Plane, MAX_PLANES,
+};
+use crate::shape::Shape;
+use nalgebra::UnitQuaternion;
+
+/// Most sites a session may have.
+pub const MAX_SITES: usize = 8;
+
+/// The static world every site shares: the object's shape and mass, gravity, environment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct World {
+    /// Object shape.
+    pub shape: Shape,
+    /// Object mass properties.
+    pub mass: MassProps,
+    /// Gravity, m/s².
+    pub gravity: Vec3,
+    /// Environment planes (first `plane_count` are used).
+    pub planes: [Plane; MAX_PLANES],
+    /// How many planes.
+    pub plane_count: usize,
+    /// Object–environment contact law.
+    pub env_contact: ContactParams,
+}
+
+impl World {
+    /// The planes in use.
+    pub fn planes(&self) -> &[Plane] {
+        &self.planes[..self.plane_count.min(MAX_PLANES)]
+    }
+}
+
+/// Where a site's copy got its energy (passivity check).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EnergyAccount {
+    /// Work of the own user's contact force, J.
+    pub own_j: f64,
+    /// Work of other users' (received) forces, J (naive only).
+    pub remote_j: f64,
+    /// Work of the environment, J.
+    pub env_j: f64,
+    /// Mechanical-energy change caused by adoptions, J.
+    pub adoption_j: f64,
+}
+
+/// One site's copy of the object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectCopy {
+    /// The state this site believes.
+    pub state: BodyState,
+    /// Its time, s.
+    pub time_s: f64,
+    /// Environment friction memory.
+    pub env: EnvContactState,
+    /// Energy bookkeeping.
+    pub energy: EnergyAccount,
+    /// Whether the object touched the environment at the last step.
+    pub env_touching: bool,
+    /// Acceleration from gravity and environment at the last step (what a report carries), m/s².
+    pub passive_accel: Vec3,
+}
+
+impl ObjectCopy {
+    /// A copy at `state`, time 0.
+    pub fn new(state: BodyState) -> Self {
+        Self {
+            state,
+            time_s: 0.0,
+            env: EnvContactState::default(),
+            energy: EnergyAccount::default(),
+            env_touching: false,
+            passive_accel: Vec3::zeros(),
+        }
+    }
+}
+
+/// What sites send each other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Report {
+    /// `paper`: a state, the time it holds at, and its gravity+environment acceleration.
+    State {
+        /// Time of the state, s (sender's clock).
+        t_s: f64,
+        /// The state.
+        state: BodyState,
+        /// Acceleration from gravity and environment, m/s².
+        accel: Vec3,
+    },
+    /// `naive`: the sender's own contact force and where it acts.
+    Force {
+        /// Time, s.
+        t_s: f64,
+        /// The contact.
+        force: ContactForce,
+    },
+}
+
+/// A received state replaced the local one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Adoption {
+    /// Position before minus after, m.
+    pub jump: Vec3,
+    /// Mechanical energy after minus before, J.
+    pub energy_j: f64,
+    /// How far the state was extrapolated, s.
+    pub age_s: f64,
+}
+
+/// A consistency method (see the module docs).
+pub trait Consistency: std::fmt::Debug + Send {
+    /// Its name, as in scenario files.
+    fn name(&self) -> &'static str;
+    /// Integrates `copy` by `dt` with the own user's (held) contact `own`.
+    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64);
+    /// The report this site sends now.
+    fn report(&self, copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report;
+    /// Handles a report from site `from`; `Some` when the local copy jumped to a received state.
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        now_s: f64,
+    ) -> Option<Adoption>;
+}
+
+/// Integrates a copy by `dt` under `users` (contacts held over the step) and the environment, keeping
+/// the energy account. `own_count` of the users are the site's own (the rest are remote).
+pub fn integrate(
+    world: &World,
+    copy: &mut ObjectCopy,
+    users: &[ContactForce],
+    own_count: usize,
+    dt: f64,
+) {
+    let before = copy.state;
+    let mut env_state = copy.env;
+    // Wrenches at the start and end of the step, per source, for the work estimate.
+    let mut seen = [[Wrench::default(); 3]; 2];
+    let mut calls = 0usize;
+    let mut touching = false;
+    let next = body::step(&copy.state, &world.mass, world.gravity, dt, |s| {
+        let (env, touch) = environment_wrench(
+            &world.env_contact,
+            &mut env_state,
+            world.planes(),
+            &world.shape,
+            s,
+            &world.mass,
+        );
+        touching = touch;
+        let mut own = Wrench::default();
+        let mut remote = Wrench::default();
+        for (i, u) in users.iter().enumerate() {
+            if i < own_count {
+                own = own + u.wrench(s.pos);
+            } else {
+                remote = remote + u.wrench(s.pos);
+            }
+        }
+        seen[calls.min(1)] = [own, remote, env];
+        calls += 1;
+        own + remote + env
+    });
+    let omega_mid = (before.omega(&world.mass) + next.omega(&world.mass)) * 0.5;
+    let dx = next.pos - before.pos;
+    let work = |k: usize| {
+        let (a, b) = (seen[0][k], seen[1][k]);
+        (a.force + b.force).dot(&dx) * 0.5 + (a.torque + b.torque).dot(&omega_mid) * 0.5 * dt
+    };
+    copy.energy.own_j += work(0);
+    copy.energy.remote_j += work(1);
+    copy.energy.env_j += work(2);
+    copy.passive_accel = world.gravity + seen[1][2].force / world.mass.mass_kg;
+    copy.env_touching = touching;
+    copy.env = env_state;
+    copy.state = next;
+    copy.time_s += dt;
+}
+
+/// Extrapolates `s` by `dt` seconds (see the module docs for the orders).
+pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8) -> BodyState {
+    if order == 0 || dt <= 0.0 {
+        return *s;
+    }
+    let omega = s.omega(&world.mass);
+    let mut out = BodyState {
+        pos: s.pos + s.vel * dt,
+        rot: UnitQuaternion::from_scaled_axis(omega * dt) * s.rot,
+        ..*s
+    };
+    if order >= 2 {
+        out.pos += accel * (0.5 * dt * dt);
+        out.vel += accel * dt;
+    }
+    push_out_of_environment(world, &mut out);
+    out
+}
+
+/// Moves `s` out of any plane it penetrates and removes its velocity into that plane.
+fn push_out_of_environment(world: &World, s: &mut BodyState) {
+    let mut probes = [Vec3::zeros(); 16];
+    let count = world.shape.probe_points(&mut probes);
+    for plane in world.planes() {
+        let n = plane.normal;
+        let depth = match world.shape {
+            Shape::Sphere { radius } => plane.offset - n.dot(&(s.pos - n * radius)),
+            _ => probes[..count]
+                .iter()
+                .map(|p| plane.offset - n.dot(&(s.pos + s.rot * p)))
+                .fold(f64::NEG_INFINITY, f64::max),
+        };
+        if depth > 0.0 {
+            s.pos += n * depth;
+            let into = s.vel.dot(&n);
+            if into < 0.0 {
+                s.vel -= n * into;
+            }
+        }
+    }
+}
+
+/// Eq. 8 across the network: own force plus the latest received forces; forces are exchanged.
+#[derive(Debug, Clone, Default)]
+pub struct Naive {
+    remote: [Option<(f64, ContactForce)>; MAX_SITES],
+}
+
+impl Consistency for Naive {
+    fn name(&self) -> &'static str {
+        "naive"
+    }
+    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+        let mut users = [ContactForce::default(); MAX_SITES + 1];
+        users[0] = *own;
+        let mut n = 1;
+        for (_, f) in self.remote.iter().flatten() {
+            users[n] = *f;
+            n += 1;
+        }
+        integrate(world, copy, &users[..n], 1, dt);
+    }
+    fn report(&self, _copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report {
+        Report::Force {
+            t_s: now_s,
+            force: *own,
+        }
+    }
+    fn receive(
+        &mut self,
+        _w: &World,
+        _c: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        _now: f64,
+    ) -> Option<Adoption> {
+        if let (Report::Force { t_s, force }, Some(slot)) = (msg, self.remote.get_mut(from)) {
+            if slot.is_none_or(|(t, _)| *t_s > t) {
+                *slot = Some((*t_s, *force));
+            }
+        }
+        None
+    }
+}
+
+/// Eq. 10/11: own force only; adopt newer received states, dead-reckoned to now.
+#[derive(Debug, Clone)]
+pub struct Paper {
+    /// Dead-reckoning order (0, 1, 2).
+    pub order: u8,
+    newest_adopted_s: f64,
+}
+
+impl Paper {
+    /// With dead-reckoning `order`.
+    pub fn new(order: u8) -> Self {
+        Self {
+            order,
+            newest_adopted_s: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl Consistency for Paper {
+    fn name(&self) -> &'static str {
+        "paper"
+    }
+    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+        integrate(world, copy, std::slice::from_ref(own), 1, dt);
+    }
+    fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
+        Report::State {
+            t_s: now_s,
+            state: copy.state,
+            accel: copy.passive_accel,
+        }
+    }
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        _from: usize,
+        msg: &Report,
+        now_s: f64,
+    ) -> Option<Adoption> {
+        let Report::State { t_s, state, accel } = msg else {
+            return None;
+        };
+        if *t_s <= self.newest_adopted_s || !state.is_finite() {
+            return None;
+        }
+        self.newest_adopted_s = *t_s;
+        let new = dead_reckon(world, state, *accel, now_s - t_s, self.order);
+        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let adoption = Adoption {
+            jump: copy.state.pos - new.pos,
+            energy_j: e(&new) - e(&copy.state),
+            age_s: now_s - t_s,
+        };
+        copy.energy.adoption_j += adoption.energy_j;
+        copy.state = new;
+        Some(adoption)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn world() -> World {
+        let shape = Shape::Cylinder {
+            radius: 0.04,
+            half_height: 0.01,
+        };
+        let mut planes = [Plane {
+            normal: Vec3::y(),
+            offset: 0.0,
+        }; MAX_PLANES];
+        planes[0] = Plane {
+            normal: Vec3::y(),
+            offset: -0.1,
+        };
+        World {
+            shape,
+            mass: MassProps {
+                mass_kg: 0.1,
+                inertia_body: shape.inertia(0.1),
+            },
+            gravity: Vec3::new(0.0, -9.81 / 3.0, 0.0),
+            planes,
+            plane_count: 1,
+            env_contact: ContactParams {
+                stiffness_n_per_m: 2000.0,
+                damping_n_s_per_m: 5.0,
+                tangential_stiffness_n_per_m: 2000.0,
+                tangential_damping_n_s_per_m: 5.0,
+                friction_static: 0.6,
+                friction_kinetic: 0.5,
+            },
+        }
+    }
+
+    /// Second-order dead reckoning is exact in free flight; first order misses ½ g Δ².
+    #[test]
+    fn gravity_aware_dead_reckoning_follows_the_parabola() {
+        let w = world();
+        let s = BodyState {
+            vel: Vec3::new(0.2, 0.5, 0.0),
+            ..BodyState::at_rest(Vec3::new(0.0, 0.2, 0.0))
+        };
+        let dt = 0.3;
+        let exact = s.pos + s.vel * dt + w.gravity * (0.5 * dt * dt);
+        assert!((dead_reckon(&w, &s, w.gravity, dt, 2).pos - exact).norm() < 1e-12);
+        assert!((dead_reckon(&w, &s, w.gravity, dt, 1).pos - exact).norm() > 0.1);
+    }
+
+    /// A resting object (support cancels gravity) is not extrapolated through the floor.
+    #[test]
+    fn dead_reckoning_never_enters_the_environment() {
+        let w = world();
+        let s = BodyState {
+            vel: Vec3::new(0.0, -0.5, 0.0),
+            ..BodyState::at_rest(Vec3::new(0.0, -0.06, 0.0))
+        };
+        let r = dead_reckon(&w, &s, w.gravity, 0.5, 2);
+        assert!(r.pos.y >= -0.06 - 1e-12, "{}", r.pos.y);
+        assert!(r.vel.y >= 0.0);
+    }
+
+    #[test]
+    fn paper_adopts_only_newer_states() {
+        let w = world();
+        let mut m = Paper::new(2);
+        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::zeros()));
+        let msg = |t: f64, x: f64| Report::State {
+            t_s: t,
+            state: BodyState::at_rest(Vec3::new(x, 0.0, 0.0)),
+            accel: Vec3::zeros(),
+        };
+        assert!(m.receive(&w, &mut copy, 1, &msg(1.0, 0.5), 1.0).is_some());
+        assert_eq!(copy.state.pos.x, 0.5);
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7), 1.1).is_none(),
+            "older: ignored"
+        );
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7), 1.1).is_none(),
+            "replay: ignored"
+        );
+        assert_eq!(copy.state.pos.x, 0.5);
+    }
+}

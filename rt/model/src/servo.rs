@@ -1,0 +1,161 @@
+//! One servo tick, as the station's servo loop and the simulator both run it: read the device,
+//! kinematics (Eq. 5), contact with the newest object state (Eq. 7), the displayed force (Eq. 6), the
+//! PI controller (Eq. 12), limits; and two safety rules:
+//!
+//! - **Stale world.** If the newest object state is older than the stale limit (physics or network
+//!   stopped), the displayed force ramps linearly to zero over the ramp time and stays there until
+//!   fresh states return, then ramps back. The commanded force and torques ramp with it, so the
+//!   device goes limp rather than holding a force against the hand.
+//! - **Bounded adoption step.** When physics adopts a remote state, the object can jump. The servo
+//!   renders the object at its new pose plus an offset that starts at the jump and shrinks by at most
+//!   `max_adoption_step_n / K` per tick, so an adoption changes the displayed force by at most
+//!   `max_adoption_step_n` per tick (plus what the hand itself does).
+
+use crate::body::{BodyState, MassProps, Vec3};
+use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::controller::{ControllerParams, PiForceController};
+use crate::device::ScaraParams;
+use crate::shape::Shape;
+
+/// Servo parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoParams {
+    /// Radius of the virtual tool's tip, m.
+    pub tool_radius_m: f64,
+    /// Tool–object contact law.
+    pub contact: ContactParams,
+    /// Force controller.
+    pub controller: ControllerParams,
+    /// Object states older than this are stale, s.
+    pub stale_limit_s: f64,
+    /// Time to ramp the displayed force to zero (and back), s.
+    pub stale_ramp_s: f64,
+    /// Largest displayed-force change per tick an adoption may cause, N.
+    pub max_adoption_step_n: f64,
+}
+
+/// What a servo tick reads.
+#[derive(Debug, Clone, Copy)]
+pub struct ServoInput<'a> {
+    /// Now, s.
+    pub now_s: f64,
+    /// Tick length, s.
+    pub dt_s: f64,
+    /// Joint positions.
+    pub q: Vec3,
+    /// Joint velocities.
+    pub qd: Vec3,
+    /// Force sensor: force the device applies to the hand, N.
+    pub f_measured: Vec3,
+    /// Newest object state.
+    pub object: &'a BodyState,
+    /// Its time, s.
+    pub object_time_s: f64,
+    /// Jump of the object position since the last tick caused by adoptions (old − new), m.
+    pub adoption_jump: Vec3,
+}
+
+/// What a servo tick produces.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoOutput {
+    /// Joint torques to apply (clamped).
+    pub tau: Vec3,
+    /// Desired force at the hand F_h (after the stale ramp), N.
+    pub f_desired: Vec3,
+    /// Commanded handle force after the controller's limits, N.
+    pub f_command: Vec3,
+    /// The tool's contact on the object (force on the object), for physics.
+    pub contact: ContactForce,
+    /// Tool position, world.
+    pub tool_pos: Vec3,
+    /// Tool velocity, world.
+    pub tool_vel: Vec3,
+    /// Display scale: 1 fresh, 0 stale.
+    pub scale: f64,
+}
+
+/// A servo loop's state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Servo {
+    /// Parameters.
+    pub params: ServoParams,
+    /// The arm.
+    pub arm: ScaraParams,
+    contact: ToolContactState,
+    controller: PiForceController,
+    scale: f64,
+    offset: Vec3,
+}
+
+impl Servo {
+    /// A servo for `arm`.
+    pub fn new(params: ServoParams, arm: ScaraParams) -> Self {
+        Self {
+            params,
+            arm,
+            contact: ToolContactState::default(),
+            controller: PiForceController::default(),
+            scale: 1.0,
+            offset: Vec3::zeros(),
+        }
+    }
+
+    /// One tick.
+    pub fn step(&mut self, inp: &ServoInput<'_>, shape: &Shape, mass: &MassProps) -> ServoOutput {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let p = &self.params;
+        let j = self.arm.jacobian(&inp.q);
+        let tool_pos = self.arm.forward(&inp.q);
+        let tool_vel = j * inp.qd;
+        // Bounded adoption step: render at the adopted pose plus a shrinking offset.
+        self.offset += inp.adoption_jump;
+        let shrink = p.max_adoption_step_n / p.contact.stiffness_n_per_m;
+        let n = self.offset.norm();
+        self.offset = if n > shrink {
+            self.offset * ((n - shrink) / n)
+        } else {
+            Vec3::zeros()
+        };
+        let rendered = BodyState {
+            pos: inp.object.pos + self.offset,
+            ..*inp.object
+        };
+        let contact = tool_contact(
+            &p.contact,
+            &mut self.contact,
+            shape,
+            &rendered,
+            mass,
+            tool_pos,
+            tool_vel,
+            p.tool_radius_m,
+        );
+        // Stale world: ramp the display to zero, and back once fresh.
+        let stale = inp.now_s - inp.object_time_s > p.stale_limit_s;
+        let rate = inp.dt_s / p.stale_ramp_s.max(1e-9);
+        self.scale = if stale {
+            (self.scale - rate).max(0.0)
+        } else {
+            (self.scale + rate).min(1.0)
+        };
+        if self.scale == 0.0 {
+            self.controller.reset_integral();
+        }
+        // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
+        let f_desired = -contact.force * self.scale;
+        let (f_command, tau) =
+            self.controller
+                .step(&p.controller, f_desired, inp.f_measured, &j, inp.dt_s);
+        // The command itself ramps too: a stale world leaves the device limp, not force-controlled.
+        let (f_command, tau) = (f_command * self.scale, tau * self.scale);
+        ServoOutput {
+            tau: self.arm.clamp_torque(tau),
+            f_desired,
+            f_command,
+            contact,
+            tool_pos,
+            tool_vel,
+            scale: self.scale,
+        }
+    }
+}

@@ -1,0 +1,157 @@
+//! Object shapes and the signed distance a contact needs (Eq. 7's penetration Δr).
+//!
+//! All queries are in the body frame; callers transform the world point in. The distance is negative
+//! inside; the normal points out of the object at the closest surface point, so the deepest
+//! penetration of a tool tip of radius ρ is `ρ − distance` along that normal.
+
+use crate::body::Vec3;
+
+/// A convex object shape, centred on its centre of mass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Shape {
+    /// A sphere of this radius, m.
+    Sphere {
+        /// Radius, m.
+        radius: f64,
+    },
+    /// A cylinder (disk) along the body z axis.
+    Cylinder {
+        /// Radius, m.
+        radius: f64,
+        /// Half the height, m.
+        half_height: f64,
+    },
+    /// A box with these half extents along the body axes, m.
+    Box {
+        /// Half extents, m.
+        half: Vec3,
+    },
+}
+
+impl Shape {
+    /// Signed distance from body-frame point `p` to the surface, and the outward unit normal there.
+    pub fn signed_distance(&self, p: Vec3) -> (f64, Vec3) {
+        match *self {
+            Shape::Sphere { radius } => {
+                let d = p.norm();
+                let n = if d > 1e-12 { p / d } else { Vec3::x() };
+                (d - radius, n)
+            }
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let rho = (p.x * p.x + p.y * p.y).sqrt();
+                let radial = if rho > 1e-12 {
+                    Vec3::new(p.x / rho, p.y / rho, 0.0)
+                } else {
+                    Vec3::x()
+                };
+                let axial = Vec3::new(0.0, 0.0, if p.z >= 0.0 { 1.0 } else { -1.0 });
+                let (dr, dz) = (rho - radius, p.z.abs() - half_height);
+                if dr <= 0.0 && dz <= 0.0 {
+                    // Inside: nearest face.
+                    if dr > dz {
+                        (dr, radial)
+                    } else {
+                        (dz, axial)
+                    }
+                } else {
+                    let (er, ez) = (dr.max(0.0), dz.max(0.0));
+                    let n = (radial * er + axial * ez).normalize();
+                    ((er * er + ez * ez).sqrt(), n)
+                }
+            }
+            Shape::Box { half } => {
+                let q = p.abs() - half;
+                let sign = p.map(|v| if v >= 0.0 { 1.0 } else { -1.0 });
+                if q.max() <= 0.0 {
+                    let axis = q.imax();
+                    let mut n = Vec3::zeros();
+                    n[axis] = sign[axis];
+                    (q[axis], n)
+                } else {
+                    let out = q.map(|v| v.max(0.0));
+                    (out.norm(), out.component_mul(&sign).normalize())
+                }
+            }
+        }
+    }
+
+    /// The body-frame points that can touch a flat environment surface: the one support point of a
+    /// sphere, the 8 corners of a box, 8 rim points on each cap of a cylinder. A fixed set, so an
+    /// environment contact needs no allocation.
+    pub fn probe_points(&self, out: &mut [Vec3; 16]) -> usize {
+        match *self {
+            Shape::Sphere { .. } => 0,
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                for (i, o) in out.iter_mut().enumerate() {
+                    let a = (i % 8) as f64 * std::f64::consts::FRAC_PI_4;
+                    let z = if i < 8 { half_height } else { -half_height };
+                    *o = Vec3::new(radius * a.cos(), radius * a.sin(), z);
+                }
+                16
+            }
+            Shape::Box { half } => {
+                for (i, o) in out.iter_mut().take(8).enumerate() {
+                    let s = |bit: usize| if i & bit == 0 { -1.0 } else { 1.0 };
+                    *o = Vec3::new(s(1) * half.x, s(2) * half.y, s(4) * half.z);
+                }
+                8
+            }
+        }
+    }
+
+    /// Principal moments of inertia of the solid shape of mass `m`, kg·m².
+    pub fn inertia(&self, m: f64) -> Vec3 {
+        match *self {
+            Shape::Sphere { radius } => Vec3::repeat(0.4 * m * radius * radius),
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let h = 2.0 * half_height;
+                let side = m * (3.0 * radius * radius + h * h) / 12.0;
+                Vec3::new(side, side, 0.5 * m * radius * radius)
+            }
+            Shape::Box { half } => {
+                let d = half * 2.0;
+                Vec3::new(
+                    m * (d.y * d.y + d.z * d.z) / 12.0,
+                    m * (d.x * d.x + d.z * d.z) / 12.0,
+                    m * (d.x * d.x + d.y * d.y) / 12.0,
+                )
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances_and_normals() {
+        let s = Shape::Sphere { radius: 0.04 };
+        let (d, n) = s.signed_distance(Vec3::new(0.03, 0.0, 0.0));
+        assert!((d + 0.01).abs() < 1e-12 && n == Vec3::x());
+        let c = Shape::Cylinder {
+            radius: 0.04,
+            half_height: 0.01,
+        };
+        let (d, n) = c.signed_distance(Vec3::new(0.0, 0.035, 0.0));
+        assert!((d + 0.005).abs() < 1e-12 && (n - Vec3::y()).norm() < 1e-12);
+        let (d, n) = c.signed_distance(Vec3::new(0.0, 0.0, 0.02));
+        assert!((d - 0.01).abs() < 1e-12 && n == Vec3::z());
+        let b = Shape::Box {
+            half: Vec3::new(0.05, 0.02, 0.02),
+        };
+        let (d, n) = b.signed_distance(Vec3::new(0.0, -0.015, 0.0));
+        assert!((d + 0.005).abs() < 1e-12 && n == -Vec3::y());
+        let (d, _) = b.signed_distance(Vec3::new(0.06, 0.0, 0.0));
+        assert!((d - 0.01).abs() < 1e-12);
+    }
+}
