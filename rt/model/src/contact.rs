@@ -154,6 +154,16 @@ pub struct EnvContactState {
     anchors: [Option<Vec3>; MAX_PLANES],
 }
 
+impl EnvContactState {
+    /// Moves every stick point by `delta`: when a copy adopts another pose, its contacts' memory must
+    /// move with the object, or the friction springs would drag it back to where it was.
+    pub fn shift(&mut self, delta: Vec3) {
+        for a in self.anchors.iter_mut().flatten() {
+            *a += delta;
+        }
+    }
+}
+
 /// The environment's wrench on the object (J_eᵀ F_e), updating the friction memory. Returns the
 /// wrench and whether any plane touches.
 ///
@@ -176,12 +186,16 @@ pub fn environment_wrench(
     for (plane, anchor) in planes.iter().zip(state.anchors.iter_mut()).take(MAX_PLANES) {
         let n = plane.normal;
         let (mut deepest, mut weight, mut centre) = (0.0f64, 0.0, Vec3::zeros());
+        let mut touching_points = [Vec3::zeros(); 16];
+        let mut n_touch = 0usize;
         let mut probe = |p: Vec3| {
             let depth = plane.offset - n.dot(&p);
             if depth > 0.0 {
                 deepest = deepest.max(depth);
                 weight += depth;
                 centre += p * depth;
+                touching_points[n_touch.min(15)] = p;
+                n_touch += 1;
             }
         };
         if let Shape::Sphere { radius } = *shape {
@@ -197,12 +211,40 @@ pub fn environment_wrench(
         }
         touching = true;
         let p = centre / weight;
-        let v = body.point_velocity(mass, p);
-        let f_n = (c.stiffness_n_per_m * deepest - c.damping_n_s_per_m * v.dot(&n)).max(0.0);
-        let a = anchor.unwrap_or(p);
-        let (f_t, slipped, stretch) = friction(c, a, p, -v, n, f_n);
-        *anchor = Some(if slipped { p + stretch } else { a });
-        total = total + Wrench::at_point(n * f_n + f_t, p, body.pos);
+        // Stiffness: K times the deepest penetration at the centre of pressure. Damping: shared by the
+        // touching points, each resisting its own normal velocity, so rocking is damped as well as
+        // bouncing (for pure translation it is exactly −B ṙ_n).
+        let f_spring = c.stiffness_n_per_m * deepest;
+        let share = c.damping_n_s_per_m / n_touch as f64;
+        let mut damping = Wrench::default();
+        let mut f_damp_total = 0.0;
+        for q in &touching_points[..n_touch.min(16)] {
+            let f = -share * body.point_velocity(mass, *q).dot(&n);
+            f_damp_total += f;
+            damping = damping + Wrench::at_point(n * f, *q, body.pos);
+        }
+        // Never pulling: limit the damping so the total normal force stays >= 0.
+        let scale = if f_spring + f_damp_total < 0.0 && f_damp_total < 0.0 {
+            -f_spring / f_damp_total
+        } else {
+            1.0
+        };
+        let f_n = f_spring + f_damp_total * scale;
+        // Friction acts at the centre of the touching patch (unweighted): for a flat face that is its
+        // centre whatever the micro-tilt, so a spinning disk's spin does not leak into translation.
+        let patch =
+            touching_points[..n_touch.min(16)].iter().sum::<Vec3>() / n_touch.min(16) as f64;
+        let v = body.point_velocity(mass, patch);
+        let a = anchor.unwrap_or(patch);
+        let (f_t, slipped, stretch) = friction(c, a, patch, -v, n, f_n);
+        *anchor = Some(if slipped { patch + stretch } else { a });
+        total = total
+            + Wrench::at_point(n * f_spring, p, body.pos)
+            + Wrench::at_point(f_t, patch, body.pos)
+            + Wrench {
+                force: damping.force * scale,
+                torque: damping.torque * scale,
+            };
     }
     (total, touching)
 }

@@ -13,8 +13,9 @@
 //!   newer than the newest it has adopted, dead-reckoned from the state's time to now.
 //!
 //! **Dead reckoning** ([`dead_reckon`]), order selectable: 0 adopts the state as it was; 1 extrapolates
-//! with constant velocity; 2 also with the sender's acceleration *from gravity and the environment*
-//! (not from its user's transient push, which the receiver cannot predict). "Gravity-aware": a state in
+//! with constant velocity; 2 also with gravity less what the environment supports
+//! ([`supported_gravity`]; not the sender's user's transient push, which the receiver cannot predict),
+//! and with kinetic friction slowing a slide on a supporting plane until it stops. "Gravity-aware": a state in
 //! free flight falls along the parabola, and a state resting on the floor, whose support cancels
 //! gravity, stays put. An extrapolated state is never left inside the environment: it is moved out of
 //! any plane it penetrates and its velocity into the plane removed.
@@ -79,8 +80,12 @@ pub struct ObjectCopy {
     pub energy: EnergyAccount,
     /// Whether the object touched the environment at the last step.
     pub env_touching: bool,
-    /// Acceleration from gravity and environment at the last step (what a report carries), m/s².
+    /// Gravity less the environment's support at the last step (what a report carries), m/s².
     pub passive_accel: Vec3,
+    /// When a user's force last changed this state (as far as this site knows), s.
+    pub changed_s: f64,
+    /// Which site's user made that change.
+    pub changed_by: usize,
 }
 
 impl ObjectCopy {
@@ -93,6 +98,8 @@ impl ObjectCopy {
             energy: EnergyAccount::default(),
             env_touching: false,
             passive_accel: Vec3::zeros(),
+            changed_s: 0.0,
+            changed_by: 0,
         }
     }
 }
@@ -100,14 +107,19 @@ impl ObjectCopy {
 /// What sites send each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Report {
-    /// `paper`: a state, the time it holds at, and its gravity+environment acceleration.
+    /// `paper`: a state, the time it holds at, the time and author of its last change by a user, and
+    /// the acceleration a receiver should extrapolate it with.
     State {
         /// Time of the state, s (sender's clock).
         t_s: f64,
         /// The state.
         state: BodyState,
-        /// Acceleration from gravity and environment, m/s².
+        /// Gravity less the environment's support, m/s².
         accel: Vec3,
+        /// When a user's force last changed it, s.
+        changed_s: f64,
+        /// Whose user that was.
+        changed_by: usize,
     },
     /// `naive`: the sender's own contact force and where it acts.
     Force {
@@ -146,6 +158,10 @@ pub trait Consistency: std::fmt::Debug + Send {
         msg: &Report,
         now_s: f64,
     ) -> Option<Adoption>;
+    /// Sum of the other sites' forces this method applies to the local copy (for traces), N.
+    fn remote_force(&self) -> Vec3 {
+        Vec3::zeros()
+    }
 }
 
 /// Integrates a copy by `dt` under `users` (contacts held over the step) and the environment, keeping
@@ -195,7 +211,7 @@ pub fn integrate(
     copy.energy.own_j += work(0);
     copy.energy.remote_j += work(1);
     copy.energy.env_j += work(2);
-    copy.passive_accel = world.gravity + seen[1][2].force / world.mass.mass_kg;
+    copy.passive_accel = supported_gravity(world, &next);
     copy.env_touching = touching;
     copy.env = env_state;
     copy.state = next;
@@ -216,25 +232,76 @@ pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8
     if order >= 2 {
         out.pos += accel * (0.5 * dt * dt);
         out.vel += accel * dt;
+        slide_with_friction(world, s, accel, dt, &mut out);
     }
     push_out_of_environment(world, &mut out);
     out
 }
 
-/// Moves `s` out of any plane it penetrates and removes its velocity into that plane.
-fn push_out_of_environment(world: &World, s: &mut BodyState) {
-    let mut probes = [Vec3::zeros(); 16];
-    let count = world.shape.probe_points(&mut probes);
+/// Order 2 on a supporting plane: the tangential velocity decays under kinetic friction
+/// (μ_k times the supported part of gravity) and stops, rather than sliding on for ever.
+fn slide_with_friction(world: &World, s: &BodyState, accel: Vec3, dt: f64, out: &mut BodyState) {
     for plane in world.planes() {
         let n = plane.normal;
-        let depth = match world.shape {
-            Shape::Sphere { radius } => plane.offset - n.dot(&(s.pos - n * radius)),
-            _ => probes[..count]
+        let support = -(world.gravity.dot(&n));
+        if support <= 0.0 || plane_depth(world, plane, s) <= -1e-4 {
+            continue;
+        }
+        let v_t = s.vel - n * s.vel.dot(&n);
+        let speed = v_t.norm();
+        let decel = world.env_contact.friction_kinetic * support;
+        if speed < 1e-12 || decel <= 0.0 {
+            continue;
+        }
+        let dir = v_t / speed;
+        let t = dt.min(speed / decel);
+        let along = speed * t - 0.5 * decel * t * t;
+        // Replace the frictionless tangential advance with the decelerating one.
+        let a_t = accel - n * accel.dot(&n);
+        out.pos += dir * along - v_t * dt - a_t * (0.5 * dt * dt);
+        out.vel += dir * (speed - decel * t) - v_t - a_t * dt;
+    }
+}
+
+/// Deepest penetration of `s` into `plane` (negative when clear of it).
+fn plane_depth(world: &World, plane: &Plane, s: &BodyState) -> f64 {
+    let n = plane.normal;
+    match world.shape {
+        Shape::Sphere { radius } => plane.offset - n.dot(&(s.pos - n * radius)),
+        _ => {
+            let mut probes = [Vec3::zeros(); 16];
+            let count = world.shape.probe_points(&mut probes);
+            probes[..count]
                 .iter()
                 .map(|p| plane.offset - n.dot(&(s.pos + s.rot * p)))
-                .fold(f64::NEG_INFINITY, f64::max),
-        };
+                .fold(f64::NEG_INFINITY, f64::max)
+        }
+    }
+}
+
+/// Gravity less what the environment planes the object rests on support: what a dead reckoner should
+/// extrapolate with. Zero for a disk on a table, g in free flight, the slope component on an incline.
+/// (The environment's *instantaneous* force is not used: on a stiff contact it oscillates around the
+/// support, and extrapolating a spring's peak over tens of milliseconds kicks the receiver's copy.)
+pub fn supported_gravity(world: &World, s: &BodyState) -> Vec3 {
+    let mut a = world.gravity;
+    for plane in world.planes() {
+        if plane_depth(world, plane, s) > -1e-4 {
+            let into = a.dot(&plane.normal);
+            if into < 0.0 {
+                a -= plane.normal * into;
+            }
+        }
+    }
+    a
+}
+
+/// Moves `s` out of any plane it penetrates and removes its velocity into that plane.
+fn push_out_of_environment(world: &World, s: &mut BodyState) {
+    for plane in world.planes() {
+        let depth = plane_depth(world, plane, s);
         if depth > 0.0 {
+            let n = plane.normal;
             s.pos += n * depth;
             let into = s.vel.dot(&n);
             if into < 0.0 {
@@ -251,6 +318,9 @@ pub struct Naive {
 }
 
 impl Consistency for Naive {
+    fn remote_force(&self) -> Vec3 {
+        self.remote.iter().flatten().map(|(_, f)| f.force).sum()
+    }
     fn name(&self) -> &'static str {
         "naive"
     }
@@ -287,20 +357,37 @@ impl Consistency for Naive {
     }
 }
 
-/// Eq. 10/11: own force only; adopt newer received states, dead-reckoned to now.
+/// Eq. 10/11: own force only; adopt received states that carry a newer change, dead-reckoned to now.
+///
+/// "Newer" is judged by the **time of the state change** the paper has each report carry: the last time
+/// a user's force changed the state, and whose. A site adopts a received state when
+/// - its change is newer than the change the local copy holds, or
+/// - it is the same change, sent by the site whose user made it (the authority for that change), and a
+///   newer snapshot than the last one adopted from that site.
+///
+/// So while a site's own user pushes, the local copy holds the newest change and delayed remote states
+/// (which cannot contain that push) are not adopted — no yank-back under the user's tool; once the
+/// push ends, the others adopt the pusher's states and follow its copy. During a simultaneous grasp
+/// the state changes hands between the users as fast as the reports allow: the paper's "ping-pong".
+///
+/// Along the normal of an environment plane the local copy rests on, the local position and velocity
+/// are kept: the contact equilibrium there is local physics, and transplanting another copy's
+/// micro-bounce would pump energy into every adoption.
 #[derive(Debug, Clone)]
 pub struct Paper {
     /// Dead-reckoning order (0, 1, 2).
     pub order: u8,
-    newest_adopted_s: f64,
+    me: usize,
+    newest_from: [f64; MAX_SITES],
 }
 
 impl Paper {
-    /// With dead-reckoning `order`.
-    pub fn new(order: u8) -> Self {
+    /// For site `me`, with dead-reckoning `order`.
+    pub fn new(order: u8, me: usize) -> Self {
         Self {
             order,
-            newest_adopted_s: f64::NEG_INFINITY,
+            me,
+            newest_from: [f64::NEG_INFINITY; MAX_SITES],
         }
     }
 }
@@ -311,30 +398,57 @@ impl Consistency for Paper {
     }
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
         integrate(world, copy, std::slice::from_ref(own), 1, dt);
+        if own.touching {
+            copy.changed_s = copy.time_s;
+            copy.changed_by = self.me;
+        }
     }
     fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
         Report::State {
             t_s: now_s,
             state: copy.state,
             accel: copy.passive_accel,
+            changed_s: copy.changed_s,
+            changed_by: copy.changed_by,
         }
     }
     fn receive(
         &mut self,
         world: &World,
         copy: &mut ObjectCopy,
-        _from: usize,
+        from: usize,
         msg: &Report,
         now_s: f64,
     ) -> Option<Adoption> {
-        let Report::State { t_s, state, accel } = msg else {
+        let Report::State {
+            t_s,
+            state,
+            accel,
+            changed_s,
+            changed_by,
+        } = *msg
+        else {
             return None;
         };
-        if *t_s <= self.newest_adopted_s || !state.is_finite() {
+        let newest = self.newest_from.get_mut(from)?;
+        if t_s <= *newest || !state.is_finite() || !changed_s.is_finite() {
+            return None; // a replay, an older snapshot, or garbage
+        }
+        let newer_change = changed_s > copy.changed_s;
+        let from_authority =
+            changed_s == copy.changed_s && changed_by == copy.changed_by && from == changed_by;
+        if !(newer_change || from_authority) {
             return None;
         }
-        self.newest_adopted_s = *t_s;
-        let new = dead_reckon(world, state, *accel, now_s - t_s, self.order);
+        *newest = t_s;
+        let mut new = dead_reckon(world, &state, accel, now_s - t_s, self.order);
+        for plane in world.planes() {
+            if plane_depth(world, plane, &copy.state) > -1e-4 {
+                let n = plane.normal;
+                new.pos += n * (copy.state.pos - new.pos).dot(&n);
+                new.vel += n * (copy.state.vel - new.vel).dot(&n);
+            }
+        }
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
@@ -342,7 +456,10 @@ impl Consistency for Paper {
             age_s: now_s - t_s,
         };
         copy.energy.adoption_j += adoption.energy_j;
+        copy.env.shift(new.pos - copy.state.pos);
         copy.state = new;
+        copy.changed_s = changed_s;
+        copy.changed_by = changed_by;
         Some(adoption)
     }
 }
@@ -412,25 +529,73 @@ mod tests {
     }
 
     #[test]
-    fn paper_adopts_only_newer_states() {
+    fn paper_adopts_newer_changes_and_the_authority_only() {
         let w = world();
-        let mut m = Paper::new(2);
+        let mut m = Paper::new(2, 0);
         let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::zeros()));
-        let msg = |t: f64, x: f64| Report::State {
+        let msg = |t: f64, x: f64, changed: f64| Report::State {
             t_s: t,
             state: BodyState::at_rest(Vec3::new(x, 0.0, 0.0)),
             accel: Vec3::zeros(),
+            changed_s: changed,
+            changed_by: 1,
         };
-        assert!(m.receive(&w, &mut copy, 1, &msg(1.0, 0.5), 1.0).is_some());
-        assert_eq!(copy.state.pos.x, 0.5);
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7), 1.1).is_none(),
-            "older: ignored"
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.5, 0.9), 1.0)
+                .is_some(),
+            "newer change"
+        );
+        assert_eq!(
+            (copy.state.pos.x, copy.changed_s, copy.changed_by),
+            (0.5, 0.9, 1)
         );
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7), 1.1).is_none(),
-            "replay: ignored"
+            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7, 0.9), 1.1)
+                .is_none(),
+            "older snapshot"
         );
-        assert_eq!(copy.state.pos.x, 0.5);
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7, 0.9), 1.1)
+                .is_none(),
+            "replay"
+        );
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.2, 0.6, 0.9), 1.2)
+                .is_some(),
+            "same change, from its author"
+        );
+        // Our own user pushes now: a delayed state holding an older change is not adopted.
+        copy.changed_s = 1.3;
+        copy.changed_by = 0;
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.25, 0.0, 1.0), 1.3)
+                .is_none(),
+            "older change"
+        );
+        assert_eq!(copy.state.pos.x, 0.6);
+    }
+
+    /// Order 2 on a table: a slide decelerates under kinetic friction and stops where physics stops it.
+    #[test]
+    fn dead_reckoning_slides_to_a_stop() {
+        let mut w = world();
+        w.planes[0] = Plane {
+            normal: Vec3::y(),
+            offset: 0.0,
+        };
+        let s = BodyState {
+            vel: Vec3::new(0.2, 0.0, 0.0),
+            ..BodyState::at_rest(Vec3::new(0.0, 0.0399, 0.0))
+        };
+        let a = supported_gravity(&w, &s);
+        assert!(a.norm() < 1e-12, "a table carries all of gravity: {a:?}");
+        let decel = w.env_contact.friction_kinetic * 9.81 / 3.0;
+        let stop = 0.2 * 0.2 / (2.0 * decel);
+        let r = dead_reckon(&w, &s, a, 5.0, 2);
+        assert!(
+            (r.pos.x - stop).abs() < 1e-12 && r.vel.norm() < 1e-12,
+            "{:?}",
+            r.pos
+        );
     }
 }

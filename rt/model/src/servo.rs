@@ -6,10 +6,12 @@
 //!   stopped), the displayed force ramps linearly to zero over the ramp time and stays there until
 //!   fresh states return, then ramps back. The commanded force and torques ramp with it, so the
 //!   device goes limp rather than holding a force against the hand.
-//! - **Bounded adoption step.** When physics adopts a remote state, the object can jump. The servo
-//!   renders the object at its new pose plus an offset that starts at the jump and shrinks by at most
-//!   `max_adoption_step_n / K` per tick, so an adoption changes the displayed force by at most
-//!   `max_adoption_step_n` per tick (plus what the hand itself does).
+//! - **Bounded adoption step.** When physics adopts a remote state, the object can jump, and with it
+//!   the contact force. Physics always gets the contact with the object where it really is (so the
+//!   copy's dynamics stay consistent); only the *displayed* force is blended: at an adoption the display
+//!   continues from its last value and closes the gap to the true force by at most
+//!   `max_adoption_step_n` per tick. (Rendering the object at an offset pose instead would feed
+//!   physics forces computed on a pose that is not the copy's, and throw the object.)
 
 use crate::body::{BodyState, MassProps, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
@@ -51,8 +53,8 @@ pub struct ServoInput<'a> {
     pub object: &'a BodyState,
     /// Its time, s.
     pub object_time_s: f64,
-    /// Jump of the object position since the last tick caused by adoptions (old − new), m.
-    pub adoption_jump: Vec3,
+    /// Whether physics adopted a remote state since the last tick.
+    pub adopted: bool,
 }
 
 /// What a servo tick produces.
@@ -84,7 +86,8 @@ pub struct Servo {
     contact: ToolContactState,
     controller: PiForceController,
     scale: f64,
-    offset: Vec3,
+    blend: Vec3,
+    last_display: Vec3,
 }
 
 impl Servo {
@@ -96,7 +99,8 @@ impl Servo {
             contact: ToolContactState::default(),
             controller: PiForceController::default(),
             scale: 1.0,
-            offset: Vec3::zeros(),
+            blend: Vec3::zeros(),
+            last_display: Vec3::zeros(),
         }
     }
 
@@ -107,24 +111,11 @@ impl Servo {
         let j = self.arm.jacobian(&inp.q);
         let tool_pos = self.arm.forward(&inp.q);
         let tool_vel = j * inp.qd;
-        // Bounded adoption step: render at the adopted pose plus a shrinking offset.
-        self.offset += inp.adoption_jump;
-        let shrink = p.max_adoption_step_n / p.contact.stiffness_n_per_m;
-        let n = self.offset.norm();
-        self.offset = if n > shrink {
-            self.offset * ((n - shrink) / n)
-        } else {
-            Vec3::zeros()
-        };
-        let rendered = BodyState {
-            pos: inp.object.pos + self.offset,
-            ..*inp.object
-        };
         let contact = tool_contact(
             &p.contact,
             &mut self.contact,
             shape,
-            &rendered,
+            inp.object,
             mass,
             tool_pos,
             tool_vel,
@@ -142,7 +133,19 @@ impl Servo {
             self.controller.reset_integral();
         }
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
-        let f_desired = -contact.force * self.scale;
+        let f_true = -contact.force * self.scale;
+        // Bounded adoption step, in force space.
+        if inp.adopted {
+            self.blend = self.last_display - f_true;
+        }
+        let n = self.blend.norm();
+        self.blend = if n > p.max_adoption_step_n {
+            self.blend * ((n - p.max_adoption_step_n) / n)
+        } else {
+            Vec3::zeros()
+        };
+        let f_desired = f_true + self.blend;
+        self.last_display = f_desired;
         let (f_command, tau) =
             self.controller
                 .step(&p.controller, f_desired, inp.f_measured, &j, inp.dt_s);

@@ -1,0 +1,857 @@
+//! Scenarios as data: the world, the object, each site's rates, device, controller and user script,
+//! the network, and the task phases to check. Parsed from TOML by the tools (serde, behind this
+//! crate's `serde` feature); validated here, with errors that name the field, the value and the rule.
+
+use crate::body::{MassProps, Vec3};
+use crate::contact::{ContactParams, Plane, MAX_PLANES};
+use crate::controller::ControllerParams;
+use crate::device::{HandParams, ScaraParams};
+use crate::method::{World, MAX_SITES};
+use crate::servo::ServoParams;
+use crate::shape::Shape;
+use crate::user::Keyframe;
+
+#[cfg(feature = "serde")]
+use serde::{Deserialize, Serialize};
+
+/// A consistency method by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize, Serialize),
+    serde(rename_all = "lowercase")
+)]
+pub enum MethodName {
+    /// Eq. 8 across the network: sum own and latest received forces.
+    Naive,
+    /// Eq. 10/11: own force only, adopt newer states, dead-reckon.
+    #[default]
+    Paper,
+}
+
+impl MethodName {
+    /// Every method, in table order.
+    pub const ALL: [MethodName; 2] = [MethodName::Naive, MethodName::Paper];
+    /// Its name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Naive => "naive",
+            Self::Paper => "paper",
+        }
+    }
+}
+
+/// An object shape by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(rename_all = "lowercase")
+)]
+pub enum ShapeName {
+    /// `radius_m`.
+    Sphere,
+    /// `radius_m`, `half_height_m` (axis z): the paper's disk.
+    #[default]
+    Cylinder,
+    /// `half_extents_m`.
+    Box,
+}
+
+/// A complete scenario.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct Scenario {
+    /// Short name.
+    pub name: String,
+    /// What it shows.
+    pub description: String,
+    /// Seed of every random choice (sensor noise, network).
+    pub seed: u64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Method for `sim run`.
+    pub method: MethodName,
+    /// Dead-reckoning order for `paper`: 0, 1 or 2.
+    pub dead_reckoning_order: u8,
+    /// Trace rows per second.
+    pub sample_rate_hz: f64,
+    /// The object.
+    pub object: ObjectSpec,
+    /// Gravity and environment.
+    pub world: WorldSpec,
+    /// Tool–object contact law.
+    pub contact: ContactSpec,
+    /// Object–environment contact law.
+    pub environment_contact: ContactSpec,
+    /// Every link between sites (emulated network).
+    pub network: LinkSpec,
+    /// The sites, 1 to 8.
+    pub site: Vec<SiteSpec>,
+    /// Task phases to check per site.
+    pub phase: Vec<PhaseSpec>,
+}
+
+/// The object.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct ObjectSpec {
+    /// Shape.
+    pub shape: ShapeName,
+    /// Radius (sphere, cylinder), m.
+    pub radius_m: f64,
+    /// Half height (cylinder), m.
+    pub half_height_m: f64,
+    /// Half extents (box), m.
+    pub half_extents_m: [f64; 3],
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Initial centre of mass, m.
+    pub start_m: [f64; 3],
+}
+
+/// Gravity and the environment.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct WorldSpec {
+    /// Gravity, m/s².
+    pub gravity_m_per_s2: [f64; 3],
+    /// Planes bounding free space (floor, walls).
+    pub planes: Vec<PlaneSpec>,
+}
+
+/// A plane: free space is where `normal · x ≥ offset_m`.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
+pub struct PlaneSpec {
+    /// Normal into free space (normalised on load).
+    pub normal: [f64; 3],
+    /// Offset along the normal, m.
+    pub offset_m: f64,
+}
+
+/// A contact law.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct ContactSpec {
+    /// Normal stiffness K, N/m.
+    pub stiffness_n_per_m: f64,
+    /// Normal damping, N·s/m.
+    pub damping_n_s_per_m: f64,
+    /// Tangential stick stiffness, N/m.
+    pub tangential_stiffness_n_per_m: f64,
+    /// Tangential damping, N·s/m.
+    pub tangential_damping_n_s_per_m: f64,
+    /// Static friction coefficient.
+    pub friction_static: f64,
+    /// Kinetic friction coefficient (≤ static).
+    pub friction_kinetic: f64,
+}
+
+/// An emulated network link (applied to every ordered pair of sites).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct LinkSpec {
+    /// Smallest one-way delay, ms.
+    pub delay_min_ms: f64,
+    /// Largest one-way delay, ms (the delay swings between min and max).
+    pub delay_max_ms: f64,
+    /// Period of the swing, s.
+    pub delay_period_s: f64,
+    /// Extra uniform jitter, ± ms (reorders messages when larger than the report period).
+    pub jitter_ms: f64,
+    /// Probability a message is lost, [0, 1).
+    pub loss: f64,
+}
+
+/// One site: its user, device and rates.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct SiteSpec {
+    /// Name (A-Z a-z 0-9 . -).
+    pub name: String,
+    /// Servo (device) rate, Hz.
+    pub servo_rate_hz: f64,
+    /// Physics rate, Hz.
+    pub physics_rate_hz: f64,
+    /// Report rate, Hz.
+    pub report_rate_hz: f64,
+    /// Device base (joint 1 axis), world, m.
+    pub device_base_m: [f64; 3],
+    /// Elbow configuration: 1 or -1.
+    pub elbow: f64,
+    /// Virtual tool tip radius, m.
+    pub tool_radius_m: f64,
+    /// Force sensor noise (standard deviation), N.
+    pub sensor_noise_n: f64,
+    /// Object states older than this are stale, ms.
+    pub stale_limit_ms: f64,
+    /// Ramp of the displayed force to zero when stale, ms.
+    pub stale_ramp_ms: f64,
+    /// Largest displayed-force step per servo tick an adoption may cause, N.
+    pub max_adoption_step_n: f64,
+    /// The user's hand.
+    pub hand: HandSpec,
+    /// The force controller.
+    pub controller: ControllerSpec,
+    /// The user's script: keyframes (time, hand target).
+    pub script: Vec<KeyframeSpec>,
+}
+
+/// The hand impedance.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct HandSpec {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Stiffness to the target, N/m.
+    pub stiffness_n_per_m: f64,
+    /// Damping, N·s/m.
+    pub damping_n_s_per_m: f64,
+    /// Grip stiffness, N/m.
+    pub grip_stiffness_n_per_m: f64,
+    /// Grip damping, N·s/m.
+    pub grip_damping_n_s_per_m: f64,
+}
+
+/// Eq. 12 gains and limits.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct ControllerSpec {
+    /// K_p.
+    pub kp: f64,
+    /// K_i, 1/s.
+    pub ki: f64,
+    /// Force limit, N.
+    pub max_force_n: f64,
+    /// Force rate limit, N/s.
+    pub max_force_rate_n_per_s: f64,
+}
+
+/// A script keyframe.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
+pub struct KeyframeSpec {
+    /// Time, s.
+    pub t_s: f64,
+    /// Hand target, world, m.
+    pub target_m: [f64; 3],
+}
+
+/// A task phase, checked per site on what that site saw.
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct PhaseSpec {
+    /// Name (push, catch, grasp, squeeze, release, ...).
+    pub name: String,
+    /// Window start, s.
+    pub from_s: f64,
+    /// Window end, s.
+    pub to_s: f64,
+    /// Sites whose user must touch the object in the window.
+    pub contact: Vec<String>,
+    /// Sites whose user must not touch it.
+    pub no_contact: Vec<String>,
+    /// Smallest peak displayed force for the `contact` sites, N.
+    pub min_force_n: f64,
+    /// Smallest displacement of each site's copy over the window, m.
+    pub object_moves_m: f64,
+    /// Each site's copy must rise this far above its start height in the window, m (0 = no check).
+    pub lifted_m: f64,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            name: "default".into(),
+            description: String::new(),
+            seed: 1,
+            duration_s: 10.0,
+            method: MethodName::Paper,
+            dead_reckoning_order: 2,
+            sample_rate_hz: 200.0,
+            object: ObjectSpec::default(),
+            world: WorldSpec::default(),
+            contact: ContactSpec::default(),
+            environment_contact: ContactSpec {
+                stiffness_n_per_m: 2000.0,
+                ..ContactSpec::default()
+            },
+            network: LinkSpec::default(),
+            site: Vec::new(),
+            phase: Vec::new(),
+        }
+    }
+}
+
+impl Default for ObjectSpec {
+    fn default() -> Self {
+        Self {
+            shape: ShapeName::Cylinder,
+            radius_m: 0.04,
+            half_height_m: 0.01,
+            half_extents_m: [0.04, 0.04, 0.04],
+            mass_kg: 0.1,
+            start_m: [0.0, 0.0, 0.0],
+        }
+    }
+}
+
+impl Default for WorldSpec {
+    fn default() -> Self {
+        Self {
+            gravity_m_per_s2: [0.0, -9.81 / 3.0, 0.0],
+            planes: vec![PlaneSpec {
+                normal: [0.0, 1.0, 0.0],
+                offset_m: -0.1,
+            }],
+        }
+    }
+}
+
+impl Default for ContactSpec {
+    fn default() -> Self {
+        Self {
+            stiffness_n_per_m: 800.0,
+            damping_n_s_per_m: 4.0,
+            tangential_stiffness_n_per_m: 800.0,
+            tangential_damping_n_s_per_m: 4.0,
+            friction_static: 0.8,
+            friction_kinetic: 0.6,
+        }
+    }
+}
+
+impl Default for LinkSpec {
+    fn default() -> Self {
+        Self {
+            delay_min_ms: 0.0,
+            delay_max_ms: 0.0,
+            delay_period_s: 5.0,
+            jitter_ms: 0.0,
+            loss: 0.0,
+        }
+    }
+}
+
+impl Default for SiteSpec {
+    fn default() -> Self {
+        Self {
+            name: "site".into(),
+            servo_rate_hz: 1000.0,
+            physics_rate_hz: 1000.0,
+            report_rate_hz: 100.0,
+            device_base_m: [-0.45, -0.05, 0.0],
+            elbow: 1.0,
+            tool_radius_m: 0.005,
+            sensor_noise_n: 0.0,
+            stale_limit_ms: 100.0,
+            stale_ramp_ms: 50.0,
+            max_adoption_step_n: 0.5,
+            hand: HandSpec::default(),
+            controller: ControllerSpec::default(),
+            script: Vec::new(),
+        }
+    }
+}
+
+impl Default for HandSpec {
+    fn default() -> Self {
+        let h = HandParams::default();
+        Self {
+            mass_kg: h.mass_kg,
+            stiffness_n_per_m: h.stiffness_n_per_m,
+            damping_n_s_per_m: h.damping_n_s_per_m,
+            grip_stiffness_n_per_m: h.grip_stiffness_n_per_m,
+            grip_damping_n_s_per_m: h.grip_damping_n_s_per_m,
+        }
+    }
+}
+
+impl Default for ControllerSpec {
+    fn default() -> Self {
+        let c = ControllerParams::default();
+        Self {
+            kp: c.kp,
+            ki: c.ki,
+            max_force_n: c.max_force_n,
+            max_force_rate_n_per_s: c.max_force_rate_n_per_s,
+        }
+    }
+}
+
+impl Default for PhaseSpec {
+    fn default() -> Self {
+        Self {
+            name: String::new(),
+            from_s: 0.0,
+            to_s: 0.0,
+            contact: Vec::new(),
+            no_contact: Vec::new(),
+            min_force_n: 0.0,
+            object_moves_m: 0.0,
+            lifted_m: 0.0,
+        }
+    }
+}
+
+/// A scenario value breaks a rule.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScenarioError {
+    /// Field path, e.g. `site[1].servo_rate_hz`.
+    pub field: String,
+    /// The value found.
+    pub value: String,
+    /// The rule it breaks.
+    pub rule: String,
+}
+
+impl std::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} = {}: {}", self.field, self.value, self.rule)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+fn err(
+    field: impl Into<String>,
+    value: impl std::fmt::Debug,
+    rule: impl Into<String>,
+) -> ScenarioError {
+    ScenarioError {
+        field: field.into(),
+        value: format!("{value:?}"),
+        rule: rule.into(),
+    }
+}
+
+/// `lo < v <= hi` and finite (NaN fails: positive containment, H8).
+fn in_range(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+    if v > lo && v <= hi && v.is_finite() {
+        Ok(())
+    } else {
+        Err(err(
+            field,
+            v,
+            format!("must be a finite number above {lo} and at most {hi}"),
+        ))
+    }
+}
+
+/// `lo <= v <= hi` and finite.
+fn in_closed(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+    if v >= lo && v <= hi && v.is_finite() {
+        Ok(())
+    } else {
+        Err(err(
+            field,
+            v,
+            format!("must be a finite number from {lo} to {hi}"),
+        ))
+    }
+}
+
+fn finite3(field: &str, v: &[f64; 3], bound: f64) -> Result<(), ScenarioError> {
+    if v.iter().all(|x| x.is_finite() && x.abs() <= bound) {
+        Ok(())
+    } else {
+        Err(err(
+            field,
+            v,
+            format!("every component must be finite and within ±{bound}"),
+        ))
+    }
+}
+
+impl ContactSpec {
+    fn validate(&self, at: &str) -> Result<(), ScenarioError> {
+        in_range(
+            &format!("{at}.stiffness_n_per_m"),
+            self.stiffness_n_per_m,
+            0.0,
+            1e6,
+        )?;
+        in_closed(
+            &format!("{at}.damping_n_s_per_m"),
+            self.damping_n_s_per_m,
+            0.0,
+            1e4,
+        )?;
+        in_range(
+            &format!("{at}.tangential_stiffness_n_per_m"),
+            self.tangential_stiffness_n_per_m,
+            0.0,
+            1e6,
+        )?;
+        in_closed(
+            &format!("{at}.tangential_damping_n_s_per_m"),
+            self.tangential_damping_n_s_per_m,
+            0.0,
+            1e4,
+        )?;
+        in_closed(
+            &format!("{at}.friction_static"),
+            self.friction_static,
+            0.0,
+            10.0,
+        )?;
+        in_closed(
+            &format!("{at}.friction_kinetic"),
+            self.friction_kinetic,
+            0.0,
+            self.friction_static,
+        )
+        .map_err(|e| ScenarioError {
+            rule: format!("{} (no more than friction_static)", e.rule),
+            ..e
+        })
+    }
+    /// As the model's contact law.
+    pub fn params(&self) -> ContactParams {
+        ContactParams {
+            stiffness_n_per_m: self.stiffness_n_per_m,
+            damping_n_s_per_m: self.damping_n_s_per_m,
+            tangential_stiffness_n_per_m: self.tangential_stiffness_n_per_m,
+            tangential_damping_n_s_per_m: self.tangential_damping_n_s_per_m,
+            friction_static: self.friction_static,
+            friction_kinetic: self.friction_kinetic,
+        }
+    }
+}
+
+fn valid_name(s: &str) -> bool {
+    (1..=48).contains(&s.len())
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'-')
+}
+
+impl Scenario {
+    /// Checks every value; the first broken rule is the error.
+    ///
+    /// # Errors
+    /// A [`ScenarioError`] naming the field, the value and the rule.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        if !valid_name(&self.name) {
+            return Err(err(
+                "name",
+                &self.name,
+                "1 to 48 characters from A-Z a-z 0-9 . -",
+            ));
+        }
+        in_range("duration_s", self.duration_s, 0.0, 3600.0)?;
+        if self.dead_reckoning_order > 2 {
+            return Err(err(
+                "dead_reckoning_order",
+                self.dead_reckoning_order,
+                "must be 0, 1 or 2",
+            ));
+        }
+        in_range("sample_rate_hz", self.sample_rate_hz, 0.0, 10_000.0)?;
+        let o = &self.object;
+        in_range("object.mass_kg", o.mass_kg, 0.0, 1000.0)?;
+        match o.shape {
+            ShapeName::Sphere => in_range("object.radius_m", o.radius_m, 0.0, 10.0)?,
+            ShapeName::Cylinder => {
+                in_range("object.radius_m", o.radius_m, 0.0, 10.0)?;
+                in_range("object.half_height_m", o.half_height_m, 0.0, 10.0)?;
+            }
+            ShapeName::Box => {
+                for (i, h) in o.half_extents_m.iter().enumerate() {
+                    in_range(&format!("object.half_extents_m[{i}]"), *h, 0.0, 10.0)?;
+                }
+            }
+        }
+        finite3("object.start_m", &o.start_m, 100.0)?;
+        finite3(
+            "world.gravity_m_per_s2",
+            &self.world.gravity_m_per_s2,
+            100.0,
+        )?;
+        if self.world.planes.len() > MAX_PLANES {
+            return Err(err(
+                "world.planes",
+                self.world.planes.len(),
+                format!("at most {MAX_PLANES} planes"),
+            ));
+        }
+        for (i, p) in self.world.planes.iter().enumerate() {
+            finite3(&format!("world.planes[{i}].normal"), &p.normal, 1e3)?;
+            if Vec3::from(p.normal).norm() < 1e-9 {
+                return Err(err(
+                    format!("world.planes[{i}].normal"),
+                    p.normal,
+                    "must not be zero",
+                ));
+            }
+            in_closed(
+                &format!("world.planes[{i}].offset_m"),
+                p.offset_m,
+                -100.0,
+                100.0,
+            )?;
+        }
+        self.contact.validate("contact")?;
+        self.environment_contact.validate("environment_contact")?;
+        let n = &self.network;
+        in_closed("network.delay_min_ms", n.delay_min_ms, 0.0, 10_000.0)?;
+        in_closed(
+            "network.delay_max_ms",
+            n.delay_max_ms,
+            n.delay_min_ms,
+            10_000.0,
+        )
+        .map_err(|e| ScenarioError {
+            rule: format!("{} (and at least delay_min_ms)", e.rule),
+            ..e
+        })?;
+        in_range("network.delay_period_s", n.delay_period_s, 0.0, 3600.0)?;
+        in_closed("network.jitter_ms", n.jitter_ms, 0.0, 10_000.0)?;
+        if !(n.loss >= 0.0 && n.loss < 1.0) {
+            return Err(err(
+                "network.loss",
+                n.loss,
+                "must be a probability from 0 up to (not including) 1",
+            ));
+        }
+        if self.site.is_empty() || self.site.len() > MAX_SITES {
+            return Err(err(
+                "site",
+                self.site.len(),
+                format!("a scenario has 1 to {MAX_SITES} sites"),
+            ));
+        }
+        for (i, s) in self.site.iter().enumerate() {
+            let at = |f: &str| format!("site[{i}].{f}");
+            if !valid_name(&s.name) {
+                return Err(err(
+                    at("name"),
+                    &s.name,
+                    "1 to 48 characters from A-Z a-z 0-9 . -",
+                ));
+            }
+            if self.site[..i].iter().any(|o| o.name == s.name) {
+                return Err(err(at("name"), &s.name, "site names must be unique"));
+            }
+            in_range(&at("servo_rate_hz"), s.servo_rate_hz, 0.0, 20_000.0)?;
+            in_range(&at("physics_rate_hz"), s.physics_rate_hz, 0.0, 20_000.0)?;
+            in_range(
+                &at("report_rate_hz"),
+                s.report_rate_hz,
+                0.0,
+                s.physics_rate_hz,
+            )
+            .map_err(|e| ScenarioError {
+                rule: format!("{} (physics_rate_hz)", e.rule),
+                ..e
+            })?;
+            finite3(&at("device_base_m"), &s.device_base_m, 100.0)?;
+            if s.elbow != 1.0 && s.elbow != -1.0 {
+                return Err(err(at("elbow"), s.elbow, "must be 1 or -1"));
+            }
+            in_range(&at("tool_radius_m"), s.tool_radius_m, 0.0, 1.0)?;
+            in_closed(&at("sensor_noise_n"), s.sensor_noise_n, 0.0, 100.0)?;
+            in_range(&at("stale_limit_ms"), s.stale_limit_ms, 0.0, 60_000.0)?;
+            in_range(&at("stale_ramp_ms"), s.stale_ramp_ms, 0.0, 60_000.0)?;
+            in_range(
+                &at("max_adoption_step_n"),
+                s.max_adoption_step_n,
+                0.0,
+                1000.0,
+            )?;
+            let h = &s.hand;
+            in_range(&at("hand.mass_kg"), h.mass_kg, 0.0, 100.0)?;
+            in_range(&at("hand.stiffness_n_per_m"), h.stiffness_n_per_m, 0.0, 1e5)?;
+            in_closed(&at("hand.damping_n_s_per_m"), h.damping_n_s_per_m, 0.0, 1e4)?;
+            in_range(
+                &at("hand.grip_stiffness_n_per_m"),
+                h.grip_stiffness_n_per_m,
+                0.0,
+                1e6,
+            )?;
+            in_closed(
+                &at("hand.grip_damping_n_s_per_m"),
+                h.grip_damping_n_s_per_m,
+                0.0,
+                1e4,
+            )?;
+            let c = &s.controller;
+            in_closed(&at("controller.kp"), c.kp, 0.0, 100.0)?;
+            in_closed(&at("controller.ki"), c.ki, 0.0, 10_000.0)?;
+            in_range(&at("controller.max_force_n"), c.max_force_n, 0.0, 1000.0)?;
+            in_range(
+                &at("controller.max_force_rate_n_per_s"),
+                c.max_force_rate_n_per_s,
+                0.0,
+                1e7,
+            )?;
+            if s.script.is_empty() {
+                return Err(err(at("script"), "[]", "needs at least one keyframe"));
+            }
+            let arm = self.arm(i);
+            for (k, f) in s.script.iter().enumerate() {
+                in_closed(&at(&format!("script[{k}].t_s")), f.t_s, 0.0, 3600.0)?;
+                if k > 0 && f.t_s < s.script[k - 1].t_s {
+                    return Err(err(
+                        at(&format!("script[{k}].t_s")),
+                        f.t_s,
+                        "keyframes must be in time order",
+                    ));
+                }
+                finite3(&at(&format!("script[{k}].target_m")), &f.target_m, 100.0)?;
+                if arm.inverse(Vec3::from(f.target_m), s.elbow).is_none() {
+                    return Err(err(
+                        at(&format!("script[{k}].target_m")),
+                        f.target_m,
+                        format!(
+                            "outside the device's reach ({} m around device_base_m)",
+                            arm.link1_m + arm.link2_m
+                        ),
+                    ));
+                }
+            }
+        }
+        for (i, p) in self.phase.iter().enumerate() {
+            let at = |f: &str| format!("phase[{i}].{f}");
+            if p.name.is_empty() {
+                return Err(err(at("name"), &p.name, "must not be empty"));
+            }
+            in_closed(&at("from_s"), p.from_s, 0.0, self.duration_s)?;
+            in_closed(&at("to_s"), p.to_s, p.from_s, self.duration_s).map_err(|e| {
+                ScenarioError {
+                    rule: format!("{} (from_s to duration_s)", e.rule),
+                    ..e
+                }
+            })?;
+            for name in p.contact.iter().chain(&p.no_contact) {
+                if !self.site.iter().any(|s| &s.name == name) {
+                    return Err(err(at("contact"), name, "names no site of this scenario"));
+                }
+            }
+            in_closed(&at("min_force_n"), p.min_force_n, 0.0, 1000.0)?;
+            in_closed(&at("object_moves_m"), p.object_moves_m, 0.0, 100.0)?;
+            in_closed(&at("lifted_m"), p.lifted_m, 0.0, 100.0)?;
+        }
+        Ok(())
+    }
+
+    /// The world every site shares.
+    pub fn world(&self) -> World {
+        let o = &self.object;
+        let shape = match o.shape {
+            ShapeName::Sphere => Shape::Sphere { radius: o.radius_m },
+            ShapeName::Cylinder => Shape::Cylinder {
+                radius: o.radius_m,
+                half_height: o.half_height_m,
+            },
+            ShapeName::Box => Shape::Box {
+                half: Vec3::from(o.half_extents_m),
+            },
+        };
+        let mut planes = [Plane {
+            normal: Vec3::y(),
+            offset: f64::NEG_INFINITY,
+        }; MAX_PLANES];
+        for (slot, p) in planes.iter_mut().zip(&self.world.planes) {
+            let n = Vec3::from(p.normal);
+            *slot = Plane {
+                normal: n / n.norm(),
+                offset: p.offset_m,
+            };
+        }
+        World {
+            shape,
+            mass: MassProps {
+                mass_kg: o.mass_kg,
+                inertia_body: shape.inertia(o.mass_kg),
+            },
+            gravity: Vec3::from(self.world.gravity_m_per_s2),
+            planes,
+            plane_count: self.world.planes.len().min(MAX_PLANES),
+            env_contact: self.environment_contact.params(),
+        }
+    }
+
+    /// Site `i`'s arm.
+    pub fn arm(&self, i: usize) -> ScaraParams {
+        ScaraParams::paper(Vec3::from(self.site[i].device_base_m))
+    }
+
+    /// Site `i`'s hand.
+    pub fn hand(&self, i: usize) -> HandParams {
+        let h = &self.site[i].hand;
+        HandParams {
+            mass_kg: h.mass_kg,
+            stiffness_n_per_m: h.stiffness_n_per_m,
+            damping_n_s_per_m: h.damping_n_s_per_m,
+            grip_stiffness_n_per_m: h.grip_stiffness_n_per_m,
+            grip_damping_n_s_per_m: h.grip_damping_n_s_per_m,
+        }
+    }
+
+    /// Site `i`'s servo parameters.
+    pub fn servo_params(&self, i: usize) -> ServoParams {
+        let s = &self.site[i];
+        ServoParams {
+            tool_radius_m: s.tool_radius_m,
+            contact: self.contact.params(),
+            controller: ControllerParams {
+                kp: s.controller.kp,
+                ki: s.controller.ki,
+                max_force_n: s.controller.max_force_n,
+                max_force_rate_n_per_s: s.controller.max_force_rate_n_per_s,
+            },
+            stale_limit_s: s.stale_limit_ms / 1e3,
+            stale_ramp_s: s.stale_ramp_ms / 1e3,
+            max_adoption_step_n: s.max_adoption_step_n,
+        }
+    }
+
+    /// Site `i`'s script.
+    pub fn script(&self, i: usize) -> Vec<Keyframe> {
+        self.site[i]
+            .script
+            .iter()
+            .map(|k| Keyframe {
+                t_s: k.t_s,
+                target: Vec3::from(k.target_m),
+            })
+            .collect()
+    }
+}

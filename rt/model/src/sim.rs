@@ -1,0 +1,434 @@
+//! The deterministic multi-site simulator.
+//!
+//! N sites, each with its own plant (SCARA arm + scripted hand), servo, physics and report timers at
+//! their own rates, and its own copy of the object kept by a consistency method; a virtual network
+//! between every ordered pair of sites with delay (swinging between a minimum and a maximum), jitter,
+//! loss and the reordering jitter causes, all drawn from seeded generators.
+//!
+//! **Virtual time** is an integer count of nanoseconds, so event order never depends on float
+//! rounding. At each instant events run in a fixed order — deliveries (by send order), then per site
+//! in index order: physics, servo, report — and plants are integrated up to the instant in sub-steps
+//! of at most [`PLANT_STEP_NS`]. Same scenario and seed ⇒ the same floating-point operations in the
+//! same order ⇒ byte-identical traces.
+//!
+//! **Reference run** ([`Mode::Reference`]): the same sites, devices and scripts, but one shared object
+//! with every user's contact summed at once (Eq. 8 without delay), integrated at the fastest site's
+//! physics rate: the "truth" the methods are measured against.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::ContactForce;
+use crate::device::Plant;
+use crate::method::{integrate, Consistency, EnergyAccount, Naive, ObjectCopy, Paper, Report};
+use crate::rng::Rng;
+use crate::scenario::{MethodName, Scenario};
+use crate::servo::{Servo, ServoInput};
+use crate::user::{target_at, Keyframe};
+
+/// Largest plant integration step: 100 µs (the grip spring's period is ~20 ms).
+pub const PLANT_STEP_NS: u64 = 100_000;
+
+/// What to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Each site its own copy, kept by this method.
+    Distributed(MethodName),
+    /// One shared object, all forces summed at once, no network.
+    Reference,
+}
+
+impl Mode {
+    /// Its name in tables and files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Distributed(m) => m.as_str(),
+            Mode::Reference => "reference",
+        }
+    }
+}
+
+/// One site's trace: rows at the scenario's sample rate.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SiteTrace {
+    /// Object centre of mass as this site believes it, m.
+    pub obj_pos: Vec<Vec3>,
+    /// Tool position, m.
+    pub tool_pos: Vec<Vec3>,
+    /// Desired force at the hand F_h, N.
+    pub f_desired: Vec<Vec3>,
+    /// Measured force F_m, N.
+    pub f_measured: Vec<Vec3>,
+    /// Sum of the users' contact forces acting on this site's copy, N.
+    pub f_on_object: Vec<Vec3>,
+    /// Whether this site's user touches the object.
+    pub touching: Vec<bool>,
+}
+
+/// A site adopted a received state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdoptionEvent {
+    /// When, s.
+    pub t_s: f64,
+    /// Adopting site.
+    pub site: usize,
+    /// Sender.
+    pub from: usize,
+    /// Position jump (before − after), m.
+    pub jump_m: f64,
+    /// How far the state was dead-reckoned, s.
+    pub age_s: f64,
+    /// Change of the displayed force at the next servo tick, N.
+    pub force_step_n: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunResult {
+    /// What ran.
+    pub mode: Mode,
+    /// Sample times, s.
+    pub t: Vec<f64>,
+    /// Per site.
+    pub sites: Vec<SiteTrace>,
+    /// Adoptions, in time order.
+    pub adoptions: Vec<AdoptionEvent>,
+    /// Energy account per site at the end.
+    pub energy: Vec<EnergyAccount>,
+    /// Mechanical energy per site at the start and end, J.
+    pub mech_energy: Vec<(f64, f64)>,
+    /// Messages sent, delivered, lost.
+    pub messages: (u64, u64, u64),
+}
+
+/// A message in flight.
+#[derive(Debug, Clone, Copy)]
+struct InFlight {
+    at_ns: u64,
+    seq: u64,
+    from: usize,
+    to: usize,
+    msg: Report,
+}
+impl PartialEq for InFlight {
+    fn eq(&self, o: &Self) -> bool {
+        (self.at_ns, self.seq) == (o.at_ns, o.seq)
+    }
+}
+impl Eq for InFlight {}
+impl PartialOrd for InFlight {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for InFlight {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        (self.at_ns, self.seq).cmp(&(o.at_ns, o.seq))
+    }
+}
+
+struct Site {
+    plant: Plant,
+    plant_ns: u64,
+    script: Vec<Keyframe>,
+    servo: Servo,
+    tau: Vec3,
+    own: ContactForce,
+    copy: ObjectCopy,
+    method: Box<dyn Consistency>,
+    noise: Rng,
+    period_servo: u64,
+    period_physics: u64,
+    period_report: u64,
+    next_servo: u64,
+    next_physics: u64,
+    next_report: u64,
+    pending_adoptions: Vec<usize>,
+    last_f_desired: Vec3,
+    last_f_measured: Vec3,
+    sensor_noise: f64,
+}
+
+fn period_ns(rate_hz: f64) -> u64 {
+    ((1e9 / rate_hz).round() as u64).max(1)
+}
+
+fn ns_to_s(ns: u64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+/// Runs `scenario` in `mode`. `progress(fraction)` is called about a hundred times.
+///
+/// The scenario must be valid ([`Scenario::validate`]).
+pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> RunResult {
+    let world = scenario.world();
+    let start = BodyState::at_rest(Vec3::from(scenario.object.start_m));
+    let mut sites: Vec<Site> = (0..scenario.site.len())
+        .map(|i| {
+            let spec = &scenario.site[i];
+            let script = scenario.script(i);
+            let arm = scenario.arm(i);
+            let p0 = script[0].target;
+            let method: Box<dyn Consistency> = match mode {
+                Mode::Distributed(MethodName::Naive) => Box::<Naive>::default(),
+                Mode::Distributed(MethodName::Paper) | Mode::Reference => {
+                    Box::new(Paper::new(scenario.dead_reckoning_order, i))
+                }
+            };
+            Site {
+                plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
+                plant_ns: 0,
+                script,
+                servo: Servo::new(scenario.servo_params(i), arm),
+                tau: Vec3::zeros(),
+                own: ContactForce::default(),
+                copy: ObjectCopy::new(start),
+                method,
+                noise: Rng::derive(scenario.seed, 1000 + i as u64),
+                period_servo: period_ns(spec.servo_rate_hz),
+                period_physics: period_ns(spec.physics_rate_hz),
+                period_report: period_ns(spec.report_rate_hz),
+                next_servo: 0,
+                next_physics: 0,
+                next_report: 0,
+                pending_adoptions: Vec::new(),
+                last_f_desired: Vec3::zeros(),
+                last_f_measured: Vec3::zeros(),
+                sensor_noise: spec.sensor_noise_n,
+            }
+        })
+        .collect();
+    let n = sites.len();
+    // Reference: one shared copy stepped at the fastest physics rate.
+    let mut shared = ObjectCopy::new(start);
+    let ref_period = sites
+        .iter()
+        .map(|s| s.period_physics)
+        .min()
+        .unwrap_or(1_000_000);
+    let mut next_ref = 0u64;
+    let mut links: Vec<Rng> = (0..n * n)
+        .map(|k| Rng::derive(scenario.seed, k as u64))
+        .collect();
+    let net = &scenario.network;
+    let mut in_flight: BinaryHeap<Reverse<InFlight>> = BinaryHeap::new();
+    let mut seq = 0u64;
+    let mut messages = (0u64, 0u64, 0u64);
+    let end_ns = (scenario.duration_s * 1e9).round() as u64;
+    let period_sample = period_ns(scenario.sample_rate_hz);
+    let mut next_sample = 0u64;
+    let mut result = RunResult {
+        mode,
+        t: Vec::new(),
+        sites: vec![SiteTrace::default(); n],
+        adoptions: Vec::new(),
+        energy: Vec::new(),
+        mech_energy: Vec::new(),
+        messages: (0, 0, 0),
+    };
+    let e0 = start.mechanical_energy(&world.mass, world.gravity);
+    let mut next_progress = 0u64;
+    let reference = mode == Mode::Reference;
+
+    loop {
+        let mut t = next_sample;
+        for s in &sites {
+            t = t.min(s.next_servo).min(s.next_physics);
+            if !reference {
+                t = t.min(s.next_report);
+            }
+        }
+        if reference {
+            t = t.min(next_ref);
+        }
+        if let Some(Reverse(m)) = in_flight.peek() {
+            t = t.min(m.at_ns);
+        }
+        if t > end_ns {
+            break;
+        }
+        if t >= next_progress {
+            progress(t as f64 / end_ns.max(1) as f64);
+            next_progress = t + end_ns / 100 + 1;
+        }
+        // Plants up to now.
+        for s in &mut sites {
+            while s.plant_ns < t {
+                let step = (t - s.plant_ns).min(PLANT_STEP_NS);
+                let mid = ns_to_s(s.plant_ns + step);
+                let (target, target_vel) = target_at(&s.script, mid);
+                s.plant.step(s.tau, target, target_vel, ns_to_s(step));
+                s.plant_ns += step;
+            }
+        }
+        // Deliveries.
+        while let Some(Reverse(m)) = in_flight.peek().copied() {
+            if m.at_ns != t {
+                break;
+            }
+            in_flight.pop();
+            messages.1 += 1;
+            let s = &mut sites[m.to];
+            if let Some(a) = s
+                .method
+                .receive(&world, &mut s.copy, m.from, &m.msg, ns_to_s(t))
+            {
+                s.pending_adoptions.push(result.adoptions.len());
+                result.adoptions.push(AdoptionEvent {
+                    t_s: ns_to_s(t),
+                    site: m.to,
+                    from: m.from,
+                    jump_m: a.jump.norm(),
+                    age_s: a.age_s,
+                    force_step_n: 0.0,
+                });
+            }
+        }
+        if reference && next_ref == t {
+            let mut users = [ContactForce::default(); crate::method::MAX_SITES];
+            for (u, s) in users.iter_mut().zip(&sites) {
+                *u = s.own;
+            }
+            integrate(&world, &mut shared, &users[..n], n, ns_to_s(ref_period));
+            shared.time_s = ns_to_s(t);
+            next_ref += ref_period;
+        }
+        for i in 0..n {
+            let s = &mut sites[i];
+            if s.next_physics == t {
+                if !reference {
+                    s.method
+                        .physics_step(&world, &mut s.copy, &s.own, ns_to_s(s.period_physics));
+                    s.copy.time_s = ns_to_s(t);
+                }
+                s.next_physics += s.period_physics;
+            }
+            if s.next_servo == t {
+                let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
+                let f_measured = s.plant.grip_force + noise;
+                let copy = if reference { &shared } else { &s.copy };
+                let out = s.servo.step(
+                    &ServoInput {
+                        now_s: ns_to_s(t),
+                        dt_s: ns_to_s(s.period_servo),
+                        q: s.plant.q,
+                        qd: s.plant.qd,
+                        f_measured,
+                        object: &copy.state,
+                        object_time_s: copy.time_s,
+                        adopted: !s.pending_adoptions.is_empty(),
+                    },
+                    &world.shape,
+                    &world.mass,
+                );
+                let step_n = (out.f_desired - s.last_f_desired).norm();
+                for k in s.pending_adoptions.drain(..) {
+                    result.adoptions[k].force_step_n = step_n;
+                }
+                s.tau = out.tau;
+                s.own = out.contact;
+                s.last_f_desired = out.f_desired;
+                s.last_f_measured = f_measured;
+                s.next_servo += s.period_servo;
+            }
+            if !reference && s.next_report == t {
+                let msg = s.method.report(&s.copy, &s.own, ns_to_s(t));
+                for to in (0..n).filter(|&to| to != i) {
+                    messages.0 += 1;
+                    let rng = &mut links[i * n + to];
+                    let lost = rng.uniform() < net.loss;
+                    let swing =
+                        0.5 - 0.5 * (std::f64::consts::TAU * ns_to_s(t) / net.delay_period_s).cos();
+                    let delay_ms = net.delay_min_ms
+                        + (net.delay_max_ms - net.delay_min_ms) * swing
+                        + rng.range(-net.jitter_ms, net.jitter_ms);
+                    if lost {
+                        messages.2 += 1;
+                        continue;
+                    }
+                    let at_ns = t + (delay_ms.max(0.0) * 1e6).round() as u64;
+                    seq += 1;
+                    in_flight.push(Reverse(InFlight {
+                        at_ns,
+                        seq,
+                        from: i,
+                        to,
+                        msg,
+                    }));
+                }
+                s.next_report += s.period_report;
+            }
+        }
+        if next_sample == t {
+            result.t.push(ns_to_s(t));
+            for (i, s) in sites.iter().enumerate() {
+                let copy = if reference { &shared } else { &s.copy };
+                let tr = &mut result.sites[i];
+                tr.obj_pos.push(copy.state.pos);
+                tr.tool_pos.push(s.servo.arm.forward(&s.plant.q));
+                tr.f_desired.push(s.last_f_desired);
+                tr.f_measured.push(s.last_f_measured);
+                tr.touching.push(s.own.touching);
+                let on_object = if reference {
+                    sites.iter().map(|o| o.own.force).sum()
+                } else {
+                    s.own.force + s.method.remote_force()
+                };
+                tr.f_on_object.push(on_object);
+            }
+            next_sample += period_sample;
+        }
+    }
+    progress(1.0);
+    messages.1 = messages.1.min(messages.0);
+    result.messages = messages;
+    for s in &sites {
+        let copy = if reference { &shared } else { &s.copy };
+        result.energy.push(copy.energy);
+        result
+            .mech_energy
+            .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
+    }
+    result
+}
+
+impl RunResult {
+    /// The trace as CSV: one row per sample and site, fixed formatting (byte-identical across runs).
+    pub fn trace_csv(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::from(
+            "t_s,site,obj_x,obj_y,obj_z,tool_x,tool_y,tool_z,fd_x,fd_y,fd_z,fm_x,fm_y,fm_z,fobj_x,fobj_y,fobj_z,touching\n",
+        );
+        for (k, t) in self.t.iter().enumerate() {
+            for (i, s) in self.sites.iter().enumerate() {
+                let _ = write!(out, "{t:.6},{i}");
+                for v in [
+                    s.obj_pos[k],
+                    s.tool_pos[k],
+                    s.f_desired[k],
+                    s.f_measured[k],
+                    s.f_on_object[k],
+                ] {
+                    let _ = write!(out, ",{:.9},{:.9},{:.9}", v.x, v.y, v.z);
+                }
+                let _ = writeln!(out, ",{}", u8::from(s.touching[k]));
+            }
+        }
+        out
+    }
+
+    /// Adoption events as CSV.
+    pub fn adoptions_csv(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::from("t_s,site,from,jump_m,age_s,force_step_n\n");
+        for a in &self.adoptions {
+            let _ = writeln!(
+                out,
+                "{:.6},{},{},{:.9},{:.6},{:.9}",
+                a.t_s, a.site, a.from, a.jump_m, a.age_s, a.force_step_n
+            );
+        }
+        out
+    }
+}

@@ -1,0 +1,273 @@
+//! `sim`: runs the deterministic multi-site simulator on a scenario file.
+//!
+//! - `sim run SCENARIO --out DIR`: one method; writes the trace, adoptions, metrics and the
+//!   Fig. 9–12 style plots.
+//! - `sim compare SCENARIO`: every method on the same scenario next to the reference run, one table
+//!   (or `--json`).
+//! - `sim bench`: cost of a physics step and a servo step, and the simulator's speed.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use coop_model::metrics::{self, Metrics};
+use coop_model::scenario::{MethodName, Scenario};
+use coop_model::sim::{self, Mode, RunResult};
+
+use crate::scenario_file;
+
+/// Command line of `sim`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "sim",
+    version,
+    about = "Run the deterministic multi-site simulator of cooperative haptic manipulation.",
+    long_about = "Run the deterministic multi-site simulator: N sites, each with its own device, \
+        servo/physics/report rates and user script, a virtual network with delay, jitter and loss, \
+        in virtual time. Same scenario and seed give byte-identical outputs. Scenario files are TOML \
+        (see scenarios/paper.toml); errors name the field, the value and the rule."
+)]
+pub struct Args {
+    #[command(subcommand)]
+    #[allow(missing_docs)]
+    pub command: Command,
+}
+
+/// `sim` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run one method; write trace.csv, adoptions.csv, metrics.json and plots to DIR.
+    Run {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Output directory (created if missing).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Method, overriding the scenario's: naive or paper.
+        #[arg(long, value_parser = parse_method)]
+        method: Option<MethodName>,
+        /// Seed, overriding the scenario's.
+        #[arg(long)]
+        seed: Option<u64>,
+    },
+    /// Run every method and the reference on the scenario; print one table.
+    Compare {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Print the figures as JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Also write each method's outputs and plots under DIR/<method>/.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
+    /// Benchmark: physics step, servo step (ns) and simulator speed on a scenario.
+    Bench {
+        /// Scenario for the speed figure.
+        #[arg(default_value = "scenarios/paper.toml")]
+        scenario: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+        /// Fewer iterations (CI smoke run).
+        #[arg(long)]
+        quick: bool,
+    },
+}
+
+fn parse_method(s: &str) -> Result<MethodName, String> {
+    match s {
+        "naive" => Ok(MethodName::Naive),
+        "paper" => Ok(MethodName::Paper),
+        _ => Err(format!("unknown method {s:?}: use naive or paper")),
+    }
+}
+
+/// Runs one mode with a progress bar on a terminal.
+pub fn run_mode(scenario: &Scenario, mode: Mode) -> RunResult {
+    use std::io::IsTerminal;
+    let bar = if std::io::stderr().is_terminal() && scenario.duration_s > 5.0 {
+        let b = indicatif::ProgressBar::new(1000);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {percent:>3}%")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_message(mode.name());
+        Some(b)
+    } else {
+        None
+    };
+    let r = sim::run(scenario, mode, &mut |f| {
+        if let Some(b) = &bar {
+            b.set_position((f * 1000.0) as u64);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    r
+}
+
+/// Runs `sim`.
+///
+/// # Errors
+/// Bad scenario files, unwritable output directories.
+pub fn main(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        Command::Run {
+            scenario,
+            out,
+            method,
+            seed,
+        } => {
+            let mut sc = scenario_file::load(&scenario)?;
+            if let Some(m) = method {
+                sc.method = m;
+            }
+            if let Some(s) = seed {
+                sc.seed = s;
+            }
+            let reference = run_mode(&sc, Mode::Reference);
+            let r = run_mode(&sc, Mode::Distributed(sc.method));
+            let m = metrics::compute(&sc, &r, &reference);
+            write_outputs(&out, &sc, &r, &reference, &m)?;
+            print_table(&sc, &[m]);
+            println!("# outputs in {}", out.display());
+        }
+        Command::Compare {
+            scenario,
+            json,
+            out,
+        } => {
+            let sc = scenario_file::load(&scenario)?;
+            let reference = run_mode(&sc, Mode::Reference);
+            let mut all = vec![metrics::compute(&sc, &reference, &reference)];
+            for method in MethodName::ALL {
+                let r = run_mode(&sc, Mode::Distributed(method));
+                let m = metrics::compute(&sc, &r, &reference);
+                if let Some(dir) = &out {
+                    write_outputs(&dir.join(method.as_str()), &sc, &r, &reference, &m)?;
+                }
+                all.push(m);
+            }
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&compare_json(&sc, &all))?
+                );
+            } else {
+                print_table(&sc, &all);
+            }
+        }
+        Command::Bench {
+            scenario,
+            json,
+            quick,
+        } => crate::simbench::run(&scenario, json, quick)?,
+    }
+    Ok(())
+}
+
+fn compare_json(sc: &Scenario, all: &[Metrics]) -> serde_json::Value {
+    serde_json::json!({ "scenario": sc.name, "seed": sc.seed, "duration_s": sc.duration_s, "methods": all })
+}
+
+/// Prints the comparison table.
+pub fn print_table(sc: &Scenario, all: &[Metrics]) {
+    println!(
+        "# scenario {} (seed {}, {} s, {} sites)",
+        sc.name,
+        sc.seed,
+        sc.duration_s,
+        sc.site.len()
+    );
+    println!(
+        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
+        "method",
+        "div max",
+        "div rms",
+        "div after",
+        "err ref",
+        "force rms",
+        "adopt step",
+        "energy in",
+        "adoptions"
+    );
+    println!(
+        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>10}",
+        "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", ""
+    );
+    for m in all {
+        let worst = |f: &dyn Fn(&coop_model::metrics::SiteMetrics) -> f64| {
+            m.sites.iter().map(f).fold(0.0, f64::max)
+        };
+        let phases: Vec<String> = m
+            .sites
+            .iter()
+            .map(|s| {
+                let ok = s.phases.iter().filter(|(_, ok)| *ok).count();
+                format!("{} {}/{}", s.name, ok, s.phases.len())
+            })
+            .collect();
+        println!(
+            "{:<10}{:>10.2}{:>10.2}{:>12.3}{:>11.2}{:>11.3}{:>11.3}{:>11.2}{:>10}  {}",
+            m.method,
+            m.divergence_max_m * 1e3,
+            m.divergence_rms_m * 1e3,
+            m.divergence_after_contact_m * 1e3,
+            worst(&|s| s.error_vs_reference_rms_m) * 1e3,
+            worst(&|s| s.force_tracking_rms_n),
+            worst(&|s| s.max_adoption_force_step_n),
+            worst(&|s| s.energy_injected_j.abs()) * 1e3,
+            m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
+            phases.join(", ")
+        );
+    }
+    let radius = sc.object.radius_m;
+    println!(
+        "# div = largest distance between sites' copies; 'after contact' from {:.2} s (contacts over, object at rest, + max delay + 2 report periods); object radius {:.0} mm",
+        all.last().map_or(0.0, |m| m.after_contact_from_s),
+        radius * 1e3
+    );
+    for m in all {
+        for s in &m.sites {
+            let failed: Vec<&str> = s
+                .phases
+                .iter()
+                .filter(|(_, ok)| !ok)
+                .map(|(n, _)| n.as_str())
+                .collect();
+            if !failed.is_empty() {
+                println!(
+                    "# {}: at {} these phases did not happen: {}",
+                    m.method,
+                    s.name,
+                    failed.join(", ")
+                );
+            }
+        }
+    }
+}
+
+/// Writes a run's trace, adoptions, metrics and plots into `dir`.
+///
+/// # Errors
+/// The directory or a file cannot be written.
+pub fn write_outputs(
+    dir: &Path,
+    sc: &Scenario,
+    r: &RunResult,
+    reference: &RunResult,
+    m: &Metrics,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let write = |name: &str, text: String| {
+        std::fs::write(dir.join(name), text)
+            .with_context(|| format!("writing {}", dir.join(name).display()))
+    };
+    write("trace.csv", r.trace_csv())?;
+    write("reference_trace.csv", reference.trace_csv())?;
+    write("adoptions.csv", r.adoptions_csv())?;
+    write("metrics.json", serde_json::to_string_pretty(m)? + "\n")?;
+    crate::plots::figures(dir, sc, r, reference)
+}
