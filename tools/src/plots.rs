@@ -1,15 +1,259 @@
-//! Plots: placeholder replaced below.
-use coop_model::{scenario::Scenario, sim::RunResult};
+//! Plots laid out like the paper's Figs. 9–12, as PNG and SVG: per direction (x, y), four panels —
+//! (a) the sum of the users' forces acting on the object at each site, (b) the object's position as
+//! each site believes it, with the reference run dashed, (c) the desired and (d) the measured contact
+//! force of each user — plus the inter-site divergence over time.
+
 use std::path::Path;
-/// Draws the figures.
+
+use anyhow::{anyhow, Context};
+use coop_model::body::Vec3;
+use coop_model::scenario::Scenario;
+use coop_model::sim::RunResult;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// The TrueType font the plots use (Debian package `fonts-dejavu-core`).
+pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+
+fn ensure_font() -> anyhow::Result<()> {
+    static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
+    DONE.get_or_init(|| {
+        let bytes = std::fs::read(FONT)
+            .map_err(|e| format!("reading {FONT} ({e}): install the fonts-dejavu-core package"))?;
+        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+            .map_err(|_| format!("{FONT} is not a usable font"))
+    })
+    .clone()
+    .map_err(|e| anyhow!(e))
+}
+
+struct Series {
+    label: String,
+    color: RGBColor,
+    dashed: bool,
+    points: Vec<(f64, f64)>,
+}
+
+struct Panel {
+    title: String,
+    y_label: &'static str,
+    series: Vec<Series>,
+}
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    title: &str,
+    panels: &[Panel],
+    t_end: f64,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("drawing: {e:?}");
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 22)).map_err(err)?;
+    let areas = root.split_evenly((panels.len(), 1));
+    for (area, p) in areas.iter().zip(panels) {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for s in &p.series {
+            for &(_, y) in &s.points {
+                lo = lo.min(y);
+                hi = hi.max(y);
+            }
+        }
+        if !lo.is_finite() {
+            (lo, hi) = (-1.0, 1.0);
+        }
+        let pad = ((hi - lo) * 0.08).max(1e-6);
+        let mut chart = ChartBuilder::on(area)
+            .caption(&p.title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(64)
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc(p.y_label)
+            .label_style(("sans-serif", 12))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()
+            .map_err(err)?;
+        for s in &p.series {
+            let style = ShapeStyle::from(&s.color).stroke_width(if s.dashed { 1 } else { 2 });
+            let drawn = if s.dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(s.points.iter().copied(), 6, 4, style))
+                    .map_err(err)?
+            } else {
+                chart
+                    .draw_series(LineSeries::new(s.points.iter().copied(), style))
+                    .map_err(err)?
+            };
+            let c = s.color;
+            drawn.label(&s.label).legend(move |(x, y)| {
+                PathElement::new(
+                    vec![(x, y), (x + 18, y)],
+                    ShapeStyle::from(&c).stroke_width(2),
+                )
+            });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.3))
+            .label_font(("sans-serif", 12))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+fn write_both(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    panels: &[Panel],
+    t_end: f64,
+    size: (u32, u32),
+) -> anyhow::Result<()> {
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    draw(
+        BitMapBackend::new(&png, size).into_drawing_area(),
+        title,
+        panels,
+        t_end,
+    )
+    .with_context(|| format!("plotting {}", png.display()))?;
+    draw(
+        SVGBackend::new(&svg, size).into_drawing_area(),
+        title,
+        panels,
+        t_end,
+    )
+    .with_context(|| format!("plotting {}", svg.display()))?;
+    Ok(())
+}
+
+/// Writes `fig_x`, `fig_y` and `divergence` (PNG and SVG) for a run into `dir`.
 ///
 /// # Errors
-/// Never yet.
+/// The font is missing, or a file cannot be written.
 pub fn figures(
-    _dir: &Path,
-    _sc: &Scenario,
-    _r: &RunResult,
-    _reference: &RunResult,
+    dir: &Path,
+    sc: &Scenario,
+    r: &RunResult,
+    reference: &RunResult,
 ) -> anyhow::Result<()> {
-    Ok(())
+    ensure_font()?;
+    let t_end = sc.duration_s;
+    let name = |i: usize| sc.site[i].name.clone();
+    let series = |f: &dyn Fn(usize, usize) -> f64, dashed_ref: Option<&dyn Fn(usize) -> f64>| {
+        let mut out: Vec<Series> = (0..r.sites.len())
+            .map(|i| Series {
+                label: name(i),
+                color: COLORS[i % COLORS.len()],
+                dashed: false,
+                points: r.t.iter().enumerate().map(|(k, &t)| (t, f(i, k))).collect(),
+            })
+            .collect();
+        if let Some(g) = dashed_ref {
+            out.push(Series {
+                label: "reference".into(),
+                color: BLACK.into(),
+                dashed: true,
+                points: reference
+                    .t
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &t)| (t, g(k)))
+                    .collect(),
+            });
+        }
+        out
+    };
+    let method = r.mode.name();
+    for (axis, stem, label) in [(0usize, "fig_x", "x"), (1, "fig_y", "y")] {
+        let c = |v: Vec3| v[axis];
+        let panels = [
+            Panel {
+                title: format!("(a) sum of users' {label}-forces on the object, per site"),
+                y_label: "N",
+                series: series(&|i, k| c(r.sites[i].f_on_object[k]), None),
+            },
+            Panel {
+                title: format!("(b) object {label} position as each site believes it"),
+                y_label: "m",
+                series: series(
+                    &|i, k| c(r.sites[i].obj_pos[k]),
+                    Some(&|k| c(reference.sites[0].obj_pos[k])),
+                ),
+            },
+            Panel {
+                title: format!("(c) desired {label}-force at each user's hand"),
+                y_label: "N",
+                series: series(&|i, k| c(r.sites[i].f_desired[k]), None),
+            },
+            Panel {
+                title: format!("(d) measured {label}-force at each user's hand"),
+                y_label: "N",
+                series: series(&|i, k| c(r.sites[i].f_measured[k]), None),
+            },
+        ];
+        let title = format!(
+            "scenario {}, method {method}: {}-direction (cf. paper Figs. 9-12)",
+            sc.name, label
+        );
+        write_both(dir, stem, &title, &panels, t_end, (1000, 1300))?;
+    }
+    let div: Vec<(f64, f64)> =
+        r.t.iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                let mut d: f64 = 0.0;
+                for (i, a) in r.sites.iter().enumerate() {
+                    for b in &r.sites[i + 1..] {
+                        d = d.max((a.obj_pos[k] - b.obj_pos[k]).norm());
+                    }
+                }
+                (t, d * 1e3)
+            })
+            .collect();
+    let panels = [Panel {
+        title: "largest distance between any two sites' copies of the object".into(),
+        y_label: "mm",
+        series: vec![Series {
+            label: method.into(),
+            color: COLORS[1],
+            dashed: false,
+            points: div,
+        }],
+    }];
+    write_both(
+        dir,
+        "divergence",
+        &format!(
+            "scenario {}, method {method}: inter-site divergence",
+            sc.name
+        ),
+        &panels,
+        t_end,
+        (1000, 400),
+    )
 }

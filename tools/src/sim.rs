@@ -182,7 +182,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         sc.site.len()
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
+        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
         "method",
         "div max",
         "div rms",
@@ -190,12 +190,13 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "err ref",
         "force rms",
         "adopt step",
-        "energy in",
+        "E others",
+        "others did",
         "adoptions"
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>10}",
-        "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", ""
+        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
+        "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", "mJ", ""
     );
     for m in all {
         let worst = |f: &dyn Fn(&coop_model::metrics::SiteMetrics) -> f64| {
@@ -210,7 +211,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{:>12.3}{:>11.2}{:>11.3}{:>11.3}{:>11.2}{:>10}  {}",
+            "{:<10}{:>10.2}{:>10.2}{:>12.3}{:>11.2}{:>11.3}{:>11.3}{:>11.2}{:>11.2}{:>10}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
@@ -218,14 +219,15 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             worst(&|s| s.error_vs_reference_rms_m) * 1e3,
             worst(&|s| s.force_tracking_rms_n),
             worst(&|s| s.max_adoption_force_step_n),
-            worst(&|s| s.energy_injected_j.abs()) * 1e3,
+            worst(&|s| s.energy_from_others_j) * 1e3,
+            worst(&|s| s.others_work_j) * 1e3,
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
             phases.join(", ")
         );
     }
     let radius = sc.object.radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {:.2} s (contacts over, object at rest, + max delay + 2 report periods); object radius {:.0} mm",
+        "# div = largest distance between sites' copies; 'after contact' from {:.2} s (contacts over, object at rest, + max delay + 2 report periods); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
         all.last().map_or(0.0, |m| m.after_contact_from_s),
         radius * 1e3
     );

@@ -82,10 +82,9 @@ pub struct ObjectCopy {
     pub env_touching: bool,
     /// Gravity less the environment's support at the last step (what a report carries), m/s².
     pub passive_accel: Vec3,
-    /// When a user's force last changed this state (as far as this site knows), s.
-    pub changed_s: f64,
-    /// Which site's user made that change.
-    pub changed_by: usize,
+    /// Per site: the time up to which that site's user's impulses are included in this state (the
+    /// paper's "time of the state change", one per contributor), s; negative: none yet.
+    pub included: [f64; MAX_SITES],
 }
 
 impl ObjectCopy {
@@ -98,8 +97,7 @@ impl ObjectCopy {
             energy: EnergyAccount::default(),
             env_touching: false,
             passive_accel: Vec3::zeros(),
-            changed_s: 0.0,
-            changed_by: 0,
+            included: [-1.0; MAX_SITES],
         }
     }
 }
@@ -107,8 +105,8 @@ impl ObjectCopy {
 /// What sites send each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Report {
-    /// `paper`: a state, the time it holds at, the time and author of its last change by a user, and
-    /// the acceleration a receiver should extrapolate it with.
+    /// `paper`: a state, the time it holds at, up to when each site's user's impulses are included
+    /// in it, and the acceleration a receiver should extrapolate it with.
     State {
         /// Time of the state, s (sender's clock).
         t_s: f64,
@@ -116,10 +114,8 @@ pub enum Report {
         state: BodyState,
         /// Gravity less the environment's support, m/s².
         accel: Vec3,
-        /// When a user's force last changed it, s.
-        changed_s: f64,
-        /// Whose user that was.
-        changed_by: usize,
+        /// Per site, the time up to which its user's impulses are included, s.
+        included: [f64; MAX_SITES],
     },
     /// `naive`: the sender's own contact force and where it acts.
     Force {
@@ -165,14 +161,15 @@ pub trait Consistency: std::fmt::Debug + Send {
 }
 
 /// Integrates a copy by `dt` under `users` (contacts held over the step) and the environment, keeping
-/// the energy account. `own_count` of the users are the site's own (the rest are remote).
+/// the energy account. `own_count` of the users are the site's own (the rest are remote). Returns the
+/// own users' impulse over the step (linear in `force`, angular in `torque`).
 pub fn integrate(
     world: &World,
     copy: &mut ObjectCopy,
     users: &[ContactForce],
     own_count: usize,
     dt: f64,
-) {
+) -> Wrench {
     let before = copy.state;
     let mut env_state = copy.env;
     // Wrenches at the start and end of the step, per source, for the work estimate.
@@ -216,6 +213,11 @@ pub fn integrate(
     copy.env = env_state;
     copy.state = next;
     copy.time_s += dt;
+    // The own users' impulse over the step (trapezoid of the two evaluations).
+    Wrench {
+        force: (seen[0][0].force + seen[1][0].force) * (0.5 * dt),
+        torque: (seen[0][0].torque + seen[1][0].torque) * (0.5 * dt),
+    }
 }
 
 /// Extrapolates `s` by `dt` seconds (see the module docs for the orders).
@@ -357,28 +359,39 @@ impl Consistency for Naive {
     }
 }
 
-/// Eq. 10/11: own force only; adopt received states that carry a newer change, dead-reckoned to now.
+/// Own impulses a site remembers for replay: 8 s at 1 kHz.
+const LOG_CAP: usize = 8192;
+
+/// Eq. 9–11: each site integrates its copy with its **own** user's force only, and the newest state
+/// travels between the sites; "the force of each user only updates the newest state"
+/// (superposition at the acceleration level).
 ///
-/// "Newer" is judged by the **time of the state change** the paper has each report carry: the last time
-/// a user's force changed the state, and whose. A site adopts a received state when
-/// - its change is newer than the change the local copy holds, or
-/// - it is the same change, sent by the site whose user made it (the authority for that change), and a
-///   newer snapshot than the last one adopted from that site.
+/// Every report carries, per site, the time up to which that site's user's impulses are included in
+/// the state: the paper's "time of the state change", one per contributor. A site adopts a received
+/// state when it includes newer contributions of the others and none older; it dead-reckons it to now
+/// and **replays its own user's impulses the sender had not yet seen** (each impulse moves the object
+/// by Δv·(now − t) and changes its momentum by Δp). So a site never takes back its own user's push,
+/// and during a simultaneous grasp each copy carries both users' forces, each from its own site. With
+/// zero delay this is the reference run's sum of forces (for free motion exactly).
 ///
-/// So while a site's own user pushes, the local copy holds the newest change and delayed remote states
-/// (which cannot contain that push) are not adopted — no yank-back under the user's tool; once the
-/// push ends, the others adopt the pusher's states and follow its copy. During a simultaneous grasp
-/// the state changes hands between the users as fast as the reports allow: the paper's "ping-pong".
+/// When nothing new is known the sites follow the copy of the site whose user touched last (it
+/// includes the newest impulse): its later snapshots are adopted, so a released object slides to
+/// rest identically everywhere.
 ///
 /// Along the normal of an environment plane the local copy rests on, the local position and velocity
 /// are kept: the contact equilibrium there is local physics, and transplanting another copy's
-/// micro-bounce would pump energy into every adoption.
+/// micro-bounce would pump energy into every adoption. The environment's friction stick points move
+/// with the adopted object.
 #[derive(Debug, Clone)]
 pub struct Paper {
     /// Dead-reckoning order (0, 1, 2).
     pub order: u8,
     me: usize,
     newest_from: [f64; MAX_SITES],
+    /// Own impulses: (end of the step, middle of the step, linear impulse, angular impulse), a ring.
+    log: Box<[(f64, f64, Vec3, Vec3)]>,
+    log_next: usize,
+    log_len: usize,
 }
 
 impl Paper {
@@ -388,7 +401,21 @@ impl Paper {
             order,
             me,
             newest_from: [f64::NEG_INFINITY; MAX_SITES],
+            log: vec![(0.0, 0.0, Vec3::zeros(), Vec3::zeros()); LOG_CAP].into_boxed_slice(),
+            log_next: 0,
+            log_len: 0,
         }
+    }
+
+    /// The site whose user's impulse is the newest in `included` (ties: the lowest index).
+    fn author(included: &[f64; MAX_SITES]) -> usize {
+        (0..MAX_SITES).fold(0, |best, k| {
+            if included[k] > included[best] {
+                k
+            } else {
+                best
+            }
+        })
     }
 }
 
@@ -397,10 +424,20 @@ impl Consistency for Paper {
         "paper"
     }
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
-        integrate(world, copy, std::slice::from_ref(own), 1, dt);
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let impulse = integrate(world, copy, std::slice::from_ref(own), 1, dt);
         if own.touching {
-            copy.changed_s = copy.time_s;
-            copy.changed_by = self.me;
+            self.log[self.log_next] = (
+                copy.time_s,
+                copy.time_s - 0.5 * dt,
+                impulse.force,
+                impulse.torque,
+            );
+            self.log_next = (self.log_next + 1) % LOG_CAP;
+            self.log_len = (self.log_len + 1).min(LOG_CAP);
+            if let Some(mine) = copy.included.get_mut(self.me) {
+                *mine = copy.time_s;
+            }
         }
     }
     fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
@@ -408,8 +445,7 @@ impl Consistency for Paper {
             t_s: now_s,
             state: copy.state,
             accel: copy.passive_accel,
-            changed_s: copy.changed_s,
-            changed_by: copy.changed_by,
+            included: copy.included,
         }
     }
     fn receive(
@@ -424,24 +460,41 @@ impl Consistency for Paper {
             t_s,
             state,
             accel,
-            changed_s,
-            changed_by,
+            included,
         } = *msg
         else {
             return None;
         };
         let newest = self.newest_from.get_mut(from)?;
-        if t_s <= *newest || !state.is_finite() || !changed_s.is_finite() {
+        if t_s <= *newest || !state.is_finite() || included.iter().any(|v| !v.is_finite()) {
             return None; // a replay, an older snapshot, or garbage
         }
-        let newer_change = changed_s > copy.changed_s;
-        let from_authority =
-            changed_s == copy.changed_s && changed_by == copy.changed_by && from == changed_by;
-        if !(newer_change || from_authority) {
+        *newest = t_s;
+        let others = (0..MAX_SITES).filter(|&k| k != self.me);
+        let gains = others.clone().any(|k| included[k] > copy.included[k]);
+        let loses = others.clone().any(|k| included[k] < copy.included[k]);
+        let same = others.clone().all(|k| included[k] == copy.included[k]);
+        let follows_author = same && from == Self::author(&copy.included) && from != self.me;
+        if !((gains && !loses) || follows_author) {
             return None;
         }
-        *newest = t_s;
         let mut new = dead_reckon(world, &state, accel, now_s - t_s, self.order);
+        // Replay our own impulses the sender had not seen.
+        let seen_until = included.get(self.me).copied().unwrap_or(f64::NEG_INFINITY);
+        let inv_i = new.inv_inertia_world(&world.mass);
+        for k in 0..self.log_len {
+            let (t_end, t_mid, dp, dl) = self.log[(self.log_next + LOG_CAP - 1 - k) % LOG_CAP];
+            if t_end <= seen_until {
+                break;
+            }
+            // The impulse acted over its step: it has moved the object for (now − step middle).
+            let age = (now_s - t_mid).max(0.0);
+            let dv = dp / world.mass.mass_kg;
+            new.vel += dv;
+            new.pos += dv * age;
+            new.ang_mom += dl;
+            new.rot = UnitQuaternion::from_scaled_axis(inv_i * dl * age) * new.rot;
+        }
         for plane in world.planes() {
             if plane_depth(world, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
@@ -458,8 +511,11 @@ impl Consistency for Paper {
         copy.energy.adoption_j += adoption.energy_j;
         copy.env.shift(new.pos - copy.state.pos);
         copy.state = new;
-        copy.changed_s = changed_s;
-        copy.changed_by = changed_by;
+        let mine = copy.included.get(self.me).copied().unwrap_or(-1.0);
+        copy.included = included;
+        if let Some(m) = copy.included.get_mut(self.me) {
+            *m = m.max(mine);
+        }
         Some(adoption)
     }
 }
@@ -529,50 +585,72 @@ mod tests {
     }
 
     #[test]
-    fn paper_adopts_newer_changes_and_the_authority_only() {
-        let w = world();
+    fn paper_adopts_newer_contributions_and_replays_its_own() {
+        let w = World {
+            plane_count: 0,
+            gravity: Vec3::zeros(),
+            ..world()
+        };
         let mut m = Paper::new(2, 0);
         let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::zeros()));
-        let msg = |t: f64, x: f64, changed: f64| Report::State {
-            t_s: t,
-            state: BodyState::at_rest(Vec3::new(x, 0.0, 0.0)),
-            accel: Vec3::zeros(),
-            changed_s: changed,
-            changed_by: 1,
+        let msg = |t: f64, x: f64, mine: f64, theirs: f64| {
+            let mut included = [-1.0; MAX_SITES];
+            included[0] = mine;
+            included[1] = theirs;
+            Report::State {
+                t_s: t,
+                state: BodyState::at_rest(Vec3::new(x, 0.0, 0.0)),
+                accel: Vec3::zeros(),
+                included,
+            }
         };
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(1.0, 0.5, 0.9), 1.0)
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.5, -1.0, 0.9), 1.0)
                 .is_some(),
-            "newer change"
+            "newer contribution"
         );
-        assert_eq!(
-            (copy.state.pos.x, copy.changed_s, copy.changed_by),
-            (0.5, 0.9, 1)
-        );
+        assert_eq!((copy.state.pos.x, copy.included[1]), (0.5, 0.9));
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7, 0.9), 1.1)
+            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7, -1.0, 0.95), 1.1)
                 .is_none(),
             "older snapshot"
         );
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7, 0.9), 1.1)
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7, -1.0, 0.95), 1.1)
                 .is_none(),
             "replay"
         );
+        // Our own user pushes: +0.1 m/s at t = 1.0 (impulse 0.01 N·s on 0.1 kg).
+        let push = ContactForce {
+            force: Vec3::new(1.0, 0.0, 0.0),
+            point: copy.state.pos,
+            depth: 0.001,
+            touching: true,
+            slipping: false,
+        };
+        copy.time_s = 0.99;
+        m.physics_step(&w, &mut copy, &push, 0.01);
+        assert!((copy.state.vel.x - 0.1).abs() < 1e-9);
+        // A state from site 1 that has not seen our push: adopted, and our push replayed on it.
+        assert!(m
+            .receive(&w, &mut copy, 1, &msg(1.2, 0.6, -1.0, 1.1), 1.2)
+            .is_some());
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(1.2, 0.6, 0.9), 1.2)
-                .is_some(),
-            "same change, from its author"
+            (copy.state.vel.x - 0.1).abs() < 1e-9,
+            "own impulse replayed: {:?}",
+            copy.state.vel
         );
-        // Our own user pushes now: a delayed state holding an older change is not adopted.
-        copy.changed_s = 1.3;
-        copy.changed_by = 0;
+        // Pushed during [0.99, 1.0]: it has moved the object for 1.2 − 0.995 s.
         assert!(
-            m.receive(&w, &mut copy, 1, &msg(1.25, 0.0, 1.0), 1.3)
-                .is_none(),
-            "older change"
+            (copy.state.pos.x - (0.6 + 0.1 * 0.205)).abs() < 1e-9,
+            "{:?}",
+            copy.state.pos
         );
-        assert_eq!(copy.state.pos.x, 0.6);
+        // One that has seen it: adopted as it is.
+        assert!(m
+            .receive(&w, &mut copy, 1, &msg(1.3, 0.65, 1.0, 1.25), 1.3)
+            .is_some());
+        assert!(copy.state.vel.x.abs() < 1e-12 && (copy.state.pos.x - 0.65).abs() < 1e-12);
     }
 
     /// Order 2 on a table: a slide decelerates under kinetic friction and stops where physics stops it.

@@ -10,9 +10,11 @@
 //! - **Force tracking**: per site, RMS of |F_h − F_m| over the run (the controller's error).
 //! - **Adoption step**: per site, the largest change of the displayed force at the servo tick after an
 //!   adoption.
-//! - **Energy injected** (passivity check): per site, the mechanical energy its copy gained beyond the
-//!   work of its own user and of the environment — what remote forces (naive) or adoptions (paper) put
-//!   in. The reference run shows the integrator's own figure (≈ 0).
+//! - **Energy from other sites** (passivity check): per site, the mechanical energy its copy gained
+//!   beyond its own user's and its environment's work — what reached it from the others (as forces in
+//!   naive, as states in paper) — next to the work the other users actually did, each on its own
+//!   site's copy. A passive method delivers no more than the others did (less what friction takes).
+//!   The reference run shows the integrator's own balance (≈ 0).
 //! - **Phases**: per site, whether each task phase of the scenario happened as that site saw it.
 
 use crate::body::Vec3;
@@ -38,8 +40,10 @@ pub struct SiteMetrics {
     pub adoptions: usize,
     /// Largest displayed-force change at an adoption, N.
     pub max_adoption_force_step_n: f64,
-    /// Energy gained beyond own and environment work, J.
-    pub energy_injected_j: f64,
+    /// Energy this copy gained beyond its own user's and its environment's work, J.
+    pub energy_from_others_j: f64,
+    /// Work the other users did, each on its own site's copy, J.
+    pub others_work_j: f64,
     /// (phase name, happened at this site).
     pub phases: Vec<(String, bool)>,
 }
@@ -120,6 +124,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         .filter(|&k| run.t[k] >= from)
         .map(|k| divs[k])
         .fold(0.0, f64::max);
+    let all_users_j: f64 = run.energy.iter().map(|e| e.own_j).sum();
     let sites = run
         .sites
         .iter()
@@ -141,7 +146,12 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                     .iter()
                     .map(|a| a.force_step_n)
                     .fold(0.0, f64::max),
-                energy_injected_j: (e1 - e0) - e.own_j - e.env_j,
+                energy_from_others_j: (e1 - e0) - e.own_j - e.env_j,
+                others_work_j: if run.mode == crate::sim::Mode::Reference {
+                    0.0
+                } else {
+                    all_users_j - e.own_j
+                },
                 phases: scenario
                     .phase
                     .iter()
