@@ -10,6 +10,18 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+/// Runs a tool's body and turns an error into one `error: …` line (the cause chain on it) and exit
+/// status 1, whatever `RUST_BACKTRACE` says: users get the message, not a stack.
+pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::ExitCode {
+    match body() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
 pub mod cli;
 pub mod latency;
 pub mod plots;

@@ -176,7 +176,7 @@ pub fn figures(
         if let Some(g) = dashed_ref {
             out.push(Series {
                 label: "reference".into(),
-                color: BLACK.into(),
+                color: BLACK,
                 dashed: true,
                 points: reference
                     .t

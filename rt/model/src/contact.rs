@@ -181,8 +181,16 @@ pub fn environment_wrench(
 ) -> (Wrench, bool) {
     let mut total = Wrench::default();
     let mut touching = false;
-    let mut probes = [Vec3::zeros(); 16];
-    let count = shape.probe_points(&mut probes);
+    // Invariants of this evaluation, computed once for every plane: the probe points in the world and
+    // the body's angular velocity (the world inertia is a 3x3 product per call).
+    let mut world_probes = [Vec3::zeros(); 16];
+    let count = shape.probe_points(&mut world_probes);
+    let r = body.rot.to_rotation_matrix();
+    for p in world_probes.iter_mut().take(count) {
+        *p = body.pos + r * *p;
+    }
+    let omega = body.omega(mass);
+    let velocity_at = |q: Vec3| body.vel + omega.cross(&(q - body.pos));
     for (plane, anchor) in planes.iter().zip(state.anchors.iter_mut()).take(MAX_PLANES) {
         let n = plane.normal;
         let (mut deepest, mut weight, mut centre) = (0.0f64, 0.0, Vec3::zeros());
@@ -201,8 +209,8 @@ pub fn environment_wrench(
         if let Shape::Sphere { radius } = *shape {
             probe(body.pos - n * radius);
         } else {
-            for p in probes.iter().take(count) {
-                probe(body.pos + body.rot * p);
+            for p in world_probes.iter().take(count) {
+                probe(*p);
             }
         }
         if deepest <= 0.0 {
@@ -219,7 +227,7 @@ pub fn environment_wrench(
         let mut damping = Wrench::default();
         let mut f_damp_total = 0.0;
         for q in &touching_points[..n_touch.min(16)] {
-            let f = -share * body.point_velocity(mass, *q).dot(&n);
+            let f = -share * velocity_at(*q).dot(&n);
             f_damp_total += f;
             damping = damping + Wrench::at_point(n * f, *q, body.pos);
         }
@@ -234,7 +242,7 @@ pub fn environment_wrench(
         // centre whatever the micro-tilt, so a spinning disk's spin does not leak into translation.
         let patch =
             touching_points[..n_touch.min(16)].iter().sum::<Vec3>() / n_touch.min(16) as f64;
-        let v = body.point_velocity(mass, patch);
+        let v = velocity_at(patch);
         let a = anchor.unwrap_or(patch);
         let (f_t, slipped, stretch) = friction(c, a, patch, -v, n, f_n);
         *anchor = Some(if slipped { patch + stretch } else { a });

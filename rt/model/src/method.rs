@@ -273,9 +273,12 @@ fn plane_depth(world: &World, plane: &Plane, s: &BodyState) -> f64 {
         _ => {
             let mut probes = [Vec3::zeros(); 16];
             let count = world.shape.probe_points(&mut probes);
+            // The plane normal in body coordinates: one rotation instead of one per probe point.
+            let n_body = s.rot.inverse() * n;
+            let centre = plane.offset - n.dot(&s.pos);
             probes[..count]
                 .iter()
-                .map(|p| plane.offset - n.dot(&(s.pos + s.rot * p)))
+                .map(|p| centre - n_body.dot(p))
                 .fold(f64::NEG_INFINITY, f64::max)
         }
     }

@@ -3,15 +3,17 @@
 use clap::Parser;
 use coop_tools::latency;
 
-fn main() -> anyhow::Result<()> {
+fn main() -> std::process::ExitCode {
     let args = latency::Args::parse();
-    let cmdline = std::env::args().collect::<Vec<_>>().join(" ");
-    let report = latency::run(&args, cmdline, true)?;
-    latency::print_report(&args, &report);
-    if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&latency::report_json(&args, &report))?;
-        std::fs::write(path, text + "\n")
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
-    }
-    Ok(())
+    coop_tools::run_main(|| {
+        let cmdline = std::env::args().collect::<Vec<_>>().join(" ");
+        let report = latency::run(&args, cmdline, true)?;
+        latency::print_report(&args, &report);
+        if let Some(path) = &args.json {
+            let text = serde_json::to_string_pretty(&latency::report_json(&args, &report))?;
+            std::fs::write(path, text + "\n")
+                .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+        }
+        Ok(())
+    })
 }

@@ -2,6 +2,6 @@
 
 use clap::Parser;
 
-fn main() -> anyhow::Result<()> {
-    coop_tools::ringbench::run(&coop_tools::ringbench::Args::parse())
+fn main() -> std::process::ExitCode {
+    coop_tools::run_main(|| coop_tools::ringbench::run(&coop_tools::ringbench::Args::parse()))
 }

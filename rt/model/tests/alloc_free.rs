@@ -1,0 +1,146 @@
+//! The model's step functions allocate nothing (H6): the station's servo and physics loops call
+//! them every tick. A counting global allocator watches thousands of servo steps, physics steps of
+//! both methods, and paper adoptions with replay.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use coop_model::body::{BodyState, MassProps, Vec3};
+use coop_model::contact::{ContactForce, ContactParams, Plane, MAX_PLANES};
+use coop_model::device::ScaraParams;
+use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, World, MAX_SITES};
+use coop_model::servo::{Servo, ServoInput, ServoParams};
+use coop_model::shape::Shape;
+
+struct Counting;
+thread_local! {
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
+}
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.with(|a| a.set(a.get() + 1));
+        // SAFETY: same contract, forwarded.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: p came from System with this layout.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        ALLOCS.with(|a| a.set(a.get() + 1));
+        // SAFETY: same contract, forwarded.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations(f: impl FnOnce()) -> u64 {
+    let before = ALLOCS.with(Cell::get);
+    f();
+    ALLOCS.with(Cell::get) - before
+}
+
+fn contact() -> ContactParams {
+    ContactParams {
+        stiffness_n_per_m: 800.0,
+        damping_n_s_per_m: 3.0,
+        tangential_stiffness_n_per_m: 800.0,
+        tangential_damping_n_s_per_m: 3.0,
+        friction_static: 0.9,
+        friction_kinetic: 0.7,
+    }
+}
+
+fn world() -> World {
+    let shape = Shape::Cylinder {
+        radius: 0.04,
+        half_height: 0.01,
+    };
+    let mut planes = [Plane {
+        normal: Vec3::z(),
+        offset: f64::NEG_INFINITY,
+    }; MAX_PLANES];
+    planes[0].offset = 0.0;
+    World {
+        shape,
+        mass: MassProps {
+            mass_kg: 0.1,
+            inertia_body: shape.inertia(0.1),
+        },
+        gravity: Vec3::new(0.0, 0.0, -3.27),
+        planes,
+        plane_count: 1,
+        env_contact: contact(),
+    }
+}
+
+#[test]
+fn counting_allocator_counts() {
+    assert!(allocations(|| drop(std::hint::black_box(vec![0u8; 8]))) >= 1);
+}
+
+#[test]
+fn servo_physics_and_adoption_steps_allocate_nothing() {
+    let w = world();
+    let start = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.0099));
+    let arm = ScaraParams::paper(Vec3::new(-0.3, -0.2, 0.0));
+    let params = ServoParams {
+        tool_radius_m: 0.005,
+        contact: contact(),
+        controller: Default::default(),
+        stale_limit_s: 0.1,
+        stale_ramp_s: 0.05,
+        max_adoption_step_n: 0.5,
+    };
+    let mut servo = Servo::new(params, arm);
+    let q = arm
+        .inverse(Vec3::new(-0.044, 0.0, 0.01), 1.0)
+        .expect("reachable");
+    let mut paper = Paper::new(2, 0);
+    let mut naive = Naive::default();
+    let (mut a, mut b) = (ObjectCopy::new(start), ObjectCopy::new(start));
+    let mut included = [-1.0; MAX_SITES];
+    let n = allocations(|| {
+        for k in 0..5_000 {
+            let now = k as f64 * 1e-3;
+            let out = servo.step(
+                &ServoInput {
+                    now_s: now,
+                    dt_s: 1e-3,
+                    q,
+                    qd: Vec3::zeros(),
+                    f_measured: Vec3::zeros(),
+                    object: &a.state,
+                    object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
+                    adopted: k % 7 == 0,
+                },
+                &w.shape,
+                &w.mass,
+            );
+            let own: ContactForce = out.contact;
+            paper.physics_step(&w, &mut a, &own, 1e-3);
+            naive.physics_step(&w, &mut b, &own, 1e-3);
+            naive.receive(
+                &w,
+                &mut b,
+                1,
+                &Report::Force {
+                    t_s: now,
+                    force: own,
+                },
+                now,
+            );
+            included[1] = now;
+            let msg = Report::State {
+                t_s: now,
+                state: b.state,
+                accel: Vec3::zeros(),
+                included,
+            };
+            paper.receive(&w, &mut a, 1, &msg, now);
+        }
+    });
+    assert_eq!(n, 0, "the model's step functions allocated {n} times");
+}

@@ -1,0 +1,211 @@
+//! The simulator as a user runs it (issue 4): bad scenario files are refused with the field, value and
+//! rule and create nothing; runs are deterministic to the byte; on the paper's experiment the naive
+//! Eq. 8 method diverges far beyond the disk while the paper's method keeps the copies together once
+//! contacts end; with zero delay and equal rates both match the reference run.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use coop_model::metrics;
+use coop_model::scenario::MethodName;
+use coop_model::sim::{self, Mode};
+use coop_tools::scenario_file;
+
+const SIM: &str = env!("CARGO_BIN_EXE_sim");
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coop-sim-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+#[test]
+fn bad_scenarios_name_the_field_and_create_nothing() {
+    let dir = repo().join("tools/tests/fixtures/scenarios");
+    let expected: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("expected.json")).expect("expected.json"),
+    )
+    .expect("json");
+    let expected = expected.as_object().expect("object");
+    assert!(expected.len() >= 10, "one fixture per rule");
+    for (file, needle) in expected {
+        let out = tempdir("bad").join(file);
+        let o = Command::new(SIM)
+            .arg("run")
+            .arg(dir.join(file))
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("run sim");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{file}: accepted");
+        let needle = needle.as_str().expect("string");
+        assert!(
+            err.contains(needle),
+            "{file}: stderr lacks {needle:?}:\n{err}"
+        );
+        assert!(
+            err.contains(file.as_str()),
+            "{file}: the error names the file:\n{err}"
+        );
+        assert!(!out.exists(), "{file}: created {}", out.display());
+    }
+}
+
+/// Determinism contract (H9): the same scenario and seed give byte-identical traces and metrics; a
+/// different seed gives a different trace (so the comparison can fail).
+#[test]
+fn same_seed_gives_byte_identical_outputs() {
+    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let a = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
+    let b = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
+    assert_eq!(a.trace_csv(), b.trace_csv());
+    assert_eq!(a.adoptions_csv(), b.adoptions_csv());
+    let mut other = sc.clone();
+    other.seed += 1;
+    let c = sim::run(&other, Mode::Distributed(MethodName::Paper), &mut |_| {});
+    assert_ne!(a.trace_csv(), c.trace_csv(), "the seed must matter");
+
+    // And through the CLI, every output file.
+    let (d1, d2) = (tempdir("det1"), tempdir("det2"));
+    for d in [&d1, &d2] {
+        let o = Command::new(SIM)
+            .args(["run", "scenarios/paper.toml", "--method", "naive", "--out"])
+            .arg(d)
+            .current_dir(repo())
+            .output()
+            .expect("run sim");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    for f in [
+        "trace.csv",
+        "reference_trace.csv",
+        "adoptions.csv",
+        "metrics.json",
+        "fig_x.svg",
+    ] {
+        let (x, y) = (
+            std::fs::read(d1.join(f)).expect(f),
+            std::fs::read(d2.join(f)).expect(f),
+        );
+        assert!(x == y, "{f} differs between two runs");
+    }
+    let png = std::fs::read(d1.join("fig_x.png")).expect("png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    for f in ["fig_y.png", "fig_y.svg", "divergence.png", "divergence.svg"] {
+        assert!(std::fs::metadata(d1.join(f)).expect(f).len() > 1000, "{f}");
+    }
+    let _ = std::fs::remove_dir_all(&d1);
+    let _ = std::fs::remove_dir_all(&d2);
+}
+
+/// The paper's experiment: naive diverges far beyond the disk's radius and stays apart; the paper's
+/// method brings the copies together once contacts end (under 1 mm).
+#[test]
+fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
+    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let radius = sc.object.radius_m;
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let naive = metrics::compute(
+        &sc,
+        &sim::run(&sc, Mode::Distributed(MethodName::Naive), &mut |_| {}),
+        &reference,
+    );
+    let paper = metrics::compute(
+        &sc,
+        &sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {}),
+        &reference,
+    );
+    assert!(
+        naive.divergence_max_m > 4.0 * radius,
+        "naive max {}",
+        naive.divergence_max_m
+    );
+    assert!(
+        naive.divergence_after_contact_m > radius,
+        "naive after contact {}",
+        naive.divergence_after_contact_m
+    );
+    assert!(
+        naive.divergence_final_m > radius,
+        "naive final {}",
+        naive.divergence_final_m
+    );
+    assert!(
+        paper.divergence_after_contact_m < 1e-3,
+        "paper after contact {}",
+        paper.divergence_after_contact_m
+    );
+    assert!(paper.divergence_final_m < 1e-3);
+    // Adoptions are bounded at the servo by the configured step.
+    for s in &paper.sites {
+        assert!(s.adoptions > 0);
+        assert!(s.max_adoption_force_step_n <= sc.site[0].max_adoption_step_n + 1e-9);
+    }
+    // The reference does every task phase at every site.
+    let r = metrics::compute(&sc, &reference, &reference);
+    assert!(
+        r.sites.iter().all(|s| s.phases.iter().all(|(_, ok)| *ok)),
+        "{:?}",
+        r.sites
+    );
+}
+
+/// Zero delay and equal 1 kHz rates: both methods match the reference run within 1 mm.
+#[test]
+fn zero_delay_both_methods_match_the_reference() {
+    let sc =
+        scenario_file::load(&repo().join("scenarios/zero-delay.toml")).expect("zero-delay.toml");
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    for method in MethodName::ALL {
+        let m = metrics::compute(
+            &sc,
+            &sim::run(&sc, Mode::Distributed(method), &mut |_| {}),
+            &reference,
+        );
+        for s in &m.sites {
+            assert!(
+                s.error_vs_reference_max_m < 1e-3,
+                "{}: {} off the reference by {} m",
+                m.method,
+                s.name,
+                s.error_vs_reference_max_m
+            );
+            assert!(
+                s.phases.iter().all(|(_, ok)| *ok),
+                "{}: {:?}",
+                m.method,
+                s.phases
+            );
+        }
+    }
+}
+
+#[test]
+fn compare_prints_one_table_and_json() {
+    let o = Command::new(SIM)
+        .args(["compare", "scenarios/space-box.toml"])
+        .current_dir(repo())
+        .output()
+        .expect("sim");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for row in ["reference", "naive", "paper"] {
+        assert!(
+            out.lines().any(|l| l.starts_with(row)),
+            "{row} row missing:\n{out}"
+        );
+    }
+    let o = Command::new(SIM)
+        .args(["compare", "scenarios/space-box.toml", "--json"])
+        .current_dir(repo())
+        .output()
+        .expect("sim");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v["methods"].as_array().map(Vec::len), Some(3));
+    assert!(v["methods"][1]["divergence_max_m"].as_f64().is_some());
+}
