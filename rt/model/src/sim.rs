@@ -54,6 +54,10 @@ impl Mode {
 pub struct SiteTrace {
     /// Object centre of mass as this site believes it, m.
     pub obj_pos: Vec<Vec3>,
+    /// Object velocity as this site believes it, m/s.
+    pub obj_vel: Vec<Vec3>,
+    /// Object orientation as this site believes it (unit quaternion w, x, y, z).
+    pub obj_rot: Vec<[f64; 4]>,
     /// Tool position, m.
     pub tool_pos: Vec<Vec3>,
     /// Desired force at the hand F_h, N.
@@ -366,6 +370,9 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 let copy = if reference { &shared } else { &s.copy };
                 let tr = &mut result.sites[i];
                 tr.obj_pos.push(copy.state.pos);
+                tr.obj_vel.push(copy.state.vel);
+                let q = copy.state.rot.quaternion();
+                tr.obj_rot.push([q.w, q.i, q.j, q.k]);
                 tr.tool_pos.push(s.servo.arm.forward(&s.plant.q));
                 tr.f_desired.push(s.last_f_desired);
                 tr.f_measured.push(s.last_f_measured);
@@ -395,10 +402,12 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
 
 impl RunResult {
     /// The trace as CSV: one row per sample and site, fixed formatting (byte-identical across runs).
+    /// Columns: time, site, object position, tool position, desired force, measured force, sum of the
+    /// users' forces on this copy, touching, object velocity, object orientation quaternion.
     pub fn trace_csv(&self) -> String {
         use std::fmt::Write;
         let mut out = String::from(
-            "t_s,site,obj_x,obj_y,obj_z,tool_x,tool_y,tool_z,fd_x,fd_y,fd_z,fm_x,fm_y,fm_z,fobj_x,fobj_y,fobj_z,touching\n",
+            "t_s,site,obj_x,obj_y,obj_z,tool_x,tool_y,tool_z,fd_x,fd_y,fd_z,fm_x,fm_y,fm_z,fobj_x,fobj_y,fobj_z,touching,vel_x,vel_y,vel_z,q_w,q_x,q_y,q_z\n",
         );
         for (k, t) in self.t.iter().enumerate() {
             for (i, s) in self.sites.iter().enumerate() {
@@ -412,7 +421,13 @@ impl RunResult {
                 ] {
                     let _ = write!(out, ",{:.9},{:.9},{:.9}", v.x, v.y, v.z);
                 }
-                let _ = writeln!(out, ",{}", u8::from(s.touching[k]));
+                let _ = write!(out, ",{}", u8::from(s.touching[k]));
+                let (v, q) = (s.obj_vel[k], s.obj_rot[k]);
+                let _ = writeln!(
+                    out,
+                    ",{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9}",
+                    v.x, v.y, v.z, q[0], q[1], q[2], q[3]
+                );
             }
         }
         out
