@@ -15,6 +15,11 @@ use crate::shape::Shape;
 
 /// Contact law parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize),
+    serde(deny_unknown_fields, default)
+)]
 pub struct ContactParams {
     /// Normal stiffness K, N/m.
     pub stiffness_n_per_m: f64,
@@ -28,6 +33,20 @@ pub struct ContactParams {
     pub friction_static: f64,
     /// Kinetic friction coefficient μ_k (≤ μ_s).
     pub friction_kinetic: f64,
+}
+
+impl Default for ContactParams {
+    /// A firm tool–object contact: 800 N/m, lightly damped, grippy (μ_s 0.8, μ_k 0.6).
+    fn default() -> Self {
+        Self {
+            stiffness_n_per_m: 800.0,
+            damping_n_s_per_m: 4.0,
+            tangential_stiffness_n_per_m: 800.0,
+            tangential_damping_n_s_per_m: 4.0,
+            friction_static: 0.8,
+            friction_kinetic: 0.6,
+        }
+    }
 }
 
 /// The force one contact puts on the object.

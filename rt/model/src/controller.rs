@@ -9,6 +9,11 @@ use crate::body::Vec3;
 
 /// Gains and limits of the force controller.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize),
+    serde(deny_unknown_fields, default)
+)]
 pub struct ControllerParams {
     /// Proportional gain K_p (dimensionless: N per N of error).
     pub kp: f64,

@@ -125,6 +125,11 @@ impl ScaraParams {
 /// The user's hand: a mass held by a spring and damper to a scripted target (an impedance), gripping
 /// the handle through a stiff, damped grip.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize, serde::Serialize),
+    serde(deny_unknown_fields, default)
+)]
 pub struct HandParams {
     /// Hand and forearm mass moving with the handle, kg.
     pub mass_kg: f64,

@@ -85,9 +85,9 @@ pub struct Scenario {
     /// Gravity and environment.
     pub world: WorldSpec,
     /// Tool–object contact law.
-    pub contact: ContactSpec,
+    pub contact: ContactParams,
     /// Object–environment contact law.
-    pub environment_contact: ContactSpec,
+    pub environment_contact: ContactParams,
     /// Every link between sites (emulated network).
     pub network: LinkSpec,
     /// The sites, 1 to 8.
@@ -142,28 +142,6 @@ pub struct PlaneSpec {
     pub offset_m: f64,
 }
 
-/// A contact law.
-#[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(
-    feature = "serde",
-    derive(Deserialize),
-    serde(deny_unknown_fields, default)
-)]
-pub struct ContactSpec {
-    /// Normal stiffness K, N/m.
-    pub stiffness_n_per_m: f64,
-    /// Normal damping, N·s/m.
-    pub damping_n_s_per_m: f64,
-    /// Tangential stick stiffness, N/m.
-    pub tangential_stiffness_n_per_m: f64,
-    /// Tangential damping, N·s/m.
-    pub tangential_damping_n_s_per_m: f64,
-    /// Static friction coefficient.
-    pub friction_static: f64,
-    /// Kinetic friction coefficient (≤ static).
-    pub friction_kinetic: f64,
-}
-
 /// An emulated network link (applied to every ordered pair of sites).
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
@@ -215,49 +193,11 @@ pub struct SiteSpec {
     /// Largest displayed-force step per servo tick an adoption may cause, N.
     pub max_adoption_step_n: f64,
     /// The user's hand.
-    pub hand: HandSpec,
+    pub hand: HandParams,
     /// The force controller.
-    pub controller: ControllerSpec,
+    pub controller: ControllerParams,
     /// The user's script: keyframes (time, hand target).
     pub script: Vec<KeyframeSpec>,
-}
-
-/// The hand impedance.
-#[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(
-    feature = "serde",
-    derive(Deserialize),
-    serde(deny_unknown_fields, default)
-)]
-pub struct HandSpec {
-    /// Mass, kg.
-    pub mass_kg: f64,
-    /// Stiffness to the target, N/m.
-    pub stiffness_n_per_m: f64,
-    /// Damping, N·s/m.
-    pub damping_n_s_per_m: f64,
-    /// Grip stiffness, N/m.
-    pub grip_stiffness_n_per_m: f64,
-    /// Grip damping, N·s/m.
-    pub grip_damping_n_s_per_m: f64,
-}
-
-/// Eq. 12 gains and limits.
-#[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(
-    feature = "serde",
-    derive(Deserialize),
-    serde(deny_unknown_fields, default)
-)]
-pub struct ControllerSpec {
-    /// K_p.
-    pub kp: f64,
-    /// K_i, 1/s.
-    pub ki: f64,
-    /// Force limit, N.
-    pub max_force_n: f64,
-    /// Force rate limit, N/s.
-    pub max_force_rate_n_per_s: f64,
 }
 
 /// A script keyframe.
@@ -308,10 +248,10 @@ impl Default for Scenario {
             sample_rate_hz: 200.0,
             object: ObjectSpec::default(),
             world: WorldSpec::default(),
-            contact: ContactSpec::default(),
-            environment_contact: ContactSpec {
+            contact: ContactParams::default(),
+            environment_contact: ContactParams {
                 stiffness_n_per_m: 2000.0,
-                ..ContactSpec::default()
+                ..ContactParams::default()
             },
             network: LinkSpec::default(),
             site: Vec::new(),
@@ -345,19 +285,6 @@ impl Default for WorldSpec {
     }
 }
 
-impl Default for ContactSpec {
-    fn default() -> Self {
-        Self {
-            stiffness_n_per_m: 800.0,
-            damping_n_s_per_m: 4.0,
-            tangential_stiffness_n_per_m: 800.0,
-            tangential_damping_n_s_per_m: 4.0,
-            friction_static: 0.8,
-            friction_kinetic: 0.6,
-        }
-    }
-}
-
 impl Default for LinkSpec {
     fn default() -> Self {
         Self {
@@ -384,34 +311,9 @@ impl Default for SiteSpec {
             stale_limit_ms: 100.0,
             stale_ramp_ms: 50.0,
             max_adoption_step_n: 0.5,
-            hand: HandSpec::default(),
-            controller: ControllerSpec::default(),
+            hand: HandParams::default(),
+            controller: ControllerParams::default(),
             script: Vec::new(),
-        }
-    }
-}
-
-impl Default for HandSpec {
-    fn default() -> Self {
-        let h = HandParams::default();
-        Self {
-            mass_kg: h.mass_kg,
-            stiffness_n_per_m: h.stiffness_n_per_m,
-            damping_n_s_per_m: h.damping_n_s_per_m,
-            grip_stiffness_n_per_m: h.grip_stiffness_n_per_m,
-            grip_damping_n_s_per_m: h.grip_damping_n_s_per_m,
-        }
-    }
-}
-
-impl Default for ControllerSpec {
-    fn default() -> Self {
-        let c = ControllerParams::default();
-        Self {
-            kp: c.kp,
-            ki: c.ki,
-            max_force_n: c.max_force_n,
-            max_force_rate_n_per_s: c.max_force_rate_n_per_s,
         }
     }
 }
@@ -500,60 +402,47 @@ fn finite3(field: &str, v: &[f64; 3], bound: f64) -> Result<(), ScenarioError> {
     }
 }
 
-impl ContactSpec {
-    fn validate(&self, at: &str) -> Result<(), ScenarioError> {
-        in_range(
-            &format!("{at}.stiffness_n_per_m"),
-            self.stiffness_n_per_m,
-            0.0,
-            1e6,
-        )?;
-        in_closed(
-            &format!("{at}.damping_n_s_per_m"),
-            self.damping_n_s_per_m,
-            0.0,
-            1e4,
-        )?;
-        in_range(
-            &format!("{at}.tangential_stiffness_n_per_m"),
-            self.tangential_stiffness_n_per_m,
-            0.0,
-            1e6,
-        )?;
-        in_closed(
-            &format!("{at}.tangential_damping_n_s_per_m"),
-            self.tangential_damping_n_s_per_m,
-            0.0,
-            1e4,
-        )?;
-        in_closed(
-            &format!("{at}.friction_static"),
-            self.friction_static,
-            0.0,
-            10.0,
-        )?;
-        in_closed(
-            &format!("{at}.friction_kinetic"),
-            self.friction_kinetic,
-            0.0,
-            self.friction_static,
-        )
-        .map_err(|e| ScenarioError {
-            rule: format!("{} (no more than friction_static)", e.rule),
-            ..e
-        })
-    }
-    /// As the model's contact law.
-    pub fn params(&self) -> ContactParams {
-        ContactParams {
-            stiffness_n_per_m: self.stiffness_n_per_m,
-            damping_n_s_per_m: self.damping_n_s_per_m,
-            tangential_stiffness_n_per_m: self.tangential_stiffness_n_per_m,
-            tangential_damping_n_s_per_m: self.tangential_damping_n_s_per_m,
-            friction_static: self.friction_static,
-            friction_kinetic: self.friction_kinetic,
-        }
-    }
+fn validate_contact(c: &ContactParams, at: &str) -> Result<(), ScenarioError> {
+    in_range(
+        &format!("{at}.stiffness_n_per_m"),
+        c.stiffness_n_per_m,
+        0.0,
+        1e6,
+    )?;
+    in_closed(
+        &format!("{at}.damping_n_s_per_m"),
+        c.damping_n_s_per_m,
+        0.0,
+        1e4,
+    )?;
+    in_range(
+        &format!("{at}.tangential_stiffness_n_per_m"),
+        c.tangential_stiffness_n_per_m,
+        0.0,
+        1e6,
+    )?;
+    in_closed(
+        &format!("{at}.tangential_damping_n_s_per_m"),
+        c.tangential_damping_n_s_per_m,
+        0.0,
+        1e4,
+    )?;
+    in_closed(
+        &format!("{at}.friction_static"),
+        c.friction_static,
+        0.0,
+        10.0,
+    )?;
+    in_closed(
+        &format!("{at}.friction_kinetic"),
+        c.friction_kinetic,
+        0.0,
+        c.friction_static,
+    )
+    .map_err(|e| ScenarioError {
+        rule: format!("{} (no more than friction_static)", e.rule),
+        ..e
+    })
 }
 
 fn valid_name(s: &str) -> bool {
@@ -627,8 +516,8 @@ impl Scenario {
                 100.0,
             )?;
         }
-        self.contact.validate("contact")?;
-        self.environment_contact.validate("environment_contact")?;
+        validate_contact(&self.contact, "contact")?;
+        validate_contact(&self.environment_contact, "environment_contact")?;
         let n = &self.network;
         in_closed("network.delay_min_ms", n.delay_min_ms, 0.0, 10_000.0)?;
         in_closed(
@@ -804,7 +693,7 @@ impl Scenario {
             gravity: Vec3::from(self.world.gravity_m_per_s2),
             planes,
             plane_count: self.world.planes.len().min(MAX_PLANES),
-            env_contact: self.environment_contact.params(),
+            env_contact: self.environment_contact,
         }
     }
 
@@ -815,14 +704,7 @@ impl Scenario {
 
     /// Site `i`'s hand.
     pub fn hand(&self, i: usize) -> HandParams {
-        let h = &self.site[i].hand;
-        HandParams {
-            mass_kg: h.mass_kg,
-            stiffness_n_per_m: h.stiffness_n_per_m,
-            damping_n_s_per_m: h.damping_n_s_per_m,
-            grip_stiffness_n_per_m: h.grip_stiffness_n_per_m,
-            grip_damping_n_s_per_m: h.grip_damping_n_s_per_m,
-        }
+        self.site[i].hand
     }
 
     /// Site `i`'s servo parameters.
@@ -830,13 +712,8 @@ impl Scenario {
         let s = &self.site[i];
         ServoParams {
             tool_radius_m: s.tool_radius_m,
-            contact: self.contact.params(),
-            controller: ControllerParams {
-                kp: s.controller.kp,
-                ki: s.controller.ki,
-                max_force_n: s.controller.max_force_n,
-                max_force_rate_n_per_s: s.controller.max_force_rate_n_per_s,
-            },
+            contact: self.contact,
+            controller: s.controller,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
             max_adoption_step_n: s.max_adoption_step_n,
