@@ -6,6 +6,8 @@
 //!   force, falling back loudly when a privilege is missing.
 //! - [`timer`]: a periodic timer on absolute CLOCK_MONOTONIC deadlines with overrun counting.
 //! - [`stats`]: live loop statistics another process reads without disturbing the loop.
+//! - [`msg`], [`device`], [`servo`], [`physics`]: the station's ring messages and the bodies of its
+//!   servo and physics loops over the model (the processes around them come with the station).
 //!
 //! Real-time contract: after construction, `Producer::push`, `Consumer::pop`/`pop_newest`,
 //! `PeriodicTimer::wait` and `LoopStats::record` do not allocate, lock or log, and make no system call
@@ -16,9 +18,17 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+#[cfg(not(loom))]
+pub mod device;
+#[cfg(not(loom))]
+pub mod msg;
+#[cfg(not(loom))]
+pub mod physics;
 pub mod process;
 #[cfg(not(loom))]
 pub mod sched;
+#[cfg(not(loom))]
+pub mod servo;
 pub mod shm;
 #[cfg(not(loom))]
 pub use shm::stats;

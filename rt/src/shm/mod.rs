@@ -6,6 +6,8 @@
 
 #[cfg(not(loom))]
 pub mod block;
+#[cfg(not(loom))]
+pub mod control;
 pub mod header;
 pub mod name;
 pub mod pod;

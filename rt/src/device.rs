@@ -1,0 +1,74 @@
+//! Devices behind one trait: what the servo loop reads and writes each tick. The default is the
+//! model's simulated SCARA arm held by a scripted hand; real drivers implement the same trait.
+
+use coop_model::body::Vec3;
+use coop_model::device::Plant;
+use coop_model::user::{target_at, Keyframe};
+
+/// One reading of a device.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Joint positions.
+    pub q: Vec3,
+    /// Joint velocities.
+    pub qd: Vec3,
+    /// Force sensor: force on the hand, N.
+    pub f_measured: Vec3,
+}
+
+/// A force-display device.
+pub trait Device: Send {
+    /// Reads the device at `now_ns`.
+    fn read(&mut self, now_ns: u64) -> Reading;
+    /// Commands joint torques (held until the next write).
+    fn write(&mut self, tau: Vec3);
+}
+
+/// The simulated arm and hand: integrated up to each read, in steps of at most 100 µs, with the last
+/// written torques held.
+#[derive(Debug, Clone)]
+pub struct SimDevice {
+    plant: Plant,
+    script: Vec<Keyframe>,
+    start_ns: u64,
+    plant_ns: u64,
+    tau: Vec3,
+}
+
+impl SimDevice {
+    /// A simulated device whose script's time 0 is `start_ns`.
+    pub fn new(plant: Plant, script: Vec<Keyframe>, start_ns: u64) -> Self {
+        Self {
+            plant,
+            script,
+            start_ns,
+            plant_ns: start_ns,
+            tau: Vec3::zeros(),
+        }
+    }
+    /// The plant (for tests and recordings).
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+}
+
+impl Device for SimDevice {
+    fn read(&mut self, now_ns: u64) -> Reading {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        while self.plant_ns < now_ns {
+            let step = (now_ns - self.plant_ns).min(100_000);
+            let t = (self.plant_ns + step - self.start_ns) as f64 * 1e-9;
+            let (target, vel) = target_at(&self.script, t);
+            self.plant.step(self.tau, target, vel, step as f64 * 1e-9);
+            self.plant_ns += step;
+        }
+        Reading {
+            q: self.plant.q,
+            qd: self.plant.qd,
+            f_measured: self.plant.grip_force,
+        }
+    }
+    fn write(&mut self, tau: Vec3) {
+        self.tau = tau;
+    }
+}

@@ -1,0 +1,122 @@
+//! The servo loop's body: read the device, take the newest object state from physics, run the
+//! model's servo step (Eq. 5–7, 12, stale ramp, bounded adoption step), write the torques, send the
+//! tool sample to physics, publish statistics. The periodic timer and scheduling around it belong to
+//! the station's servo process.
+
+use coop_model::body::BodyState;
+use coop_model::method::World;
+use coop_model::servo::{Servo, ServoInput, ServoOutput};
+
+use crate::device::Device;
+use crate::msg::{ObjectSample, ToolSample};
+use crate::shm::control::ControlBlock;
+use crate::shm::{Consumer, Producer};
+
+/// Everything one servo loop owns.
+#[derive(Debug)]
+pub struct ServoLoop<D> {
+    servo: Servo,
+    device: D,
+    world: World,
+    objects: Consumer<ObjectSample>,
+    tools: Producer<ToolSample>,
+    latest: Option<(BodyState, u64, u64)>,
+    seq: u64,
+    last_ns: u64,
+    /// Tool samples dropped because physics did not keep up.
+    pub dropped: u64,
+}
+
+impl<D: Device> ServoLoop<D> {
+    /// A servo loop over `device`, reading object states from `objects`, sending tool samples on
+    /// `tools`.
+    pub fn new(
+        servo: Servo,
+        device: D,
+        world: World,
+        objects: Consumer<ObjectSample>,
+        tools: Producer<ToolSample>,
+        start_ns: u64,
+    ) -> Self {
+        Self {
+            servo,
+            device,
+            world,
+            objects,
+            tools,
+            latest: None,
+            seq: 0,
+            last_ns: start_ns,
+            dropped: 0,
+        }
+    }
+
+    /// One tick at `now_ns`.
+    pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoOutput {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
+        let mut adopted = false;
+        if let Ok(n) = self.objects.pop_newest() {
+            if let Some(state) = n.value.state() {
+                adopted = self.latest.is_some_and(|(_, _, a)| a != n.value.adoptions);
+                self.latest = Some((state, n.value.t_ns, n.value.adoptions));
+            }
+        }
+        let reading = self.device.read(now_ns);
+        let dt = (now_ns.saturating_sub(self.last_ns)).max(1) as f64 * 1e-9;
+        self.last_ns = now_ns;
+        // No state yet: the world is stale from the start (the display stays at zero).
+        let (object, t_ns) = self.latest.map_or(
+            (
+                BodyState::at_rest(coop_model::body::Vec3::new(1e3, 1e3, 1e3)),
+                0,
+            ),
+            |(s, t, _)| (s, t),
+        );
+        let out = self.servo.step(
+            &ServoInput {
+                now_s: now_ns as f64 * 1e-9,
+                dt_s: dt,
+                q: reading.q,
+                qd: reading.qd,
+                f_measured: reading.f_measured,
+                object: &object,
+                object_time_s: t_ns as f64 * 1e-9,
+                adopted,
+            },
+            &self.world.shape,
+            &self.world.mass,
+        );
+        self.device.write(out.tau);
+        self.seq += 1;
+        let a = |v: coop_model::body::Vec3| [v.x, v.y, v.z];
+        let sample = ToolSample {
+            t_ns: now_ns,
+            seq: self.seq,
+            tool_pos: a(out.tool_pos),
+            tool_vel: a(out.tool_vel),
+            force: a(out.contact.force),
+            point: a(out.contact.point),
+            depth: out.contact.depth,
+            touching: u64::from(out.contact.touching),
+            f_desired: a(out.f_desired),
+            f_measured: a(reading.f_measured),
+            f_command: a(out.f_command),
+        };
+        if self.tools.push(sample).is_err() {
+            self.dropped += 1;
+            if let Some(c) = control {
+                c.drops[0].store(self.dropped, crate::sync::Ordering::Relaxed);
+            }
+        }
+        if let Some(c) = control {
+            ControlBlock::store_f64(&c.servo_command_n, out.f_command.norm());
+            ControlBlock::store_f64(&c.servo_scale, out.scale);
+        }
+        out
+    }
+
+    /// The device.
+    pub fn device(&self) -> &D {
+        &self.device
+    }
+}

@@ -1,0 +1,265 @@
+//! The servo and physics loop bodies over real shared-memory rings, stepped with injected time (no
+//! sleeping, no timing assertions): a push flows servo → ring → physics and moves the object; states
+//! flow back; reports go out at the report rate; a hostile report is rejected and changes nothing;
+//! when physics stops, the servo's commanded force ramps to zero within stale limit + ramp; and the
+//! loop steps allocate nothing.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use coop_model::body::{BodyState, Vec3};
+use coop_model::device::Plant;
+use coop_model::method::{ObjectCopy, Paper};
+use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
+use coop_model::servo::Servo;
+use coop_rt::device::SimDevice;
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
+use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
+use coop_rt::servo::ServoLoop;
+use coop_rt::shm::{Producer, RingSegment, SegmentName};
+
+struct Counting;
+thread_local! {
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
+}
+// SAFETY: forwards every call to the system allocator unchanged; only counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        ALLOCS.with(|a| a.set(a.get() + 1));
+        // SAFETY: same contract, forwarded.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: p came from System with this layout.
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        ALLOCS.with(|a| a.set(a.get() + 1));
+        // SAFETY: same contract, forwarded.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const MS: u64 = 1_000_000;
+
+/// One site pushing a disk on a table, all four rings real segments.
+struct Rig {
+    servo: ServoLoop<SimDevice>,
+    physics: PhysicsLoop,
+    reports: coop_rt::shm::Consumer<SiteReport>,
+    remote_in: Producer<SiteReport>,
+    _segments: (
+        RingSegment<ToolSample>,
+        RingSegment<ObjectSample>,
+        RingSegment<SiteReport>,
+        RingSegment<SiteReport>,
+    ),
+    stale_ms: f64,
+    ramp_ms: f64,
+}
+
+/// With `wall`, a wall at x = 4.5 cm stops the disk so the user can press it against the wall.
+fn rig(tag: &str, wall: bool) -> Rig {
+    let mut sc = Scenario::default();
+    sc.object.start_m = [0.0, 0.0, 0.0099];
+    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+    sc.world.planes[0].offset_m = 0.0;
+    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    if wall {
+        sc.world.planes.push(coop_model::scenario::PlaneSpec {
+            normal: [-1.0, 0.0, 0.0],
+            offset_m: -0.045,
+        });
+    }
+    sc.site.push(SiteSpec {
+        name: "a".into(),
+        device_base_m: [-0.3, -0.2, 0.0],
+        report_rate_hz: 100.0,
+        script: vec![
+            KeyframeSpec {
+                t_s: 0.0,
+                target_m: [-0.12, 0.0, 0.01],
+            },
+            KeyframeSpec {
+                t_s: 0.2,
+                target_m: [-0.12, 0.0, 0.01],
+            },
+            KeyframeSpec {
+                t_s: 0.7,
+                target_m: [-0.035, 0.0, 0.01],
+            },
+        ],
+        ..SiteSpec::default()
+    });
+    sc.validate().expect("valid scenario");
+    let session = format!("lp{}{tag}", std::process::id());
+    let name = |w: &str| SegmentName::new(&session, "a", w).expect("name");
+    let tool = RingSegment::<ToolSample>::create(&name("tool"), 64).expect("tool ring");
+    let obj = RingSegment::<ObjectSample>::create(&name("obj"), 64).expect("object ring");
+    let rep = RingSegment::<SiteReport>::create(&name("rep"), 64).expect("report ring");
+    let rem = RingSegment::<SiteReport>::create(&name("rem"), 64).expect("remote ring");
+    let world = sc.world();
+    let script = sc.script(0);
+    let device = SimDevice::new(
+        Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+        script,
+        0,
+    );
+    let servo = ServoLoop::new(
+        Servo::new(sc.servo_params(0), sc.arm(0)),
+        device,
+        world,
+        obj.consumer().expect("c"),
+        tool.producer().expect("p"),
+        0,
+    );
+    let physics = PhysicsLoop::new(
+        0,
+        Box::new(Paper::new(2, 0)),
+        world,
+        ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m))),
+        PhysicsRings {
+            tools: tool.consumer().expect("c"),
+            remote: rem.consumer().expect("c"),
+            objects: obj.producer().expect("p"),
+            reports: rep.producer().expect("p"),
+        },
+        PhysicsTiming {
+            period_ns: MS,
+            report_period_ns: 10 * MS,
+            start_ns: 0,
+        },
+    );
+    Rig {
+        servo,
+        physics,
+        reports: rep.consumer().expect("c"),
+        remote_in: rem.producer().expect("p"),
+        _segments: (tool, obj, rep, rem),
+        stale_ms: sc.site[0].stale_limit_ms,
+        ramp_ms: sc.site[0].stale_ramp_ms,
+    }
+}
+
+#[test]
+fn a_push_flows_through_the_rings_and_reports_go_out() {
+    let mut r = rig("push", false);
+    let mut touched = false;
+    let mut reports = 0;
+    for k in 1..=1500u64 {
+        r.physics.step(k * MS);
+        let out = r.servo.step(k * MS, None);
+        touched |= out.contact.touching && out.f_desired.norm() > 0.1;
+        while let Ok(rep) = r.reports.pop() {
+            assert!(rep.report().is_some(), "every report decodes");
+            reports += 1;
+        }
+    }
+    assert!(touched, "the servo felt the disk");
+    let x = r.physics.copy().state.pos.x;
+    assert!(
+        x > 0.005,
+        "physics moved the disk with the servo's contact: x = {x}"
+    );
+    assert!(
+        (140..=160).contains(&reports),
+        "100 Hz over 1.5 s: {reports}"
+    );
+}
+
+#[test]
+fn a_hostile_report_is_rejected_and_changes_nothing() {
+    let mut r = rig("hostile", false);
+    for k in 1..=100u64 {
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, None);
+    }
+    let before = r.physics.copy().state;
+    let mut bad = SiteReport {
+        kind: 1,
+        t_ns: 200 * MS,
+        site: 1,
+        rot: [1.0, 0.0, 0.0, 0.0],
+        ..SiteReport::default()
+    };
+    bad.pos = [f64::NAN, 0.0, 0.0];
+    r.remote_in.push(bad).expect("room");
+    let mut foreign = bad;
+    foreign.pos = [5.0, 5.0, 5.0];
+    foreign.site = 42;
+    r.remote_in.push(foreign).expect("room");
+    r.physics.step(101 * MS);
+    assert_eq!(r.physics.rejected, 2);
+    assert_eq!(r.physics.adoptions(), 0);
+    let after = r.physics.copy().state;
+    assert!(after.is_finite() && (after.pos - before.pos).norm() < 1e-3);
+}
+
+#[test]
+fn when_physics_stops_the_commanded_force_ramps_to_zero() {
+    let mut r = rig("stale", true);
+    // Press the disk against the wall until the servo commands a clear force.
+    let mut k = 0u64;
+    let mut pressing = 0.0;
+    while k < 1500 {
+        k += 1;
+        r.physics.step(k * MS);
+        pressing = r.servo.step(k * MS, None).f_command.norm();
+    }
+    assert!(pressing > 0.3, "holding the disk: commanded {pressing} N");
+    // Physics stops: no more object states.
+    let stopped = k;
+    let deadline = stopped + (r.stale_ms + r.ramp_ms) as u64 + 1;
+    let mut last = f64::INFINITY;
+    let mut zero_at = None;
+    while k < deadline + 200 {
+        k += 1;
+        let out = r.servo.step(k * MS, None);
+        let f = out.f_command.norm();
+        if k > stopped + r.stale_ms as u64 + 1 {
+            assert!(
+                f <= last + 1e-9,
+                "ramping down, not up: {f} after {last} at {k} ms"
+            );
+        }
+        last = f;
+        if f == 0.0 && zero_at.is_none() {
+            zero_at = Some(k);
+        }
+        if k > deadline {
+            assert_eq!(
+                f,
+                0.0,
+                "still commanding {f} N {} ms after physics stopped",
+                k - stopped
+            );
+            assert_eq!(out.tau.norm(), 0.0, "torques too");
+        }
+    }
+    let zero_at = zero_at.expect("reached zero");
+    assert!(
+        zero_at - stopped <= (r.stale_ms + r.ramp_ms) as u64 + 1,
+        "zero after {} ms",
+        zero_at - stopped
+    );
+}
+
+#[test]
+fn loop_steps_allocate_nothing() {
+    let mut r = rig("alloc", true);
+    // Warm up outside the count (first contact, first adoption paths).
+    for k in 1..=10u64 {
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, None);
+    }
+    let before = ALLOCS.with(Cell::get);
+    for k in 11..=3000u64 {
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, None);
+        while r.reports.pop().is_ok() {}
+    }
+    let n = ALLOCS.with(Cell::get) - before;
+    assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
+}
