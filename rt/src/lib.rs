@@ -26,6 +26,8 @@ pub mod msg;
 pub mod physics;
 pub mod process;
 #[cfg(not(loom))]
+pub mod run;
+#[cfg(not(loom))]
 pub mod sched;
 #[cfg(not(loom))]
 pub mod servo;

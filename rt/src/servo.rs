@@ -9,7 +9,7 @@ use coop_model::servo::{Servo, ServoInput, ServoOutput};
 
 use crate::device::Device;
 use crate::msg::{ObjectSample, ToolSample};
-use crate::shm::control::ControlBlock;
+use crate::shm::control::{ControlBlock, RunState};
 use crate::shm::{Consumer, Producer};
 
 /// Everything one servo loop owns.
@@ -25,6 +25,7 @@ pub struct ServoLoop<D> {
     last_ns: u64,
     /// Tool samples dropped because physics did not keep up.
     pub dropped: u64,
+    limp: bool,
 }
 
 impl<D: Device> ServoLoop<D> {
@@ -48,10 +49,12 @@ impl<D: Device> ServoLoop<D> {
             seq: 0,
             last_ns: start_ns,
             dropped: 0,
+            limp: false,
         }
     }
 
-    /// One tick at `now_ns`.
+    /// One tick at `now_ns`. While the station is stopping (per `control`), the displayed force and the
+    /// command ramp to zero as for a stale world; [`ServoLoop::is_limp`] says when they got there.
     pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoOutput {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let mut adopted = false;
@@ -82,6 +85,7 @@ impl<D: Device> ServoLoop<D> {
                 object: &object,
                 object_time_s: t_ns as f64 * 1e-9,
                 adopted,
+                stopping: control.is_some_and(|c| c.run_state() == RunState::Stopping),
             },
             &self.world.shape,
             &self.world.mass,
@@ -112,7 +116,13 @@ impl<D: Device> ServoLoop<D> {
             ControlBlock::store_f64(&c.servo_command_n, out.f_command.norm());
             ControlBlock::store_f64(&c.servo_scale, out.scale);
         }
+        self.limp = out.scale == 0.0;
         out
+    }
+
+    /// Whether the last tick displayed and commanded nothing (scale 0): safe to exit on a stop.
+    pub fn is_limp(&self) -> bool {
+        self.limp
     }
 
     /// The device.

@@ -263,3 +263,43 @@ fn loop_steps_allocate_nothing() {
     let n = ALLOCS.with(Cell::get) - before;
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
 }
+
+/// A cooperative stop (run state Stopping) ramps the commanded force to zero within the ramp time
+/// even while physics keeps running; only then is the servo limp and free to exit.
+#[test]
+fn a_cooperative_stop_ramps_the_force_to_zero_first() {
+    use coop_rt::shm::control::{ControlBlock, RunState};
+    use coop_rt::shm::BlockSegment;
+    let mut r = rig("coop", true);
+    let name =
+        SegmentName::new(&format!("lp{}coop", std::process::id()), "a", "ctl").expect("name");
+    let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
+    ctl.set_run_state(RunState::Running);
+    let mut k = 0u64;
+    let mut pressing = 0.0;
+    while k < 1500 {
+        k += 1;
+        r.physics.step(k * MS);
+        pressing = r.servo.step(k * MS, Some(&ctl)).f_command.norm();
+    }
+    assert!(pressing > 0.3, "holding the disk: {pressing} N");
+    assert!(!r.servo.is_limp());
+    assert!(
+        (ControlBlock::load_f64(&ctl.servo_command_n) - pressing).abs() < 1e-12,
+        "published"
+    );
+    ctl.set_run_state(RunState::Stopping);
+    let stop = k;
+    while !r.servo.is_limp() {
+        k += 1;
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, Some(&ctl));
+        assert!(
+            k - stop <= r.ramp_ms as u64 + 1,
+            "not limp {} ms after the stop",
+            k - stop
+        );
+    }
+    assert_eq!(ControlBlock::load_f64(&ctl.servo_command_n), 0.0);
+    assert_eq!(ControlBlock::load_f64(&ctl.servo_scale), 0.0);
+}

@@ -81,6 +81,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                             object: &start,
                             object_time_s: k as f64 * dt,
                             adopted: false,
+                            stopping: false,
                         },
                         &world.shape,
                         &world.mass,

@@ -3,7 +3,7 @@
 //! PI controller (Eq. 12), limits; and two safety rules:
 //!
 //! - **Stale world.** If the newest object state is older than the stale limit (physics or network
-//!   stopped), the displayed force ramps linearly to zero over the ramp time and stays there until
+//!   stopped), or the station is stopping, the displayed force ramps linearly to zero over the ramp time and stays there until
 //!   fresh states return, then ramps back. The commanded force and torques ramp with it, so the
 //!   device goes limp rather than holding a force against the hand.
 //! - **Bounded adoption step.** When physics adopts a remote state, the object can jump, and with it
@@ -55,6 +55,8 @@ pub struct ServoInput<'a> {
     pub object_time_s: f64,
     /// Whether physics adopted a remote state since the last tick.
     pub adopted: bool,
+    /// A cooperative stop was requested: ramp the display to zero as for a stale world.
+    pub stopping: bool,
 }
 
 /// What a servo tick produces.
@@ -122,7 +124,7 @@ impl Servo {
             p.tool_radius_m,
         );
         // Stale world: ramp the display to zero, and back once fresh.
-        let stale = inp.now_s - inp.object_time_s > p.stale_limit_s;
+        let stale = inp.stopping || inp.now_s - inp.object_time_s > p.stale_limit_s;
         let rate = inp.dt_s / p.stale_ramp_s.max(1e-9);
         self.scale = if stale {
             (self.scale - rate).max(0.0)

@@ -115,6 +115,7 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
                     object: &a.state,
                     object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
                     adopted: k % 7 == 0,
+                    stopping: false,
                 },
                 &w.shape,
                 &w.mass,
