@@ -1,50 +1,36 @@
-//! Running a loop body as a station process does: apply the scheduling (falling back loudly), record
-//! what is in force in the child's slot of the control block, sleep to absolute deadlines, record
+//! Running a loop body as a station process does: record the scheduling in force (the caller applied
+//! it with [`crate::sched::apply_to_current_thread`] and reported any fallback) in the child's slot
+//! of the control block, sleep to absolute deadlines, record
 //! each cycle's wake-up latency and compute time into the loop's live statistics, bump the heartbeat,
 //! and leave when the body says so (it watches the run state: the servo first ramps its force to zero).
 
 use std::time::Duration;
 
-use crate::sched::{self, InForce, Policy, Request, RequestError, Warning};
+use crate::sched::{InForce, Policy};
 use crate::shm::control::{Child, ControlBlock};
 use crate::stats::LoopStats;
 use crate::sync::Ordering;
 use crate::timer::{monotonic_ns, PeriodicTimer};
 
-/// How a loop runs.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LoopConfig {
-    /// Period.
-    pub period: Duration,
-    /// Scheduling for the loop's thread.
-    pub sched: Request,
-}
-
 /// How a run went.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RunSummary {
-    /// Scheduling in force while it ran.
-    pub in_force: InForce,
-    /// Privileges that were missing (each once).
-    pub warnings: Vec<Warning>,
     /// Cycles run.
     pub cycles: u64,
     /// Deadlines missed.
     pub overruns: u64,
 }
 
-/// Runs `step(now_ns) -> keep_going` every period on the calling thread until it returns false.
-///
-/// # Errors
-/// A request that can never be honoured (priority out of range, CPU not allowed).
+/// Runs `step(now_ns) -> keep_going` every `period` on the calling thread until it returns false,
+/// recording `in_force` in `child`'s slot and each cycle in `stats`.
 pub fn run_periodic(
     control: &ControlBlock,
     child: Child,
     stats: &LoopStats,
-    cfg: &LoopConfig,
+    period: Duration,
+    in_force: &InForce,
     mut step: impl FnMut(u64) -> bool,
-) -> Result<RunSummary, RequestError> {
-    let (in_force, warnings) = sched::apply_to_current_thread(&cfg.sched)?;
+) -> RunSummary {
     let slot = control.child(child);
     slot.policy
         .store(policy_number(in_force.policy), Ordering::Relaxed);
@@ -58,8 +44,10 @@ pub fn run_periodic(
             .fold(0u64, |m, &c| m | (1 << c)),
         Ordering::Relaxed,
     );
-    stats.set_period_ns(u64::try_from(cfg.period.as_nanos()).unwrap_or(u64::MAX));
-    let mut timer = PeriodicTimer::new(cfg.period);
+    slot.pid
+        .store(u64::from(std::process::id()), Ordering::Relaxed);
+    stats.set_period_ns(u64::try_from(period.as_nanos()).unwrap_or(u64::MAX));
+    let mut timer = PeriodicTimer::new(period);
     let mut cycles = 0u64;
     loop {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep.
@@ -77,12 +65,10 @@ pub fn run_periodic(
             break;
         }
     }
-    Ok(RunSummary {
-        in_force,
-        warnings,
+    RunSummary {
         cycles,
         overruns: timer.overruns(),
-    })
+    }
 }
 
 fn policy_number(p: Policy) -> u64 {
@@ -100,34 +86,31 @@ mod tests {
     use crate::shm::control::RunState;
     use crate::shm::{BlockSegment, SegmentName};
 
-    /// A loop at 1 kHz under SCHED_OTHER (so the test needs no privilege and starves nothing) runs
-    /// until the run state says stop, recording statistics, heartbeat and what is in force.
+    /// A loop at 1 kHz under the test thread's own scheduling runs until the run state says stop,
+    /// recording statistics, heartbeat, pid and what is in force.
     #[test]
     fn runs_until_stopped_and_records_what_it_did() {
         let name =
             SegmentName::new(&format!("run{}", std::process::id()), "t", "ctl").expect("name");
         let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
         ctl.set_run_state(RunState::Running);
-        let cfg = LoopConfig {
-            period: Duration::from_millis(1),
-            sched: Request {
-                policy: Policy::Other,
-                priority: 0,
-                cpus: None,
-                prefault_stack_bytes: 64 * 1024,
-            },
-        };
+        let in_force = crate::sched::in_force();
         let mut n = 0u64;
-        let summary = run_periodic(&ctl, Child::Physics, &ctl.physics, &cfg, |_| {
-            n += 1;
-            if n == 50 {
-                ctl.set_run_state(RunState::Stopping);
-            }
-            ctl.run_state() == RunState::Running
-        })
-        .expect("valid request");
+        let summary = run_periodic(
+            &ctl,
+            Child::Physics,
+            &ctl.physics,
+            Duration::from_millis(1),
+            &in_force,
+            |_| {
+                n += 1;
+                if n == 50 {
+                    ctl.set_run_state(RunState::Stopping);
+                }
+                ctl.run_state() == RunState::Running
+            },
+        );
         assert_eq!(summary.cycles, 50);
-        assert_eq!(summary.in_force.policy, Policy::Other);
         let s = ctl.physics.snapshot();
         assert_eq!(s.cycles, 50);
         assert_eq!(s.period_ns, 1_000_000);
@@ -136,6 +119,13 @@ mod tests {
             ctl.child(Child::Physics).heartbeat.load(Ordering::Relaxed),
             50
         );
-        assert_eq!(ctl.child(Child::Physics).policy.load(Ordering::Relaxed), 0);
+        assert_eq!(
+            ctl.child(Child::Physics).policy.load(Ordering::Relaxed),
+            policy_number(in_force.policy)
+        );
+        assert_eq!(
+            ctl.child(Child::Physics).pid.load(Ordering::Relaxed),
+            u64::from(std::process::id())
+        );
     }
 }

@@ -3,6 +3,7 @@
 //! - [`latency`]: the wake-up latency tool users of cyclictest already know (issue 3).
 //! - [`ringbench`]: the shared-memory ring against rtrb between two cores (issue 3).
 //! - [`sim`]: the deterministic multi-site simulator's CLI (issue 4).
+//! - [`station`]: one site's processes (issue 5, in progress).
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
 //! measured loops, which follow coop-rt's contract (no allocation, lock, logging or system call but
@@ -29,3 +30,4 @@ pub mod ringbench;
 pub mod scenario_file;
 pub mod sim;
 pub mod simbench;
+pub mod station;

@@ -1,0 +1,147 @@
+//! The station's loop processes, as the supervisor starts them (`station servo|physics`, hidden
+//! subcommands of the one `station` binary, so `ps` shows which station a child belongs to).
+//!
+//! Each child dies with its supervisor (parent-death signal), applies its scheduling (one warning per
+//! missing privilege, then it runs anyway), opens the segments the supervisor created, and runs its
+//! loop body under [`coop_rt::run::run_periodic`] until the run state asks it to stop — the servo only
+//! once its force has ramped to zero.
+
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use coop_model::body::{BodyState, Vec3};
+use coop_model::device::Plant;
+use coop_model::method::{Consistency, Naive, ObjectCopy, Paper};
+use coop_model::scenario::MethodName;
+use coop_model::servo::Servo;
+use coop_rt::device::SimDevice;
+use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
+use coop_rt::run::run_periodic;
+use coop_rt::sched::{self, Request};
+use coop_rt::servo::ServoLoop;
+use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_rt::shm::{BlockSegment, Consumer, Producer, RingOpenOptions};
+use coop_rt::timer::monotonic_ns;
+
+use super::config::Resolved;
+use super::segments::Names;
+
+/// How long a child waits for its supervisor's segments to be ready.
+const OPEN_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Dies with `parent` (SIGTERM on its death) and refuses to start if it is already gone.
+fn die_with_parent(parent: Option<u32>) -> anyhow::Result<()> {
+    nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
+        .context("setting the parent-death signal")?;
+    if let Some(p) = parent {
+        let now = nix::unistd::getppid().as_raw();
+        if u32::try_from(now).ok() != Some(p) {
+            bail!("the supervisor (pid {p}) is gone (parent is now {now}); not starting");
+        }
+    }
+    Ok(())
+}
+
+/// Applies scheduling and memory locking, printing each missing privilege once.
+fn setup(cfg: &Resolved, req: &Request, what: &str) -> anyhow::Result<sched::InForce> {
+    if cfg.config.mlockall {
+        if let Err(w) = sched::lock_memory() {
+            eprintln!("station {what} {}: {w}", cfg.name);
+        }
+    }
+    let (in_force, warnings) = sched::apply_to_current_thread(req)?;
+    for w in warnings {
+        eprintln!("station {what} {}: {w}", cfg.name);
+    }
+    Ok(in_force)
+}
+
+fn period(rate_hz: f64) -> Duration {
+    Duration::from_secs_f64(1.0 / rate_hz)
+}
+
+/// Runs the servo process of the configured station until a cooperative stop leaves it limp.
+///
+/// # Errors
+/// The segments cannot be opened, or the scheduling request is impossible.
+pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+    die_with_parent(parent)?;
+    let names = Names::of(&cfg.config.session, &cfg.name)?;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: OPEN_TIMEOUT,
+    };
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let objects = Consumer::open(&names.object, &opts).context("opening the object ring")?;
+    let tools = Producer::open(&names.tool, &opts).context("opening the tool ring")?;
+    let (sc, i) = (&cfg.scenario, cfg.site);
+    let script = sc.script(i);
+    let start = monotonic_ns();
+    let plant = Plant::at(sc.arm(i), sc.hand(i), script[0].target, sc.site[i].elbow);
+    let device = SimDevice::new(plant, script, start);
+    let mut servo = ServoLoop::new(
+        Servo::new(sc.servo_params(i), sc.arm(i)),
+        device,
+        sc.world(),
+        objects,
+        tools,
+        start,
+    );
+    let in_force = setup(cfg, &cfg.servo_sched, "servo")?;
+    run_periodic(
+        &ctl,
+        Child::Servo,
+        &ctl.servo,
+        period(sc.site[i].servo_rate_hz),
+        &in_force,
+        |now| {
+            servo.step(now, Some(&ctl));
+            match ctl.run_state() {
+                RunState::Starting | RunState::Running => true,
+                // Stop only once nothing is displayed or commanded any more.
+                RunState::Stopping | RunState::Stopped => !servo.is_limp(),
+            }
+        },
+    );
+    Ok(())
+}
+
+/// Runs the physics process of the configured station until the run state asks it to stop.
+///
+/// # Errors
+/// The segments cannot be opened, or the scheduling request is impossible.
+pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+    die_with_parent(parent)?;
+    let names = Names::of(&cfg.config.session, &cfg.name)?;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: OPEN_TIMEOUT,
+    };
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let rings = PhysicsRings {
+        tools: Consumer::open(&names.tool, &opts).context("opening the tool ring")?,
+        remote: Consumer::open(&names.remote, &opts).context("opening the remote ring")?,
+        objects: Producer::open(&names.object, &opts).context("opening the object ring")?,
+        reports: Producer::open(&names.report, &opts).context("opening the report ring")?,
+    };
+    let (sc, i) = (&cfg.scenario, cfg.site);
+    let method: Box<dyn Consistency> = match sc.method {
+        MethodName::Naive => Box::<Naive>::default(),
+        MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
+    };
+    let step = period(sc.site[i].physics_rate_hz);
+    let timing = PhysicsTiming {
+        period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
+        report_period_ns: u64::try_from(period(sc.site[i].report_rate_hz).as_nanos())
+            .unwrap_or(10_000_000),
+        start_ns: monotonic_ns(),
+    };
+    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m)));
+    let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
+    let in_force = setup(cfg, &cfg.physics_sched, "physics")?;
+    run_periodic(&ctl, Child::Physics, &ctl.physics, step, &in_force, |now| {
+        physics.step(now);
+        matches!(ctl.run_state(), RunState::Starting | RunState::Running)
+    });
+    Ok(())
+}

@@ -1,0 +1,278 @@
+//! A station's configuration: which session and site it is, where the world comes from (a scenario
+//! file, by default the paper's experiment embedded in the binary), and how its loops are scheduled.
+//! Every field has a default, so a station starts with no file at all; a file is TOML with unknown
+//! fields refused, and validation names the field, the value and the rule.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use coop_model::scenario::{MethodName, Scenario};
+use coop_rt::sched::{Policy, Request};
+use coop_rt::shm::SegmentName;
+use serde::Deserialize;
+
+use crate::scenario_file;
+
+/// The paper's experiment, the default world.
+pub const DEFAULT_SCENARIO: &str = include_str!("../../../scenarios/paper.toml");
+
+/// Scheduling of one loop.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopSpec {
+    /// CPU to pin to; none leaves the affinity alone.
+    pub cpu: Option<usize>,
+    /// fifo, rr or other.
+    pub policy: String,
+    /// 1..=99 for fifo/rr, 0 for other.
+    pub priority: i32,
+}
+
+/// Ring sizes, in slots (powers of two).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RingSpec {
+    /// Servo → physics tool samples.
+    pub tool_slots: usize,
+    /// Physics → servo object states.
+    pub object_slots: usize,
+    /// Physics → network reports.
+    pub report_slots: usize,
+    /// Network → physics remote reports.
+    pub remote_slots: usize,
+}
+
+/// The configuration file.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StationConfig {
+    /// Session name: stations of one session see each other.
+    pub session: String,
+    /// This station's site: a site name of the scenario (default: its first site).
+    pub station: Option<String>,
+    /// Scenario file with the world, the rates, the device and the user's script (default: the
+    /// paper's experiment).
+    pub scenario: Option<PathBuf>,
+    /// Consistency method, overriding the scenario's.
+    pub method: Option<MethodName>,
+    /// Lock all memory of the loop processes.
+    pub mlockall: bool,
+    /// The servo loop.
+    pub servo: LoopSpec,
+    /// The physics loop.
+    pub physics: LoopSpec,
+    /// Ring sizes.
+    pub rings: RingSpec,
+}
+
+impl Default for StationConfig {
+    fn default() -> Self {
+        Self {
+            session: "local".into(),
+            station: None,
+            scenario: None,
+            method: None,
+            mlockall: true,
+            servo: LoopSpec {
+                cpu: None,
+                policy: "fifo".into(),
+                priority: 80,
+            },
+            physics: LoopSpec {
+                cpu: None,
+                policy: "fifo".into(),
+                priority: 70,
+            },
+            rings: RingSpec::default(),
+        }
+    }
+}
+
+impl Default for LoopSpec {
+    fn default() -> Self {
+        Self {
+            cpu: None,
+            policy: "fifo".into(),
+            priority: 80,
+        }
+    }
+}
+
+impl Default for RingSpec {
+    fn default() -> Self {
+        Self {
+            tool_slots: 64,
+            object_slots: 64,
+            report_slots: 256,
+            remote_slots: 256,
+        }
+    }
+}
+
+/// A configuration with its scenario loaded and every value checked.
+#[derive(Debug, Clone)]
+pub struct Resolved {
+    /// The file's values.
+    pub config: StationConfig,
+    /// The world.
+    pub scenario: Scenario,
+    /// This station's site index in the scenario.
+    pub site: usize,
+    /// This station's site name.
+    pub name: String,
+    /// Servo scheduling.
+    pub servo_sched: Request,
+    /// Physics scheduling.
+    pub physics_sched: Request,
+}
+
+fn sched(field: &str, l: &LoopSpec) -> anyhow::Result<Request> {
+    let policy: Policy = l
+        .policy
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("{field}.policy = {:?}: {e}", l.policy))?;
+    let req = Request {
+        policy,
+        priority: l.priority,
+        cpus: l.cpu.map(|c| vec![c]),
+        prefault_stack_bytes: 256 * 1024,
+    };
+    req.validate()
+        .map_err(|e| anyhow::anyhow!("{field}: {e}"))?;
+    Ok(req)
+}
+
+impl StationConfig {
+    /// Reads `path` (or the defaults when `None`) and resolves it.
+    ///
+    /// # Errors
+    /// Unreadable file, bad TOML, unknown field, or a value that breaks a rule (the message names
+    /// the field, the value and the rule).
+    pub fn load(path: Option<&Path>) -> anyhow::Result<Resolved> {
+        let config = match path {
+            None => StationConfig::default(),
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("reading station config {}", p.display()))?;
+                toml::from_str(&text)
+                    .map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))
+                    .with_context(|| format!("station config {}", p.display()))?
+            }
+        };
+        config
+            .resolve(path.and_then(Path::parent))
+            .with_context(|| {
+                format!(
+                    "station config {}",
+                    path.map_or("(defaults)".into(), |p| p.display().to_string())
+                )
+            })
+    }
+
+    /// Checks every value and loads the scenario (a relative scenario path is relative to `base`).
+    ///
+    /// # Errors
+    /// As [`StationConfig::load`].
+    pub fn resolve(self, base: Option<&Path>) -> anyhow::Result<Resolved> {
+        SegmentName::station_prefix(&self.session, "x")
+            .map_err(|e| anyhow::anyhow!("session = {:?}: {e}", self.session))?;
+        let mut scenario = match &self.scenario {
+            None => {
+                scenario_file::parse(DEFAULT_SCENARIO).context("the embedded paper scenario")?
+            }
+            Some(p) => {
+                let full = if p.is_relative() {
+                    base.unwrap_or(Path::new(".")).join(p)
+                } else {
+                    p.clone()
+                };
+                scenario_file::load(&full)?
+            }
+        };
+        if let Some(m) = self.method {
+            scenario.method = m;
+        }
+        let name = self
+            .station
+            .clone()
+            .unwrap_or_else(|| scenario.site[0].name.clone());
+        let Some(site) = scenario.site.iter().position(|s| s.name == name) else {
+            bail!(
+                "station = {name:?}: names no site of scenario {:?} (its sites: {})",
+                scenario.name,
+                scenario
+                    .site
+                    .iter()
+                    .map(|s| s.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        };
+        for (field, slots) in [
+            ("rings.tool_slots", self.rings.tool_slots),
+            ("rings.object_slots", self.rings.object_slots),
+            ("rings.report_slots", self.rings.report_slots),
+            ("rings.remote_slots", self.rings.remote_slots),
+        ] {
+            if !(slots.is_power_of_two() && (2..=65536).contains(&slots)) {
+                bail!("{field} = {slots}: must be a power of two from 2 to 65536");
+            }
+        }
+        let servo_sched = sched("servo", &self.servo)?;
+        let physics_sched = sched("physics", &self.physics)?;
+        Ok(Resolved {
+            config: self,
+            scenario,
+            site,
+            name,
+            servo_sched,
+            physics_sched,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_resolve_to_the_paper_scenario_first_site() {
+        let r = StationConfig::default()
+            .resolve(None)
+            .expect("defaults are valid");
+        assert_eq!((r.name.as_str(), r.site), ("user1", 0));
+        assert_eq!(r.servo_sched.policy, Policy::Fifo);
+        assert_eq!(r.scenario.name, "paper");
+    }
+
+    #[test]
+    fn each_rule_names_field_value_and_rule() {
+        let cases: [(&str, &str); 6] = [
+            ("session = \"a_b\"", "session = \"a_b\""),
+            (
+                "station = \"nobody\"",
+                "station = \"nobody\": names no site",
+            ),
+            (
+                "[servo]\npriority = 120",
+                "servo: priority 120 is out of range",
+            ),
+            (
+                "[physics]\npolicy = \"deadline\"",
+                "physics.policy = \"deadline\"",
+            ),
+            (
+                "[rings]\ntool_slots = 100",
+                "rings.tool_slots = 100: must be a power of two",
+            ),
+            ("sesion = \"x\"", "unknown field `sesion`"),
+        ];
+        for (text, needle) in cases {
+            let err = toml::from_str::<StationConfig>(text)
+                .map_err(anyhow::Error::from)
+                .and_then(|c| c.resolve(None).map(drop))
+                .expect_err(text);
+            assert!(format!("{err:#}").contains(needle), "{text}: {err:#}");
+        }
+    }
+}

@@ -1,0 +1,151 @@
+//! The station's loop processes, with this test as their supervisor: it creates the segments, starts
+//! `station servo` and `station physics` as real processes, reads their reports as the network
+//! process will, stops them cooperatively, and checks they exit cleanly — the servo limp — leaving no
+//! segment behind. Also: a child refuses to start without its supervisor, and a bad configuration is
+//! a clear error.
+
+use std::process::Command;
+use std::time::Duration;
+
+use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_rt::sync::Ordering;
+use coop_tests::{shm_entries, unique_session, wait_until, Reaped};
+use coop_tools::station::config::{RingSpec, StationConfig};
+use coop_tools::station::segments::{Names, StationSegments};
+
+const STATION: &str = env!("CARGO_BIN_EXE_station");
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn config_file(session: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("coop-station-{session}"));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("station.toml");
+    // SCHED_OTHER so parallel tests need no privilege; the loops still sleep to absolute deadlines.
+    std::fs::write(
+        &path,
+        format!(
+            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
+             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n"
+        ),
+    )
+    .expect("write config");
+    path
+}
+
+fn spawn(what: &str, config: &std::path::Path, parent: u32) -> Reaped {
+    Reaped::spawn(
+        Command::new(STATION)
+            .arg(what)
+            .arg("--config")
+            .arg(config)
+            .arg("--parent")
+            .arg(parent.to_string()),
+    )
+}
+
+#[test]
+fn servo_and_physics_processes_run_report_and_stop_limp() {
+    let session = unique_session();
+    let config = config_file(&session);
+    let names = Names::of(&session, "user1").expect("names");
+    let segs = StationSegments::create(&names, &RingSpec::default()).expect("segments");
+    segs.control.set_run_state(RunState::Running);
+    let me = std::process::id();
+    let mut physics = spawn("physics", &config, me);
+    let mut servo = spawn("servo", &config, me);
+    let mut reports = segs.report.consumer().expect("report consumer");
+    let mut decoded = 0;
+    wait_until("both loops running and exchanging", LIMIT, || {
+        while let Ok(r) = reports.pop() {
+            assert!(r.report().is_some(), "a report that does not decode: {r:?}");
+            decoded += 1;
+        }
+        let hb = |c| segs.control.child(c).heartbeat.load(Ordering::Relaxed);
+        (hb(Child::Servo) > 300
+            && hb(Child::Physics) > 300
+            && segs.tool.indices().1 > 300
+            && segs.object.indices().1 > 300
+            && decoded > 20)
+            .then_some(())
+    });
+    let ctl: &ControlBlock = &segs.control;
+    assert_eq!(
+        ctl.child(Child::Servo).pid.load(Ordering::Relaxed),
+        u64::from(servo.pid())
+    );
+    assert_eq!(
+        ctl.child(Child::Physics).pid.load(Ordering::Relaxed),
+        u64::from(physics.pid())
+    );
+    assert!(ctl.servo.snapshot().cycles > 300 && ctl.physics.snapshot().cycles > 300);
+    assert_eq!(
+        ctl.servo.snapshot().period_ns,
+        1_666_667,
+        "600 Hz, user1's servo rate in the paper scenario"
+    );
+
+    ctl.set_run_state(RunState::Stopping);
+    let exited = |c: &mut Reaped| {
+        wait_until("child exits after the stop", LIMIT, || {
+            c.0.as_mut().and_then(|p| p.try_wait().ok().flatten())
+        })
+    };
+    assert!(exited(&mut physics).success());
+    assert!(exited(&mut servo).success());
+    assert_eq!(
+        ControlBlock::load_f64(&ctl.servo_scale),
+        0.0,
+        "the servo left limp"
+    );
+    assert_eq!(ControlBlock::load_f64(&ctl.servo_command_n), 0.0);
+    drop(reports);
+    drop(segs);
+    assert!(
+        shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+    let _ = std::fs::remove_dir_all(config.parent().expect("dir"));
+}
+
+#[test]
+fn a_child_refuses_to_start_without_its_supervisor() {
+    let session = unique_session();
+    let config = config_file(&session);
+    // Pid 1 is not our parent: the child must see that its supervisor is gone.
+    let out = Command::new(STATION)
+        .args(["physics", "--parent", "1", "--config"])
+        .arg(&config)
+        .output()
+        .expect("run station");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("supervisor (pid 1) is gone"), "{err}");
+    let _ = std::fs::remove_dir_all(config.parent().expect("dir"));
+}
+
+#[test]
+fn a_bad_configuration_is_a_clear_error_and_creates_nothing() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-station-bad-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("bad.toml");
+    std::fs::write(
+        &path,
+        format!("session = \"{session}\"\nstation = \"nobody\"\n"),
+    )
+    .expect("write");
+    let out = Command::new(STATION)
+        .args(["servo", "--config"])
+        .arg(&path)
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("station = \"nobody\": names no site") && err.contains("bad.toml"),
+        "{err}"
+    );
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    assert!(StationConfig::load(Some(&path)).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
