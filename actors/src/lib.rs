@@ -1,1 +1,14 @@
-//! placeholder
+//! coop-actors: the station supervisor, on ractor and tokio.
+//!
+//! One [`child::ChildProcess`] actor per OS child (servo, physics, network), each owning its process,
+//! started as a process-group leader and watched by a heartbeat; one [`supervisor::StationSupervisor`]
+//! linking them and applying a [`policy::RestartPolicy`] written as data. Nothing here runs on a
+//! real-time path: the supervisor only spawns, watches and signals processes.
+//!
+//! Never build this with `panic = "abort"`: ractor turns a panicking actor into a supervision event.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod child;
+pub mod policy;
+pub mod supervisor;
