@@ -1,7 +1,8 @@
 //! `station`: one site of a coop-haptics session. See `station --help`.
 //!
-//! Built so far: `station clean` and the loop processes the supervisor will spawn (`station servo`,
-//! `station physics`, hidden). `station run` and `station status` arrive with the supervisor.
+//! Built so far: `station run` (servo and physics under the supervisor), `station clean`, and the
+//! loop processes the supervisor spawns (`station servo`, `station physics`, hidden). The network
+//! process and `station status` come next.
 
 use std::path::PathBuf;
 
@@ -22,6 +23,14 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run the station: servo and physics processes under a supervisor, until Ctrl-C/SIGTERM.
+    Run {
+        #[command(flatten)]
+        child: ChildArgs,
+        /// Stop by itself after this many seconds.
+        #[arg(long, value_name = "S")]
+        duration_s: Option<f64>,
+    },
     /// Remove the shared-memory segments of stations whose creator is gone (live ones stay).
     Clean {
         /// Only this session's segments.
@@ -50,8 +59,8 @@ struct ChildArgs {
     /// Session name, overriding the configuration's.
     #[arg(long)]
     session: Option<String>,
-    /// The supervisor's pid: refuse to start if it is already gone.
-    #[arg(long)]
+    /// The supervisor's pid: refuse to start if it is already gone (set by the supervisor).
+    #[arg(long, hide = true)]
     parent: Option<u32>,
 }
 
@@ -93,6 +102,21 @@ fn main() -> std::process::ExitCode {
                 left.len()
             );
             Ok(())
+        }
+        Command::Run {
+            child: a,
+            duration_s,
+        } => {
+            let duration = match duration_s {
+                Some(d) if d > 0.0 && d.is_finite() => Some(std::time::Duration::from_secs_f64(d)),
+                Some(d) => anyhow::bail!("--duration-s {d}: must be a positive number of seconds"),
+                None => None,
+            };
+            let opts = coop_tools::station::run::RunOptions {
+                config: a.config.clone(),
+                duration,
+            };
+            coop_tools::station::run::run(&resolve(&a)?, &opts)
         }
         Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
         Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),

@@ -42,6 +42,40 @@ pub struct RingSpec {
     pub remote_slots: usize,
 }
 
+/// The supervisor's policy.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SupervisorSpec {
+    /// never, on-failure or always.
+    pub restart: String,
+    /// Most restarts of one child within the window before the station stops.
+    pub max_restarts: u32,
+    /// The window, s.
+    pub restart_window_s: f64,
+    /// First restart delay, ms (doubling per restart in the window).
+    pub backoff_initial_ms: u64,
+    /// Longest restart delay, ms.
+    pub backoff_max_ms: u64,
+    /// A loop whose heartbeat stands still this long is hung and killed, ms.
+    pub heartbeat_timeout_ms: u64,
+    /// Time a child has to show its first heartbeat, ms.
+    pub startup_timeout_ms: u64,
+}
+
+impl Default for SupervisorSpec {
+    fn default() -> Self {
+        Self {
+            restart: "on-failure".into(),
+            max_restarts: 3,
+            restart_window_s: 10.0,
+            backoff_initial_ms: 100,
+            backoff_max_ms: 2000,
+            heartbeat_timeout_ms: 500,
+            startup_timeout_ms: 3000,
+        }
+    }
+}
+
 /// The configuration file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -63,6 +97,8 @@ pub struct StationConfig {
     pub physics: LoopSpec,
     /// Ring sizes.
     pub rings: RingSpec,
+    /// Restart policy and watchdog.
+    pub supervisor: SupervisorSpec,
 }
 
 impl Default for StationConfig {
@@ -84,6 +120,7 @@ impl Default for StationConfig {
                 priority: 70,
             },
             rings: RingSpec::default(),
+            supervisor: SupervisorSpec::default(),
         }
     }
 }
@@ -124,6 +161,8 @@ pub struct Resolved {
     pub servo_sched: Request,
     /// Physics scheduling.
     pub physics_sched: Request,
+    /// The supervisor's restart policy.
+    pub policy: coop_actors::policy::RestartPolicy,
 }
 
 fn sched(field: &str, l: &LoopSpec) -> anyhow::Result<Request> {
@@ -220,6 +259,42 @@ impl StationConfig {
         }
         let servo_sched = sched("servo", &self.servo)?;
         let physics_sched = sched("physics", &self.physics)?;
+        let sup = &self.supervisor;
+        let mode = sup
+            .restart
+            .parse()
+            .map_err(|e: String| anyhow::anyhow!("supervisor.restart = {:?}: {e}", sup.restart))?;
+        if !(sup.restart_window_s > 0.0 && sup.restart_window_s <= 3600.0) {
+            bail!(
+                "supervisor.restart_window_s = {}: must be above 0 and at most 3600",
+                sup.restart_window_s
+            );
+        }
+        for (field, v, lo) in [
+            ("supervisor.backoff_initial_ms", sup.backoff_initial_ms, 1),
+            (
+                "supervisor.backoff_max_ms",
+                sup.backoff_max_ms,
+                sup.backoff_initial_ms,
+            ),
+            (
+                "supervisor.heartbeat_timeout_ms",
+                sup.heartbeat_timeout_ms,
+                10,
+            ),
+            ("supervisor.startup_timeout_ms", sup.startup_timeout_ms, 10),
+        ] {
+            if !(lo..=600_000).contains(&v) {
+                bail!("{field} = {v}: must be from {lo} to 600000");
+            }
+        }
+        let policy = coop_actors::policy::RestartPolicy {
+            mode,
+            max_restarts: sup.max_restarts,
+            window: std::time::Duration::from_secs_f64(sup.restart_window_s),
+            backoff_initial: std::time::Duration::from_millis(sup.backoff_initial_ms),
+            backoff_max: std::time::Duration::from_millis(sup.backoff_max_ms),
+        };
         Ok(Resolved {
             config: self,
             scenario,
@@ -227,6 +302,7 @@ impl StationConfig {
             name,
             servo_sched,
             physics_sched,
+            policy,
         })
     }
 }
@@ -247,7 +323,15 @@ mod tests {
 
     #[test]
     fn each_rule_names_field_value_and_rule() {
-        let cases: [(&str, &str); 6] = [
+        let cases: [(&str, &str); 8] = [
+            (
+                "[supervisor]\nrestart = \"sometimes\"",
+                "supervisor.restart = \"sometimes\"",
+            ),
+            (
+                "[supervisor]\nheartbeat_timeout_ms = 0",
+                "supervisor.heartbeat_timeout_ms = 0: must be from 10",
+            ),
             ("session = \"a_b\"", "session = \"a_b\""),
             (
                 "station = \"nobody\"",

@@ -1,10 +1,11 @@
 //! The station: one site — one user, one device, a full local copy of the world — as separate
 //! processes for the servo loop, the physics loop and the network, connected by shared-memory rings.
 //!
-//! Built so far: the configuration ([`config`]), the set of segments a supervisor creates before it
-//! spawns anything ([`segments`]), and the servo and physics child processes ([`child`]). The
-//! supervisor (`station run`/`status`) and the network process come next.
+//! Built so far: the configuration ([`config`]), the set of segments created before anything is
+//! spawned ([`segments`]), the servo and physics child processes ([`child`]), and `station run`
+//! under the ractor supervisor ([`run`]). The network process and `station status` come next.
 
 pub mod child;
 pub mod config;
+pub mod run;
 pub mod segments;

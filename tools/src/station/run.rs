@@ -1,0 +1,210 @@
+//! `station run`: bring a station up in order, keep it going, and take it down leaving nothing.
+//!
+//! Up: clean stale segments a dead predecessor of this station left (refusing if one is alive),
+//! create the control block and rings, start the supervisor (which starts servo and physics as
+//! process-group leaders that die with it), then declare the station running.
+//! Down, on SIGINT/SIGTERM, a duration, or a child the policy gave up on — the stop ladder:
+//! cooperative stop through the run state (the servo first ramps its force to zero) → [`STOP_GRACE`]
+//! → SIGTERM to each child's process group → [`TERM_GRACE`] → SIGKILL; then unlink every segment.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use coop_actors::child::{ChildSpec, Watch};
+use coop_actors::supervisor::{End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg};
+use coop_rt::shm::control::{Child, RunState};
+use coop_rt::shm::{self, SegmentName, SegmentStatus};
+use coop_rt::sync::Ordering;
+use nix::sys::signal::Signal;
+use ractor::Actor;
+use tokio::signal::unix::{signal, SignalKind};
+use tokio::sync::watch;
+
+use super::config::Resolved;
+use super::segments::{Names, StationSegments};
+
+/// How long children get to stop by themselves after the run state says stop: the servo ramps its
+/// force to zero (50 ms by default) and each loop notices within one cycle; two seconds leaves room
+/// for a loaded two-core machine.
+pub const STOP_GRACE: Duration = Duration::from_secs(2);
+/// How long children get after SIGTERM before SIGKILL: they have no handler, so this only covers
+/// the kernel delivering it.
+pub const TERM_GRACE: Duration = Duration::from_secs(1);
+
+/// What `station run` was asked.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// The config file the children should read too.
+    pub config: Option<PathBuf>,
+    /// Stop by itself after this long.
+    pub duration: Option<Duration>,
+}
+
+/// Runs the station until a signal, the duration, or a child the policy gave up on.
+///
+/// # Errors
+/// A live station of the same name, segments that cannot be created, or a child the policy gave up
+/// on (the message names the child and the policy).
+pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
+    let session = &cfg.config.session;
+    let prefix = SegmentName::station_prefix(session, &cfg.name)?;
+    let removed = shm::remove_stale(&prefix)?;
+    if !removed.is_empty() {
+        eprintln!(
+            "station {}: removed {} stale segment(s) of a previous run",
+            cfg.name,
+            removed.len()
+        );
+    }
+    if let Some(live) = shm::list(&prefix)?
+        .into_iter()
+        .find(|i| matches!(i.status, SegmentStatus::Live { .. }))
+    {
+        bail!(
+            "station {} of session {session} is already running ({}: {}); stop it first, or choose another --station or --session",
+            cfg.name,
+            live.name,
+            live.status
+        );
+    }
+    let names = Names::of(session, &cfg.name)?;
+    let segs = Arc::new(
+        StationSegments::create(&names, &cfg.config.rings)
+            .context("creating the station's segments")?,
+    );
+    segs.control.set_run_state(RunState::Starting);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let outcome = rt.block_on(supervise(cfg, opts, segs.clone()));
+    segs.control.set_run_state(RunState::Stopped);
+    drop(segs); // unlinks every segment
+    outcome
+}
+
+fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<ChildSpec> {
+    let mut args = vec![
+        role.to_owned(),
+        "--session".into(),
+        cfg.config.session.clone(),
+        "--station".into(),
+        cfg.name.clone(),
+        "--parent".into(),
+        std::process::id().to_string(),
+    ];
+    if let Some(c) = &opts.config {
+        args.push("--config".into());
+        args.push(c.display().to_string());
+    }
+    Ok(ChildSpec {
+        name: role.to_owned(),
+        program: std::env::current_exe().context("finding the station binary")?,
+        args,
+    })
+}
+
+async fn supervise(
+    cfg: &Resolved,
+    opts: &RunOptions,
+    segs: Arc<StationSegments>,
+) -> anyhow::Result<()> {
+    let sup_cfg = &cfg.config.supervisor;
+    let watch_of = |c: Child| {
+        let s = segs.clone();
+        Some(Watch {
+            heartbeat: Arc::new(move || s.control.child(c).heartbeat.load(Ordering::Relaxed)),
+            timeout: Duration::from_millis(sup_cfg.heartbeat_timeout_ms),
+            startup: Duration::from_millis(sup_cfg.startup_timeout_ms),
+        })
+    };
+    let children = vec![
+        (child_spec(cfg, opts, "servo")?, watch_of(Child::Servo)),
+        (child_spec(cfg, opts, "physics")?, watch_of(Child::Physics)),
+    ];
+    let (tx, mut rx) = watch::channel(Status::default());
+    let args = SupervisorArgs {
+        children,
+        policy: cfg.policy,
+        status: tx,
+    };
+    let (sup, handle) = Actor::spawn(
+        Some(format!("station-{}-{}", cfg.name, std::process::id())),
+        StationSupervisor,
+        args,
+    )
+    .await
+    .map_err(|e| anyhow::anyhow!("starting the supervisor: {e}"))?;
+    segs.control.set_run_state(RunState::Running);
+    eprintln!(
+        "station {} (session {}): running servo at {} Hz and physics at {} Hz; Ctrl-C to stop",
+        cfg.name,
+        cfg.config.session,
+        cfg.scenario.site[cfg.site].servo_rate_hz,
+        cfg.scenario.site[cfg.site].physics_rate_hz
+    );
+    let mut sigint = signal(SignalKind::interrupt())?;
+    let mut sigterm = signal(SignalKind::terminate())?;
+    let until = async {
+        match opts.duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(until);
+    let end = loop {
+        tokio::select! {
+            _ = sigint.recv() => break None,
+            _ = sigterm.recv() => break None,
+            _ = &mut until => break None,
+            changed = rx.changed() => {
+                let status = rx.borrow_and_update().clone();
+                for (c, n) in [Child::Servo, Child::Physics].into_iter().zip(&status.restarts) {
+                    segs.control.child(c).restarts.store(u64::from(*n), Ordering::Relaxed);
+                }
+                if changed.is_err() || status.end.is_some() {
+                    break status.end;
+                }
+            }
+        }
+    };
+    // The stop ladder.
+    let _ = sup.send_message(SupervisorMsg::BeginStop);
+    segs.control.set_run_state(RunState::Stopping);
+    for (grace, signal) in [
+        (STOP_GRACE, Some(Signal::SIGTERM)),
+        (TERM_GRACE, Some(Signal::SIGKILL)),
+        (TERM_GRACE, None),
+    ] {
+        let gone = tokio::time::timeout(grace, rx.wait_for(|s| s.live == 0))
+            .await
+            .is_ok();
+        if gone {
+            break;
+        }
+        match signal {
+            Some(sig) => {
+                eprintln!(
+                    "station {}: children still running after {:?}; sending {sig}",
+                    cfg.name, grace
+                );
+                let _ = sup.send_message(SupervisorMsg::SignalAll(sig));
+            }
+            None => eprintln!("station {}: children did not die after SIGKILL", cfg.name),
+        }
+    }
+    sup.stop(None);
+    let _ = handle.await;
+    match end {
+        Some(End::Failed(why)) => bail!("station {} stopped: {why}", cfg.name),
+        Some(End::Clean(why)) => {
+            eprintln!("station {} stopped: {why}", cfg.name);
+            Ok(())
+        }
+        None => {
+            eprintln!("station {} stopped", cfg.name);
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,165 @@
+//! `station run` with real processes (issue 5): it comes up, keeps going through killed children,
+//! stops on SIGTERM leaving nothing behind, its children die with it, and a live station's name is
+//! refused. Unique session names keep parallel tests apart; every wait has a deadline; nothing
+//! asserts on timing.
+
+use std::process::Command;
+use std::time::Duration;
+
+use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_rt::shm::{BlockSegment, SegmentName};
+use coop_rt::sync::Ordering;
+use coop_tests::{shm_entries, unique_session, wait_until, Reaped};
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+
+const STATION: &str = env!("CARGO_BIN_EXE_station");
+const LIMIT: Duration = Duration::from_secs(60);
+
+fn config(session: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("coop-run-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let p = dir.join("station.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
+             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
+             [supervisor]\nbackoff_initial_ms = 20\n"
+        ),
+    )
+    .expect("write");
+    p
+}
+
+fn start(cfg: &std::path::Path) -> Reaped {
+    Reaped::spawn(Command::new(STATION).arg("run").arg("--config").arg(cfg))
+}
+
+/// Opens the station's control block once it exists (read-only use: opening claims nothing).
+fn control(session: &str) -> BlockSegment<ControlBlock> {
+    let name = SegmentName::new(session, "user1", "ctl").expect("name");
+    wait_until("the control block", LIMIT, || {
+        BlockSegment::<ControlBlock>::open(&name, Duration::from_secs(1)).ok()
+    })
+}
+
+fn beats(c: &ControlBlock, child: Child) -> u64 {
+    c.child(child).heartbeat.load(Ordering::Relaxed)
+}
+fn pid(c: &ControlBlock, child: Child) -> u32 {
+    c.child(child).pid.load(Ordering::Relaxed) as u32
+}
+fn alive(pid: u32) -> bool {
+    kill(Pid::from_raw(pid as i32), None).is_ok()
+        && !std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| s.contains(") Z "))
+}
+fn running(c: &ControlBlock) -> (u32, u32) {
+    wait_until("servo and physics running", LIMIT, || {
+        (c.run_state() == RunState::Running
+            && beats(c, Child::Servo) > 50
+            && beats(c, Child::Physics) > 50)
+            .then(|| (pid(c, Child::Servo), pid(c, Child::Physics)))
+    })
+}
+
+#[test]
+fn runs_then_stops_on_sigterm_leaving_nothing() {
+    let session = unique_session();
+    let cfg = config(&session);
+    let station = start(&cfg);
+    let ctl = control(&session);
+    let (servo, physics) = running(&ctl);
+    // About five seconds of servo cycles at user1's 600 Hz.
+    wait_until("5 s of servo cycles", LIMIT, || {
+        (ctl.servo.snapshot().cycles >= 3000).then_some(())
+    });
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+    assert!(
+        !alive(servo) && !alive(physics),
+        "children outlived the station"
+    );
+    assert_eq!(
+        ControlBlock::load_f64(&ctl.servo_scale),
+        0.0,
+        "the servo stopped limp"
+    );
+    drop(ctl);
+    assert!(
+        shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+}
+
+#[test]
+fn killed_children_are_restarted_and_the_station_goes_on() {
+    let session = unique_session();
+    let cfg = config(&session);
+    let station = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    for child in [Child::Servo, Child::Physics] {
+        let old = pid(&ctl, child);
+        kill(Pid::from_raw(old as i32), Signal::SIGKILL).expect("SIGKILL child");
+        let new = wait_until("a restarted child", LIMIT, || {
+            let p = pid(&ctl, child);
+            (p != old && p != 0 && ctl.child(child).restarts.load(Ordering::Relaxed) == 1)
+                .then_some(p)
+        });
+        let before = beats(&ctl, child);
+        wait_until("the restarted child's heartbeat", LIMIT, || {
+            (beats(&ctl, child) > before + 50).then_some(())
+        });
+        assert!(alive(new));
+    }
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+}
+
+#[test]
+fn a_killed_supervisor_takes_its_children_and_the_next_run_cleans_up() {
+    let session = unique_session();
+    let cfg = config(&session);
+    let mut first = start(&cfg);
+    let ctl = control(&session);
+    let (servo, physics) = running(&ctl);
+
+    // A second station of the same name is refused while the first lives.
+    let out = Command::new(STATION)
+        .arg("run")
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("station user1 of session") && err.contains("already running"),
+        "{err}"
+    );
+
+    first.kill();
+    let _ = first.finish();
+    wait_until("children to die with their supervisor", LIMIT, || {
+        (!alive(servo) && !alive(physics)).then_some(())
+    });
+    drop(ctl);
+    assert!(
+        !shm_entries(&format!("coop_{session}_")).is_empty(),
+        "a crash leaves stale segments"
+    );
+
+    let second = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    kill(Pid::from_raw(second.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = second.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+}
