@@ -179,6 +179,9 @@ unsafe impl ShmPod for SiteReport {
     const TYPE_NAME: &'static str = "coop.SiteReport.v1";
 }
 
+/// Sites a report's inclusion times cover.
+pub const INCLUDED_SITES: usize = MAX_SITES;
+
 const KIND_STATE: u64 = 1;
 const KIND_FORCE: u64 = 2;
 

@@ -30,6 +30,8 @@ pub struct PhysicsLoop {
     adoptions: u64,
     /// Reports refused as malformed (non-finite, unknown site, unknown kind).
     pub rejected: u64,
+    /// Remote reports taken from the ring (valid or not).
+    pub received: u64,
     /// Object samples or reports dropped because a ring was full.
     pub dropped: u64,
 }
@@ -85,6 +87,7 @@ impl PhysicsLoop {
             report_seq: 0,
             adoptions: 0,
             rejected: 0,
+            received: 0,
             dropped: 0,
         }
     }
@@ -100,6 +103,7 @@ impl PhysicsLoop {
             }
         }
         while let Ok(r) = self.remote.pop() {
+            self.received += 1;
             match r.report() {
                 Some((from, msg)) if from != self.site => {
                     if self

@@ -163,3 +163,68 @@ fn a_killed_supervisor_takes_its_children_and_the_next_run_cleans_up() {
     drop(ctl);
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
 }
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind")
+        .local_addr()
+        .expect("addr")
+        .port()
+}
+
+/// Two stations started by hand in one session on loopback: each one's physics receives the
+/// other's states over zenoh (and adopts them), through its network process and rings.
+#[test]
+fn two_stations_by_hand_see_each_other() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-two-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let (pa, pb) = (free_port(), free_port());
+    let write = |name: &str, listen: u16, connect: Option<u16>| {
+        let p = dir.join(format!("{name}.toml"));
+        let connect = connect.map_or(String::new(), |c| format!("\"tcp/127.0.0.1:{c}\""));
+        std::fs::write(
+            &p,
+            format!(
+                "session = \"{session}\"\nstation = \"{name}\"\nmlockall = false\n\
+                 [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
+                 [network]\nlisten = [\"tcp/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n"
+            ),
+        )
+        .expect("write");
+        p
+    };
+    let a = start(&write("user1", pa, None));
+    let b = start(&write("user2", pb, Some(pa)));
+    let open = |name: &str| {
+        let n = SegmentName::new(&session, name, "ctl").expect("name");
+        wait_until("a control block", LIMIT, || {
+            BlockSegment::<ControlBlock>::open(&n, Duration::from_secs(1)).ok()
+        })
+    };
+    let (ca, cb) = (open("user1"), open("user2"));
+    wait_until("each physics to receive the other's states", LIMIT, || {
+        let got = |c: &ControlBlock| {
+            (
+                c.net_received.load(Ordering::Relaxed),
+                c.physics_received.load(Ordering::Relaxed),
+                c.physics_adoptions.load(Ordering::Relaxed),
+            )
+        };
+        let (ra, rb) = (got(&ca), got(&cb));
+        (ra.0 > 20 && ra.1 > 20 && rb.0 > 20 && rb.1 > 20 && (ra.2 + rb.2) > 0).then_some(())
+    });
+    assert_eq!(ca.net_rejected.load(Ordering::Relaxed), 0);
+    assert!(
+        ca.net_published.load(Ordering::Relaxed) > 20
+            && cb.net_published.load(Ordering::Relaxed) > 20
+    );
+    for s in [a, b] {
+        kill(Pid::from_raw(s.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+        let (status, _) = s.finish();
+        assert!(status.success(), "exit {status}");
+    }
+    drop((ca, cb));
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}

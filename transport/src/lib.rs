@@ -1,1 +1,15 @@
-//! placeholder
+//! coop-transport: Zenoh between stations.
+//!
+//! - [`keys`]: every key expression, from one place.
+//! - [`wire`]: the one encode and the one decode of what stations send each other.
+//! - [`network`]: the station's network process — reports from physics out to the session, the
+//!   other stations' reports in to physics, through the station's shared-memory rings.
+//!
+//! The network process is not a real-time loop: it runs tokio and zenoh at normal priority, and only
+//! touches the rings (lock-free, non-blocking) on the real-time side's behalf.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod keys;
+pub mod network;
+pub mod wire;

@@ -74,12 +74,22 @@ pub struct ControlBlock {
     pub servo_command_n: AtomicU64,
     /// The servo's display scale: 1 fresh, 0 stale (f64 bits).
     pub servo_scale: AtomicU64,
+    /// Reports the network process published.
+    pub net_published: AtomicU64,
+    /// Other sites' reports it handed to physics.
+    pub net_received: AtomicU64,
+    /// Messages it refused.
+    pub net_rejected: AtomicU64,
+    /// Remote reports physics took from the ring.
+    pub physics_received: AtomicU64,
+    /// States physics adopted.
+    pub physics_adoptions: AtomicU64,
 }
 
 // SAFETY: repr(C), made only of AtomicU64 (directly, in arrays and in LoopStats/ChildSlot, which are
 // the same); all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v1";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v2";
 }
 
 impl ControlBlock {

@@ -23,7 +23,7 @@ struct Args {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run the station: servo and physics processes under a supervisor, until Ctrl-C/SIGTERM.
+    /// Run the station: servo, physics and network processes under a supervisor, until Ctrl-C/SIGTERM.
     Run {
         #[command(flatten)]
         child: ChildArgs,
@@ -46,6 +46,9 @@ enum Command {
     /// The physics loop process (started by the supervisor).
     #[command(hide = true)]
     Physics(ChildArgs),
+    /// The network process (started by the supervisor).
+    #[command(hide = true)]
+    Network(ChildArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -120,5 +123,6 @@ fn main() -> std::process::ExitCode {
         }
         Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
         Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),
+        Command::Network(a) => child::run_network(&resolve(&a)?, a.parent),
     })
 }

@@ -141,7 +141,45 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let in_force = setup(cfg, &cfg.physics_sched, "physics")?;
     run_periodic(&ctl, Child::Physics, &ctl.physics, step, &in_force, |now| {
         physics.step(now);
+        ctl.physics_received
+            .store(physics.received, coop_rt::sync::Ordering::Relaxed);
+        ctl.physics_adoptions
+            .store(physics.adoptions(), coop_rt::sync::Ordering::Relaxed);
         matches!(ctl.run_state(), RunState::Starting | RunState::Running)
     });
+    Ok(())
+}
+
+/// Runs the network process of the configured station until the run state asks it to stop.
+///
+/// # Errors
+/// The segments cannot be opened, or the zenoh session cannot be set up.
+pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+    die_with_parent(parent)?;
+    let names = Names::of(&cfg.config.session, &cfg.name)?;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: OPEN_TIMEOUT,
+    };
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let args = coop_transport::network::NetworkArgs {
+        session: &cfg.config.session,
+        site: &cfg.name,
+        site_index: cfg.site,
+        endpoints: coop_transport::network::Endpoints {
+            listen: cfg.config.network.listen.clone(),
+            connect: cfg.config.network.connect.clone(),
+        },
+        control: &ctl,
+        reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
+        remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
+    };
+    // Normal priority, unpinned: the network is not a real-time loop.
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
+    rt.block_on(coop_transport::network::run(args))
+        .map_err(anyhow::Error::msg)?;
     Ok(())
 }

@@ -42,6 +42,25 @@ pub struct RingSpec {
     pub remote_slots: usize,
 }
 
+/// The network process's zenoh endpoints.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NetworkSpec {
+    /// Locators to listen on (default: a free TCP port on loopback).
+    pub listen: Vec<String>,
+    /// Locators of other stations or zenoh routers to connect to.
+    pub connect: Vec<String>,
+}
+
+impl Default for NetworkSpec {
+    fn default() -> Self {
+        Self {
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            connect: Vec::new(),
+        }
+    }
+}
+
 /// The supervisor's policy.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -99,6 +118,8 @@ pub struct StationConfig {
     pub rings: RingSpec,
     /// Restart policy and watchdog.
     pub supervisor: SupervisorSpec,
+    /// Zenoh endpoints.
+    pub network: NetworkSpec,
 }
 
 impl Default for StationConfig {
@@ -121,6 +142,7 @@ impl Default for StationConfig {
             },
             rings: RingSpec::default(),
             supervisor: SupervisorSpec::default(),
+            network: NetworkSpec::default(),
         }
     }
 }
@@ -255,6 +277,14 @@ impl StationConfig {
         ] {
             if !(slots.is_power_of_two() && (2..=65536).contains(&slots)) {
                 bail!("{field} = {slots}: must be a power of two from 2 to 65536");
+            }
+        }
+        for (field, list) in [
+            ("network.listen", &self.network.listen),
+            ("network.connect", &self.network.connect),
+        ] {
+            if let Some(bad) = list.iter().find(|e| !e.contains('/') || e.len() > 256) {
+                bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
             }
         }
         let servo_sched = sched("servo", &self.servo)?;

@@ -1,8 +1,8 @@
 //! `station run`: bring a station up in order, keep it going, and take it down leaving nothing.
 //!
 //! Up: clean stale segments a dead predecessor of this station left (refusing if one is alive),
-//! create the control block and rings, start the supervisor (which starts servo and physics as
-//! process-group leaders that die with it), then declare the station running.
+//! create the control block and rings, start the supervisor (which starts servo, physics and network
+//! as process-group leaders that die with it), then declare the station running.
 //! Down, on SIGINT/SIGTERM, a duration, or a child the policy gave up on — the stop ladder:
 //! cooperative stop through the run state (the servo first ramps its force to zero) → [`STOP_GRACE`]
 //! → SIGTERM to each child's process group → [`TERM_GRACE`] → SIGKILL; then unlink every segment.
@@ -122,6 +122,7 @@ async fn supervise(
     let children = vec![
         (child_spec(cfg, opts, "servo")?, watch_of(Child::Servo)),
         (child_spec(cfg, opts, "physics")?, watch_of(Child::Physics)),
+        (child_spec(cfg, opts, "network")?, watch_of(Child::Network)),
     ];
     let (tx, mut rx) = watch::channel(Status::default());
     let args = SupervisorArgs {
@@ -138,7 +139,7 @@ async fn supervise(
     .map_err(|e| anyhow::anyhow!("starting the supervisor: {e}"))?;
     segs.control.set_run_state(RunState::Running);
     eprintln!(
-        "station {} (session {}): running servo at {} Hz and physics at {} Hz; Ctrl-C to stop",
+        "station {} (session {}): running servo at {} Hz, physics at {} Hz and the network; Ctrl-C to stop",
         cfg.name,
         cfg.config.session,
         cfg.scenario.site[cfg.site].servo_rate_hz,
@@ -160,7 +161,7 @@ async fn supervise(
             _ = &mut until => break None,
             changed = rx.changed() => {
                 let status = rx.borrow_and_update().clone();
-                for (c, n) in [Child::Servo, Child::Physics].into_iter().zip(&status.restarts) {
+                for (c, n) in [Child::Servo, Child::Physics, Child::Network].into_iter().zip(&status.restarts) {
                     segs.control.child(c).restarts.store(u64::from(*n), Ordering::Relaxed);
                 }
                 if changed.is_err() || status.end.is_some() {
