@@ -26,6 +26,6 @@ pub use ring::{
     Consumer, Newest, PopError, Producer, PushError, RingCorruption, RingOpenError, Side,
 };
 #[cfg(not(loom))]
-pub use ring::{RingOpenOptions, RingSegment};
+pub use ring::{RingFill, RingOpenOptions, RingSegment};
 #[cfg(not(loom))]
 pub use segment::{inspect, list, remove_stale, CreateError, SegmentInfo, SegmentStatus};

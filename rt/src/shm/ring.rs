@@ -510,7 +510,7 @@ impl<T> Drop for Consumer<T> {
 #[cfg(not(loom))]
 mod segment_backed;
 #[cfg(not(loom))]
-pub use segment_backed::{RingOpenOptions, RingSegment};
+pub use segment_backed::{RingFill, RingOpenOptions, RingSegment};
 
 /// A heap-backed ring for loom models: the same control block and protocol, in loom's atomics.
 ///

@@ -2,7 +2,7 @@
 //!
 //! Built so far: `station run` (servo and physics under the supervisor), `station clean`, and the
 //! loop processes the supervisor spawns (`station servo`, `station physics`, hidden). The network
-//! process and `station status` come next.
+//! process is in `station run`; `station status` reads a running station.
 
 use std::path::PathBuf;
 
@@ -30,6 +30,21 @@ enum Command {
         /// Stop by itself after this many seconds.
         #[arg(long, value_name = "S")]
         duration_s: Option<f64>,
+    },
+    /// Show what a running station is doing (children, loop rates and latency, rings, network).
+    Status {
+        /// Station (site) name; default: the configuration's.
+        #[arg(long)]
+        station: Option<String>,
+        /// Session name; default: the configuration's.
+        #[arg(long)]
+        session: Option<String>,
+        /// Station configuration to take the defaults from.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
     },
     /// Remove the shared-memory segments of stations whose creator is gone (live ones stay).
     Clean {
@@ -85,6 +100,23 @@ fn resolve(a: &ChildArgs) -> anyhow::Result<coop_tools::station::config::Resolve
 fn main() -> std::process::ExitCode {
     let args = Args::parse();
     coop_tools::run_main(|| match args.command {
+        Command::Status {
+            station,
+            session,
+            config,
+            json,
+        } => {
+            let r = StationConfig::load(config.as_deref())?;
+            let session = session.unwrap_or(r.config.session);
+            let station = station.unwrap_or(r.name);
+            let v = coop_tools::station::status::read(&session, &station)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                coop_tools::station::status::print(&v);
+            }
+            Ok(())
+        }
         Command::Clean { session, station } => {
             let prefix = match (&session, &station) {
                 (Some(s), Some(t)) => coop_rt::shm::SegmentName::station_prefix(s, t)?,

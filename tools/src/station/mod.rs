@@ -3,9 +3,11 @@
 //!
 //! Built so far: the configuration ([`config`]), the set of segments created before anything is
 //! spawned ([`segments`]), the servo and physics child processes ([`child`]), and `station run`
-//! under the ractor supervisor ([`run`]). The network process and `station status` come next.
+//! under the ractor supervisor ([`run`]) with the zenoh network process, and `station status`
+//! ([`status`]).
 
 pub mod child;
 pub mod config;
 pub mod run;
 pub mod segments;
+pub mod status;

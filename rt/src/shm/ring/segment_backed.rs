@@ -128,6 +128,37 @@ impl<T: ShmPod> RingSegment<T> {
     }
 }
 
+/// A ring's fill as seen from outside: read without claiming either half.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RingFill {
+    /// Messages waiting.
+    pub used: u64,
+    /// Slots.
+    pub capacity: u64,
+    /// Messages pushed since creation.
+    pub pushed: u64,
+}
+
+impl<T: ShmPod> RingSegment<T> {
+    /// Reads ring `name`'s indices without claiming a half (for status tools).
+    ///
+    /// # Errors
+    /// As [`Producer::open`], without the claim.
+    pub fn inspect(name: &SegmentName, opts: &RingOpenOptions) -> Result<RingFill, RingOpenError> {
+        let shared = open_shared::<T>(name, opts)?;
+        let c = shared.control();
+        let (head, tail) = (
+            c.head.load(Ordering::Acquire),
+            c.tail.load(Ordering::Acquire),
+        );
+        Ok(RingFill {
+            used: tail.wrapping_sub(head).min(shared.capacity),
+            capacity: shared.capacity,
+            pushed: tail,
+        })
+    }
+}
+
 fn open_shared<T: ShmPod>(
     name: &SegmentName,
     opts: &RingOpenOptions,

@@ -1,0 +1,192 @@
+//! `station status`: what a running station is doing, read from its control block and rings without
+//! touching the loops (no claim, no lock; two snapshots 200 ms apart give the achieved rates).
+
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
+use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_rt::shm::{BlockSegment, RingOpenOptions, RingSegment};
+use coop_rt::stats::LoopSnapshot;
+use coop_rt::sync::Ordering;
+use serde_json::json;
+
+use super::segments::Names;
+
+fn policy_name(n: u64) -> &'static str {
+    match n {
+        0 => "SCHED_OTHER",
+        1 => "SCHED_FIFO",
+        2 => "SCHED_RR",
+        _ => "other",
+    }
+}
+
+fn cpus(mask: u64) -> String {
+    let v: Vec<String> = (0..64)
+        .filter(|c| mask & (1 << c) != 0)
+        .map(|c| c.to_string())
+        .collect();
+    if v.is_empty() {
+        "-".into()
+    } else {
+        v.join(",")
+    }
+}
+
+fn loop_json(s: &LoopSnapshot, rate: f64) -> serde_json::Value {
+    let q = |p: f64| s.wake_us.value_at_quantile(p);
+    json!({
+        "period_us": s.period_ns as f64 / 1e3,
+        "rate_hz": rate,
+        "cycles": s.cycles,
+        "overruns": s.overruns,
+        "wake_us": { "min": s.wake_min_ns as f64 / 1e3, "p50": q(0.5), "p99": q(0.99), "p999": q(0.999), "max": s.wake_max_ns as f64 / 1e3 },
+        "compute_us": { "p50": s.compute_us.value_at_quantile(0.5), "p99": s.compute_us.value_at_quantile(0.99), "max": s.compute_max_ns as f64 / 1e3 },
+    })
+}
+
+/// Reads the status of station `station` in `session` as JSON.
+///
+/// # Errors
+/// No such station, or its segments fail validation (stale: run `station clean`).
+pub fn read(session: &str, station: &str) -> anyhow::Result<serde_json::Value> {
+    let names = Names::of(session, station)?;
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))
+        .with_context(|| format!("station {station} of session {session}"))?;
+    let (s0, p0, t0) = (ctl.servo.snapshot(), ctl.physics.snapshot(), Instant::now());
+    std::thread::sleep(Duration::from_millis(200));
+    let (s1, p1) = (ctl.servo.snapshot(), ctl.physics.snapshot());
+    let dt = t0.elapsed().as_secs_f64();
+    let rate = |a: &LoopSnapshot, b: &LoopSnapshot| (b.cycles.saturating_sub(a.cycles)) as f64 / dt;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: Duration::from_millis(500),
+    };
+    let fill = |r: Result<coop_rt::shm::RingFill, _>| match r {
+        Ok(f) => json!({ "used": f.used, "capacity": f.capacity, "pushed": f.pushed }),
+        Err(e) => json!({ "error": format!("{e}") }),
+    };
+    let children: Vec<serde_json::Value> = [
+        ("servo", Child::Servo),
+        ("physics", Child::Physics),
+        ("network", Child::Network),
+    ]
+    .iter()
+    .map(|(name, c)| {
+        let slot = ctl.child(*c);
+        json!({
+            "name": name,
+            "pid": slot.pid.load(Ordering::Relaxed),
+            "heartbeat": slot.heartbeat.load(Ordering::Relaxed),
+            "restarts": slot.restarts.load(Ordering::Relaxed),
+            "policy": policy_name(slot.policy.load(Ordering::Relaxed)),
+            "priority": slot.priority.load(Ordering::Relaxed),
+            "cpus": cpus(slot.cpus.load(Ordering::Relaxed)),
+        })
+    })
+    .collect();
+    Ok(json!({
+        "session": session,
+        "station": station,
+        "run_state": format!("{:?}", ctl.run_state()).to_lowercase(),
+        "children": children,
+        "loops": { "servo": loop_json(&s1, rate(&s0, &s1)), "physics": loop_json(&p1, rate(&p0, &p1)) },
+        "rings": {
+            "tool": fill(RingSegment::<ToolSample>::inspect(&names.tool, &opts)),
+            "object": fill(RingSegment::<ObjectSample>::inspect(&names.object, &opts)),
+            "report": fill(RingSegment::<SiteReport>::inspect(&names.report, &opts)),
+            "remote": fill(RingSegment::<SiteReport>::inspect(&names.remote, &opts)),
+            "drops": { "tool": ctl.drops[0].load(Ordering::Relaxed), "object": ctl.drops[1].load(Ordering::Relaxed),
+                       "report": ctl.drops[2].load(Ordering::Relaxed), "remote": ctl.drops[3].load(Ordering::Relaxed) },
+        },
+        "network": {
+            "published": ctl.net_published.load(Ordering::Relaxed),
+            "received": ctl.net_received.load(Ordering::Relaxed),
+            "rejected": ctl.net_rejected.load(Ordering::Relaxed),
+        },
+        "physics": {
+            "remote_received": ctl.physics_received.load(Ordering::Relaxed),
+            "adoptions": ctl.physics_adoptions.load(Ordering::Relaxed),
+        },
+        "servo": {
+            "command_n": ControlBlock::load_f64(&ctl.servo_command_n),
+            "display_scale": ControlBlock::load_f64(&ctl.servo_scale),
+        },
+        "running": ctl.run_state() == RunState::Running,
+    }))
+}
+
+/// Prints the status for people.
+pub fn print(v: &serde_json::Value) {
+    let s = |v: &serde_json::Value| v.as_str().unwrap_or("?").to_owned();
+    println!(
+        "station {} (session {}): {}",
+        s(&v["station"]),
+        s(&v["session"]),
+        s(&v["run_state"])
+    );
+    println!(
+        "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  cpus",
+        "child", "pid", "heartbeat", "restarts", "policy", "prio"
+    );
+    let n = |v: &serde_json::Value| v.as_u64().unwrap_or(0);
+    for c in v["children"].as_array().into_iter().flatten() {
+        println!(
+            "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  {}",
+            s(&c["name"]),
+            n(&c["pid"]),
+            n(&c["heartbeat"]),
+            n(&c["restarts"]),
+            s(&c["policy"]),
+            n(&c["priority"]),
+            s(&c["cpus"])
+        );
+    }
+    println!(
+        "{:<9}{:>9}{:>10}{:>10}{:>10}  {:<26}{:>14}",
+        "loop",
+        "rate Hz",
+        "period us",
+        "cycles",
+        "overruns",
+        "wake p50/p99/p99.9/max us",
+        "compute max us"
+    );
+    for name in ["servo", "physics"] {
+        let l = &v["loops"][name];
+        let w = &l["wake_us"];
+        println!(
+            "{:<9}{:>9.1}{:>10.1}{:>10}{:>10}  {:<26}{:>14.1}",
+            name,
+            l["rate_hz"].as_f64().unwrap_or(0.0),
+            l["period_us"].as_f64().unwrap_or(0.0),
+            n(&l["cycles"]),
+            n(&l["overruns"]),
+            format!(
+                "{}/{}/{}/{:.0}",
+                w["p50"],
+                w["p99"],
+                w["p999"],
+                w["max"].as_f64().unwrap_or(0.0)
+            ),
+            l["compute_us"]["max"].as_f64().unwrap_or(0.0)
+        );
+    }
+    let r = &v["rings"];
+    let f = |x: &serde_json::Value| format!("{}/{}", x["used"], x["capacity"]);
+    println!(
+        "rings (used/slots): tool {}, object {}, report {}, remote {}; drops: tool {}, object {}, report {}, remote {}",
+        f(&r["tool"]), f(&r["object"]), f(&r["report"]), f(&r["remote"]),
+        r["drops"]["tool"], r["drops"]["object"], r["drops"]["report"], r["drops"]["remote"]
+    );
+    println!(
+        "network: published {}, received {}, rejected {}; physics: took {} remote reports, adopted {}",
+        v["network"]["published"], v["network"]["received"], v["network"]["rejected"], v["physics"]["remote_received"], v["physics"]["adoptions"]
+    );
+    println!(
+        "servo: commanding {:.2} N, display scale {:.2}",
+        v["servo"]["command_n"].as_f64().unwrap_or(0.0),
+        v["servo"]["display_scale"].as_f64().unwrap_or(0.0)
+    );
+}
