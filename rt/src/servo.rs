@@ -26,6 +26,8 @@ pub struct ServoLoop<D> {
     /// Tool samples dropped because physics did not keep up.
     pub dropped: u64,
     limp: bool,
+    stale_state_ns: Option<u64>,
+    stale_limp_recorded: bool,
 }
 
 impl<D: Device> ServoLoop<D> {
@@ -50,6 +52,8 @@ impl<D: Device> ServoLoop<D> {
             last_ns: start_ns,
             dropped: 0,
             limp: false,
+            stale_state_ns: None,
+            stale_limp_recorded: false,
         }
     }
 
@@ -110,6 +114,25 @@ impl<D: Device> ServoLoop<D> {
             self.dropped += 1;
             if let Some(c) = control {
                 c.drops[0].store(self.dropped, crate::sync::Ordering::Relaxed);
+            }
+        }
+        // Record stale episodes: when the newest state was, and when the command reached zero.
+        let stale = now_ns.saturating_sub(t_ns) as f64 * 1e-9 > self.servo.params.stale_limit_s;
+        if stale && self.stale_state_ns != Some(t_ns) {
+            self.stale_state_ns = Some(t_ns);
+            self.stale_limp_recorded = false;
+            if let Some(c) = control {
+                c.servo_stale_state_ns
+                    .store(t_ns, crate::sync::Ordering::Relaxed);
+                c.servo_stale_limp_ns
+                    .store(0, crate::sync::Ordering::Relaxed);
+            }
+        }
+        if stale && !self.stale_limp_recorded && out.f_command.norm() == 0.0 {
+            self.stale_limp_recorded = true;
+            if let Some(c) = control {
+                c.servo_stale_limp_ns
+                    .store(now_ns, crate::sync::Ordering::Relaxed);
             }
         }
         if let Some(c) = control {

@@ -155,15 +155,32 @@ fn a_bad_configuration_is_a_clear_error_and_creates_nothing() {
 #[test]
 fn every_bad_configuration_fixture_is_refused_with_its_field() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/station");
-    let expected: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("expected.json")).expect("expected.json")).expect("json");
+    let expected: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("expected.json")).expect("expected.json"),
+    )
+    .expect("json");
     let before = shm_entries("coop_local_");
     for (file, needle) in expected.as_object().expect("object") {
-        let out = Command::new(STATION).arg("run").arg("--config").arg(dir.join(file)).output().expect("run");
+        let out = Command::new(STATION)
+            .arg("run")
+            .arg("--config")
+            .arg(dir.join(file))
+            .output()
+            .expect("run");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{file}: accepted");
-        assert!(err.contains(needle.as_str().expect("string")), "{file}: stderr lacks {needle}:\n{err}");
-        assert!(err.contains(file.as_str()), "{file}: the message names the file:\n{err}");
+        assert!(
+            err.contains(needle.as_str().expect("string")),
+            "{file}: stderr lacks {needle}:\n{err}"
+        );
+        assert!(
+            err.contains(file.as_str()),
+            "{file}: the message names the file:\n{err}"
+        );
     }
-    assert_eq!(shm_entries("coop_local_"), before, "a refused configuration created segments");
+    assert_eq!(
+        shm_entries("coop_local_"),
+        before,
+        "a refused configuration created segments"
+    );
 }

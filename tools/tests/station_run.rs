@@ -228,3 +228,70 @@ fn two_stations_by_hand_see_each_other() {
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// While physics is down (SIGKILLed, then restarted by the supervisor), the servo's commanded force
+/// ramps to zero within stale limit + ramp time of its newest object state — as the servo itself
+/// recorded it, not as the test timed it.
+#[test]
+fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-stale-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    // One user pressing a disk against a wall for the whole run.
+    std::fs::write(
+        dir.join("press.toml"),
+        "name = \"press\"\nduration_s = 600.0\n\
+         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
+         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
+         planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\
+         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
+         stale_limit_ms = 100.0\nstale_ramp_ms = 50.0\n\
+         script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
+    )
+    .expect("scenario");
+    let cfg = dir.join("station.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "session = \"{session}\"\nstation = \"user1\"\nscenario = \"press.toml\"\nmlockall = false\n\
+             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
+             [supervisor]\nbackoff_initial_ms = 300\n"
+        ),
+    )
+    .expect("config");
+    let station = start(&cfg);
+    let ctl = control(&session);
+    let (_, physics) = running(&ctl);
+    wait_until("the user pressing the disk", LIMIT, || {
+        (ControlBlock::load_f64(&ctl.servo_command_n) > 0.3).then_some(())
+    });
+    kill(Pid::from_raw(physics as i32), Signal::SIGKILL).expect("SIGKILL physics");
+    let (state_ns, limp_ns) = wait_until("the servo to record going limp", LIMIT, || {
+        let (s, l) = (
+            ctl.servo_stale_state_ns.load(Ordering::Relaxed),
+            ctl.servo_stale_limp_ns.load(Ordering::Relaxed),
+        );
+        (s > 0 && l > 0).then_some((s, l))
+    });
+    // stale limit 100 ms + ramp 50 ms + one 1 ms servo tick.
+    let took_ms = (limp_ns - state_ns) as f64 / 1e6;
+    assert!(
+        took_ms <= 151.0 + 1e-6,
+        "force reached zero {took_ms} ms after the newest state"
+    );
+    assert!(
+        took_ms >= 100.0,
+        "and not before the stale limit: {took_ms} ms"
+    );
+    wait_until("physics restarted", LIMIT, || {
+        (pid(&ctl, Child::Physics) != physics
+            && ctl.child(Child::Physics).restarts.load(Ordering::Relaxed) == 1)
+            .then_some(())
+    });
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -84,6 +84,10 @@ pub struct ControlBlock {
     pub physics_received: AtomicU64,
     /// States physics adopted.
     pub physics_adoptions: AtomicU64,
+    /// The servo's last stale episode: the time of the newest object state it had, ns.
+    pub servo_stale_state_ns: AtomicU64,
+    /// ... and when its command first reached zero in that episode, ns (0: not yet).
+    pub servo_stale_limp_ns: AtomicU64,
 }
 
 // SAFETY: repr(C), made only of AtomicU64 (directly, in arrays and in LoopStats/ChildSlot, which are
