@@ -100,7 +100,7 @@ fn killed_children_are_restarted_and_the_station_goes_on() {
     let station = start(&cfg);
     let ctl = control(&session);
     running(&ctl);
-    for child in [Child::Servo, Child::Physics] {
+    for child in [Child::Servo, Child::Physics, Child::Network] {
         let old = pid(&ctl, child);
         kill(Pid::from_raw(old as i32), Signal::SIGKILL).expect("SIGKILL child");
         let new = wait_until("a restarted child", LIMIT, || {
@@ -293,5 +293,47 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
     assert!(status.success(), "exit {status}");
     drop(ctl);
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A child that fails on every start (here the network process: its listen port is taken) is
+/// restarted per policy, then the station stops with an error naming the child and the policy, and
+/// leaves nothing behind.
+#[test]
+fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
+    let session = unique_session();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let port = taken.local_addr().expect("addr").port();
+    let dir = std::env::temp_dir().join(format!("coop-crash-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let cfg = dir.join("station.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
+             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
+             [network]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n\
+             [supervisor]\nmax_restarts = 2\nbackoff_initial_ms = 20\n"
+        ),
+    )
+    .expect("config");
+    let out = Command::new(STATION)
+        .arg("run")
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the station should fail: {err}");
+    assert!(err.contains("child network failed 3 times"), "{err}");
+    assert!(
+        err.contains("restart on-failure, at most 2 restarts"),
+        "{err}"
+    );
+    assert!(
+        shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+    drop(taken);
     let _ = std::fs::remove_dir_all(&dir);
 }
