@@ -36,6 +36,7 @@ const PREFAULT_STACK: usize = 256 * 1024;
     name = "latency",
     version,
     disable_help_flag = true,
+    args_conflicts_with_subcommands = true,
     about = "Measure wake-up latency of periodic real-time threads (cyclictest-compatible).",
     long_about = "Measure wake-up latency of periodic real-time threads, the way cyclictest does.\n\n\
         Each thread sleeps to absolute CLOCK_MONOTONIC deadlines INTERVAL apart with \
@@ -47,7 +48,8 @@ const PREFAULT_STACK: usize = 256 * 1024;
         that is what coop-haptics' servo loops run at. Without the privilege for it the tool warns \
         once and measures under SCHED_OTHER, saying so in the header. Stop early with Ctrl-C.",
     after_help = "Examples:\n  latency -D 5s -q                 5 s, one thread, FIFO 80, summary only\n  \
-        latency -i 1000 -p 80 -a 1 -m -D 60s --json out.json\n  latency -t -a -h 100 -l 10000      one thread per CPU, pinned, histogram to 100 us"
+        latency -i 1000 -p 80 -a 1 -m -D 60s --json out.json\n  latency -t -a -h 100 -l 10000      one thread per CPU, pinned, histogram to 100 us\n  \
+        latency attach user1 -D 60s       a running station's servo and physics loops"
 )]
 pub struct Args {
     /// Period of each thread in microseconds.
@@ -92,6 +94,32 @@ pub struct Args {
     /// Print help.
     #[arg(long, action = ArgAction::Help)]
     pub help: Option<bool>,
+    /// Attach to a running station instead of measuring here.
+    #[command(subcommand)]
+    pub attach: Option<Attach>,
+}
+
+/// `latency attach`.
+#[derive(Debug, Clone, clap::Subcommand)]
+pub enum Attach {
+    /// Print a running station's servo and physics loop latency, live, in this tool's format
+    /// (read from the station's control block; the loops are not disturbed).
+    Attach {
+        /// Station (site) name.
+        station: String,
+        /// Session name.
+        #[arg(long, default_value = "local")]
+        session: String,
+        /// Stop after this long (s, m, h, d); default: until Ctrl-C.
+        #[arg(short = 'D', long, value_name = "TIME", value_parser = parse_duration)]
+        duration: Option<Duration>,
+        /// Quiet: print only the summary at the end.
+        #[arg(short = 'q', long)]
+        quiet: bool,
+        /// Write the summary as JSON to FILE.
+        #[arg(long, value_name = "FILE")]
+        json: Option<PathBuf>,
+    },
 }
 
 fn parse_policy(s: &str) -> Result<Policy, String> {
@@ -675,4 +703,135 @@ mod tests {
         let a = Args::try_parse_from(["latency", "--policy", "other", "-p", "5"]).expect("parses");
         assert!(thread_requests(&a).is_err());
     }
+}
+
+/// `latency attach`: a running station's loops, in this tool's format. Live lines on a terminal
+/// unless quiet; the summary (header, T: lines, percentiles) at the end.
+///
+/// # Errors
+/// No such station, or its control block fails validation.
+pub fn attach(
+    station: &str,
+    session: &str,
+    duration: Option<Duration>,
+    quiet: bool,
+    json: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    use coop_rt::shm::control::{Child, ControlBlock};
+    let names = crate::station::segments::Names::of(session, station)?;
+    let ctl = coop_rt::shm::BlockSegment::<ControlBlock>::open(
+        &names.control,
+        Duration::from_millis(500),
+    )
+    .with_context(|| format!("attaching to station {station} of session {session}"))?;
+    let stop = StopFlag::on_sigint_sigterm().context("blocking SIGINT/SIGTERM")?;
+    let start = (ctl.servo.snapshot(), ctl.physics.snapshot());
+    let began = Instant::now();
+    let live = !quiet && std::io::stdout().is_terminal();
+    let loops = [
+        ("servo", Child::Servo, 0usize),
+        ("physics", Child::Physics, 1),
+    ];
+    let line = |name: &str,
+                c: Child,
+                i: usize,
+                base: &coop_rt::stats::LoopSnapshot,
+                now: &coop_rt::stats::LoopSnapshot| {
+        let slot = ctl.child(c);
+        let cycles = now.cycles.saturating_sub(base.cycles);
+        let _ = name;
+        format!(
+            "T:{i:2} ({:6}) P:{:2} I:{} C:{cycles:8} Min:{:7} Act:{:5} Avg:{:5} Max:{:8}",
+            slot.pid.load(coop_rt::sync::Ordering::Relaxed),
+            slot.priority.load(coop_rt::sync::Ordering::Relaxed),
+            now.period_ns / 1000,
+            us(now.wake_min_ns),
+            us(now.last_wake_ns),
+            us(now.wake_sum_ns.checked_div(now.cycles).unwrap_or(0)),
+            us(now.wake_max_ns),
+        )
+    };
+    let mut printed = false;
+    loop {
+        std::thread::sleep(Duration::from_millis(200));
+        let done = stop.is_raised() || duration.is_some_and(|d| began.elapsed() >= d);
+        if live && !done {
+            let mut out = std::io::stdout().lock();
+            if printed {
+                let _ = write!(out, "\x1b[{}A", loops.len());
+            }
+            for (name, c, i) in loops {
+                let (base, now) = if i == 0 {
+                    (&start.0, ctl.servo.snapshot())
+                } else {
+                    (&start.1, ctl.physics.snapshot())
+                };
+                let _ = writeln!(out, "{}\x1b[K", line(name, c, i, base, &now));
+            }
+            let _ = out.flush();
+            printed = true;
+        }
+        if done {
+            break;
+        }
+    }
+    let (servo, physics) = (ctl.servo.snapshot(), ctl.physics.snapshot());
+    println!("# latency attach: station {station} of session {session}, {:.1} s; figures since the station started", began.elapsed().as_secs_f64());
+    let policy = |c: Child| match ctl.child(c).policy.load(coop_rt::sync::Ordering::Relaxed) {
+        1 => "SCHED_FIFO",
+        2 => "SCHED_RR",
+        _ => "SCHED_OTHER",
+    };
+    for (name, c, i) in loops {
+        let mask = ctl.child(c).cpus.load(coop_rt::sync::Ordering::Relaxed);
+        let cpus: Vec<String> = (0..64)
+            .filter(|b| mask & (1 << b) != 0)
+            .map(|b| b.to_string())
+            .collect();
+        println!(
+            "# T:{i:2} {name}: policy: {} priority: {} affinity: {}",
+            policy(c),
+            ctl.child(c).priority.load(coop_rt::sync::Ordering::Relaxed),
+            cpus.join(",")
+        );
+    }
+    let mut threads = serde_json::Map::new();
+    for (name, c, i) in loops {
+        let snap = if i == 0 { &servo } else { &physics };
+        let zero = coop_rt::stats::LoopSnapshot {
+            cycles: 0,
+            ..snap.clone()
+        };
+        println!("{}", line(name, c, i, &zero, snap));
+        let q = |p: f64| snap.wake_us.value_at_quantile(p);
+        println!(
+            "# T:{i:2} latency us: p50 {} p99 {} p99.9 {} p99.99 {} max {:.1} overruns {}",
+            q(0.5),
+            q(0.99),
+            q(0.999),
+            q(0.9999),
+            snap.wake_max_ns as f64 / 1e3,
+            snap.overruns
+        );
+        let hist: serde_json::Map<String, serde_json::Value> = snap
+            .wake_us
+            .iter_recorded()
+            .map(|v| (v.value_iterated_to().to_string(), v.count_at_value().into()))
+            .collect();
+        threads.insert(
+            i.to_string(),
+            serde_json::json!({
+                "loop": name, "cycles": snap.cycles, "overruns": snap.overruns, "interval_us": snap.period_ns / 1000,
+                "min_us": snap.wake_min_ns as f64 / 1e3, "max_us": snap.wake_max_ns as f64 / 1e3,
+                "p50_us": q(0.5), "p99_us": q(0.99), "p999_us": q(0.999), "p9999_us": q(0.9999),
+                "histogram_us": hist,
+            }),
+        );
+    }
+    if let Some(path) = json {
+        let v = serde_json::json!({ "file_version": 1, "tool": "coop-haptics latency attach", "station": station, "session": session, "thread": threads, "return_code": 0 });
+        std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
 }

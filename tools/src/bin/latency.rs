@@ -5,6 +5,18 @@ use coop_tools::latency;
 
 fn main() -> std::process::ExitCode {
     let args = latency::Args::parse();
+    if let Some(latency::Attach::Attach {
+        station,
+        session,
+        duration,
+        quiet,
+        json,
+    }) = &args.attach
+    {
+        return coop_tools::run_main(|| {
+            latency::attach(station, session, *duration, *quiet, json.as_deref())
+        });
+    }
     coop_tools::run_main(|| {
         let cmdline = std::env::args().collect::<Vec<_>>().join(" ");
         let report = latency::run(&args, cmdline, true)?;
