@@ -657,54 +657,6 @@ pub fn report_json(args: &Args, r: &Report) -> serde_json::Value {
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn flags_parse_like_cyclictest() {
-        let a = Args::try_parse_from([
-            "latency", "-i", "500", "-l", "10", "-p", "70", "-a", "1", "-t", "2", "-m", "-q", "-h",
-            "50", "--json", "x.json",
-        ])
-        .expect("valid flags");
-        assert_eq!(
-            (a.interval_us, a.loops, a.priority, a.threads),
-            (500, 10, Some(70), 2)
-        );
-        assert_eq!(a.affinity.as_deref(), Some("1"));
-        assert!(a.mlockall && a.quiet);
-        assert_eq!(a.histogram, Some(50));
-        let a = Args::try_parse_from(["latency", "-t", "-a", "-D", "1m"]).expect("valid flags");
-        assert_eq!((a.threads, a.affinity.as_deref()), (0, Some("auto")));
-        assert_eq!(a.duration, Some(Duration::from_secs(60)));
-        for bad in [
-            vec!["latency", "-i", "0"],
-            vec!["latency", "-D", "5x"],
-            vec!["latency", "--policy", "deadline"],
-            vec!["latency", "--bogus"],
-        ] {
-            assert!(Args::try_parse_from(&bad).is_err(), "{bad:?}");
-        }
-    }
-
-    #[test]
-    fn bad_priority_and_cpu_are_errors_before_anything_runs() {
-        let a = Args::try_parse_from(["latency", "-p", "120"]).expect("parses");
-        assert!(thread_requests(&a)
-            .unwrap_err()
-            .to_string()
-            .contains("priority 120"));
-        let a = Args::try_parse_from(["latency", "-a", "4000"]).expect("parses");
-        assert!(thread_requests(&a)
-            .unwrap_err()
-            .to_string()
-            .contains("CPU 4000"));
-        let a = Args::try_parse_from(["latency", "--policy", "other", "-p", "5"]).expect("parses");
-        assert!(thread_requests(&a).is_err());
-    }
-}
-
 /// `latency attach`: a running station's loops, in this tool's format. Live lines on a terminal
 /// unless quiet; the summary (header, T: lines, percentiles) at the end.
 ///
@@ -834,4 +786,52 @@ pub fn attach(
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_parse_like_cyclictest() {
+        let a = Args::try_parse_from([
+            "latency", "-i", "500", "-l", "10", "-p", "70", "-a", "1", "-t", "2", "-m", "-q", "-h",
+            "50", "--json", "x.json",
+        ])
+        .expect("valid flags");
+        assert_eq!(
+            (a.interval_us, a.loops, a.priority, a.threads),
+            (500, 10, Some(70), 2)
+        );
+        assert_eq!(a.affinity.as_deref(), Some("1"));
+        assert!(a.mlockall && a.quiet);
+        assert_eq!(a.histogram, Some(50));
+        let a = Args::try_parse_from(["latency", "-t", "-a", "-D", "1m"]).expect("valid flags");
+        assert_eq!((a.threads, a.affinity.as_deref()), (0, Some("auto")));
+        assert_eq!(a.duration, Some(Duration::from_secs(60)));
+        for bad in [
+            vec!["latency", "-i", "0"],
+            vec!["latency", "-D", "5x"],
+            vec!["latency", "--policy", "deadline"],
+            vec!["latency", "--bogus"],
+        ] {
+            assert!(Args::try_parse_from(&bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn bad_priority_and_cpu_are_errors_before_anything_runs() {
+        let a = Args::try_parse_from(["latency", "-p", "120"]).expect("parses");
+        assert!(thread_requests(&a)
+            .unwrap_err()
+            .to_string()
+            .contains("priority 120"));
+        let a = Args::try_parse_from(["latency", "-a", "4000"]).expect("parses");
+        assert!(thread_requests(&a)
+            .unwrap_err()
+            .to_string()
+            .contains("CPU 4000"));
+        let a = Args::try_parse_from(["latency", "--policy", "other", "-p", "5"]).expect("parses");
+        assert!(thread_requests(&a).is_err());
+    }
 }
