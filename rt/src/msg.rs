@@ -89,11 +89,14 @@ pub struct ObjectSample {
     pub ang_mom: [f64; 3],
     /// Adoptions so far (the servo bounds the force step when it changes).
     pub adoptions: u64,
+    /// Time of the newest tool sample this state was computed with, ns (0: none yet): the servo
+    /// measures the servo → physics → servo round trip from it.
+    pub tool_t_ns: u64,
 }
-const _: () = assert!(core::mem::size_of::<ObjectSample>() == 128);
-// SAFETY: repr(C), only u64 and f64 fields (128 bytes, no padding); every bit pattern is valid.
+const _: () = assert!(core::mem::size_of::<ObjectSample>() == 136);
+// SAFETY: repr(C), only u64 and f64 fields (136 bytes, no padding); every bit pattern is valid.
 unsafe impl ShmPod for ObjectSample {
-    const TYPE_NAME: &'static str = "coop.ObjectSample.v1";
+    const TYPE_NAME: &'static str = "coop.ObjectSample.v2";
 }
 
 fn state_fields(s: &BodyState) -> ([f64; 3], [f64; 4], [f64; 3], [f64; 3]) {
@@ -119,8 +122,8 @@ fn body_state(pos: [f64; 3], rot: [f64; 4], vel: [f64; 3], ang_mom: [f64; 3]) ->
 }
 
 impl ObjectSample {
-    /// From a state.
-    pub fn new(t_ns: u64, seq: u64, s: &BodyState, adoptions: u64) -> Self {
+    /// From a state computed with the tool sample of time `tool_t_ns`.
+    pub fn new(t_ns: u64, seq: u64, s: &BodyState, adoptions: u64, tool_t_ns: u64) -> Self {
         let (pos, rot, vel, ang_mom) = state_fields(s);
         Self {
             t_ns,
@@ -130,6 +133,7 @@ impl ObjectSample {
             vel,
             ang_mom,
             adoptions,
+            tool_t_ns,
         }
     }
     /// The state, or `None` if not finite or not a unit quaternion.
@@ -328,7 +332,7 @@ mod tests {
 
     #[test]
     fn object_samples_validate() {
-        let s = ObjectSample::new(5, 6, &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)), 2);
+        let s = ObjectSample::new(5, 6, &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)), 2, 4);
         assert_eq!(s.state().map(|b| b.pos.z), Some(0.01));
         let mut bad = s;
         bad.pos[2] = f64::INFINITY;

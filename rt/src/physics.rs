@@ -18,6 +18,7 @@ pub struct PhysicsLoop {
     world: World,
     copy: ObjectCopy,
     own: ContactForce,
+    own_t_ns: u64,
     tools: Consumer<ToolSample>,
     remote: Consumer<SiteReport>,
     objects: Producer<ObjectSample>,
@@ -76,6 +77,7 @@ impl PhysicsLoop {
             world,
             copy,
             own: ContactForce::default(),
+            own_t_ns: 0,
             tools: rings.tools,
             remote: rings.remote,
             objects: rings.objects,
@@ -100,6 +102,7 @@ impl PhysicsLoop {
             // A malformed sample leaves the last good contact in place.
             if let Some(c) = n.value.contact() {
                 self.own = c;
+                self.own_t_ns = n.value.t_ns;
             }
         }
         while let Ok(r) = self.remote.pop() {
@@ -133,6 +136,7 @@ impl PhysicsLoop {
                 self.seq,
                 &self.copy.state,
                 self.adoptions,
+                self.own_t_ns,
             ))
             .is_err()
         {

@@ -28,6 +28,7 @@ pub struct ServoLoop<D> {
     limp: bool,
     stale_state_ns: Option<u64>,
     stale_limp_recorded: bool,
+    last_roundtrip_tool_ns: u64,
 }
 
 impl<D: Device> ServoLoop<D> {
@@ -54,6 +55,7 @@ impl<D: Device> ServoLoop<D> {
             limp: false,
             stale_state_ns: None,
             stale_limp_recorded: false,
+            last_roundtrip_tool_ns: 0,
         }
     }
 
@@ -63,6 +65,16 @@ impl<D: Device> ServoLoop<D> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let mut adopted = false;
         if let Ok(n) = self.objects.pop_newest() {
+            // The round trip of the tool sample this state was computed with, once per tool sample.
+            if n.value.tool_t_ns > self.last_roundtrip_tool_ns && n.value.tool_t_ns <= now_ns {
+                self.last_roundtrip_tool_ns = n.value.tool_t_ns;
+                if let Some(c) = control {
+                    let count = c.roundtrip_count.load(crate::sync::Ordering::Relaxed);
+                    c.roundtrip.record(now_ns - n.value.tool_t_ns, count == 0);
+                    c.roundtrip_count
+                        .store(count + 1, crate::sync::Ordering::Relaxed);
+                }
+            }
             if let Some(state) = n.value.state() {
                 adopted = self.latest.is_some_and(|(_, _, a)| a != n.value.adoptions);
                 self.latest = Some((state, n.value.t_ns, n.value.adoptions));

@@ -73,5 +73,6 @@ a, b = rows["standalone"], rows["station servo"]
 r = lambda i: b[i] / max(a[i], 1)
 print(f"{'ratio':<15}{'':>9}{r(1):>9.2f}{r(2):>10.2f}{r(3):>10.2f}")
 print(f"# goal: station servo p99.9 <= 1.5x standalone: {'met' if r(2) <= 1.5 else 'NOT met'}; overruns at 1 kHz: {b[4]} (goal 0 over 60 s)")
-print("# the servo->physics->servo round trip figure is not measured yet (no sample tagging across the rings)")
+rt = json.load(open(f"{work}/station.json"))["roundtrip"]
+print(f"# servo -> physics -> servo round trip across processes ({rt['samples']} samples): p50 {rt['p50_us']} us, p99 {rt['p99_us']} us, max {rt['max_us']:.0f} us")
 PY

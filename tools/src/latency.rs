@@ -727,8 +727,27 @@ pub fn attach(
             break;
         }
     }
-    let (servo, physics) = (ctl.servo.snapshot(), ctl.physics.snapshot());
-    println!("# latency attach: station {station} of session {session}, {:.1} s; figures since the station started", began.elapsed().as_secs_f64());
+    // The summary covers the attach window only: the histograms now, less the ones at attach start
+    // (a station's start-up, mlockall faulting its pages in, is not what the loop does once running).
+    let window = |now: coop_rt::stats::LoopSnapshot, base: &coop_rt::stats::LoopSnapshot| {
+        let mut w = now.clone();
+        let _ = w.wake_us.subtract(&base.wake_us);
+        let _ = w.compute_us.subtract(&base.compute_us);
+        w.cycles = now.cycles.saturating_sub(base.cycles);
+        w.overruns = now.overruns.saturating_sub(base.overruns);
+        w.wake_sum_ns = now.wake_sum_ns.saturating_sub(base.wake_sum_ns);
+        w.wake_min_ns = w.wake_us.min() * 1_000;
+        w.wake_max_ns = w.wake_us.max() * 1_000;
+        w
+    };
+    let (servo, physics) = (
+        window(ctl.servo.snapshot(), &start.0),
+        window(ctl.physics.snapshot(), &start.1),
+    );
+    println!(
+        "# latency attach: station {station} of session {session}, {:.1} s attached",
+        began.elapsed().as_secs_f64()
+    );
     let policy = |c: Child| match ctl.child(c).policy.load(coop_rt::sync::Ordering::Relaxed) {
         1 => "SCHED_FIFO",
         2 => "SCHED_RR",
@@ -780,8 +799,17 @@ pub fn attach(
             }),
         );
     }
+    let rt = ctl.roundtrip.to_hdr();
+    let rt_count = ctl.roundtrip_count.load(coop_rt::sync::Ordering::Relaxed);
+    let rt_max = ctl.roundtrip.max_ns.load(coop_rt::sync::Ordering::Relaxed) as f64 / 1e3;
+    println!(
+        "# servo -> physics -> servo round trip us ({rt_count} samples): p50 {} p99 {} max {rt_max:.1}",
+        rt.value_at_quantile(0.5),
+        rt.value_at_quantile(0.99)
+    );
     if let Some(path) = json {
-        let v = serde_json::json!({ "file_version": 1, "tool": "coop-haptics latency attach", "station": station, "session": session, "thread": threads, "return_code": 0 });
+        let roundtrip = serde_json::json!({ "samples": rt_count, "p50_us": rt.value_at_quantile(0.5), "p99_us": rt.value_at_quantile(0.99), "max_us": rt_max });
+        let v = serde_json::json!({ "file_version": 1, "tool": "coop-haptics latency attach", "station": station, "session": session, "thread": threads, "roundtrip": roundtrip, "return_code": 0 });
         std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
     }

@@ -88,12 +88,17 @@ pub struct ControlBlock {
     pub servo_stale_state_ns: AtomicU64,
     /// ... and when its command first reached zero in that episode, ns (0: not yet).
     pub servo_stale_limp_ns: AtomicU64,
+    /// Round trips measured by the servo: from a tool sample to the object state computed with it
+    /// arriving back (servo → physics → servo).
+    pub roundtrip_count: AtomicU64,
+    /// Their histogram.
+    pub roundtrip: crate::stats::SharedHistogram,
 }
 
 // SAFETY: repr(C), made only of AtomicU64 (directly, in arrays and in LoopStats/ChildSlot, which are
 // the same); all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v2";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v3";
 }
 
 impl ControlBlock {

@@ -28,9 +28,10 @@ pub struct SharedHistogram {
 }
 
 impl SharedHistogram {
-    /// Records one sample. Single writer: plain relaxed load + store, no read-modify-write.
+    /// Records one sample (`first`: the first one ever, which sets the minimum). Single writer:
+    /// plain relaxed load + store, no read-modify-write.
     #[inline]
-    fn record(&self, ns: u64, first: bool) {
+    pub fn record(&self, ns: u64, first: bool) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let us = (ns / 1_000) as usize;
         let cell = self.buckets.get(us).unwrap_or(&self.overflow);
@@ -45,7 +46,7 @@ impl SharedHistogram {
     }
 
     /// An hdrhistogram (in µs) of the buckets; overflow samples are recorded at the observed maximum.
-    fn to_hdr(&self) -> hdrhistogram::Histogram<u64> {
+    pub fn to_hdr(&self) -> hdrhistogram::Histogram<u64> {
         let max_us = (self.max_ns.load(Ordering::Relaxed) / 1_000).max(BUCKETS as u64);
         let mut h = hdrhistogram::Histogram::new_with_bounds(1, max_us.max(2), 3)
             .expect("bounds 1..max with 3 digits are valid");

@@ -42,6 +42,21 @@ fn die_with_parent(parent: Option<u32>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Pins the calling process's thread (and the threads it starts later) to the housekeeping CPUs.
+pub fn keep_off_the_servo(cfg: &Resolved) {
+    let req = Request {
+        policy: sched::Policy::Other,
+        priority: 0,
+        cpus: Some(cfg.housekeeping_cpus.clone()),
+        prefault_stack_bytes: 0,
+    };
+    if let Ok((_, warnings)) = sched::apply_to_current_thread(&req) {
+        for w in warnings {
+            eprintln!("station {}: {w}", cfg.name);
+        }
+    }
+}
+
 /// Applies scheduling and memory locking, printing each missing privilege once.
 fn setup(cfg: &Resolved, req: &Request, what: &str) -> anyhow::Result<sched::InForce> {
     if cfg.config.mlockall {

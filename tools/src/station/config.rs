@@ -20,7 +20,8 @@ pub const DEFAULT_SCENARIO: &str = include_str!("../../../scenarios/paper.toml")
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopSpec {
-    /// CPU to pin to; none leaves the affinity alone.
+    /// CPU to pin to. Default: the servo gets the last allowed CPU to itself; physics, the network
+    /// process and the supervisor share the first (on one CPU, everything shares it).
     pub cpu: Option<usize>,
     /// fifo, rr or other.
     pub policy: String,
@@ -183,11 +184,13 @@ pub struct Resolved {
     pub servo_sched: Request,
     /// Physics scheduling.
     pub physics_sched: Request,
+    /// CPUs for everything that is not the servo (physics, network, supervisor).
+    pub housekeeping_cpus: Vec<usize>,
     /// The supervisor's restart policy.
     pub policy: coop_actors::policy::RestartPolicy,
 }
 
-fn sched(field: &str, l: &LoopSpec) -> anyhow::Result<Request> {
+fn sched(field: &str, l: &LoopSpec, default_cpu: usize) -> anyhow::Result<Request> {
     let policy: Policy = l
         .policy
         .parse()
@@ -195,7 +198,7 @@ fn sched(field: &str, l: &LoopSpec) -> anyhow::Result<Request> {
     let req = Request {
         policy,
         priority: l.priority,
-        cpus: l.cpu.map(|c| vec![c]),
+        cpus: Some(vec![l.cpu.unwrap_or(default_cpu)]),
         prefault_stack_bytes: 256 * 1024,
     };
     req.validate()
@@ -287,8 +290,13 @@ impl StationConfig {
                 bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
             }
         }
-        let servo_sched = sched("servo", &self.servo)?;
-        let physics_sched = sched("physics", &self.physics)?;
+        let allowed = coop_rt::sched::allowed_cpus();
+        let (first, last) = (
+            allowed.first().copied().unwrap_or(0),
+            allowed.last().copied().unwrap_or(0),
+        );
+        let servo_sched = sched("servo", &self.servo, last)?;
+        let physics_sched = sched("physics", &self.physics, first)?;
         let sup = &self.supervisor;
         let mode = sup
             .restart
@@ -330,6 +338,7 @@ impl StationConfig {
             scenario,
             site,
             name,
+            housekeeping_cpus: physics_sched.cpus.clone().unwrap_or_default(),
             servo_sched,
             physics_sched,
             policy,
