@@ -97,9 +97,8 @@ impl<B: ShmShared> BlockSegment<B> {
 impl<B: ShmShared> core::ops::Deref for BlockSegment<B> {
     type Target = B;
     fn deref(&self) -> &B {
-        // SAFETY: the payload holds exactly size_of::<B>() bytes (length validated at open, set at create),
-        // 128-byte aligned (>= align_of B, asserted at create); B is valid for any bytes and shared only
-        // through atomics (ShmShared), and the mapping lives as long as `self`.
+        // SAFETY: the payload is exactly size_of::<B>() bytes, 128-byte aligned (checked at open/create); B
+        // is valid for any bytes, shared only through atomics (ShmShared); the mapping outlives `self`.
         unsafe { &*(self.seg.map.payload() as *const B) }
     }
 }

@@ -159,9 +159,9 @@ struct Shared<T> {
     _t: PhantomData<T>,
 }
 
-// SAFETY: the ring protocol hands each slot to exactly one side at a time (the producer writes slots in
-// [tail, head + capacity), the consumer reads [head, tail)), and indices are atomics; T: Send lets
-// values move between threads. The mapping is valid for as long as the Arc<Shared> lives.
+// The ring protocol hands each slot to exactly one side at a time (the producer writes [tail,
+// head + capacity), the consumer reads [head, tail)); indices are atomics; the mapping lives with the Arc.
+// SAFETY: per the protocol above, slots are never shared between sides; T: Send lets values move.
 unsafe impl<T: Send> Send for Shared<T> {}
 // SAFETY: as above; shared access is through atomics or the protocol-guarded slots.
 unsafe impl<T: Send> Sync for Shared<T> {}

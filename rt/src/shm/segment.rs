@@ -91,9 +91,9 @@ impl Mapping {
         &self.name
     }
     pub(crate) fn header(&self) -> &SegmentHeader {
-        // SAFETY: every Mapping is at least HEADER_LEN bytes (checked at create/open) and page-aligned,
-        // so a SegmentHeader (align 128) fits at its base. Non-atomic fields are only read, and only
-        // after `ready` was seen with Acquire, when the creator no longer writes them.
+        // Every Mapping is at least HEADER_LEN bytes (checked at create/open) and page-aligned.
+        // SAFETY: a SegmentHeader (align 128) fits at the base; its plain fields are read only after
+        // `ready` (Acquire), when the creator no longer writes them.
         unsafe { &*(self.base() as *const SegmentHeader) }
     }
     pub(crate) fn payload(&self) -> *mut u8 {
@@ -161,9 +161,9 @@ impl RawSegment {
             name: name.to_string(),
         };
         let h = map.base() as *mut SegmentHeader;
-        // SAFETY: we just created the segment exclusively and nobody may use it before `ready`; the
-        // header fits (size >= HEADER_LEN, page-aligned base). Raw field writes, no reference to the
-        // whole header, because openers may already be polling `ready`.
+        // Raw field writes, no reference to the whole header: openers may already be polling `ready`.
+        // SAFETY: we created the segment exclusively, nobody uses it before `ready`, and the header
+        // fits (size >= HEADER_LEN, page-aligned base).
         unsafe {
             (&raw mut (*h).magic).write_volatile(MAGIC);
             (&raw mut (*h).layout_version).write_volatile(LAYOUT_VERSION);

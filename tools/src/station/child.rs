@@ -57,6 +57,21 @@ pub fn keep_off_the_servo(cfg: &Resolved) {
     }
 }
 
+/// What every child does first: die with the supervisor, then open the station's control block.
+fn attach(
+    cfg: &Resolved,
+    parent: Option<u32>,
+) -> anyhow::Result<(Names, RingOpenOptions, BlockSegment<ControlBlock>)> {
+    die_with_parent(parent)?;
+    let names = Names::of(&cfg.config.session, &cfg.name)?;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: OPEN_TIMEOUT,
+    };
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    Ok((names, opts, ctl))
+}
+
 /// Applies scheduling and memory locking, printing each missing privilege once.
 fn setup(cfg: &Resolved, req: &Request, what: &str) -> anyhow::Result<sched::InForce> {
     if cfg.config.mlockall {
@@ -80,13 +95,7 @@ fn period(rate_hz: f64) -> Duration {
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
 pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
-    die_with_parent(parent)?;
-    let names = Names::of(&cfg.config.session, &cfg.name)?;
-    let opts = RingOpenOptions {
-        capacity: None,
-        ready_timeout: OPEN_TIMEOUT,
-    };
-    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let (names, opts, ctl) = attach(cfg, parent)?;
     let objects = Consumer::open(&names.object, &opts).context("opening the object ring")?;
     let tools = Producer::open(&names.tool, &opts).context("opening the tool ring")?;
     let (sc, i) = (&cfg.scenario, cfg.site);
@@ -126,13 +135,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
 pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
-    die_with_parent(parent)?;
-    let names = Names::of(&cfg.config.session, &cfg.name)?;
-    let opts = RingOpenOptions {
-        capacity: None,
-        ready_timeout: OPEN_TIMEOUT,
-    };
-    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let (names, opts, ctl) = attach(cfg, parent)?;
     let rings = PhysicsRings {
         tools: Consumer::open(&names.tool, &opts).context("opening the tool ring")?,
         remote: Consumer::open(&names.remote, &opts).context("opening the remote ring")?,
@@ -170,13 +173,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
 /// # Errors
 /// The segments cannot be opened, or the zenoh session cannot be set up.
 pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
-    die_with_parent(parent)?;
-    let names = Names::of(&cfg.config.session, &cfg.name)?;
-    let opts = RingOpenOptions {
-        capacity: None,
-        ready_timeout: OPEN_TIMEOUT,
-    };
-    let ctl = BlockSegment::<ControlBlock>::open(&names.control, OPEN_TIMEOUT)?;
+    let (names, opts, ctl) = attach(cfg, parent)?;
     let args = coop_transport::network::NetworkArgs {
         session: &cfg.config.session,
         site: &cfg.name,
