@@ -186,7 +186,9 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
     };
-    // Normal priority, unpinned: the network is not a real-time loop.
+    // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
+    // (tokio's and zenoh's, which inherit this affinity) must not run where the servo wakes.
+    keep_off_the_servo(cfg);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()

@@ -25,8 +25,9 @@ pub struct LoopSpec {
     pub cpu: Option<usize>,
     /// fifo, rr or other.
     pub policy: String,
-    /// 1..=99 for fifo/rr, 0 for other.
-    pub priority: i32,
+    /// 1..=99 for fifo/rr, 0 for other. Default: 80 for the servo, 70 for physics under fifo/rr,
+    /// 0 under other.
+    pub priority: Option<i32>,
 }
 
 /// Ring sizes, in slots (powers of two).
@@ -131,16 +132,8 @@ impl Default for StationConfig {
             scenario: None,
             method: None,
             mlockall: true,
-            servo: LoopSpec {
-                cpu: None,
-                policy: "fifo".into(),
-                priority: 80,
-            },
-            physics: LoopSpec {
-                cpu: None,
-                policy: "fifo".into(),
-                priority: 70,
-            },
+            servo: LoopSpec::default(),
+            physics: LoopSpec::default(),
             rings: RingSpec::default(),
             supervisor: SupervisorSpec::default(),
             network: NetworkSpec::default(),
@@ -153,7 +146,7 @@ impl Default for LoopSpec {
         Self {
             cpu: None,
             policy: "fifo".into(),
-            priority: 80,
+            priority: None,
         }
     }
 }
@@ -190,14 +183,23 @@ pub struct Resolved {
     pub policy: coop_actors::policy::RestartPolicy,
 }
 
-fn sched(field: &str, l: &LoopSpec, default_cpu: usize) -> anyhow::Result<Request> {
+fn sched(
+    field: &str,
+    l: &LoopSpec,
+    default_cpu: usize,
+    default_rt_priority: i32,
+) -> anyhow::Result<Request> {
     let policy: Policy = l
         .policy
         .parse()
         .map_err(|e: String| anyhow::anyhow!("{field}.policy = {:?}: {e}", l.policy))?;
     let req = Request {
         policy,
-        priority: l.priority,
+        priority: l.priority.unwrap_or(if policy.is_realtime() {
+            default_rt_priority
+        } else {
+            0
+        }),
         cpus: Some(vec![l.cpu.unwrap_or(default_cpu)]),
         prefault_stack_bytes: 256 * 1024,
     };
@@ -295,8 +297,8 @@ impl StationConfig {
             allowed.first().copied().unwrap_or(0),
             allowed.last().copied().unwrap_or(0),
         );
-        let servo_sched = sched("servo", &self.servo, last)?;
-        let physics_sched = sched("physics", &self.physics, first)?;
+        let servo_sched = sched("servo", &self.servo, last, 80)?;
+        let physics_sched = sched("physics", &self.physics, first, 70)?;
         let sup = &self.supervisor;
         let mode = sup
             .restart

@@ -75,6 +75,8 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
             .context("creating the station's segments")?,
     );
     segs.control.set_run_state(RunState::Starting);
+    // The supervisor stays off the servo's CPU too (its children set their own affinity).
+    super::child::keep_off_the_servo(cfg);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
