@@ -47,7 +47,8 @@ TOML
 "$target/release/station" run --config "$work/station.toml" --duration-s $((duration + 4)) 2> "$work/station.log" &
 station_pid=$!
 sleep 1
-"$target/release/latency" attach user1 --session "$session" -D "${duration}s" -q --json "$work/station.json" > /dev/null
+# The observer stays off the servo's CPU too.
+taskset -c 0 "$target/release/latency" attach user1 --session "$session" -D "${duration}s" -q --json "$work/station.json" > /dev/null
 wait "$station_pid"; station_pid=
 
 python3 - "$work" <<'PY'
