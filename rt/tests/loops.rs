@@ -4,9 +4,6 @@
 //! when physics stops, the servo's commanded force ramps to zero within stale limit + ramp; and the
 //! loop steps allocate nothing.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use coop_model::body::{BodyState, Vec3};
 use coop_model::device::Plant;
 use coop_model::method::{ObjectCopy, Paper};
@@ -18,29 +15,8 @@ use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::servo::ServoLoop;
 use coop_rt::shm::{Producer, RingSegment, SegmentName};
 
-struct Counting;
-thread_local! {
-    static ALLOCS: Cell<u64> = const { Cell::new(0) };
-}
-// SAFETY: forwards every call to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.with(|a| a.set(a.get() + 1));
-        // SAFETY: same contract, forwarded.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: p came from System with this layout.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.with(|a| a.set(a.get() + 1));
-        // SAFETY: same contract, forwarded.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+mod common;
+use common::counting_alloc::allocations_during;
 
 const MS: u64 = 1_000_000;
 
@@ -254,13 +230,13 @@ fn loop_steps_allocate_nothing() {
         r.physics.step(k * MS);
         r.servo.step(k * MS, None);
     }
-    let before = ALLOCS.with(Cell::get);
-    for k in 11..=3000u64 {
-        r.physics.step(k * MS);
-        r.servo.step(k * MS, None);
-        while r.reports.pop().is_ok() {}
-    }
-    let n = ALLOCS.with(Cell::get) - before;
+    let n = allocations_during(|| {
+        for k in 11..=3000u64 {
+            r.physics.step(k * MS);
+            r.servo.step(k * MS, None);
+            while r.reports.pop().is_ok() {}
+        }
+    });
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
 }
 

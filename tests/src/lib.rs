@@ -113,3 +113,30 @@ pub fn shm_entries(prefix: &str) -> Vec<String> {
         })
         .unwrap_or_default()
 }
+
+/// Writes a station configuration for a test to `dir/<station>.toml` and returns its path: the
+/// session, the station, no mlockall, and both loops under SCHED_OTHER priority 0 (parallel tests
+/// need no privilege and starve nothing; the loops still sleep to absolute deadlines). `top` holds
+/// extra top-level keys (before any table), `tables` extra tables.
+///
+/// # Panics
+/// If the directory or file cannot be written.
+pub fn station_config(
+    dir: &std::path::Path,
+    session: &str,
+    station: &str,
+    top: &str,
+    tables: &str,
+) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir).expect("config dir");
+    let path = dir.join(format!("{station}.toml"));
+    std::fs::write(
+        &path,
+        format!(
+            "session = \"{session}\"\nstation = \"{station}\"\nmlockall = false\n{top}\
+             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n{tables}"
+        ),
+    )
+    .expect("write config");
+    path
+}

@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use coop_rt::shm::control::{Child, ControlBlock, RunState};
 use coop_rt::sync::Ordering;
-use coop_tests::{shm_entries, unique_session, wait_until, Reaped};
+use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
 use coop_tools::station::config::{RingSpec, StationConfig};
 use coop_tools::station::segments::{Names, StationSegments};
 
@@ -18,18 +18,7 @@ const LIMIT: Duration = Duration::from_secs(60);
 
 fn config_file(session: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("coop-station-{session}"));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let path = dir.join("station.toml");
-    // SCHED_OTHER so parallel tests need no privilege; the loops still sleep to absolute deadlines.
-    std::fs::write(
-        &path,
-        format!(
-            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
-             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n"
-        ),
-    )
-    .expect("write config");
-    path
+    station_config(&dir, session, "user1", "", "")
 }
 
 fn spawn(what: &str, config: &std::path::Path, parent: u32) -> Reaped {

@@ -9,7 +9,7 @@ use std::time::Duration;
 use coop_rt::shm::control::{Child, ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::Ordering;
-use coop_tests::{shm_entries, unique_session, wait_until, Reaped};
+use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
@@ -18,18 +18,13 @@ const LIMIT: Duration = Duration::from_secs(60);
 
 fn config(session: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("coop-run-{session}"));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let p = dir.join("station.toml");
-    std::fs::write(
-        &p,
-        format!(
-            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
-             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
-             [supervisor]\nbackoff_initial_ms = 20\n"
-        ),
+    station_config(
+        &dir,
+        session,
+        "user1",
+        "",
+        "[supervisor]\nbackoff_initial_ms = 20\n",
     )
-    .expect("write");
-    p
 }
 
 fn start(cfg: &std::path::Path) -> Reaped {
@@ -181,18 +176,10 @@ fn two_stations_by_hand_see_each_other() {
     std::fs::create_dir_all(&dir).expect("dir");
     let (pa, pb) = (free_port(), free_port());
     let write = |name: &str, listen: u16, connect: Option<u16>| {
-        let p = dir.join(format!("{name}.toml"));
         let connect = connect.map_or(String::new(), |c| format!("\"tcp/127.0.0.1:{c}\""));
-        std::fs::write(
-            &p,
-            format!(
-                "session = \"{session}\"\nstation = \"{name}\"\nmlockall = false\n\
-                 [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
-                 [network]\nlisten = [\"tcp/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n"
-            ),
-        )
-        .expect("write");
-        p
+        let network =
+            format!("[network]\nlisten = [\"tcp/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n");
+        station_config(&dir, &session, name, "", &network)
     };
     let a = start(&write("user1", pa, None));
     let b = start(&write("user2", pb, Some(pa)));
@@ -249,16 +236,13 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
          script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
     )
     .expect("scenario");
-    let cfg = dir.join("station.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "session = \"{session}\"\nstation = \"user1\"\nscenario = \"press.toml\"\nmlockall = false\n\
-             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
-             [supervisor]\nbackoff_initial_ms = 300\n"
-        ),
-    )
-    .expect("config");
+    let cfg = station_config(
+        &dir,
+        &session,
+        "user1",
+        "scenario = \"press.toml\"\n",
+        "[supervisor]\nbackoff_initial_ms = 300\n",
+    );
     let station = start(&cfg);
     let ctl = control(&session);
     let (_, physics) = running(&ctl);
@@ -305,18 +289,8 @@ fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
     let port = taken.local_addr().expect("addr").port();
     let dir = std::env::temp_dir().join(format!("coop-crash-{session}"));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let cfg = dir.join("station.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "session = \"{session}\"\nstation = \"user1\"\nmlockall = false\n\
-             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n\
-             [network]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n\
-             [supervisor]\nmax_restarts = 2\nbackoff_initial_ms = 20\n"
-        ),
-    )
-    .expect("config");
+    let tables = format!("[network]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n[supervisor]\nmax_restarts = 2\nbackoff_initial_ms = 20\n");
+    let cfg = station_config(&dir, &session, "user1", "", &tables);
     let out = Command::new(STATION)
         .arg("run")
         .arg("--config")

@@ -2,9 +2,6 @@
 //! them every tick. A counting global allocator watches thousands of servo steps, physics steps of
 //! both methods, and paper adoptions with replay.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use coop_model::body::{BodyState, MassProps, Vec3};
 use coop_model::contact::{ContactForce, ContactParams, Plane, MAX_PLANES};
 use coop_model::device::ScaraParams;
@@ -12,35 +9,11 @@ use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, World, M
 use coop_model::servo::{Servo, ServoInput, ServoParams};
 use coop_model::shape::Shape;
 
-struct Counting;
-thread_local! {
-    static ALLOCS: Cell<u64> = const { Cell::new(0) };
-}
-// SAFETY: forwards every call to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
-        ALLOCS.with(|a| a.set(a.get() + 1));
-        // SAFETY: same contract, forwarded.
-        unsafe { System.alloc(l) }
-    }
-    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
-        // SAFETY: p came from System with this layout.
-        unsafe { System.dealloc(p, l) }
-    }
-    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
-        ALLOCS.with(|a| a.set(a.get() + 1));
-        // SAFETY: same contract, forwarded.
-        unsafe { System.realloc(p, l, n) }
-    }
-}
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn allocations(f: impl FnOnce()) -> u64 {
-    let before = ALLOCS.with(Cell::get);
-    f();
-    ALLOCS.with(Cell::get) - before
-}
+// The one counting allocator of the workspace's tests (a dev-dependency on coop-rt would break this
+// crate's purity, so the file is included rather than imported).
+#[path = "../../tests/common/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations_during as allocations;
 
 fn contact() -> ContactParams {
     ContactParams {

@@ -1,0 +1,2 @@
+//! Helpers shared by coop-rt's integration tests.
+pub mod counting_alloc;
