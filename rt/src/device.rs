@@ -30,21 +30,36 @@ pub trait Device: Send {
 pub struct SimDevice {
     plant: Plant,
     script: Vec<Keyframe>,
-    start_ns: u64,
+    start_ns: Option<u64>,
     plant_ns: u64,
     tau: Vec3,
 }
 
 impl SimDevice {
-    /// A simulated device whose script's time 0 is `start_ns`.
+    /// A simulated device whose script's time 0 is `start_ns`; `now_ns` is when its plant starts.
     pub fn new(plant: Plant, script: Vec<Keyframe>, start_ns: u64) -> Self {
+        let mut d = Self::waiting(plant, script, start_ns);
+        d.start_ns = Some(start_ns);
+        d
+    }
+    /// A simulated device whose hand holds the script's first pose until [`SimDevice::start_at`]
+    /// gives the script's time 0 (a station waiting for its session to start).
+    pub fn waiting(plant: Plant, script: Vec<Keyframe>, now_ns: u64) -> Self {
         Self {
             plant,
             script,
-            start_ns,
-            plant_ns: start_ns,
+            start_ns: None,
+            plant_ns: now_ns,
             tau: Vec3::zeros(),
         }
+    }
+    /// Sets the script's time 0 (the hand holds the first pose until then).
+    pub fn start_at(&mut self, start_ns: u64) {
+        self.start_ns = Some(start_ns);
+    }
+    /// The script's time 0, once known.
+    pub fn start(&self) -> Option<u64> {
+        self.start_ns
     }
     /// The plant (for tests and recordings).
     pub fn plant(&self) -> &Plant {
@@ -57,7 +72,9 @@ impl Device for SimDevice {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         while self.plant_ns < now_ns {
             let step = (now_ns - self.plant_ns).min(100_000);
-            let t = (self.plant_ns + step - self.start_ns) as f64 * 1e-9;
+            let t = self.start_ns.map_or(0.0, |s| {
+                (self.plant_ns + step).saturating_sub(s) as f64 * 1e-9
+            });
             let (target, vel) = target_at(&self.script, t);
             self.plant.step(self.tau, target, vel, step as f64 * 1e-9);
             self.plant_ns += step;

@@ -1,9 +1,10 @@
 //! The messages on a station's rings, as plain old data (H5): servo → physics [`ToolSample`],
-//! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`]. Each has a stable
+//! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`], physics → recorder
+//! [`TraceRecord`]. Each has a stable
 //! `TYPE_NAME` and a compile-time size check; conversions to the model's types validate what they
 //! read (finite numbers, unit quaternion, known site), because a ring's bytes are only as good as its
 //! writer.
-#![allow(unsafe_code)] // the three `unsafe impl ShmPod` below, each with its SAFETY argument
+#![allow(unsafe_code)] // the four `unsafe impl ShmPod` below, each with its SAFETY argument
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
@@ -140,6 +141,43 @@ impl ObjectSample {
     pub fn state(&self) -> Option<BodyState> {
         body_state(self.pos, self.rot, self.vel, self.ang_mom)
     }
+    /// Its 17 words, in field order (for the control block's resume seqlock).
+    pub fn words(&self) -> [u64; 17] {
+        let f = |v: f64| v.to_bits();
+        [
+            self.t_ns,
+            self.seq,
+            f(self.pos[0]),
+            f(self.pos[1]),
+            f(self.pos[2]),
+            f(self.rot[0]),
+            f(self.rot[1]),
+            f(self.rot[2]),
+            f(self.rot[3]),
+            f(self.vel[0]),
+            f(self.vel[1]),
+            f(self.vel[2]),
+            f(self.ang_mom[0]),
+            f(self.ang_mom[1]),
+            f(self.ang_mom[2]),
+            self.adoptions,
+            self.tool_t_ns,
+        ]
+    }
+    /// The inverse of [`ObjectSample::words`].
+    pub fn from_words(w: [u64; 17]) -> Self {
+        let f = f64::from_bits;
+        Self {
+            t_ns: w[0],
+            seq: w[1],
+            pos: [f(w[2]), f(w[3]), f(w[4])],
+            rot: [f(w[5]), f(w[6]), f(w[7]), f(w[8])],
+            vel: [f(w[9]), f(w[10]), f(w[11])],
+            ang_mom: [f(w[12]), f(w[13]), f(w[14])],
+            adoptions: w[15],
+            tool_t_ns: w[16],
+        }
+    }
 }
 
 /// What a site reports to the others (physics → network), and what arrives from them (network →
@@ -181,6 +219,71 @@ const _: () = assert!(core::mem::size_of::<SiteReport>() == 288);
 // pattern is valid.
 unsafe impl ShmPod for SiteReport {
     const TYPE_NAME: &'static str = "coop.SiteReport.v1";
+}
+
+/// Physics → network (the recorder), at the scenario's sample rate and at every adoption: what this
+/// site believed and displayed, for the station's recording. Nothing on the real-time side reads it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C)]
+pub struct TraceRecord {
+    /// [`TraceRecord::SAMPLE`] or [`TraceRecord::ADOPTION`].
+    pub kind: u64,
+    /// When, ns on CLOCK_MONOTONIC.
+    pub t_ns: u64,
+    /// Object position as this site believes it, m.
+    pub pos: [f64; 3],
+    /// Object orientation (w, x, y, z).
+    pub rot: [f64; 4],
+    /// Object velocity, m/s.
+    pub vel: [f64; 3],
+    /// Tool position (from the newest tool sample), m.
+    pub tool_pos: [f64; 3],
+    /// Desired force at the hand F_h, N.
+    pub f_desired: [f64; 3],
+    /// Measured force F_m, N.
+    pub f_measured: [f64; 3],
+    /// Users' contact force acting on this copy (own, plus the others' in naive), N.
+    pub f_object: [f64; 3],
+    /// 1 when the own user touches the object.
+    pub touching: u64,
+    /// Adoptions so far.
+    pub adoptions: u64,
+    /// Adoption: the sender's site index.
+    pub from: u64,
+    /// Adoption: position before minus after, m.
+    pub jump_m: f64,
+    /// Adoption: how far the received state was dead-reckoned, s.
+    pub age_s: f64,
+}
+const _: () = assert!(core::mem::size_of::<TraceRecord>() == 232);
+// SAFETY: repr(C), only u64 and f64 fields (232 bytes, no padding); every bit pattern is valid.
+unsafe impl ShmPod for TraceRecord {
+    const TYPE_NAME: &'static str = "coop.TraceRecord.v1";
+}
+
+impl TraceRecord {
+    /// A periodic sample.
+    pub const SAMPLE: u64 = 1;
+    /// An adoption.
+    pub const ADOPTION: u64 = 2;
+
+    /// A record of `kind` at `t_ns` of `state`, with the newest tool sample `tool`.
+    pub fn new(kind: u64, t_ns: u64, s: &BodyState, tool: &ToolSample, f_object: Vec3) -> Self {
+        let (pos, rot, vel, _) = state_fields(s);
+        Self {
+            kind,
+            t_ns,
+            pos,
+            rot,
+            vel,
+            tool_pos: tool.tool_pos,
+            f_desired: tool.f_desired,
+            f_measured: tool.f_measured,
+            f_object: a3(f_object),
+            touching: tool.touching,
+            ..Self::default()
+        }
+    }
 }
 
 /// Sites a report's inclusion times cover.

@@ -7,7 +7,7 @@
 use coop_model::contact::ContactForce;
 use coop_model::method::{Consistency, ObjectCopy, World};
 
-use crate::msg::{ObjectSample, SiteReport, ToolSample};
+use crate::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use crate::shm::{Consumer, Producer};
 
 /// Everything one physics loop owns.
@@ -19,10 +19,14 @@ pub struct PhysicsLoop {
     copy: ObjectCopy,
     own: ContactForce,
     own_t_ns: u64,
+    tool: ToolSample,
     tools: Consumer<ToolSample>,
     remote: Consumer<SiteReport>,
     objects: Producer<ObjectSample>,
     reports: Producer<SiteReport>,
+    trace: Option<Producer<TraceRecord>>,
+    trace_period_ns: u64,
+    next_trace_ns: u64,
     period_ns: u64,
     report_period_ns: u64,
     next_report_ns: u64,
@@ -46,6 +50,10 @@ pub struct PhysicsTiming {
     pub report_period_ns: u64,
     /// First step's time, ns on CLOCK_MONOTONIC.
     pub start_ns: u64,
+    /// Trace sample period, ns (records fall on `start_ns + k * trace_period_ns`).
+    pub trace_period_ns: u64,
+    /// The last report sequence number used (a restarted physics continues after it).
+    pub report_seq: u64,
 }
 
 /// The rings a physics loop uses.
@@ -59,6 +67,8 @@ pub struct PhysicsRings {
     pub objects: Producer<ObjectSample>,
     /// Reports to the network process.
     pub reports: Producer<SiteReport>,
+    /// Trace records to the recorder (the network process), if the station records.
+    pub trace: Option<Producer<TraceRecord>>,
 }
 
 impl PhysicsLoop {
@@ -78,15 +88,19 @@ impl PhysicsLoop {
             copy,
             own: ContactForce::default(),
             own_t_ns: 0,
+            tool: ToolSample::default(),
             tools: rings.tools,
             remote: rings.remote,
             objects: rings.objects,
             reports: rings.reports,
+            trace: rings.trace,
+            trace_period_ns: timing.trace_period_ns.max(1),
+            next_trace_ns: timing.start_ns,
             period_ns: timing.period_ns,
             report_period_ns: timing.report_period_ns,
             next_report_ns: timing.start_ns,
             seq: 0,
-            report_seq: 0,
+            report_seq: timing.report_seq,
             adoptions: 0,
             rejected: 0,
             received: 0,
@@ -103,18 +117,23 @@ impl PhysicsLoop {
             if let Some(c) = n.value.contact() {
                 self.own = c;
                 self.own_t_ns = n.value.t_ns;
+                self.tool = n.value;
             }
         }
         while let Ok(r) = self.remote.pop() {
             self.received += 1;
             match r.report() {
                 Some((from, msg)) if from != self.site => {
-                    if self
-                        .method
-                        .receive(&self.world, &mut self.copy, from, &msg, now_s)
-                        .is_some()
+                    if let Some(a) =
+                        self.method
+                            .receive(&self.world, &mut self.copy, from, &msg, now_s)
                     {
                         self.adoptions += 1;
+                        let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
+                        rec.from = from as u64;
+                        rec.jump_m = a.jump.norm();
+                        rec.age_s = a.age_s;
+                        self.push_trace(rec);
                     }
                 }
                 _ => self.rejected += 1,
@@ -142,6 +161,11 @@ impl PhysicsLoop {
         {
             self.dropped += 1;
         }
+        if now_ns >= self.next_trace_ns {
+            self.next_trace_ns = next_on_grid(self.next_trace_ns, now_ns, self.trace_period_ns);
+            let rec = self.record(TraceRecord::SAMPLE, now_ns);
+            self.push_trace(rec);
+        }
         if now_ns >= self.next_report_ns {
             self.next_report_ns = self
                 .next_report_ns
@@ -159,6 +183,41 @@ impl PhysicsLoop {
         }
     }
 
+    fn record(&self, kind: u64, now_ns: u64) -> TraceRecord {
+        let mut r = TraceRecord::new(
+            kind,
+            now_ns,
+            &self.copy.state,
+            &self.tool,
+            self.own.force + self.method.remote_force(),
+        );
+        r.adoptions = self.adoptions;
+        r
+    }
+
+    fn push_trace(&mut self, r: TraceRecord) {
+        if let Some(t) = &mut self.trace {
+            if t.push(r).is_err() {
+                self.dropped += 1;
+            }
+        }
+    }
+
+    /// The last report sequence number used.
+    pub fn report_seq(&self) -> u64 {
+        self.report_seq
+    }
+    /// The state last sent to the servo, as sent.
+    pub fn object_sample(&self, now_ns: u64) -> ObjectSample {
+        ObjectSample::new(
+            now_ns,
+            self.seq,
+            &self.copy.state,
+            self.adoptions,
+            self.own_t_ns,
+        )
+    }
+
     /// The copy this site believes.
     pub fn copy(&self) -> &ObjectCopy {
         &self.copy
@@ -167,4 +226,9 @@ impl PhysicsLoop {
     pub fn adoptions(&self) -> u64 {
         self.adoptions
     }
+}
+
+/// The first point of the grid `last + k * period` (k ≥ 1) after `now`.
+fn next_on_grid(last: u64, now: u64, period: u64) -> u64 {
+    last + ((now - last) / period + 1) * period
 }

@@ -59,6 +59,11 @@ impl<D: Device> ServoLoop<D> {
         }
     }
 
+    /// The device.
+    pub fn device_mut(&mut self) -> &mut D {
+        &mut self.device
+    }
+
     /// One tick at `now_ns`. While the station is stopping (per `control`), the displayed force and the
     /// command ramp to zero as for a stale world; [`ServoLoop::is_limp`] says when they got there.
     pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoOutput {

@@ -10,7 +10,7 @@ use coop_model::method::{ObjectCopy, Paper};
 use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
 use coop_model::servo::Servo;
 use coop_rt::device::SimDevice;
-use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::servo::ServoLoop;
 use coop_rt::shm::{Producer, RingSegment, SegmentName};
@@ -20,18 +20,23 @@ use common::counting_alloc::allocations_during;
 
 const MS: u64 = 1_000_000;
 
+/// The rig's rings, kept alive with it.
+type Segments = (
+    RingSegment<TraceRecord>,
+    RingSegment<ToolSample>,
+    RingSegment<ObjectSample>,
+    RingSegment<SiteReport>,
+    RingSegment<SiteReport>,
+);
+
 /// One site pushing a disk on a table, all four rings real segments.
 struct Rig {
     servo: ServoLoop<SimDevice>,
     physics: PhysicsLoop,
     reports: coop_rt::shm::Consumer<SiteReport>,
     remote_in: Producer<SiteReport>,
-    _segments: (
-        RingSegment<ToolSample>,
-        RingSegment<ObjectSample>,
-        RingSegment<SiteReport>,
-        RingSegment<SiteReport>,
-    ),
+    trace: coop_rt::shm::Consumer<TraceRecord>,
+    _segments: Segments,
     stale_ms: f64,
     ramp_ms: f64,
 }
@@ -76,6 +81,7 @@ fn rig(tag: &str, wall: bool) -> Rig {
     let obj = RingSegment::<ObjectSample>::create(&name("obj"), 64).expect("object ring");
     let rep = RingSegment::<SiteReport>::create(&name("rep"), 64).expect("report ring");
     let rem = RingSegment::<SiteReport>::create(&name("rem"), 64).expect("remote ring");
+    let trc = RingSegment::<TraceRecord>::create(&name("trc"), 4096).expect("trace ring");
     let world = sc.world();
     let script = sc.script(0);
     let device = SimDevice::new(
@@ -101,11 +107,14 @@ fn rig(tag: &str, wall: bool) -> Rig {
             remote: rem.consumer().expect("c"),
             objects: obj.producer().expect("p"),
             reports: rep.producer().expect("p"),
+            trace: Some(trc.producer().expect("p")),
         },
         PhysicsTiming {
             period_ns: MS,
             report_period_ns: 10 * MS,
             start_ns: 0,
+            trace_period_ns: 5 * MS,
+            report_seq: 0,
         },
     );
     Rig {
@@ -113,7 +122,8 @@ fn rig(tag: &str, wall: bool) -> Rig {
         physics,
         reports: rep.consumer().expect("c"),
         remote_in: rem.producer().expect("p"),
-        _segments: (tool, obj, rep, rem),
+        trace: trc.consumer().expect("c"),
+        _segments: (trc, tool, obj, rep, rem),
         stale_ms: sc.site[0].stale_limit_ms,
         ramp_ms: sc.site[0].stale_ramp_ms,
     }
@@ -124,6 +134,7 @@ fn a_push_flows_through_the_rings_and_reports_go_out() {
     let mut r = rig("push", false);
     let mut touched = false;
     let mut reports = 0;
+    let (mut samples, mut last_t, mut traced_touch) = (0, 0, false);
     for k in 1..=1500u64 {
         r.physics.step(k * MS);
         let out = r.servo.step(k * MS, None);
@@ -132,7 +143,19 @@ fn a_push_flows_through_the_rings_and_reports_go_out() {
             assert!(rep.report().is_some(), "every report decodes");
             reports += 1;
         }
+        while let Ok(t) = r.trace.pop() {
+            assert_eq!(t.kind, TraceRecord::SAMPLE);
+            assert!(t.t_ns > last_t, "trace records in time order");
+            last_t = t.t_ns;
+            samples += 1;
+            traced_touch |= t.touching == 1 && t.f_object[0] > 0.0;
+        }
     }
+    assert_eq!(
+        samples, 301,
+        "one trace sample at the start and per 5 ms over 1.5 s"
+    );
+    assert!(traced_touch, "the trace shows the push on the object");
     assert!(touched, "the servo felt the disk");
     let x = r.physics.copy().state.pos.x;
     assert!(

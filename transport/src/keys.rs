@@ -1,4 +1,5 @@
-//! Key expressions. Every key a station publishes or subscribes to is built here.
+//! Key expressions. Every key a station publishes, declares or queries is built here (see
+//! `docs/wire.md`).
 
 /// The key a site publishes object `obj`'s state on: `coop/<session>/obj/<obj>/state/<site>`.
 pub fn state(session: &str, obj: u32, site: &str) -> String {
@@ -10,11 +11,51 @@ pub fn all_states(session: &str, obj: u32) -> String {
     format!("coop/{session}/obj/{obj}/state/*")
 }
 
+/// The queryable a site answers with its newest state of object `obj` (for late joiners).
+pub fn current(session: &str, obj: u32, site: &str) -> String {
+    format!("coop/{session}/obj/{obj}/current/{site}")
+}
+
+/// Every site's current-state queryable.
+pub fn all_current(session: &str, obj: u32) -> String {
+    format!("coop/{session}/obj/{obj}/current/*")
+}
+
+/// A site's liveliness token: present while its network process runs.
+pub fn presence(session: &str, site: &str) -> String {
+    format!("coop/{session}/presence/{site}")
+}
+
+/// Every site's liveliness token.
+pub fn all_presence(session: &str) -> String {
+    format!("coop/{session}/presence/*")
+}
+
+/// The queryable a site answers with its clock (NTP-style offset estimation).
+pub fn clock(session: &str, site: &str) -> String {
+    format!("coop/{session}/clock/{site}")
+}
+
+/// The session's time 0, put and answered by the launcher.
+pub fn epoch(session: &str) -> String {
+    format!("coop/{session}/epoch")
+}
+
+/// The last chunk of a key: the site name of a state, current, presence or clock key.
+pub fn site_of(key: &str) -> &str {
+    key.rsplit('/').next().unwrap_or("")
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
     fn keys() {
         assert_eq!(super::state("s1", 0, "user1"), "coop/s1/obj/0/state/user1");
         assert_eq!(super::all_states("s1", 0), "coop/s1/obj/0/state/*");
+        assert_eq!(super::current("s1", 0, "u"), "coop/s1/obj/0/current/u");
+        assert_eq!(super::presence("s1", "u"), "coop/s1/presence/u");
+        assert_eq!(super::clock("s1", "u"), "coop/s1/clock/u");
+        assert_eq!(super::epoch("s1"), "coop/s1/epoch");
+        assert_eq!(super::site_of(&super::state("s", 0, "user2")), "user2");
     }
 }

@@ -2,6 +2,7 @@
 //!
 //! - [`keys`]: every key expression, from one place.
 //! - [`wire`]: the one encode and the one decode of what stations send each other.
+//! - [`recording`]: the station's MCAP recording, written and read.
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
 //!
@@ -12,4 +13,5 @@
 
 pub mod keys;
 pub mod network;
+pub mod recording;
 pub mod wire;

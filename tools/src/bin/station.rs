@@ -109,7 +109,8 @@ fn main() -> std::process::ExitCode {
             let r = StationConfig::load(config.as_deref())?;
             let session = session.unwrap_or(r.config.session);
             let station = station.unwrap_or(r.name);
-            let v = coop_tools::station::status::read(&session, &station)?;
+            let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
+            let v = coop_tools::station::status::read(&session, &station, &sites)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {

@@ -21,6 +21,7 @@ use coop_rt::sched::{self, Request};
 use coop_rt::servo::ServoLoop;
 use coop_rt::shm::control::{Child, ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, Consumer, Producer, RingOpenOptions};
+use coop_rt::sync::Ordering;
 use coop_rt::timer::monotonic_ns;
 
 use super::config::Resolved;
@@ -102,7 +103,12 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let script = sc.script(i);
     let start = monotonic_ns();
     let plant = Plant::at(sc.arm(i), sc.hand(i), script[0].target, sc.site[i].elbow);
-    let device = SimDevice::new(plant, script, start);
+    // The script runs on the session's clock: a restarted servo picks it up where it is, and a
+    // station waiting for its session holds the first pose until the session starts.
+    let mut device = SimDevice::waiting(plant, script, start);
+    if let Some(epoch) = ctl.epoch() {
+        device.start_at(epoch);
+    }
     let mut servo = ServoLoop::new(
         Servo::new(sc.servo_params(i), sc.arm(i)),
         device,
@@ -119,6 +125,11 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         period(sc.site[i].servo_rate_hz),
         &in_force,
         |now| {
+            if servo.device_mut().start().is_none() {
+                if let Some(epoch) = ctl.epoch() {
+                    servo.device_mut().start_at(epoch);
+                }
+            }
             servo.step(now, Some(&ctl));
             match ctl.run_state() {
                 RunState::Starting | RunState::Running => true,
@@ -141,6 +152,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         remote: Consumer::open(&names.remote, &opts).context("opening the remote ring")?,
         objects: Producer::open(&names.object, &opts).context("opening the object ring")?,
         reports: Producer::open(&names.report, &opts).context("opening the report ring")?,
+        trace: Some(Producer::open(&names.trace, &opts).context("opening the trace ring")?),
     };
     let (sc, i) = (&cfg.scenario, cfg.site);
     let method: Box<dyn Consistency> = match sc.method {
@@ -153,16 +165,36 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         report_period_ns: u64::try_from(period(sc.site[i].report_rate_hz).as_nanos())
             .unwrap_or(10_000_000),
         start_ns: monotonic_ns(),
+        trace_period_ns: u64::try_from(period(sc.sample_rate_hz).as_nanos()).unwrap_or(5_000_000),
+        report_seq: ctl.report_seq.load(Ordering::Relaxed),
     };
-    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m)));
+    // A restarted physics resumes from the newest state its predecessor published, not from the
+    // scenario's start (the servo kept displaying that state; a jump back would be felt).
+    let resumed = ctl.resume().and_then(|s| s.state());
+    if resumed.is_some() {
+        eprintln!(
+            "station physics {}: resuming from the last published state",
+            cfg.name
+        );
+    }
+    let copy = ObjectCopy::new(
+        resumed.unwrap_or_else(|| BodyState::at_rest(Vec3::from(sc.object.start_m))),
+    );
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     let in_force = setup(cfg, &cfg.physics_sched, "physics")?;
+    let mut last_report_seq = timing.report_seq;
     run_periodic(&ctl, Child::Physics, &ctl.physics, step, &in_force, |now| {
         physics.step(now);
         ctl.physics_received
-            .store(physics.received, coop_rt::sync::Ordering::Relaxed);
+            .store(physics.received, Ordering::Relaxed);
         ctl.physics_adoptions
-            .store(physics.adoptions(), coop_rt::sync::Ordering::Relaxed);
+            .store(physics.adoptions(), Ordering::Relaxed);
+        if physics.report_seq() != last_report_seq {
+            // At the report rate: what a successor resumes from.
+            last_report_seq = physics.report_seq();
+            ctl.report_seq.store(last_report_seq, Ordering::Relaxed);
+            ctl.store_resume(&physics.object_sample(now));
+        }
         matches!(ctl.run_state(), RunState::Starting | RunState::Running)
     });
     Ok(())
@@ -174,26 +206,32 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
 /// The segments cannot be opened, or the zenoh session cannot be set up.
 pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let (names, opts, ctl) = attach(cfg, parent)?;
+    let sc = &cfg.scenario;
+    let net = &cfg.config.network;
     let args = coop_transport::network::NetworkArgs {
         session: &cfg.config.session,
-        site: &cfg.name,
+        sites: sc.site.iter().map(|s| s.name.clone()).collect(),
         site_index: cfg.site,
+        scenario: sc.name.clone(),
+        method: sc.method.as_str().to_owned(),
         endpoints: coop_transport::network::Endpoints {
-            listen: cfg.config.network.listen.clone(),
-            connect: cfg.config.network.connect.clone(),
+            listen: net.listen.clone(),
+            connect: net.connect.clone(),
+            mode: net.mode.clone(),
         },
         control: &ctl,
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
+        trace: Consumer::open(&names.trace, &opts).context("opening the trace ring")?,
+        record: cfg.config.record.clone(),
+        emulation: net.emulate.then(|| coop_transport::network::Emulation {
+            link: sc.network.clone(),
+            seed: sc.seed,
+        }),
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
-    // (tokio's and zenoh's, which inherit this affinity) must not run where the servo wakes.
+    // (zenoh's, which inherit this affinity) must not run where the servo wakes.
     keep_off_the_servo(cfg);
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()?;
-    rt.block_on(coop_transport::network::run(args))
-        .map_err(anyhow::Error::msg)?;
+    coop_transport::network::run(args).map_err(anyhow::Error::msg)?;
     Ok(())
 }

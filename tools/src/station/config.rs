@@ -42,6 +42,8 @@ pub struct RingSpec {
     pub report_slots: usize,
     /// Network → physics remote reports.
     pub remote_slots: usize,
+    /// Physics → recorder trace records (the scenario's sample rate plus adoptions).
+    pub trace_slots: usize,
 }
 
 /// The network process's zenoh endpoints.
@@ -52,6 +54,12 @@ pub struct NetworkSpec {
     pub listen: Vec<String>,
     /// Locators of other stations or zenoh routers to connect to.
     pub connect: Vec<String>,
+    /// Emulate the scenario's `[network]` link (delay, jitter, loss, seeded) on receive, so long
+    /// delays can be run on one machine. Shown as EMULATED in status and recordings.
+    pub emulate: bool,
+    /// `peer` (default: stations connect to each other) or `client` (through the `zenohd` routers
+    /// in `connect`).
+    pub mode: String,
 }
 
 impl Default for NetworkSpec {
@@ -59,8 +67,21 @@ impl Default for NetworkSpec {
         Self {
             listen: vec!["tcp/127.0.0.1:0".into()],
             connect: Vec::new(),
+            emulate: false,
+            mode: "peer".into(),
         }
     }
+}
+
+/// When the users' scripts start (the session's time 0).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum StartMode {
+    /// When this station starts.
+    #[default]
+    Now,
+    /// When the session's launcher announces it (on `coop/<session>/epoch`).
+    Session,
 }
 
 /// The supervisor's policy.
@@ -122,6 +143,11 @@ pub struct StationConfig {
     pub supervisor: SupervisorSpec,
     /// Zenoh endpoints.
     pub network: NetworkSpec,
+    /// When the users' scripts start: `now` or `session`.
+    pub start: StartMode,
+    /// Record what this station believed and displayed to this MCAP file (relative to the config
+    /// file's directory). Default: no recording.
+    pub record: Option<PathBuf>,
 }
 
 impl Default for StationConfig {
@@ -137,6 +163,8 @@ impl Default for StationConfig {
             rings: RingSpec::default(),
             supervisor: SupervisorSpec::default(),
             network: NetworkSpec::default(),
+            start: StartMode::Now,
+            record: None,
         }
     }
 }
@@ -158,6 +186,7 @@ impl Default for RingSpec {
             object_slots: 64,
             report_slots: 256,
             remote_slots: 256,
+            trace_slots: 4096,
         }
     }
 }
@@ -279,6 +308,7 @@ impl StationConfig {
             ("rings.object_slots", self.rings.object_slots),
             ("rings.report_slots", self.rings.report_slots),
             ("rings.remote_slots", self.rings.remote_slots),
+            ("rings.trace_slots", self.rings.trace_slots),
         ] {
             if !(slots.is_power_of_two() && (2..=65536).contains(&slots)) {
                 bail!("{field} = {slots}: must be a power of two from 2 to 65536");
@@ -292,14 +322,31 @@ impl StationConfig {
                 bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
             }
         }
+        if !["peer", "client"].contains(&self.network.mode.as_str()) {
+            bail!(
+                "network.mode = {:?}: must be peer or client",
+                self.network.mode
+            );
+        }
+        if self.network.mode == "client" && self.network.connect.is_empty() {
+            bail!(
+                "network.mode = \"client\" needs network.connect: the zenohd routers to go through"
+            );
+        }
+        let mut config = self;
+        if let (Some(r), Some(b)) = (&config.record, base) {
+            if r.is_relative() {
+                config.record = Some(b.join(r));
+            }
+        }
         let allowed = coop_rt::sched::allowed_cpus();
         let (first, last) = (
             allowed.first().copied().unwrap_or(0),
             allowed.last().copied().unwrap_or(0),
         );
-        let servo_sched = sched("servo", &self.servo, last, 80)?;
-        let physics_sched = sched("physics", &self.physics, first, 70)?;
-        let sup = &self.supervisor;
+        let servo_sched = sched("servo", &config.servo, last, 80)?;
+        let physics_sched = sched("physics", &config.physics, first, 70)?;
+        let sup = &config.supervisor;
         let mode = sup
             .restart
             .parse()
@@ -336,7 +383,7 @@ impl StationConfig {
             backoff_max: std::time::Duration::from_millis(sup.backoff_max_ms),
         };
         Ok(Resolved {
-            config: self,
+            config,
             scenario,
             site,
             name,

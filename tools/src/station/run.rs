@@ -75,6 +75,12 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
             .context("creating the station's segments")?,
     );
     segs.control.set_run_state(RunState::Starting);
+    if cfg.config.start == super::config::StartMode::Now {
+        // SYNC: Release pairs with `ControlBlock::epoch`'s Acquire.
+        segs.control
+            .epoch_ns
+            .store(coop_rt::timer::monotonic_ns(), Ordering::Release);
+    }
     // The supervisor stays off the servo's CPU too (its children set their own affinity).
     super::child::keep_off_the_servo(cfg);
     let rt = tokio::runtime::Builder::new_current_thread()

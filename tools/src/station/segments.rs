@@ -1,7 +1,7 @@
 //! The shared-memory segments of one station, created by its supervisor before any child starts and
-//! unlinked when the supervisor's handles drop: the control block and the four rings.
+//! unlinked when the supervisor's handles drop: the control block and the five rings.
 
-use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use coop_rt::shm::control::ControlBlock;
 use coop_rt::shm::{BlockSegment, RingSegment, SegmentName};
 
@@ -20,6 +20,8 @@ pub struct Names {
     pub report: SegmentName,
     /// Network → physics.
     pub remote: SegmentName,
+    /// Physics → recorder (the network process).
+    pub trace: SegmentName,
 }
 
 impl Names {
@@ -35,6 +37,7 @@ impl Names {
             object: n("obj")?,
             report: n("rep")?,
             remote: n("rem")?,
+            trace: n("trc")?,
         })
     }
 }
@@ -52,6 +55,8 @@ pub struct StationSegments {
     pub report: RingSegment<SiteReport>,
     /// Network → physics.
     pub remote: RingSegment<SiteReport>,
+    /// Physics → recorder.
+    pub trace: RingSegment<TraceRecord>,
 }
 
 impl StationSegments {
@@ -66,6 +71,7 @@ impl StationSegments {
             object: RingSegment::create(&names.object, rings.object_slots)?,
             report: RingSegment::create(&names.report, rings.report_slots)?,
             remote: RingSegment::create(&names.remote, rings.remote_slots)?,
+            trace: RingSegment::create(&names.trace, rings.trace_slots)?,
         })
     }
 }

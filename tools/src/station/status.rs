@@ -50,7 +50,7 @@ fn loop_json(s: &LoopSnapshot, rate: f64) -> serde_json::Value {
 ///
 /// # Errors
 /// No such station, or its segments fail validation (stale: run `station clean`).
-pub fn read(session: &str, station: &str) -> anyhow::Result<serde_json::Value> {
+pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<serde_json::Value> {
     let names = Names::of(session, station)?;
     let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))
         .with_context(|| format!("station {station} of session {session}"))?;
@@ -100,11 +100,7 @@ pub fn read(session: &str, station: &str) -> anyhow::Result<serde_json::Value> {
             "drops": { "tool": ctl.drops[0].load(Ordering::Relaxed), "object": ctl.drops[1].load(Ordering::Relaxed),
                        "report": ctl.drops[2].load(Ordering::Relaxed), "remote": ctl.drops[3].load(Ordering::Relaxed) },
         },
-        "network": {
-            "published": ctl.net_published.load(Ordering::Relaxed),
-            "received": ctl.net_received.load(Ordering::Relaxed),
-            "rejected": ctl.net_rejected.load(Ordering::Relaxed),
-        },
+        "network": network_json(&ctl, sites),
         "physics": {
             "remote_received": ctl.physics_received.load(Ordering::Relaxed),
             "adoptions": ctl.physics_adoptions.load(Ordering::Relaxed),
@@ -115,6 +111,46 @@ pub fn read(session: &str, station: &str) -> anyhow::Result<serde_json::Value> {
         },
         "running": ctl.run_state() == RunState::Running,
     }))
+}
+
+fn network_json(ctl: &ControlBlock, sites: &[String]) -> serde_json::Value {
+    let refused: Vec<u64> = ctl
+        .net_refused
+        .iter()
+        .map(|c| c.load(Ordering::Relaxed))
+        .collect();
+    let present = ctl.peers_present.load(Ordering::Relaxed);
+    let peers: Vec<serde_json::Value> = sites
+        .iter()
+        .enumerate()
+        .map(|(j, name)| {
+            let rtt = ctl.clock_rtt_ns[j].load(Ordering::Relaxed);
+            json!({
+                "site": name,
+                "present": present & (1 << j) != 0,
+                "clock_offset_us": (rtt > 0).then(|| ctl.clock_offset_ns[j].load(Ordering::Relaxed) as i64 as f64 / 1e3),
+                "clock_rtt_us": (rtt > 0).then(|| rtt as f64 / 1e3),
+            })
+        })
+        .collect();
+    let lat = ctl.net_latency.to_hdr();
+    let n = ctl.net_latency_count.load(Ordering::Relaxed);
+    let q = |p: f64| lat.value_at_quantile(p);
+    json!({
+        "locators": ctl.locators(),
+        "published": ctl.net_published.load(Ordering::Relaxed),
+        "received": ctl.net_received.load(Ordering::Relaxed),
+        "rejected": refused.iter().sum::<u64>(),
+        "refused": { "version": refused[0], "length": refused[1], "contents": refused[2], "foreign": refused[3], "duplicate_or_reordered": refused[4] },
+        "emulation": if ctl.net_emulated.load(Ordering::Relaxed) == 1 { "EMULATED (delay, jitter, loss on receive)" } else { "none" },
+        "emulated_lost": ctl.net_emulated_lost.load(Ordering::Relaxed),
+        "join_states": ctl.net_join_states.load(Ordering::Relaxed),
+        "joins": ctl.peer_joins.load(Ordering::Relaxed),
+        "leaves": ctl.peer_leaves.load(Ordering::Relaxed),
+        "peers": peers,
+        "latency_us": if n > 0 { json!({ "count": n, "p50": q(0.5), "p99": q(0.99), "max": lat.max() }) } else { json!(null) },
+        "epoch_ns": ctl.epoch(),
+    })
 }
 
 /// Prints the status for people.
@@ -180,9 +216,40 @@ pub fn print(v: &serde_json::Value) {
         f(&r["tool"]), f(&r["object"]), f(&r["report"]), f(&r["remote"]),
         r["drops"]["tool"], r["drops"]["object"], r["drops"]["report"], r["drops"]["remote"]
     );
+    let net = &v["network"];
+    println!("zenoh: {}", s(&net["locators"]));
     println!(
-        "network: published {}, received {}, rejected {}; physics: took {} remote reports, adopted {}",
-        v["network"]["published"], v["network"]["received"], v["network"]["rejected"], v["physics"]["remote_received"], v["physics"]["adoptions"]
+        "network: published {}, received {}, refused {} {}; emulation: {} (lost {}); late-join states {}",
+        net["published"], net["received"], net["rejected"], net["refused"], s(&net["emulation"]), net["emulated_lost"], net["join_states"]
+    );
+    for p in net["peers"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|p| p["site"] != v["station"])
+    {
+        println!(
+            "  peer {:<10} {:<8} clock offset {} us, rtt {} us",
+            s(&p["site"]),
+            if p["present"].as_bool() == Some(true) {
+                "present"
+            } else {
+                "absent"
+            },
+            p["clock_offset_us"],
+            p["clock_rtt_us"]
+        );
+    }
+    if !net["latency_us"].is_null() {
+        let l = &net["latency_us"];
+        println!(
+            "state latency (sender physics -> our physics ring): p50 {} us, p99 {} us, max {} us over {}",
+            l["p50"], l["p99"], l["max"], l["count"]
+        );
+    }
+    println!(
+        "physics: took {} remote reports, adopted {}",
+        v["physics"]["remote_received"], v["physics"]["adoptions"]
     );
     println!(
         "servo: commanding {:.2} N, display scale {:.2}",

@@ -1,0 +1,546 @@
+//! A station's recording: what it believed and displayed, as an [MCAP](https://mcap.dev) file that
+//! Foxglove, the `mcap` CLI and the `mcap` Python package read.
+//!
+//! Every message is JSON (`message_encoding = "json"`, each channel with a `jsonschema` schema). Times
+//! inside messages (`t_ns`) are CLOCK_MONOTONIC ns of the recording station; the MCAP `log_time` is
+//! the wall clock, for viewers. Channels:
+//!
+//! | topic       | rate                         | contents                                              |
+//! |-------------|------------------------------|-------------------------------------------------------|
+//! | `/session`  | once the session time is known | session, site, scenario, method, epoch, emulation   |
+//! | `/object`   | scenario sample rate         | object pose and velocity as this site believes it     |
+//! | `/tool`     | scenario sample rate         | tool position, desired/measured force, force on object |
+//! | `/adoption` | each adoption                | sender, position jump, how far it was dead-reckoned  |
+//! | `/remote`   | each state handed to physics | sender, sequence, sent time, age, emulated delay      |
+//! | `/presence` | each join or leave           | site, present                                         |
+//! | `/clock`    | each new estimate            | per peer clock offset and round trip                 |
+//! | `/status`   | at the end                   | the network counters                                  |
+//!
+//! The file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps everything
+//! up to the last flush; [`read`] accepts such a file (no summary, no end magic).
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+/// How often the writer pushes what it has to the file.
+pub const FLUSH_EVERY: Duration = Duration::from_millis(200);
+
+/// `/session`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct SessionMsg {
+    /// When this was written, ns (monotonic).
+    pub t_ns: u64,
+    /// Session name.
+    pub session: String,
+    /// Site name.
+    pub site: String,
+    /// Site index in the scenario.
+    pub site_index: usize,
+    /// Scenario name.
+    pub scenario: String,
+    /// Consistency method.
+    pub method: String,
+    /// The session's time 0, ns (monotonic).
+    pub epoch_ns: u64,
+    /// "none", or "EMULATED: …" with the link's parameters.
+    pub emulation: String,
+}
+
+/// `/object` and `/tool` in one (they are sampled together; split on writing).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct SampleMsg {
+    /// ns (monotonic).
+    pub t_ns: u64,
+    /// Object position, m.
+    pub pos: [f64; 3],
+    /// Object orientation (w, x, y, z).
+    pub rot: [f64; 4],
+    /// Object velocity, m/s.
+    pub vel: [f64; 3],
+    /// Adoptions so far.
+    pub adoptions: u64,
+    /// Tool position, m.
+    pub tool_pos: [f64; 3],
+    /// Desired force at the hand, N.
+    pub f_desired: [f64; 3],
+    /// Measured force, N.
+    pub f_measured: [f64; 3],
+    /// Users' force on this copy, N.
+    pub f_object: [f64; 3],
+    /// The own user touches the object.
+    pub touching: bool,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ObjectPart {
+    t_ns: u64,
+    pos: [f64; 3],
+    rot: [f64; 4],
+    vel: [f64; 3],
+    adoptions: u64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ToolPart {
+    t_ns: u64,
+    tool_pos: [f64; 3],
+    f_desired: [f64; 3],
+    f_measured: [f64; 3],
+    f_object: [f64; 3],
+    touching: bool,
+}
+
+/// `/adoption`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct AdoptionMsg {
+    /// ns (monotonic).
+    pub t_ns: u64,
+    /// Sender's site index.
+    pub from: usize,
+    /// Position jump, m.
+    pub jump_m: f64,
+    /// How far the state was dead-reckoned, s.
+    pub age_s: f64,
+}
+
+/// `/remote`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct RemoteMsg {
+    /// When it was handed to physics, ns (monotonic).
+    pub t_ns: u64,
+    /// Sender's site index.
+    pub from: usize,
+    /// Sender's sequence number.
+    pub seq: u64,
+    /// Sender's time of the state, corrected to our clock, ns.
+    pub sent_ns: u64,
+    /// `t_ns − sent_ns`, s.
+    pub age_s: f64,
+    /// Delay the emulation added on top of the real one, s (0 without emulation).
+    pub emulated_delay_s: f64,
+    /// The zenoh timestamp (HLC) of the sample, if it had one.
+    pub zenoh_ts: Option<String>,
+    /// `live`, or `join` for a state from the session's queryable at start.
+    pub via: String,
+}
+
+/// `/presence`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct PresenceMsg {
+    /// ns (monotonic).
+    pub t_ns: u64,
+    /// Site name.
+    pub site: String,
+    /// Joined (true) or left.
+    pub present: bool,
+}
+
+/// `/clock`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct ClockMsg {
+    /// ns (monotonic).
+    pub t_ns: u64,
+    /// Peer site index.
+    pub site: usize,
+    /// Its clock minus ours, ns.
+    pub offset_ns: i64,
+    /// Round trip of the exchange, ns.
+    pub rtt_ns: u64,
+}
+
+/// `/status`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct StatusMsg {
+    /// ns (monotonic).
+    pub t_ns: u64,
+    /// Reports published.
+    pub published: u64,
+    /// Reports handed to physics.
+    pub received: u64,
+    /// Refused: version, length, contents, foreign, duplicate/out of order.
+    pub refused: [u64; 5],
+    /// Dropped by the emulation.
+    pub emulated_lost: u64,
+    /// States from the session's queryable at start.
+    pub join_states: u64,
+}
+
+const TOPICS: [&str; 8] = [
+    "/session",
+    "/object",
+    "/tool",
+    "/adoption",
+    "/remote",
+    "/presence",
+    "/clock",
+    "/status",
+];
+
+/// Writes a recording.
+pub struct Recorder {
+    w: mcap::Writer<BufWriter<File>>,
+    channels: [u16; TOPICS.len()],
+    seq: u32,
+    wall_minus_mono: i128,
+    last_flush: Instant,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder").field("seq", &self.seq).finish()
+    }
+}
+
+/// A recording could not be written or read.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// File system.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// MCAP.
+    #[error("{path}: MCAP: {source}")]
+    Mcap {
+        /// The file.
+        path: String,
+        /// Why.
+        source: mcap::McapError,
+    },
+}
+
+fn schema_of(topic: &str) -> &'static str {
+    match topic {
+        "/object" => {
+            r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"pos":{"type":"array"},"rot":{"type":"array"},"vel":{"type":"array"},"adoptions":{"type":"integer"}}}"#
+        }
+        "/tool" => {
+            r#"{"type":"object","properties":{"t_ns":{"type":"integer"},"tool_pos":{"type":"array"},"f_desired":{"type":"array"},"f_measured":{"type":"array"},"f_object":{"type":"array"},"touching":{"type":"boolean"}}}"#
+        }
+        _ => r#"{"type":"object"}"#,
+    }
+}
+
+impl Recorder {
+    /// Creates (truncates) `path` and writes the header, schemas and channels.
+    ///
+    /// # Errors
+    /// The file cannot be created or written.
+    pub fn create(path: &Path, metadata: BTreeMap<String, String>) -> Result<Self, RecordingError> {
+        let p = path.display().to_string();
+        let mcap_err = |source| RecordingError::Mcap {
+            path: p.clone(),
+            source,
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|source| RecordingError::Io {
+                path: dir.display().to_string(),
+                source,
+            })?;
+        }
+        let file = File::create(path).map_err(|source| RecordingError::Io {
+            path: p.clone(),
+            source,
+        })?;
+        let mut w = mcap::WriteOptions::new()
+            .use_chunks(false)
+            .profile("")
+            .library(concat!("coop-haptics ", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::new(file))
+            .map_err(mcap_err)?;
+        w.write_metadata(&mcap::records::Metadata {
+            name: "coop-haptics".into(),
+            metadata,
+        })
+        .map_err(mcap_err)?;
+        let mut channels = [0u16; TOPICS.len()];
+        for (c, topic) in channels.iter_mut().zip(TOPICS) {
+            let schema = w
+                .add_schema(topic, "jsonschema", schema_of(topic).as_bytes())
+                .map_err(mcap_err)?;
+            *c = w
+                .add_channel(schema, topic, "json", &BTreeMap::new())
+                .map_err(mcap_err)?;
+        }
+        let wall = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i128);
+        let mono = i128::from(coop_rt::timer::monotonic_ns());
+        Ok(Self {
+            w,
+            channels,
+            seq: 0,
+            wall_minus_mono: wall - mono,
+            last_flush: Instant::now(),
+        })
+    }
+
+    fn put<T: Serialize>(
+        &mut self,
+        topic: usize,
+        t_ns: u64,
+        msg: &T,
+    ) -> Result<(), mcap::McapError> {
+        let data = serde_json::to_vec(msg).unwrap_or_default();
+        self.seq = self.seq.wrapping_add(1);
+        let log_time = u64::try_from(i128::from(t_ns) + self.wall_minus_mono).unwrap_or(0);
+        self.w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: self.channels[topic],
+                sequence: self.seq,
+                log_time,
+                publish_time: log_time,
+            },
+            &data,
+        )?;
+        if self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.last_flush = Instant::now();
+            self.w.flush()?;
+        }
+        Ok(())
+    }
+
+    /// `/session`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn session(&mut self, m: &SessionMsg) -> Result<(), mcap::McapError> {
+        self.put(0, m.t_ns, m)
+    }
+    /// `/object` and `/tool`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn sample(&mut self, m: &SampleMsg) -> Result<(), mcap::McapError> {
+        self.put(
+            1,
+            m.t_ns,
+            &ObjectPart {
+                t_ns: m.t_ns,
+                pos: m.pos,
+                rot: m.rot,
+                vel: m.vel,
+                adoptions: m.adoptions,
+            },
+        )?;
+        self.put(
+            2,
+            m.t_ns,
+            &ToolPart {
+                t_ns: m.t_ns,
+                tool_pos: m.tool_pos,
+                f_desired: m.f_desired,
+                f_measured: m.f_measured,
+                f_object: m.f_object,
+                touching: m.touching,
+            },
+        )
+    }
+    /// `/adoption`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn adoption(&mut self, m: &AdoptionMsg) -> Result<(), mcap::McapError> {
+        self.put(3, m.t_ns, m)
+    }
+    /// `/remote`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn remote(&mut self, m: &RemoteMsg) -> Result<(), mcap::McapError> {
+        self.put(4, m.t_ns, m)
+    }
+    /// `/presence`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn presence(&mut self, m: &PresenceMsg) -> Result<(), mcap::McapError> {
+        self.put(5, m.t_ns, m)
+    }
+    /// `/clock`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn clock(&mut self, m: &ClockMsg) -> Result<(), mcap::McapError> {
+        self.put(6, m.t_ns, m)
+    }
+    /// `/status`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn status(&mut self, m: &StatusMsg) -> Result<(), mcap::McapError> {
+        self.put(7, m.t_ns, m)
+    }
+
+    /// Writes the summary and footer and closes the file.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn finish(mut self) -> Result<(), mcap::McapError> {
+        self.w.finish()?;
+        Ok(())
+    }
+}
+
+/// A recording, read back.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recording {
+    /// The session message, if the session started.
+    pub session: Option<SessionMsg>,
+    /// Samples (object and tool joined by time).
+    pub samples: Vec<SampleMsg>,
+    /// Adoptions.
+    pub adoptions: Vec<AdoptionMsg>,
+    /// Remote states handed to physics.
+    pub remote: Vec<RemoteMsg>,
+    /// Joins and leaves.
+    pub presence: Vec<PresenceMsg>,
+    /// Clock estimates.
+    pub clock: Vec<ClockMsg>,
+    /// Final counters, if the station stopped cleanly.
+    pub status: Option<StatusMsg>,
+    /// The file ended early (no footer): the station did not finish it.
+    pub truncated: bool,
+}
+
+/// Reads a recording written by [`Recorder`], also one cut short by a crash.
+///
+/// # Errors
+/// The file cannot be read, is not MCAP, or a message is not what its channel says.
+pub fn read(path: &Path) -> Result<Recording, RecordingError> {
+    let p = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| RecordingError::Io {
+        path: p.clone(),
+        source,
+    })?;
+    let mcap_err = |source| RecordingError::Mcap {
+        path: p.clone(),
+        source,
+    };
+    let bad = |what: String| RecordingError::Io {
+        path: p.clone(),
+        source: std::io::Error::new(std::io::ErrorKind::InvalidData, what),
+    };
+    let stream =
+        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .map_err(mcap_err)?;
+    let mut r = Recording::default();
+    let mut tools: Vec<ToolPart> = Vec::new();
+    let mut objects: Vec<ObjectPart> = Vec::new();
+    for m in stream {
+        let m = match m {
+            Ok(m) => m,
+            // A crash leaves a partly written last record: keep what came before it.
+            Err(_) => {
+                r.truncated = true;
+                break;
+            }
+        };
+        let data: &[u8] = &m.data;
+        let topic = m.channel.topic.as_str();
+        let e = |err: serde_json::Error| bad(format!("{topic}: {err}"));
+        match topic {
+            "/session" => r.session = Some(serde_json::from_slice(data).map_err(e)?),
+            "/object" => objects.push(serde_json::from_slice(data).map_err(e)?),
+            "/tool" => tools.push(serde_json::from_slice(data).map_err(e)?),
+            "/adoption" => r.adoptions.push(serde_json::from_slice(data).map_err(e)?),
+            "/remote" => r.remote.push(serde_json::from_slice(data).map_err(e)?),
+            "/presence" => r.presence.push(serde_json::from_slice(data).map_err(e)?),
+            "/clock" => r.clock.push(serde_json::from_slice(data).map_err(e)?),
+            "/status" => r.status = Some(serde_json::from_slice(data).map_err(e)?),
+            _ => {}
+        }
+    }
+    r.truncated |= mcap::read::footer(&bytes).is_err();
+    // Object and tool parts of one sample are written back to back with the same time.
+    let mut tools = tools.into_iter().peekable();
+    for o in objects {
+        while tools.next_if(|t| t.t_ns < o.t_ns).is_some() {}
+        let t = tools.next_if(|t| t.t_ns == o.t_ns);
+        let mut s = SampleMsg {
+            t_ns: o.t_ns,
+            pos: o.pos,
+            rot: o.rot,
+            vel: o.vel,
+            adoptions: o.adoptions,
+            ..SampleMsg::default()
+        };
+        if let Some(t) = t {
+            s.tool_pos = t.tool_pos;
+            s.f_desired = t.f_desired;
+            s.f_measured = t.f_measured;
+            s.f_object = t.f_object;
+            s.touching = t.touching;
+        }
+        r.samples.push(s);
+    }
+    Ok(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn written_then_read_back_also_when_cut_short() {
+        let dir = std::env::temp_dir().join(format!("coop-rec-{}", std::process::id()));
+        let path = dir.join("a.mcap");
+        let mut w =
+            Recorder::create(&path, BTreeMap::from([("site".into(), "a".into())])).expect("create");
+        let session = SessionMsg {
+            t_ns: 1,
+            session: "s".into(),
+            site: "a".into(),
+            epoch_ns: 5,
+            ..SessionMsg::default()
+        };
+        w.session(&session).expect("w");
+        for k in 0..100u64 {
+            let s = SampleMsg {
+                t_ns: 10 + k,
+                pos: [k as f64, 0.0, 0.0],
+                rot: [1.0, 0.0, 0.0, 0.0],
+                touching: k % 2 == 0,
+                ..SampleMsg::default()
+            };
+            w.sample(&s).expect("w");
+        }
+        w.adoption(&AdoptionMsg {
+            t_ns: 50,
+            from: 1,
+            jump_m: 0.01,
+            age_s: 0.2,
+        })
+        .expect("w");
+        w.status(&StatusMsg::default()).expect("w");
+        w.finish().expect("finish");
+        let r = read(&path).expect("read");
+        assert!(!r.truncated);
+        assert_eq!(r.session, Some(session));
+        assert_eq!(r.samples.len(), 100);
+        assert_eq!(r.samples[7].pos[0], 7.0);
+        assert!(!r.samples[7].touching && r.samples[8].touching);
+        assert_eq!(r.adoptions.len(), 1);
+        assert!(r.status.is_some());
+        // Cut the file in the middle of the data: what was before the cut is still there.
+        let bytes = std::fs::read(&path).expect("bytes");
+        let cut = dir.join("cut.mcap");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).expect("write");
+        let r = read(&cut).expect("a cut recording still reads");
+        assert!(r.truncated);
+        assert!(
+            r.samples.len() > 20 && r.samples.len() < 100,
+            "{}",
+            r.samples.len()
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
