@@ -61,6 +61,18 @@ impl Reaped {
             let _ = c.kill();
         }
     }
+    /// Waits up to `limit` for the child to exit; its status, or `None` (it is left running).
+    pub fn wait_timeout(&mut self, limit: Duration) -> Option<std::process::ExitStatus> {
+        let start = Instant::now();
+        let c = self.0.as_mut()?;
+        while start.elapsed() < limit {
+            if let Ok(Some(s)) = c.try_wait() {
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        None
+    }
     /// Waits for exit and returns (success, stdout).
     ///
     /// # Panics

@@ -3,7 +3,8 @@
 //! - [`latency`]: the wake-up latency tool users of cyclictest already know (issue 3).
 //! - [`ringbench`]: the shared-memory ring against rtrb between two cores (issue 3).
 //! - [`sim`]: the deterministic multi-site simulator's CLI (issue 4).
-//! - [`station`]: one site's processes (issue 5, in progress).
+//! - [`station`]: one site's processes (issue 5).
+//! - [`session`]: a multi-site session of real stations, recorded and measured (issue 6).
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
 //! measured loops, which follow coop-rt's contract (no allocation, lock, logging or system call but
@@ -25,9 +26,11 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 
 pub mod cli;
 pub mod latency;
+pub mod netbench;
 pub mod plots;
 pub mod ringbench;
 pub mod scenario_file;
+pub mod session;
 pub mod sim;
 pub mod simbench;
 pub mod station;

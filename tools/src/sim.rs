@@ -199,8 +199,22 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", "mJ", ""
     );
     for m in all {
+        // The worst site; NaN (not measured, e.g. on real stations) if any site's is.
         let worst = |f: &dyn Fn(&coop_model::metrics::SiteMetrics) -> f64| {
-            m.sites.iter().map(f).fold(0.0, f64::max)
+            m.sites.iter().map(f).fold(0.0, |a: f64, b| {
+                if a.is_nan() || b.is_nan() {
+                    f64::NAN
+                } else {
+                    a.max(b)
+                }
+            })
+        };
+        let cell = |v: f64, width: usize, prec: usize| {
+            if v.is_nan() {
+                format!("{:>width$}", "-")
+            } else {
+                format!("{v:>width$.prec$}")
+            }
         };
         let phases: Vec<String> = m
             .sites
@@ -211,24 +225,27 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{:>12.3}{:>11.2}{:>11.3}{:>11.3}{:>11.2}{:>11.2}{:>10}  {}",
+            "{:<10}{:>10.2}{:>10.2}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
-            m.divergence_after_contact_m * 1e3,
+            cell(m.divergence_after_contact_m * 1e3, 12, 3),
             worst(&|s| s.error_vs_reference_rms_m) * 1e3,
             worst(&|s| s.force_tracking_rms_n),
-            worst(&|s| s.max_adoption_force_step_n),
-            worst(&|s| s.energy_from_others_j) * 1e3,
-            worst(&|s| s.others_work_j) * 1e3,
+            cell(worst(&|s| s.max_adoption_force_step_n), 11, 3),
+            cell(worst(&|s| s.energy_from_others_j) * 1e3, 11, 2),
+            cell(worst(&|s| s.others_work_j) * 1e3, 11, 2),
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
             phases.join(", ")
         );
     }
     let radius = sc.object.radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {:.2} s (contacts over, object at rest, + max delay + 2 report periods); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
-        all.last().map_or(0.0, |m| m.after_contact_from_s),
+        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
+        all.iter()
+            .map(|m| format!("{:.2} s ({})", m.after_contact_from_s, m.method))
+            .collect::<Vec<_>>()
+            .join(", "),
         radius * 1e3
     );
     for m in all {

@@ -201,7 +201,10 @@ fn two_stations_by_hand_see_each_other() {
         let (ra, rb) = (got(&ca), got(&cb));
         (ra.0 > 20 && ra.1 > 20 && rb.0 > 20 && rb.1 > 20 && (ra.2 + rb.2) > 0).then_some(())
     });
-    assert!(ca.net_refused.iter().all(|c| c.load(Ordering::Relaxed) == 0));
+    assert!(ca
+        .net_refused
+        .iter()
+        .all(|c| c.load(Ordering::Relaxed) == 0));
     assert!(
         ca.net_published.load(Ordering::Relaxed) > 20
             && cb.net_published.load(Ordering::Relaxed) > 20

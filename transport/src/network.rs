@@ -136,6 +136,14 @@ pub fn config(endpoints: &Endpoints) -> Result<zenoh::Config, String> {
         .map_err(|e| e.to_string())?;
     c.insert_json5("timestamping/enabled", "true")
         .map_err(|e| format!("timestamping: {e}"))?;
+    // A peer that stops reading (stalled, or hostile) must not stall the session: zenoh closes a
+    // link a blocking message cannot enter within 0.2 s (default 5 s, longer than the watchdog's
+    // 0.5 s), and a state that cannot go within 0.2 ms is dropped (the next one replaces it).
+    let q = "transport/link/tx/queue/congestion_control";
+    c.insert_json5(&format!("{q}/block/wait_before_close"), "200000")
+        .map_err(|e| format!("congestion control: {e}"))?;
+    c.insert_json5(&format!("{q}/drop/wait_before_drop"), "200")
+        .map_err(|e| format!("congestion control: {e}"))?;
     if mode != "client" {
         c.insert_json5("listen/endpoints", &json(&endpoints.listen))
             .map_err(|e| format!("listen endpoints: {e}"))?;
@@ -176,6 +184,7 @@ struct Held {
     from: usize,
     report: SiteReport,
     delay_s: f64,
+    offset_ns: i64,
 }
 impl PartialEq for Held {
     fn eq(&self, o: &Self) -> bool {
@@ -275,6 +284,7 @@ impl Receiver<'_> {
             from,
             report: r,
             delay_s,
+            offset_ns: offset,
         };
         if release <= now {
             self.hand_over(held, zenoh_ts, join, now);
@@ -313,6 +323,7 @@ impl Receiver<'_> {
             from: h.from,
             seq: h.report.seq,
             sent_ns: h.report.t_ns,
+            offset_ns: h.offset_ns,
             age_s: age as f64 * 1e-9,
             emulated_delay_s: h.delay_s,
             zenoh_ts,
@@ -466,6 +477,40 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
     // session, which is closed before this function returns, so the callbacks borrow it through a
     // scoped thread's guarantee: everything below runs inside `std::thread::scope`.
     std::thread::scope(|scope| -> Result<StatusMsg, String> {
+        let _token = session
+            .liveliness()
+            .declare_token(keys::presence(session_name, &site))
+            .wait()
+            .map_err(|e| format!("declaring the liveliness token: {e}"))?;
+        // (site, present, when zenoh told us)
+        let presence_events: Arc<Mutex<Vec<(String, bool, u64)>>> = Arc::default();
+        let pe = presence_events.clone();
+        let _presence = session
+            .liveliness()
+            .declare_subscriber(keys::all_presence(session_name))
+            .history(true)
+            .callback(move |s: Sample| {
+                let name = keys::site_of(s.key_expr().as_str()).to_owned();
+                lock(&pe).push((name, s.kind() == SampleKind::Put, monotonic_ns()));
+            })
+            .wait()
+            .map_err(|e| format!("declaring the presence subscriber: {e}"))?;
+        // Late join, before subscribing: the session's current state first (so it is what physics
+        // adopts first, not refused as older than a live state that overtook it).
+        if let Ok(replies) = session
+            .get(keys::all_current(session_name, 0))
+            .allowed_destination(Locality::Remote)
+            .timeout(Duration::from_secs(1))
+            .wait()
+        {
+            while let Ok(reply) = replies.recv() {
+                if let Ok(s) = reply.result() {
+                    // The replying site's own key carries its name.
+                    let key = s.key_expr().as_str().to_owned();
+                    lock(&receiver).on_bytes(&key, &s.payload().to_bytes(), None, true);
+                }
+            }
+        }
         let rx = receiver.clone();
         let subscriber = session
             .declare_subscriber(keys::all_states(session_name, 0))
@@ -526,31 +571,13 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
             })
             .wait()
             .map_err(|e| format!("declaring the clock queryable: {e}"))?;
-        let _token = session
-            .liveliness()
-            .declare_token(keys::presence(session_name, &site))
-            .wait()
-            .map_err(|e| format!("declaring the liveliness token: {e}"))?;
-        let presence_events: Arc<Mutex<Vec<(String, bool)>>> = Arc::default();
-        let pe = presence_events.clone();
-        let _presence = session
-            .liveliness()
-            .declare_subscriber(keys::all_presence(session_name))
-            .history(true)
-            .callback(move |s: Sample| {
-                let name = keys::site_of(s.key_expr().as_str()).to_owned();
-                lock(&pe).push((name, s.kind() == SampleKind::Put));
-            })
-            .wait()
-            .map_err(|e| format!("declaring the presence subscriber: {e}"))?;
         let epoch_sub = session
             .declare_subscriber(keys::epoch(session_name))
             .wait()
             .map_err(|e| format!("declaring the epoch subscriber: {e}"))?;
 
-        // Late join: the session's time 0 and its current state, asked for once at start.
+        // The session's time 0, asked for once at start (and put by the launcher when decided).
         {
-            let rx = rx.clone();
             let session = &session;
             scope.spawn(move || {
                 if ctl.epoch().is_none() {
@@ -570,20 +597,6 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                                     );
                                 }
                             }
-                        }
-                    }
-                }
-                if let Ok(replies) = session
-                    .get(keys::all_current(session_name, 0))
-                    .allowed_destination(Locality::Remote)
-                    .timeout(Duration::from_secs(1))
-                    .wait()
-                {
-                    while let Ok(reply) = replies.recv() {
-                        if let Ok(s) = reply.result() {
-                            // The state key of the replying site carries its name.
-                            let key = s.key_expr().as_str().to_owned();
-                            lock(&rx).on_bytes(&key, &s.payload().to_bytes(), None, true);
                         }
                     }
                 }
@@ -638,9 +651,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                         CLOCK_EVERY
                     };
                     let until = std::time::Instant::now() + pause;
-                    while std::time::Instant::now() < until
-                        && stop.load(Ordering::Relaxed) == 0
-                    {
+                    while std::time::Instant::now() < until && stop.load(Ordering::Relaxed) == 0 {
                         std::thread::sleep(Duration::from_millis(20));
                     }
                 }
@@ -698,7 +709,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                     write_to(&mut recorder, &mut write_err, |w| w.sample(&s));
                 }
             }
-            for (name, present) in std::mem::take(&mut *lock(&presence_events)) {
+            for (name, present, at) in std::mem::take(&mut *lock(&presence_events)) {
                 let Some(j) = sites.iter().position(|s| *s == name) else {
                     continue;
                 };
@@ -715,7 +726,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                 ctl.peer_joins.store(joins, Ordering::Relaxed);
                 ctl.peer_leaves.store(leaves, Ordering::Relaxed);
                 let m = PresenceMsg {
-                    t_ns: now,
+                    t_ns: at,
                     site: name,
                     present,
                 };

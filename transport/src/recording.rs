@@ -119,6 +119,9 @@ pub struct RemoteMsg {
     pub seq: u64,
     /// Sender's time of the state, corrected to our clock, ns.
     pub sent_ns: u64,
+    /// The correction applied: the sender's clock minus ours, ns.
+    #[serde(default)]
+    pub offset_ns: i64,
     /// `t_ns − sent_ns`, s.
     pub age_s: f64,
     /// Delay the emulation added on top of the real one, s (0 without emulation).

@@ -266,6 +266,7 @@ mod tests {
         let r = sample();
         let bytes = encode(&r);
         assert_eq!(bytes.len(), ENCODED_LEN);
+        assert_eq!(ENCODED_LEN, 289, "docs/wire.md says 289 bytes");
         assert_eq!(decode(&bytes), Ok(r));
         let mut v2 = bytes.clone();
         v2[0] = 2;

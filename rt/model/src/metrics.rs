@@ -58,7 +58,7 @@ pub struct Metrics {
     pub divergence_max_m: f64,
     /// RMS inter-site divergence, m.
     pub divergence_rms_m: f64,
-    /// Largest inter-site divergence after contacts end, m.
+    /// Largest inter-site divergence after contacts end, m (NaN if they never end within the run).
     pub divergence_after_contact_m: f64,
     /// Inter-site divergence at the end of the run, m.
     pub divergence_final_m: f64,
@@ -120,10 +120,16 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
     let settle =
         (scenario.network.delay_max_ms + scenario.network.jitter_ms) / 1e3 + 2.0 * slowest_report;
     let from = last_contact.max(settled) + settle;
-    let after = (0..samples)
-        .filter(|&k| run.t[k] >= from)
-        .map(|k| divs[k])
-        .fold(0.0, f64::max);
+    // NaN when that moment never came within the run (a user still touching at the end): there is
+    // nothing to measure, and 0 would read as "together".
+    let after = if run.t.last().is_some_and(|&end| from <= end) {
+        (0..samples)
+            .filter(|&k| run.t[k] >= from)
+            .map(|k| divs[k])
+            .fold(0.0, f64::max)
+    } else {
+        f64::NAN
+    };
     let all_users_j: f64 = run.energy.iter().map(|e| e.own_j).sum();
     let sites = run
         .sites

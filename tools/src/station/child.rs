@@ -31,7 +31,7 @@ use super::segments::Names;
 const OPEN_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Dies with `parent` (SIGTERM on its death) and refuses to start if it is already gone.
-fn die_with_parent(parent: Option<u32>) -> anyhow::Result<()> {
+pub fn die_with_parent(parent: Option<u32>) -> anyhow::Result<()> {
     nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
         .context("setting the parent-death signal")?;
     if let Some(p) = parent {

@@ -7,6 +7,7 @@
 //! ([`status`]).
 
 pub mod child;
+pub mod cli;
 pub mod config;
 pub mod run;
 pub mod segments;

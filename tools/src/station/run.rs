@@ -40,6 +40,8 @@ pub struct RunOptions {
     pub config: Option<PathBuf>,
     /// Stop by itself after this long.
     pub duration: Option<Duration>,
+    /// Arguments before the subcommand when this executable re-runs itself for a child.
+    pub exe_prefix: Vec<String>,
 }
 
 /// Runs the station until a signal, the duration, or a child the policy gave up on.
@@ -93,7 +95,8 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
 }
 
 fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<ChildSpec> {
-    let mut args = vec![
+    let mut args = opts.exe_prefix.clone();
+    args.extend([
         role.to_owned(),
         "--session".into(),
         cfg.config.session.clone(),
@@ -101,7 +104,7 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<C
         cfg.name.clone(),
         "--parent".into(),
         std::process::id().to_string(),
-    ];
+    ]);
     if let Some(c) = &opts.config {
         args.push("--config".into());
         args.push(c.display().to_string());

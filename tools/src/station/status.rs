@@ -46,6 +46,19 @@ fn loop_json(s: &LoopSnapshot, rate: f64) -> serde_json::Value {
     })
 }
 
+/// The overrun counters of a running station's servo and physics loops (cheap: no snapshot).
+///
+/// # Errors
+/// No such station.
+pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
+    let names = Names::of(session, station)?;
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))?;
+    Ok([
+        ctl.servo.overruns.load(Ordering::Relaxed),
+        ctl.physics.overruns.load(Ordering::Relaxed),
+    ])
+}
+
 /// Reads the status of station `station` in `session` as JSON.
 ///
 /// # Errors

@@ -1,0 +1,167 @@
+//! `session`: a multi-site session of real stations on this machine. See `session --help`.
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+use coop_model::scenario::MethodName;
+
+/// Command line of `session`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "session",
+    version,
+    about = "Run a multi-site coop-haptics session: one real station per site of a scenario, over zenoh.",
+    long_about = "Run a multi-site coop-haptics session on this machine: one real station (servo, \
+        physics and network processes under a supervisor) per site of a scenario file, connected as \
+        zenoh peers on loopback, the scenario's network delay, jitter and loss emulated on receive. \
+        The launcher waits until every station is present, starts the users' scripts together, \
+        stops the stations cleanly, reads their MCAP recordings and prints the metrics table of \
+        `sim compare` for the real run next to the simulator's figures."
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the scenario on real stations, once per method; print the metrics table.
+    Run {
+        /// Scenario file (TOML), as for `sim`.
+        scenario: PathBuf,
+        /// Output directory: per method the station configs, logs, MCAP recordings, metrics.json
+        /// and plots.
+        #[arg(long, value_name = "DIR", default_value = "out/session")]
+        out: PathBuf,
+        /// naive, paper, or all (both, one session each).
+        #[arg(long, default_value = "all", value_parser = parse_methods)]
+        method: Methods,
+        /// Print JSON instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Session name prefix (default: s<pid>); each method's session is <prefix>-<method>.
+        #[arg(long)]
+        session: Option<String>,
+        /// Start a site late: SITE=SECONDS after the session's start (repeatable).
+        #[arg(long, value_name = "SITE=S", value_parser = parse_late)]
+        late: Vec<(String, f64)>,
+        /// Do not emulate the scenario's network delay, jitter and loss (loopback only).
+        #[arg(long)]
+        no_emulation: bool,
+        /// Seconds the stations get to be present.
+        #[arg(long, default_value_t = 30.0)]
+        start_timeout_s: f64,
+        /// A separate station binary to run (default: this executable, as `session station`).
+        #[arg(long)]
+        station_bin: Option<PathBuf>,
+    },
+    /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
+    /// the same payload (run from the repository root).
+    Bench {
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+        /// A separate station binary to run (default: this executable, as `session station`).
+        #[arg(long)]
+        station_bin: Option<PathBuf>,
+    },
+    /// The benchmark's echo process.
+    #[command(hide = true)]
+    BenchPong {
+        /// Where to listen.
+        #[arg(long)]
+        listen: String,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct Methods(Vec<MethodName>);
+
+fn parse_methods(s: &str) -> Result<Methods, String> {
+    match s {
+        "naive" => Ok(Methods(vec![MethodName::Naive])),
+        "paper" => Ok(Methods(vec![MethodName::Paper])),
+        "all" => Ok(Methods(MethodName::ALL.to_vec())),
+        _ => Err(format!("unknown method {s:?}: use naive, paper or all")),
+    }
+}
+
+fn parse_late(s: &str) -> Result<(String, f64), String> {
+    let (site, t) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?}: expected SITE=SECONDS, e.g. user2=3"))?;
+    let t: f64 = t
+        .parse()
+        .map_err(|e| format!("{s:?}: seconds {t:?}: {e}"))?;
+    Ok((site.to_owned(), t))
+}
+
+fn main() -> std::process::ExitCode {
+    // `session station ...` is the station command line: the launcher runs its stations (and they
+    // their loop processes) from this one executable.
+    let argv: Vec<String> = std::env::args().collect();
+    if argv.get(1).map(String::as_str) == Some("station") {
+        let mut rest = vec![format!("{} station", argv[0])];
+        rest.extend(argv[2..].iter().cloned());
+        return coop_tools::station::cli::main(rest, vec!["station".into()]);
+    }
+    let args = Args::parse();
+    coop_tools::run_main(|| match args.command {
+        Command::Run {
+            scenario,
+            out,
+            method,
+            json,
+            session,
+            late,
+            no_emulation,
+            start_timeout_s,
+            station_bin,
+        } => {
+            if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
+                anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
+            }
+            let station_bin = station_bin_or_default(station_bin)?;
+            let a = coop_tools::session::RunArgs {
+                scenario,
+                out,
+                methods: method.0,
+                session,
+                late,
+                emulate: !no_emulation,
+                start_timeout: std::time::Duration::from_secs_f64(start_timeout_s),
+                station_bin,
+                progress: !json,
+            };
+            let (sc, rows, v) = coop_tools::session::run(&a)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                coop_tools::sim::print_table(&sc, &rows);
+                println!(
+                    "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
+                    a.out.display()
+                );
+            }
+            Ok(())
+        }
+        Command::Bench { json, station_bin } => {
+            coop_tools::netbench::run(json, &station_bin_or_default(station_bin)?)
+        }
+        Command::BenchPong { listen } => coop_tools::netbench::pong(&listen),
+    })
+}
+
+/// The station program and the arguments before its subcommand.
+fn station_bin_or_default(b: Option<PathBuf>) -> anyhow::Result<coop_tools::session::StationBin> {
+    Ok(match b {
+        Some(program) => coop_tools::session::StationBin {
+            program,
+            prefix: vec![],
+        },
+        None => coop_tools::session::StationBin {
+            program: std::env::current_exe()?,
+            prefix: vec!["station".into()],
+        },
+    })
+}

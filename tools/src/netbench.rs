@@ -1,0 +1,337 @@
+//! `session bench`: how long a state takes from one station's physics to another's, next to a bare
+//! zenoh ping-pong of the same payload between two processes, in the same run.
+//!
+//! - **Stations**: a two-station session of `scenarios/zero-delay.toml` (14 s, 1 kHz reports, no
+//!   emulation). Each state handed to physics is recorded with the sender's time; the latency is
+//!   receive time minus send time on the one CLOCK_MONOTONIC of this machine (the clock-offset
+//!   correction is taken back out). The path: physics A → ring → network A (polls every
+//!   [`coop_transport::network::POLL`]) → zenoh → network B → ring into physics B.
+//! - **Bare zenoh**: this process publishes the same 289-byte payload (express, real-time
+//!   priority, drop on congestion), a child process (`session bench-pong`) echoes it; one way =
+//!   round trip / 2. Paced at 1 kHz like the states.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use coop_model::scenario::MethodName;
+use coop_transport::network::{self, Endpoints};
+use coop_transport::recording;
+use hdrhistogram::Histogram;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::Wait;
+
+/// Figures of one path, µs.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct Figures {
+    /// Median.
+    pub p50_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// Largest.
+    pub max_us: f64,
+    /// Samples.
+    pub samples: u64,
+}
+
+fn figures(h: &Histogram<u64>) -> Figures {
+    let us = |ns: u64| ns as f64 / 1e3;
+    Figures {
+        p50_us: us(h.value_at_quantile(0.5)),
+        p99_us: us(h.value_at_quantile(0.99)),
+        max_us: us(h.max()),
+        samples: h.len(),
+    }
+}
+
+fn histogram() -> Histogram<u64> {
+    Histogram::new_with_bounds(1, 60_000_000_000, 3).expect("valid bounds")
+}
+
+/// The station path: a two-station session, latencies from the receivers' recordings.
+fn stations(
+    root: &Path,
+    station_bin: &crate::session::StationBin,
+) -> anyhow::Result<Histogram<u64>> {
+    let scenario = root.join("scenarios/zero-delay.toml");
+    let sc = crate::scenario_file::load(&scenario)?;
+    let dir = std::env::temp_dir().join(format!("coop-netbench-{}", std::process::id()));
+    let a = crate::session::RunArgs {
+        scenario,
+        out: dir.clone(),
+        methods: vec![MethodName::Paper],
+        session: None,
+        late: vec![],
+        emulate: false,
+        start_timeout: Duration::from_secs(30),
+        station_bin: station_bin.clone(),
+        progress: false,
+    };
+    crate::session::run_method(
+        &a,
+        &sc,
+        MethodName::Paper,
+        &format!("nb{}", std::process::id()),
+    )?;
+    let mut h = histogram();
+    for s in &sc.site {
+        let rec = recording::read(&dir.join("paper").join(format!("{}.mcap", s.name)))?;
+        // Same machine, one clock: take the clock-offset correction back out.
+        for m in rec.remote.iter().filter(|m| m.via == "live") {
+            let sent = i128::from(m.sent_ns) + i128::from(m.offset_ns);
+            let lat = i128::from(m.t_ns) - sent;
+            h.saturating_record(u64::try_from(lat).unwrap_or(0));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(h)
+}
+
+/// The child: echoes every ping as a pong until stdin closes.
+///
+/// # Errors
+/// Zenoh cannot be set up.
+pub fn pong(listen: &str) -> anyhow::Result<()> {
+    let ep = Endpoints {
+        listen: vec![listen.to_owned()],
+        connect: vec![],
+        mode: "peer".into(),
+    };
+    let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let publisher = z
+        .declare_publisher("coop/bench/pong")
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let sub = z
+        .declare_subscriber("coop/bench/ping")
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    println!("ready");
+    std::thread::spawn(|| {
+        let mut s = String::new();
+        let _ = std::io::stdin().read_line(&mut s);
+        std::process::exit(0);
+    });
+    while let Ok(s) = sub.recv() {
+        let _ = publisher.put(s.payload().clone()).wait();
+    }
+    Ok(())
+}
+
+/// Bare zenoh: one-way = ping-pong round trip / 2, between this process and a child.
+fn bare_zenoh(samples: u64) -> anyhow::Result<Histogram<u64>> {
+    let listen = network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0);
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(["bench-pong", "--listen", &listen])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .context("starting the pong process")?;
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().context("pong stdout")?),
+        &mut line,
+    )?;
+    if line.trim() != "ready" {
+        let _ = child.kill();
+        bail!("the pong process did not start: {line:?}");
+    }
+    let ep = Endpoints {
+        listen: vec![],
+        connect: vec![listen],
+        mode: "peer".into(),
+    };
+    let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let publisher = z
+        .declare_publisher("coop/bench/ping")
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let sub = z
+        .declare_subscriber("coop/bench/pong")
+        .wait()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let payload = coop_transport::wire::encode(&coop_rt::msg::SiteReport {
+        kind: 1,
+        rot: [1.0, 0.0, 0.0, 0.0],
+        ..Default::default()
+    });
+    let mut h = histogram();
+    let start = Instant::now();
+    let mut k = 0u64;
+    // Warm up (routes, connections), then measure.
+    while h.len() < samples && start.elapsed() < Duration::from_secs(120) {
+        let t0 = Instant::now();
+        publisher
+            .put(payload.clone())
+            .wait()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        if let Ok(Some(_)) = sub.recv_timeout(Duration::from_millis(100)) {
+            k += 1;
+            if k > 200 {
+                h.saturating_record(t0.elapsed().as_nanos() as u64 / 2);
+            }
+        }
+        let next = t0 + Duration::from_millis(1);
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    drop(child.stdin.take());
+    let _ = child.wait();
+    let _ = z.close().wait();
+    Ok(h)
+}
+
+/// Four stations at 1 kHz: each servo's overruns during the session, next to the standalone
+/// `latency` tool's over the same time at the same settings (FIFO 80 on the servo's CPU, 1 kHz).
+fn four_stations(
+    root: &Path,
+    station_bin: &crate::session::StationBin,
+) -> anyhow::Result<serde_json::Value> {
+    let scenario = root.join("scenarios/four-users.toml");
+    let sc = crate::scenario_file::load(&scenario)?;
+    let dir = std::env::temp_dir().join(format!("coop-netbench4-{}", std::process::id()));
+    let a = crate::session::RunArgs {
+        scenario,
+        out: dir.clone(),
+        methods: vec![MethodName::Paper],
+        session: None,
+        late: vec![],
+        emulate: true,
+        start_timeout: Duration::from_secs(30),
+        station_bin: station_bin.clone(),
+        progress: false,
+    };
+    let o = crate::session::run_method(
+        &a,
+        &sc,
+        MethodName::Paper,
+        &format!("nf{}", std::process::id()),
+    )?;
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut rows = Vec::new();
+    for s in &sc.site {
+        let st = &o.stations[&s.name]["live"];
+        rows.push(serde_json::json!({
+            "site": s.name,
+            "servo_hz": s.servo_rate_hz,
+            "servo_overruns": st["overruns_during_session"]["servo"],
+            "physics_overruns": st["overruns_during_session"]["physics"],
+            "servo_wake_p999_us": st["loops"]["servo"]["wake_us"]["p999"],
+            "servo_wake_max_us": st["loops"]["servo"]["wake_us"]["max"],
+        }));
+    }
+    let cpu = coop_rt::sched::allowed_cpus().last().copied().unwrap_or(0);
+    let la = <crate::latency::Args as clap::Parser>::try_parse_from([
+        "latency".to_owned(),
+        "-D".into(),
+        format!("{}s", sc.duration_s),
+        "-a".into(),
+        cpu.to_string(),
+        "-m".into(),
+        "-q".into(),
+    ])?;
+    let r = crate::latency::run(&la, "latency (session bench baseline)".into(), false)?;
+    let t = r.threads.first().context("no latency thread")?;
+    Ok(serde_json::json!({
+        "duration_s": sc.duration_s,
+        "stations": rows,
+        "standalone_latency": {
+            "overruns": t.overruns,
+            "cycles": t.cycles,
+            "wake_p999_us": t.hist.value_at_quantile(0.999) as f64 / 1e3,
+            "wake_max_us": t.hist.max() as f64 / 1e3,
+        },
+    }))
+}
+
+/// Runs the benchmark and prints the table (or JSON).
+///
+/// # Errors
+/// A session or zenoh failure.
+pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Result<()> {
+    let root: PathBuf = std::env::current_dir()?;
+    if !root.join("scenarios/zero-delay.toml").exists() {
+        bail!("run from the repository root (scenarios/zero-delay.toml not found)");
+    }
+    let st = figures(&stations(&root, station_bin)?);
+    let bare = figures(&bare_zenoh(st.samples.clamp(1000, 20_000))?);
+    let ratio = |a: f64, b: f64| a / b.max(1e-9);
+    let (r50, r99) = (ratio(st.p50_us, bare.p50_us), ratio(st.p99_us, bare.p99_us));
+    let four = four_stations(&root, station_bin)?;
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "stations": st, "bare_zenoh": bare, "ratio_p50": r50, "ratio_p99": r99,
+                "four_stations": four,
+            }))?
+        );
+        return Ok(());
+    }
+    println!("# state latency on loopback: a two-station session of scenarios/zero-delay.toml (14 s, 1 kHz reports) vs bare zenoh ping-pong (289 B, two processes)");
+    println!(
+        "{:<44}{:>10}{:>10}{:>10}{:>10}",
+        "path", "p50 us", "p99 us", "max us", "samples"
+    );
+    for (name, f) in [
+        ("station physics A -> ring into physics B", st),
+        ("bare zenoh one way (round trip / 2)", bare),
+    ] {
+        println!(
+            "{:<44}{:>10.1}{:>10.1}{:>10.1}{:>10}",
+            name, f.p50_us, f.p99_us, f.max_us, f.samples
+        );
+    }
+    println!("{:<44}{:>10.2}{:>10.2}", "ratio stations / bare", r50, r99);
+    println!(
+        "# goal: <= 1.5x bare zenoh at p50 and p99: {}",
+        if r50 <= 1.5 && r99 <= 1.5 {
+            "met"
+        } else {
+            "NOT met"
+        }
+    );
+    println!(
+        "\n# four stations (scenarios/four-users.toml, {} s, emulated network) vs the standalone latency tool on the servo CPU, same duration, after it",
+        four["duration_s"]
+    );
+    println!(
+        "{:<22}{:>10}{:>16}{:>18}{:>14}{:>14}",
+        "loop", "rate Hz", "servo overruns", "physics overruns", "wake p99.9 us", "wake max us"
+    );
+    for r in four["stations"].as_array().into_iter().flatten() {
+        println!(
+            "{:<22}{:>10}{:>16}{:>18}{:>14}{:>14.0}",
+            format!("station {}", r["site"].as_str().unwrap_or("?")),
+            r["servo_hz"],
+            r["servo_overruns"],
+            r["physics_overruns"],
+            r["servo_wake_p999_us"],
+            r["servo_wake_max_us"].as_f64().unwrap_or(0.0)
+        );
+    }
+    let s = &four["standalone_latency"];
+    println!(
+        "{:<22}{:>10}{:>16}{:>18}{:>14.0}{:>14.0}",
+        "standalone latency",
+        1000,
+        s["overruns"],
+        "-",
+        s["wake_p999_us"].as_f64().unwrap_or(0.0),
+        s["wake_max_us"].as_f64().unwrap_or(0.0)
+    );
+    println!(
+        "# goal: no servo overruns at 1 kHz; the standalone row is what this machine does alone"
+    );
+    Ok(())
+}

@@ -1,0 +1,586 @@
+//! `session`: the product's main job — a multi-site session of real stations on this machine.
+//!
+//! `session run SCENARIO` starts one `station run` per site of the scenario (each a supervisor with
+//! its servo, physics and network processes), connected as zenoh peers on loopback with the
+//! scenario's network emulated on receive. It waits until every station is present (liveliness),
+//! announces the session's time 0, runs the users' scripts, stops the stations cleanly, reads their
+//! MCAP recordings, and prints the metrics table of `sim compare` for the real run next to the
+//! simulator's figures for the same scenario, with the Fig. 9–12 plots per method.
+//!
+//! Stations die with the launcher (parent-death signal, then their own stop ladder), so an
+//! interrupted session leaves nothing behind.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use coop_model::body::Vec3;
+use coop_model::method::EnergyAccount;
+use coop_model::metrics::{self, Metrics};
+use coop_model::scenario::{MethodName, Scenario};
+use coop_model::sim::{AdoptionEvent, Mode, RunResult, SiteTrace};
+use coop_transport::recording::{self, Recording};
+use coop_transport::{keys, network, wire};
+use zenoh::Wait;
+
+use crate::scenario_file;
+
+/// What `session run` was asked.
+#[derive(Debug, Clone)]
+pub struct RunArgs {
+    /// Scenario file.
+    pub scenario: PathBuf,
+    /// Output directory (per method: station configs, logs, recordings, metrics, plots).
+    pub out: PathBuf,
+    /// Methods to run, one session each.
+    pub methods: Vec<MethodName>,
+    /// Session name prefix (default: unique per launcher).
+    pub session: Option<String>,
+    /// Sites that join late: (site, seconds after the session's start).
+    pub late: Vec<(String, f64)>,
+    /// Emulate the scenario's network on receive (default on).
+    pub emulate: bool,
+    /// How long stations get to be present.
+    pub start_timeout: Duration,
+    /// The station program.
+    pub station_bin: StationBin,
+    /// Show progress on a terminal.
+    pub progress: bool,
+}
+
+/// How to run a station: a program and the arguments before its subcommand (`session station run`
+/// when the launcher runs its own executable, `station run` for a separate binary).
+#[derive(Debug, Clone)]
+pub struct StationBin {
+    /// The executable.
+    pub program: PathBuf,
+    /// Arguments before `run`.
+    pub prefix: Vec<String>,
+}
+
+/// One station of a running session.
+#[derive(Debug)]
+struct Station {
+    site: String,
+    child: Option<Child>,
+    log: PathBuf,
+    record: PathBuf,
+    config: PathBuf,
+}
+
+impl Station {
+    fn log_tail(&self) -> String {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(8)..].join("\n")
+    }
+}
+
+impl Drop for Station {
+    fn drop(&mut self) {
+        // Whatever happened, no station outlives its session.
+        if let Some(c) = &mut self.child {
+            if matches!(c.try_wait(), Ok(None)) {
+                let pid = nix::unistd::Pid::from_raw(c.id() as i32);
+                let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+                let deadline = Instant::now() + Duration::from_secs(6);
+                while Instant::now() < deadline && matches!(c.try_wait(), Ok(None)) {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+}
+
+/// The outcome of one method's session.
+#[derive(Debug)]
+pub struct MethodOutcome {
+    /// The simulator's reference run's figures.
+    pub reference: Metrics,
+    /// The simulator's figures for this method.
+    pub simulated: Metrics,
+    /// The stations' figures.
+    pub real: Metrics,
+    /// Per station: its final network counters and loop statistics.
+    pub stations: serde_json::Value,
+}
+
+/// The station configuration `session run` writes for one site.
+struct StationToml<'a> {
+    scenario: &'a Path,
+    session: &'a str,
+    site: &'a str,
+    method: MethodName,
+    listen: &'a str,
+    connect: &'a [String],
+    record: &'a Path,
+    emulate: bool,
+}
+
+impl StationToml<'_> {
+    fn text(&self) -> String {
+        let connect: Vec<String> = self.connect.iter().map(|s| format!("{s:?}")).collect();
+        format!(
+            "# Written by `session run` for site {site}.\nsession = {session:?}\nstation = {site:?}\nscenario = {scenario:?}\nmethod = {method:?}\nstart = \"session\"\nrecord = {record:?}\n\n[network]\nlisten = [{listen:?}]\nconnect = [{connect}]\nemulate = {emulate}\n",
+            site = self.site,
+            session = self.session,
+            scenario = self.scenario.display().to_string(),
+            method = self.method.as_str(),
+            record = self.record.display().to_string(),
+            listen = self.listen,
+            connect = connect.join(", "),
+            emulate = self.emulate,
+        )
+    }
+}
+
+fn spawn(bin: &StationBin, st: &Station) -> anyhow::Result<Child> {
+    let log =
+        std::fs::File::create(&st.log).with_context(|| format!("creating {}", st.log.display()))?;
+    Command::new(&bin.program)
+        .args(&bin.prefix)
+        .args(["run", "--config"])
+        .arg(&st.config)
+        .arg("--parent")
+        .arg(std::process::id().to_string())
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .spawn()
+        .with_context(|| format!("starting {} for site {}", bin.program.display(), st.site))
+}
+
+/// Runs one session of `method` and gathers its figures.
+///
+/// # Errors
+/// A station that does not start, is not present in time, or fails; recordings that cannot be read.
+pub fn run_method(
+    a: &RunArgs,
+    sc: &Scenario,
+    method: MethodName,
+    session: &str,
+) -> anyhow::Result<MethodOutcome> {
+    let mut sc = sc.clone();
+    sc.method = method;
+    let dir = a.out.join(method.as_str());
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let sc_path = std::fs::canonicalize(&a.scenario)
+        .with_context(|| format!("finding {}", a.scenario.display()))?;
+    let n = sc.site.len();
+    let ports: Vec<String> = (0..=n)
+        .map(|_| network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0))
+        .collect();
+    let mut stations: Vec<Station> = Vec::new();
+    for (i, s) in sc.site.iter().enumerate() {
+        let others: Vec<String> = (0..=n)
+            .filter(|&j| j != i)
+            .map(|j| ports[j].clone())
+            .collect();
+        let record = dir.join(format!("{}.mcap", s.name));
+        let _ = std::fs::remove_file(&record);
+        let config = dir.join(format!("{}.toml", s.name));
+        std::fs::write(
+            &config,
+            StationToml {
+                scenario: &sc_path,
+                session,
+                site: &s.name,
+                method,
+                listen: &ports[i],
+                connect: &others,
+                record: &record,
+                emulate: a.emulate,
+            }
+            .text(),
+        )
+        .with_context(|| format!("writing {}", config.display()))?;
+        stations.push(Station {
+            site: s.name.clone(),
+            child: None,
+            log: dir.join(format!("{}.log", s.name)),
+            record,
+            config,
+        });
+    }
+    let late: BTreeMap<&str, f64> = a.late.iter().map(|(s, t)| (s.as_str(), *t)).collect();
+
+    // The launcher is a zenoh peer too: it watches presence and announces the session's time 0.
+    let endpoints = network::Endpoints {
+        listen: vec![ports[n].clone()],
+        connect: ports[..n].to_vec(),
+        mode: "peer".into(),
+    };
+    let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("opening the launcher's zenoh session: {e}"))?;
+    let present: Arc<Mutex<BTreeSet<String>>> = Arc::default();
+    let p = present.clone();
+    let _presence = z
+        .liveliness()
+        .declare_subscriber(keys::all_presence(session))
+        .history(true)
+        .callback(move |s| {
+            let site = keys::site_of(s.key_expr().as_str()).to_owned();
+            let mut set = p.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if s.kind() == zenoh::sample::SampleKind::Put {
+                set.insert(site);
+            } else {
+                set.remove(&site);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
+    let epoch: Arc<Mutex<Option<u64>>> = Arc::default();
+    let e = epoch.clone();
+    let _epoch_q = z
+        .declare_queryable(keys::epoch(session))
+        .callback(move |q| {
+            let v = *e.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            if let Some(v) = v {
+                let _ = q
+                    .reply(q.key_expr().clone(), wire::encode_u64(v).to_vec())
+                    .wait();
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("declaring the epoch queryable: {e}"))?;
+
+    for st in stations
+        .iter_mut()
+        .filter(|s| !late.contains_key(s.site.as_str()))
+    {
+        st.child = Some(spawn(&a.station_bin, st)?);
+    }
+    let check_alive = |stations: &mut [Station]| -> anyhow::Result<()> {
+        for st in stations.iter_mut() {
+            if let Some(c) = &mut st.child {
+                if let Ok(Some(status)) = c.try_wait() {
+                    st.child = None;
+                    bail!(
+                        "station {} exited early ({status}); its log ({}):\n{}",
+                        st.site,
+                        st.log.display(),
+                        st.log_tail()
+                    );
+                }
+            }
+        }
+        Ok(())
+    };
+    let waited = Instant::now();
+    loop {
+        check_alive(&mut stations)?;
+        let have = present
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        let missing: Vec<&str> = stations
+            .iter()
+            .filter(|s| s.child.is_some() && !have.contains(&s.site))
+            .map(|s| s.site.as_str())
+            .collect();
+        if missing.is_empty() {
+            break;
+        }
+        if waited.elapsed() > a.start_timeout {
+            bail!(
+                "stations not present after {:?}: {} (logs in {})",
+                a.start_timeout,
+                missing.join(", "),
+                dir.display()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Time 0 a little ahead, so every station has it before it matters.
+    let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
+    *epoch
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(t0);
+    z.put(keys::epoch(session), wire::encode_u64(t0).to_vec())
+        .wait()
+        .map_err(|e| anyhow::anyhow!("announcing the session start: {e}"))?;
+
+    // Overruns from here on are the session's (startup, with every station's processes and zenoh
+    // coming up on two cores, is reported apart).
+    let overruns_at_start: BTreeMap<String, [u64; 2]> = stations
+        .iter()
+        .filter_map(|s| {
+            Some((
+                s.site.clone(),
+                crate::station::status::overruns(session, &s.site).ok()?,
+            ))
+        })
+        .collect();
+    let bar = (a.progress && std::io::IsTerminal::is_terminal(&std::io::stderr())).then(|| {
+        let b = indicatif::ProgressBar::new((sc.duration_s * 10.0) as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{msg:>14} [{bar:40}] {pos}/{len} ds")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_message(format!("session {}", method.as_str()));
+        b
+    });
+    if bar.is_none() && a.progress {
+        eprintln!(
+            "session {session}: {} stations running {} for {} s",
+            n,
+            method.as_str(),
+            sc.duration_s
+        );
+    }
+    let end = t0 + (sc.duration_s * 1e9) as u64 + 200_000_000;
+    let mut statuses = serde_json::Map::new();
+    loop {
+        let now = coop_rt::timer::monotonic_ns();
+        let t = now.saturating_sub(t0) as f64 * 1e-9;
+        for st in stations.iter_mut().filter(|s| s.child.is_none()) {
+            if late.get(st.site.as_str()).is_some_and(|&l| t >= l) && !st.record.exists() {
+                st.child = Some(spawn(&a.station_bin, st)?);
+            }
+        }
+        check_alive(&mut stations)?;
+        if let Some(b) = &bar {
+            b.set_position((t * 10.0) as u64);
+        }
+        if now >= end {
+            break;
+        }
+        // Just before the end: each station's live statistics (loops, network) for the report.
+        if now + 300_000_000 >= end && statuses.is_empty() {
+            let sites: Vec<String> = sc.site.iter().map(|s| s.name.clone()).collect();
+            for st in &stations {
+                let at_end = crate::station::status::overruns(session, &st.site).ok();
+                if let Ok(mut v) = crate::station::status::read(session, &st.site, &sites) {
+                    // A late joiner's whole run is in the session.
+                    let start = overruns_at_start.get(&st.site).copied().unwrap_or([0, 0]);
+                    if let Some(e) = at_end {
+                        v["overruns_during_session"] = serde_json::json!({
+                            "servo": e[0].saturating_sub(start[0]),
+                            "physics": e[1].saturating_sub(start[1]),
+                        });
+                    }
+                    statuses.insert(st.site.clone(), v);
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    // Stop: SIGTERM each station (its stop ladder ramps the force to zero, then unlinks), wait.
+    for st in &stations {
+        if let Some(c) = &st.child {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(c.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+    }
+    for st in &mut stations {
+        if let Some(mut c) = st.child.take() {
+            let deadline = Instant::now() + Duration::from_secs(10);
+            let status = loop {
+                if let Some(s) = c.try_wait()? {
+                    break Some(s);
+                }
+                if Instant::now() > deadline {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                    break None;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            };
+            match status {
+                Some(s) if s.success() => {}
+                other => bail!(
+                    "station {} did not stop cleanly ({other:?}); its log:\n{}",
+                    st.site,
+                    st.log_tail()
+                ),
+            }
+        }
+    }
+    let _ = z.close().wait();
+
+    let recordings: Vec<Recording> = stations
+        .iter()
+        .map(|s| recording::read(&s.record).with_context(|| format!("station {}", s.site)))
+        .collect::<anyhow::Result<_>>()?;
+    let real_run = run_from_recordings(&sc, &recordings, t0)?;
+    let reference_run = crate::sim::run_mode(&sc, Mode::Reference);
+    let sim_run = crate::sim::run_mode(&sc, Mode::Distributed(method));
+    let reference = metrics::compute(&sc, &reference_run, &reference_run);
+    let mut simulated = metrics::compute(&sc, &sim_run, &reference_run);
+    simulated.method = format!("{}-sim", method.as_str());
+    let mut real = metrics::compute(&sc, &real_run, &reference_run);
+    real.method = format!("{}-real", method.as_str());
+    for s in &mut real.sites {
+        // Not measured on real stations (the servo's adoption step and the energy account live in
+        // the simulator only).
+        s.max_adoption_force_step_n = f64::NAN;
+        s.energy_from_others_j = f64::NAN;
+        s.others_work_j = f64::NAN;
+    }
+    crate::plots::figures(&dir, &sc, &real_run, &reference_run)?;
+    std::fs::write(
+        dir.join("metrics.json"),
+        serde_json::to_string_pretty(&serde_json::json!({ "real": real, "simulated": simulated }))?
+            + "\n",
+    )?;
+    let mut per_station = serde_json::Map::new();
+    for (st, rec) in stations.iter().zip(&recordings) {
+        per_station.insert(
+            st.site.clone(),
+            serde_json::json!({
+                "recording": st.record.display().to_string(),
+                "final": rec.status,
+                "live": statuses.get(&st.site),
+                // When its network joined the session (its own presence seen).
+                "joined_s": rec.presence.iter().find(|p| p.site == st.site && p.present).map(|p| (p.t_ns as f64 - t0 as f64) * 1e-9),
+                "first_sample_s": rec.samples.first().map(|s| (s.t_ns as f64 - t0 as f64) * 1e-9),
+                "last_sample_s": rec.samples.last().map(|s| (s.t_ns as f64 - t0 as f64) * 1e-9),
+                "final_object_m": rec.samples.last().map(|s| s.pos),
+                "first_adoption_jump_m": rec.adoptions.first().map(|a| a.jump_m),
+                "truncated": rec.truncated,
+                "first_adoption_s": rec.adoptions.first().map(|a| (a.t_ns as f64 - t0 as f64) * 1e-9),
+                "join_states": rec.status.map(|s| s.join_states),
+            }),
+        );
+    }
+    Ok(MethodOutcome {
+        reference,
+        simulated,
+        real,
+        stations: serde_json::Value::Object(per_station),
+    })
+}
+
+/// Turns the stations' recordings into the simulator's run layout: every site's trace on the
+/// scenario's sample grid from the session's time 0 (each value the newest recorded at or before
+/// the grid time), adoptions, and message counts.
+///
+/// # Errors
+/// A recording without samples.
+pub fn run_from_recordings(
+    sc: &Scenario,
+    recs: &[Recording],
+    epoch_ns: u64,
+) -> anyhow::Result<RunResult> {
+    let rate = sc.sample_rate_hz;
+    let samples = (sc.duration_s * rate).round() as usize + 1;
+    let t: Vec<f64> = (0..samples).map(|k| k as f64 / rate).collect();
+    let mut sites = Vec::new();
+    let mut adoptions = Vec::new();
+    let mut messages = (0u64, 0u64, 0u64);
+    for (i, r) in recs.iter().enumerate() {
+        if r.samples.is_empty() {
+            bail!("the recording of site {} has no samples", sc.site[i].name);
+        }
+        let mut tr = SiteTrace::default();
+        let mut k = 0usize;
+        for &tk in &t {
+            let at = epoch_ns as f64 + tk * 1e9;
+            while k + 1 < r.samples.len() && (r.samples[k + 1].t_ns as f64) <= at {
+                k += 1;
+            }
+            let s = &r.samples[k];
+            tr.obj_pos.push(Vec3::from(s.pos));
+            tr.obj_vel.push(Vec3::from(s.vel));
+            tr.obj_rot.push(s.rot);
+            tr.tool_pos.push(Vec3::from(s.tool_pos));
+            tr.f_desired.push(Vec3::from(s.f_desired));
+            tr.f_measured.push(Vec3::from(s.f_measured));
+            tr.f_on_object.push(Vec3::from(s.f_object));
+            tr.touching.push(s.touching);
+        }
+        sites.push(tr);
+        for a in &r.adoptions {
+            adoptions.push(AdoptionEvent {
+                t_s: (a.t_ns as f64 - epoch_ns as f64) * 1e-9,
+                site: i,
+                from: a.from,
+                jump_m: a.jump_m,
+                age_s: a.age_s,
+                force_step_n: 0.0,
+            });
+        }
+        if let Some(s) = r.status {
+            messages.0 += s.published * (recs.len() as u64).saturating_sub(1);
+            messages.1 += s.received;
+            messages.2 += s.emulated_lost;
+        }
+    }
+    adoptions.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    Ok(RunResult {
+        mode: Mode::Distributed(sc.method),
+        t,
+        sites,
+        adoptions,
+        energy: vec![EnergyAccount::default(); recs.len()],
+        mech_energy: vec![(0.0, 0.0); recs.len()],
+        messages,
+    })
+}
+
+/// Runs every requested method: the scenario, the table's rows (reference, then per method the
+/// simulator's and the stations' figures), and everything as JSON.
+///
+/// # Errors
+/// As [`run_method`]; a bad scenario file.
+pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::Value)> {
+    let sc = scenario_file::load(&a.scenario)?;
+    for (site, t) in &a.late {
+        if !sc.site.iter().any(|s| &s.name == site) {
+            bail!(
+                "--late {site}={t}: no site {site:?} in scenario {:?}",
+                sc.name
+            );
+        }
+        if !(t.is_finite() && *t >= 0.0 && *t < sc.duration_s) {
+            bail!(
+                "--late {site}={t}: must be from 0 to the scenario's duration ({} s)",
+                sc.duration_s
+            );
+        }
+    }
+    if !a.station_bin.program.exists() {
+        bail!(
+            "station binary {} not found (build it: cargo build --release -p coop-tools)",
+            a.station_bin.program.display()
+        );
+    }
+    let base = a
+        .session
+        .clone()
+        .unwrap_or_else(|| format!("s{}", std::process::id()));
+    let mut rows = Vec::new();
+    let mut json = serde_json::Map::new();
+    for &m in &a.methods {
+        let session = format!("{base}-{}", m.as_str());
+        let o = run_method(a, &sc, m, &session)
+            .with_context(|| format!("session {session} ({})", m.as_str()))?;
+        if rows.is_empty() {
+            rows.push(o.reference.clone());
+        }
+        rows.push(o.simulated.clone());
+        rows.push(o.real.clone());
+        json.insert(
+            m.as_str().to_owned(),
+            serde_json::json!({ "simulated": o.simulated, "real": o.real, "stations": o.stations }),
+        );
+    }
+    let v = serde_json::json!({
+        "scenario": sc.name,
+        "out": a.out.display().to_string(),
+        "reference": rows.first(),
+        "methods": json,
+    });
+    Ok((sc, rows, v))
+}

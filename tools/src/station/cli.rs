@@ -1,0 +1,171 @@
+//! The `station` command line: `station run|status|clean`, and the hidden loop processes the
+//! supervisor spawns (`station servo|physics|network`). The `station` binary is this; the `session`
+//! binary carries it too (`session station ...`), so one executable can run a whole session.
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+use super::{child, config::StationConfig};
+
+/// Command line of `station`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "station",
+    version,
+    about = "One site of a coop-haptics session: servo, physics and network processes over shared memory."
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the station: servo, physics and network processes under a supervisor, until Ctrl-C/SIGTERM.
+    Run {
+        #[command(flatten)]
+        child: ChildArgs,
+        /// Stop by itself after this many seconds.
+        #[arg(long, value_name = "S")]
+        duration_s: Option<f64>,
+    },
+    /// Show what a running station is doing (children, loop rates and latency, rings, network).
+    Status {
+        /// Station (site) name; default: the configuration's.
+        #[arg(long)]
+        station: Option<String>,
+        /// Session name; default: the configuration's.
+        #[arg(long)]
+        session: Option<String>,
+        /// Station configuration to take the defaults from.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Remove the shared-memory segments of stations whose creator is gone (live ones stay).
+    Clean {
+        /// Only this session's segments.
+        #[arg(long)]
+        session: Option<String>,
+        /// Only this station's (needs --session).
+        #[arg(long, requires = "session")]
+        station: Option<String>,
+    },
+    /// The servo loop process (started by the supervisor).
+    #[command(hide = true)]
+    Servo(ChildArgs),
+    /// The physics loop process (started by the supervisor).
+    #[command(hide = true)]
+    Physics(ChildArgs),
+    /// The network process (started by the supervisor).
+    #[command(hide = true)]
+    Network(ChildArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ChildArgs {
+    /// Station configuration (TOML); defaults when absent.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Station (site) name, overriding the configuration's.
+    #[arg(long)]
+    station: Option<String>,
+    /// Session name, overriding the configuration's.
+    #[arg(long)]
+    session: Option<String>,
+    /// The supervisor's pid: refuse to start if it is already gone (set by the supervisor).
+    #[arg(long, hide = true)]
+    parent: Option<u32>,
+}
+
+fn resolve(a: &ChildArgs) -> anyhow::Result<super::config::Resolved> {
+    let mut r = StationConfig::load(a.config.as_deref())?;
+    if a.station.is_some() || a.session.is_some() {
+        let mut c = r.config.clone();
+        if let Some(s) = &a.station {
+            c.station = Some(s.clone());
+        }
+        if let Some(s) = &a.session {
+            c.session = s.clone();
+        }
+        r = c.resolve(a.config.as_deref().and_then(std::path::Path::parent))?;
+    }
+    Ok(r)
+}
+
+/// Runs the station command line `args` (the first is the program name). `exe_prefix` are the
+/// arguments that come before the subcommand when this executable re-runs itself (empty for the
+/// `station` binary, `["station"]` inside `session`).
+pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCode {
+    let args = match Args::try_parse_from(args) {
+        Ok(a) => a,
+        Err(e) => e.exit(),
+    };
+    crate::run_main(|| match args.command {
+        Command::Status {
+            station,
+            session,
+            config,
+            json,
+        } => {
+            let r = StationConfig::load(config.as_deref())?;
+            let session = session.unwrap_or(r.config.session);
+            let station = station.unwrap_or(r.name);
+            let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
+            let v = super::status::read(&session, &station, &sites)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                super::status::print(&v);
+            }
+            Ok(())
+        }
+        Command::Clean { session, station } => {
+            let prefix = match (&session, &station) {
+                (Some(s), Some(t)) => coop_rt::shm::SegmentName::station_prefix(s, t)?,
+                (Some(s), None) => format!("{}{s}_", coop_rt::shm::PREFIX),
+                _ => coop_rt::shm::PREFIX.to_owned(),
+            };
+            let removed = coop_rt::shm::remove_stale(&prefix)?;
+            for r in &removed {
+                println!("removed {} ({})", r.name, r.status);
+            }
+            let left = coop_rt::shm::list(&prefix)?;
+            for l in &left {
+                println!("kept {} ({})", l.name, l.status);
+            }
+            println!(
+                "# {} stale segment(s) removed, {} kept",
+                removed.len(),
+                left.len()
+            );
+            Ok(())
+        }
+        Command::Run {
+            child: a,
+            duration_s,
+        } => {
+            let duration = match duration_s {
+                Some(d) if d > 0.0 && d.is_finite() => Some(std::time::Duration::from_secs_f64(d)),
+                Some(d) => anyhow::bail!("--duration-s {d}: must be a positive number of seconds"),
+                None => None,
+            };
+            if a.parent.is_some() {
+                // Started by a launcher (`session`): stop (SIGTERM: the stop ladder) when it dies.
+                child::die_with_parent(a.parent)?;
+            }
+            let opts = super::run::RunOptions {
+                config: a.config.clone(),
+                duration,
+                exe_prefix,
+            };
+            super::run::run(&resolve(&a)?, &opts)
+        }
+        Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
+        Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),
+        Command::Network(a) => child::run_network(&resolve(&a)?, a.parent),
+    })
+}

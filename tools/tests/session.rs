@@ -1,0 +1,373 @@
+//! Multi-site sessions on real stations (`session run`): the paper's experiment, four stations at
+//! 1 kHz, a late joiner, hostile messages, and the recordings read by a foreign MCAP reader.
+//!
+//! Every session is real processes (a supervisor with servo, physics and network per site) talking
+//! zenoh on loopback. Sessions in this file take turns (one lock): each runs its scenario in real
+//! time, and the machine has two cores.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use coop_rt::sync::{AtomicU64, Ordering};
+use serde_json::Value;
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn out_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coop-session-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn session(args: &[&str], out: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_session"));
+    c.current_dir(root())
+        .arg("run")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .arg("--json");
+    c
+}
+
+fn run_json(mut c: Command) -> Value {
+    let out = c.output().expect("session runs");
+    assert!(
+        out.status.success(),
+        "session failed: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "session printed no JSON ({e}):\n{}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    })
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+/// Topics of an MCAP file as the `mcap` Python package (not our code) reads them, or `None` when
+/// that package is not installed (CI installs it; see .ci/run).
+fn foreign_topics(path: &Path) -> Option<Vec<(String, u64)>> {
+    let script = "import sys\nfrom mcap.reader import make_reader\nr = make_reader(open(sys.argv[1], 'rb'))\ns = r.get_summary()\nfor c in s.channels.values():\n    print(c.topic, s.statistics.channel_message_counts.get(c.id, 0))\n";
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .arg(path)
+        .output()
+        .ok()?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        if err.contains("No module named") {
+            return None;
+        }
+        panic!("the mcap package could not read {}: {err}", path.display());
+    }
+    Some(
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| {
+                let (t, n) = l.split_once(' ')?;
+                Some((t.to_owned(), n.parse().ok()?))
+            })
+            .collect(),
+    )
+}
+
+#[test]
+fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = out_dir("paper");
+    let v = run_json(session(&["scenarios/paper.toml"], &out));
+    let naive = &v["methods"]["naive"]["real"];
+    let paper = &v["methods"]["paper"]["real"];
+    // Naive parts at the push and never rejoins: its copies end centimetres apart.
+    assert!(
+        f(&naive["divergence_final_m"]) > 0.02,
+        "naive should diverge: {naive}"
+    );
+    // Paper: the copies end together, and stay together once contacts end (when they end within
+    // the run; with 0.5 s of delay a user may still be touching at the end).
+    assert!(
+        f(&paper["divergence_final_m"]) < 0.005,
+        "paper should keep the copies together: {paper}"
+    );
+    let after = f(&paper["divergence_after_contact_m"]);
+    assert!(
+        after.is_nan() || after < 0.005,
+        "paper after contact: {after}"
+    );
+    for m in ["naive", "paper"] {
+        for (site, st) in v["methods"][m]["stations"].as_object().expect("stations") {
+            let fin = &st["final"];
+            assert!(
+                fin["published"].as_u64() > Some(100) && fin["received"].as_u64() > Some(100),
+                "{m} {site} exchanged states: {fin}"
+            );
+            assert_eq!(fin["emulated_lost"], 0, "the paper's link loses nothing");
+            assert_eq!(st["truncated"], false, "{m} {site}: recording finished");
+            assert!(
+                f(&st["last_sample_s"]) > 13.9,
+                "{m} {site} recorded to the end: {st}"
+            );
+        }
+    }
+    // The recordings open with a reader that is not ours, and hold the expected channels.
+    let rec = out.join("paper").join("user2.mcap");
+    match foreign_topics(&rec) {
+        None if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() => {
+            panic!("python3 with the mcap package is required (pip install mcap)")
+        }
+        None => eprintln!(
+            "SKIPPED the foreign-reader check: python3 -c 'import mcap' fails (pip install mcap)"
+        ),
+        Some(topics) => {
+            let count = |t: &str| topics.iter().find(|(n, _)| n == t).map_or(0, |x| x.1);
+            assert!(count("/object") > 2000, "{topics:?}"); // 200 Hz over 14 s
+            assert_eq!(count("/object"), count("/tool"), "{topics:?}");
+            assert!(count("/adoption") > 10, "{topics:?}");
+            assert!(count("/remote") > 100, "{topics:?}");
+            for t in ["/session", "/presence", "/clock", "/status"] {
+                assert!(count(t) >= 1, "{t} missing: {topics:?}");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn four_stations_run_to_the_end_and_report_their_overruns() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = out_dir("four");
+    let v = run_json(session(
+        &["scenarios/four-users.toml", "--method", "paper"],
+        &out,
+    ));
+    let stations = v["methods"]["paper"]["stations"]
+        .as_object()
+        .expect("stations");
+    assert_eq!(stations.len(), 4);
+    for (site, st) in stations {
+        assert!(f(&st["last_sample_s"]) > 9.9, "{site} ran to the end: {st}");
+        let servo = &st["live"]["loops"]["servo"];
+        // Running at its rate (not stalled), SCHED_FIFO as configured. Whether it missed deadlines
+        // is timing, which tests do not assert on a shared two-core machine: the session reports
+        // it, and `session bench` prints it next to the standalone `latency` tool's.
+        assert!(
+            f(&servo["rate_hz"]) > 400.0,
+            "{site}: servo running: {servo}"
+        );
+        let during = &st["live"]["overruns_during_session"];
+        assert!(
+            during["servo"].is_u64() && during["physics"].is_u64(),
+            "{site}: overruns reported: {}",
+            st["live"]
+        );
+        eprintln!(
+            "{site}: overruns during the session: servo {}, physics {}",
+            during["servo"], during["physics"]
+        );
+    }
+    let real = &v["methods"]["paper"]["real"];
+    assert!(
+        f(&real["divergence_after_contact_m"]) < 0.005,
+        "four copies together after contacts: {real}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn a_late_joiner_adopts_the_session_state_within_one_report_period() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = out_dir("late");
+    let v = run_json(session(
+        &[
+            "scenarios/paper.toml",
+            "--method",
+            "paper",
+            "--late",
+            "user2=2.5",
+            "--no-emulation",
+        ],
+        &out,
+    ));
+    let late = &v["methods"]["paper"]["stations"]["user2"];
+    assert!(f(&late["joined_s"]) >= 2.5, "user2 joined late: {late}");
+    assert!(
+        late["join_states"].as_u64() >= Some(1),
+        "it asked the session for its state: {late}"
+    );
+    // By 2.5 s user1 has pushed the disk ~10 cm from where the scenario starts it.
+    assert!(
+        f(&late["first_adoption_jump_m"]) > 0.05,
+        "its first adoption took it to the session's state: {late}"
+    );
+    let report_period = 1.0 / 90.0; // user1 reports at 90 Hz
+    let waited = f(&late["first_adoption_s"]) - f(&late["joined_s"]);
+    assert!(
+        waited <= report_period,
+        "adopted {waited:.4} s after joining (one report period is {report_period:.4} s): {late}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// What the attacker sent, per refusal reason.
+#[derive(Debug, Default)]
+struct Sent {
+    version: u64,
+    length: u64,
+    contents: u64,
+    foreign: u64,
+    replayed: u64,
+}
+
+/// Connects to the session through user1's locator (from its status, as an operator would) and
+/// sends every kind of bad message on the session's state keys until `stop` is set.
+fn attack(session: &str, stop: &AtomicU64) -> Sent {
+    use zenoh::Wait;
+    let locator = coop_tests::wait_until("user1's locators", Duration::from_secs(60), || {
+        let v = coop_tools::station::status::read(session, "user1", &[]).ok()?;
+        let text = v["network"]["locators"].as_str()?.to_owned();
+        let (_, rest) = text.split_once("listen [")?;
+        Some(rest.split([']', ',']).next()?.trim().to_owned())
+    });
+    let ep = coop_transport::network::Endpoints {
+        listen: vec![],
+        connect: vec![locator],
+        mode: "peer".into(),
+    };
+    let z = zenoh::open(coop_transport::network::config(&ep).expect("config"))
+        .wait()
+        .expect("attacker's session");
+    let sub = z
+        .declare_subscriber(coop_transport::keys::state(session, 0, "user1"))
+        .wait()
+        .expect("subscriber");
+    let captured = coop_tests::wait_until("a real state of user1", Duration::from_secs(30), || {
+        sub.recv_timeout(Duration::from_millis(100)).ok().flatten()
+    })
+    .payload()
+    .to_bytes()
+    .to_vec();
+    // Undeclared now: our own puts below match it too, and a subscriber nobody drains would block
+    // this session's delivery of them.
+    drop(sub);
+    let k1 = coop_transport::keys::state(session, 0, "user1");
+    let k2 = coop_transport::keys::state(session, 0, "user2");
+    let mut s = Sent::default();
+    let put = |k: &str, b: Vec<u8>| {
+        z.put(k, b).wait().expect("put");
+    };
+    let mut nan = coop_transport::wire::decode(&captured).expect("a real state decodes");
+    nan.pos[0] = f64::NAN;
+    let nan = coop_transport::wire::encode(&nan);
+    let mut round = 0u64;
+    while stop.load(Ordering::Relaxed) == 0 {
+        let mut v2 = captured.clone();
+        v2[0] = 2;
+        put(&k1, v2);
+        s.version += 1;
+        put(&k1, captured[..100].to_vec());
+        let mut long = captured.clone();
+        long.extend_from_slice(&[0u8; 64]);
+        put(&k1, long);
+        put(&k1, vec![1u8; 1 << 20]); // a megabyte
+        s.length += 3;
+        put(&k1, nan.clone());
+        let mut junk = vec![1u8; 289];
+        for (i, b) in junk.iter_mut().enumerate().skip(1) {
+            *b = (i as u64).wrapping_mul(0x9e37_79b9).wrapping_add(round) as u8;
+        }
+        put(&k1, junk);
+        s.contents += 2;
+        put(&k2, captured.clone()); // user1's state on user2's key
+        s.foreign += 1;
+        put(&k1, captured.clone()); // a replay
+        s.replayed += 1;
+        round += 1;
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = z.close().wait();
+    s
+}
+
+#[test]
+fn hostile_messages_are_counted_and_change_nothing() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let pid = std::process::id();
+    let (quiet, loud) = (format!("q{pid}"), format!("h{pid}"));
+    let (out_q, out_h) = (out_dir("quiet"), out_dir("hostile"));
+    let run = |name: &str, out: &Path| {
+        session(
+            &[
+                "scenarios/zero-delay.toml",
+                "--method",
+                "paper",
+                "--session",
+                name,
+            ],
+            out,
+        )
+    };
+    // The same scenario twice at once, one of them under attack.
+    let quiet_run = std::thread::spawn({
+        let c = run(&quiet, &out_q);
+        move || run_json(c)
+    });
+    let loud_cmd = run(&loud, &out_h);
+    let loud_run = std::thread::spawn(move || run_json(loud_cmd));
+    let stop = AtomicU64::new(0);
+    let sent = std::thread::scope(|s| {
+        let attacker = s.spawn(|| attack(&format!("{loud}-paper"), &stop));
+        let v = loud_run.join();
+        stop.store(1, Ordering::Relaxed);
+        (attacker.join().expect("attacker"), v)
+    });
+    let (sent, loud_v) = (sent.0, sent.1.expect("hostile session"));
+    let quiet_v = quiet_run.join().expect("quiet session");
+    assert!(sent.replayed > 20, "the attack ran: {sent:?}");
+    let st = |v: &Value, site: &str| v["methods"]["paper"]["stations"][site].clone();
+    // user2 hears everything sent on user1's key and on its own. The attacker sends rounds of one
+    // version, three length, two contents, one foreign and one replayed message; rounds sent before
+    // its zenoh session reached user2 or after the stations stopped are not heard, so the counts
+    // are checked per delivered round.
+    let refused = st(&loud_v, "user2")["final"]["refused"].clone();
+    let r = |i: usize| refused[i].as_u64().unwrap_or(0);
+    let rounds = r(0);
+    assert!(
+        rounds * 2 > sent.version,
+        "most rounds were heard: {refused} of {sent:?}"
+    );
+    let near = |got: u64, want: u64| got.abs_diff(want) <= 3;
+    assert!(near(r(1), 3 * rounds), "length: {refused} vs {sent:?}");
+    assert!(near(r(2), 2 * rounds), "contents: {refused} vs {sent:?}");
+    assert!(near(r(3), rounds), "foreign: {refused} vs {sent:?}");
+    assert!(r(4) + 1 >= rounds, "replayed: {refused} vs {sent:?}");
+    // ... and what the stations believe is what they believe without the attack.
+    for site in ["user1", "user2"] {
+        let a = &st(&loud_v, site)["final_object_m"];
+        let b = &st(&quiet_v, site)["final_object_m"];
+        let d: f64 = (0..3)
+            .map(|k| (f(&a[k]) - f(&b[k])).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(d < 0.005, "{site}: attacked {a} vs quiet {b}: {d} m apart");
+    }
+    for v in [&loud_v, &quiet_v] {
+        let real = &v["methods"]["paper"]["real"];
+        assert!(f(&real["divergence_after_contact_m"]) < 0.001, "{real}");
+        let err = real["sites"][0]["error_vs_reference_max_m"].clone();
+        assert!(f(&err) < 0.01, "close to the simulator's reference: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&out_q);
+    let _ = std::fs::remove_dir_all(&out_h);
+}
