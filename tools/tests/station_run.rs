@@ -314,3 +314,40 @@ fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
     drop(taken);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
+    let session = unique_session();
+    let cfg = config(&session);
+    let station = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    let epoch = wait_until("the session's time 0", LIMIT, || ctl.epoch());
+    // The embedded paper scenario: user1 pushes the disk from x = -5 cm at 1 s; it slides and comes
+    // to rest before user1 comes back at 3 s.
+    let (before, seq) = wait_until("the pushed disk at rest", LIMIT, || {
+        let s = ctl.resume()?;
+        let t = s.t_ns.saturating_sub(epoch) as f64 * 1e-9;
+        (t > 2.2 && s.pos[0] > 0.0).then(|| (s, ctl.report_seq.load(Ordering::Relaxed)))
+    });
+    let old = pid(&ctl, Child::Physics);
+    kill(Pid::from_raw(old as i32), Signal::SIGKILL).expect("SIGKILL physics");
+    let killed_at = coop_rt::timer::monotonic_ns();
+    let after = wait_until("a state from the restarted physics", LIMIT, || {
+        ctl.resume()
+            .filter(|s| s.t_ns > killed_at && pid(&ctl, Child::Physics) != old)
+    });
+    assert!(
+        (after.pos[0] - before.pos[0]).abs() < 0.01,
+        "resumed at x = {} m, not where it was (x = {} m; the scenario starts it at -0.05)",
+        after.pos[0],
+        before.pos[0]
+    );
+    assert!(
+        ctl.report_seq.load(Ordering::Relaxed) > seq,
+        "the report sequence continued"
+    );
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+}

@@ -34,7 +34,8 @@ use zenoh::sample::{Locality, Sample, SampleKind};
 use zenoh::Wait;
 
 use crate::recording::{
-    AdoptionMsg, ClockMsg, PresenceMsg, Recorder, RemoteMsg, SampleMsg, SessionMsg, StatusMsg,
+    AdoptionMsg, ClockMsg, PresenceMsg, PublishedMsg, Recorder, RemoteMsg, SampleMsg, SessionMsg,
+    StatusMsg,
 };
 use crate::{keys, wire};
 
@@ -672,6 +673,12 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                 let bytes = wire::encode(&r);
                 if publisher.put(bytes.clone()).wait().is_ok() {
                     published += 1;
+                    let m = PublishedMsg {
+                        t_ns: monotonic_ns(),
+                        seq: r.seq,
+                        state_ns: r.t_ns,
+                    };
+                    write_to(&mut recorder, &mut write_err, |w| w.published(&m));
                 }
                 *lock(&last_report) = Some(bytes);
             }

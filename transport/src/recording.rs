@@ -12,6 +12,7 @@
 //! | `/tool`     | scenario sample rate         | tool position, desired/measured force, force on object |
 //! | `/adoption` | each adoption                | sender, position jump, how far it was dead-reckoned  |
 //! | `/remote`   | each state handed to physics | sender, sequence, sent time, age, emulated delay      |
+//! | `/published`| each report published        | sequence and time of the state                        |
 //! | `/presence` | each join or leave           | site, present                                         |
 //! | `/clock`    | each new estimate            | per peer clock offset and round trip                 |
 //! | `/status`   | at the end                   | the network counters                                  |
@@ -132,6 +133,17 @@ pub struct RemoteMsg {
     pub via: String,
 }
 
+/// `/published`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct PublishedMsg {
+    /// When it was published, ns (monotonic).
+    pub t_ns: u64,
+    /// Its sequence number.
+    pub seq: u64,
+    /// Its state's time (the report's `t_ns`), ns.
+    pub state_ns: u64,
+}
+
 /// `/presence`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct PresenceMsg {
@@ -173,7 +185,7 @@ pub struct StatusMsg {
     pub join_states: u64,
 }
 
-const TOPICS: [&str; 8] = [
+const TOPICS: [&str; 9] = [
     "/session",
     "/object",
     "/tool",
@@ -182,6 +194,7 @@ const TOPICS: [&str; 8] = [
     "/presence",
     "/clock",
     "/status",
+    "/published",
 ];
 
 /// Writes a recording.
@@ -382,6 +395,13 @@ impl Recorder {
     pub fn status(&mut self, m: &StatusMsg) -> Result<(), mcap::McapError> {
         self.put(7, m.t_ns, m)
     }
+    /// `/published`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn published(&mut self, m: &PublishedMsg) -> Result<(), mcap::McapError> {
+        self.put(8, m.t_ns, m)
+    }
 
     /// Writes the summary and footer and closes the file.
     ///
@@ -404,6 +424,8 @@ pub struct Recording {
     pub adoptions: Vec<AdoptionMsg>,
     /// Remote states handed to physics.
     pub remote: Vec<RemoteMsg>,
+    /// Reports published.
+    pub published: Vec<PublishedMsg>,
     /// Joins and leaves.
     pub presence: Vec<PresenceMsg>,
     /// Clock estimates.
@@ -459,6 +481,7 @@ pub fn read(path: &Path) -> Result<Recording, RecordingError> {
             "/presence" => r.presence.push(serde_json::from_slice(data).map_err(e)?),
             "/clock" => r.clock.push(serde_json::from_slice(data).map_err(e)?),
             "/status" => r.status = Some(serde_json::from_slice(data).map_err(e)?),
+            "/published" => r.published.push(serde_json::from_slice(data).map_err(e)?),
             _ => {}
         }
     }
