@@ -26,6 +26,19 @@ pub fn monotonic_ns() -> u64 {
     })
 }
 
+/// Sleeps until `deadline_ns` on CLOCK_MONOTONIC (absolute; EINTR sleeps again to the same time).
+pub fn sleep_until(deadline_ns: u64) {
+    let ts = TimeSpec::new(
+        (deadline_ns / 1_000_000_000) as _,
+        (deadline_ns % 1_000_000_000) as _,
+    );
+    while let Err(Errno::EINTR) = clock_nanosleep(
+        ClockId::CLOCK_MONOTONIC,
+        ClockNanosleepFlags::TIMER_ABSTIME,
+        &ts,
+    ) {}
+}
+
 /// One wake-up of a [`PeriodicTimer`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Wake {

@@ -222,7 +222,7 @@ fn four_stations(
     for s in &sc.site {
         let st = &o.stations[&s.name]["live"];
         rows.push(serde_json::json!({
-            "site": s.name,
+            "site": s.name.clone(),
             "servo_hz": s.servo_rate_hz,
             "servo_overruns": st["overruns_during_session"]["servo"],
             "physics_overruns": st["overruns_during_session"]["physics"],
@@ -309,14 +309,16 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         "{:<22}{:>10}{:>16}{:>18}{:>14}{:>14}",
         "loop", "rate Hz", "servo overruns", "physics overruns", "wake p99.9 us", "wake max us"
     );
+    // serde_json's Display ignores widths: make strings first.
+    let c = |v: &serde_json::Value| v.to_string();
     for r in four["stations"].as_array().into_iter().flatten() {
         println!(
             "{:<22}{:>10}{:>16}{:>18}{:>14}{:>14.0}",
             format!("station {}", r["site"].as_str().unwrap_or("?")),
-            r["servo_hz"],
-            r["servo_overruns"],
-            r["physics_overruns"],
-            r["servo_wake_p999_us"],
+            c(&r["servo_hz"]),
+            c(&r["servo_overruns"]),
+            c(&r["physics_overruns"]),
+            c(&r["servo_wake_p999_us"]),
             r["servo_wake_max_us"].as_f64().unwrap_or(0.0)
         );
     }
@@ -325,7 +327,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         "{:<22}{:>10}{:>16}{:>18}{:>14.0}{:>14.0}",
         "standalone latency",
         1000,
-        s["overruns"],
+        c(&s["overruns"]),
         "-",
         s["wake_p999_us"].as_f64().unwrap_or(0.0),
         s["wake_max_us"].as_f64().unwrap_or(0.0)

@@ -39,10 +39,38 @@ use crate::recording::{
 };
 use crate::{keys, wire};
 
-/// How often the loop drains the report and trace rings and releases emulated messages.
-pub const POLL: Duration = Duration::from_micros(250);
+/// The loop's longest sleep: it drains the trace ring, releases emulated messages and beats its
+/// heartbeat at least this often.
+pub const POLL: Duration = Duration::from_millis(1);
+/// How long after physics' expected next report the loop looks for it (physics' wake latency and
+/// step), and how often it looks again while the report is late.
+pub const PUBLISH_LAG_NS: u64 = 40_000;
+/// See [`PUBLISH_LAG_NS`].
+pub const RETRY_NS: u64 = 25_000;
+/// Past this lateness physics is taken to be stopped (restarting), and the loop polls at [`POLL`].
+pub const GIVE_UP_NS: u64 = 500_000;
+
+/// When the loop wakes next: just after physics' next report is expected (it tells its last report
+/// time and its period in the control block), soon again if that report is late, never later
+/// than [`POLL`].
+pub fn next_wake(period: u64, last: u64, now: u64) -> u64 {
+    let poll = now + POLL.as_nanos() as u64;
+    if period == 0 || last == 0 {
+        return poll;
+    }
+    let expected = last + period;
+    if now < expected + PUBLISH_LAG_NS {
+        (expected + PUBLISH_LAG_NS).min(poll)
+    } else if now < expected + GIVE_UP_NS {
+        now + RETRY_NS
+    } else {
+        poll
+    }
+}
 /// How often each peer's clock is sampled (the first few samples come faster).
 pub const CLOCK_EVERY: Duration = Duration::from_millis(500);
+/// A report older than this when the network process gets to it is not published (ns).
+pub const STALE_REPORT_NS: u64 = 100_000_000;
 /// Clock samples kept per peer; the offset comes from the one with the shortest round trip.
 pub const CLOCK_WINDOW: usize = 8;
 
@@ -664,12 +692,25 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
         slot.pid
             .store(u64::from(std::process::id()), Ordering::Relaxed);
         let mut published = 0u64;
+        let mut stale_skipped = 0u64;
         let mut session_recorded = false;
         let mut present_mask = 0u64;
         let (mut joins, mut leaves) = (0u64, 0u64);
         let mut write_err: Option<String> = None;
         loop {
-            while let Ok(r) = reports.pop() {
+            // Only the newest report: states replace each other, and a backlog (physics ran
+            // before this process was up, or while it restarted) is stale by definition.
+            if let Ok(newest) = reports.pop_newest().map_err(|_| ()).and_then(|n| {
+                stale_skipped += n.skipped;
+                // A ring that filled up before this process was up holds old states only.
+                if monotonic_ns().saturating_sub(n.value.t_ns) > STALE_REPORT_NS {
+                    stale_skipped += 1;
+                    Err(())
+                } else {
+                    Ok(n)
+                }
+            }) {
+                let r = newest.value;
                 let bytes = wire::encode(&r);
                 if publisher.put(bytes.clone()).wait().is_ok() {
                     published += 1;
@@ -777,7 +818,11 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
             if !matches!(ctl.run_state(), RunState::Starting | RunState::Running) {
                 break;
             }
-            std::thread::sleep(POLL);
+            coop_rt::timer::sleep_until(next_wake(
+                ctl.physics_report_period_ns.load(Ordering::Relaxed),
+                ctl.physics_last_report_ns.load(Ordering::Relaxed),
+                monotonic_ns(),
+            ));
         }
         stop.store(1, Ordering::Relaxed);
         let status = {
@@ -789,6 +834,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                 refused: rx.refused,
                 emulated_lost: rx.emulated_lost,
                 join_states: rx.join_states,
+                stale_skipped,
             }
         };
         if let Some(mut r) = recorder.take() {
@@ -829,6 +875,27 @@ mod tests {
             p.add(400, 20);
         }
         assert_eq!(p.add(400, 20), (400, 20), "old samples leave the window");
+    }
+
+    #[test]
+    fn the_loop_wakes_just_after_the_next_report() {
+        let ms = 1_000_000;
+        // Nothing known yet: poll.
+        assert_eq!(next_wake(0, 0, 10 * ms), 11 * ms);
+        // Last report at 10 ms, every 1 ms: wake 40 µs after 11 ms.
+        assert_eq!(
+            next_wake(ms, 10 * ms, 10 * ms + 5),
+            11 * ms + PUBLISH_LAG_NS
+        );
+        // Late: look again soon.
+        assert_eq!(
+            next_wake(ms, 10 * ms, 11 * ms + 100_000),
+            11 * ms + 100_000 + RETRY_NS
+        );
+        // Long late (physics restarting): poll.
+        assert_eq!(next_wake(ms, 10 * ms, 12 * ms), 13 * ms);
+        // A slow report rate: never sleep past the poll period.
+        assert_eq!(next_wake(50 * ms, 10 * ms, 10 * ms), 11 * ms);
     }
 
     #[test]

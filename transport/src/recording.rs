@@ -183,6 +183,9 @@ pub struct StatusMsg {
     pub emulated_lost: u64,
     /// States from the session's queryable at start.
     pub join_states: u64,
+    /// Reports not published because a newer one was already waiting.
+    #[serde(default)]
+    pub stale_skipped: u64,
 }
 
 const TOPICS: [&str; 9] = [

@@ -126,6 +126,11 @@ pub struct ControlBlock {
     pub net_latency: crate::stats::SharedHistogram,
     /// Count of `net_latency` samples.
     pub net_latency_count: AtomicU64,
+    /// When physics last made a report (the step's wake time, ns), and its report period: the
+    /// network process wakes just after the next one instead of polling.
+    pub physics_last_report_ns: AtomicU64,
+    /// See `physics_last_report_ns`.
+    pub physics_report_period_ns: AtomicU64,
     /// Bytes of `locators` in use (written last, Release).
     pub locators_len: AtomicU64,
     /// The zenoh locators the network process listens on and its peers' ids, as text.

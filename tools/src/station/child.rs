@@ -183,6 +183,8 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     let in_force = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;
+    ctl.physics_report_period_ns
+        .store(timing.report_period_ns, Ordering::Relaxed);
     run_periodic(&ctl, Child::Physics, &ctl.physics, step, &in_force, |now| {
         physics.step(now);
         ctl.physics_received
@@ -192,6 +194,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         if physics.report_seq() != last_report_seq {
             // At the report rate: what a successor resumes from.
             last_report_seq = physics.report_seq();
+            ctl.physics_last_report_ns.store(now, Ordering::Relaxed);
             ctl.report_seq.store(last_report_seq, Ordering::Relaxed);
             ctl.store_resume(&physics.object_sample(now));
         }
