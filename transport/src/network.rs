@@ -882,9 +882,9 @@ mod tests {
         let ms = 1_000_000;
         // Nothing known yet: poll.
         assert_eq!(next_wake(0, 0, 10 * ms), 11 * ms);
-        // Last report at 10 ms, every 1 ms: wake 40 µs after 11 ms.
+        // Last report at 10 ms, every 1 ms, now 10.5 ms: wake 40 µs after 11 ms.
         assert_eq!(
-            next_wake(ms, 10 * ms, 10 * ms + 5),
+            next_wake(ms, 10 * ms, 10 * ms + ms / 2),
             11 * ms + PUBLISH_LAG_NS
         );
         // Late: look again soon.
