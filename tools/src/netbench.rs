@@ -97,6 +97,7 @@ pub fn pong(listen: &str) -> anyhow::Result<()> {
         listen: vec![listen.to_owned()],
         connect: vec![],
         mode: "peer".into(),
+        tls: None,
     };
     let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
         .wait()
@@ -146,6 +147,7 @@ fn bare_zenoh(samples: u64) -> anyhow::Result<Histogram<u64>> {
         listen: vec![],
         connect: vec![listen],
         mode: "peer".into(),
+        tls: None,
     };
     let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
         .wait()

@@ -214,6 +214,7 @@ pub fn run_method(
         listen: vec![ports[n].clone()],
         connect: ports[..n].to_vec(),
         mode: "peer".into(),
+        tls: None,
     };
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
         .wait()

@@ -244,6 +244,7 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         listen: vec![],
         connect: vec![locator],
         mode: "peer".into(),
+        tls: None,
     };
     let z = zenoh::open(coop_transport::network::config(&ep).expect("config"))
         .wait()

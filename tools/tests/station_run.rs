@@ -171,14 +171,56 @@ fn free_port() -> u16 {
 /// other's states over zenoh (and adopts them), through its network process and rings.
 #[test]
 fn two_stations_by_hand_see_each_other() {
+    two_stations("tcp", "");
+}
+
+/// The same over TLS, with a CA and a station certificate made for the test by `openssl`
+/// (skipped with a message where it is not installed).
+#[test]
+fn two_stations_see_each_other_over_tls() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-tls-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let sh = |cmd: &str| {
+        Command::new("sh")
+            .arg("-c")
+            .arg(cmd)
+            .current_dir(&dir)
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !sh("command -v openssl") {
+        eprintln!("SKIPPED two_stations_see_each_other_over_tls: openssl is not installed");
+        return;
+    }
+    assert!(
+        sh("openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days 1 -subj '/CN=coop test CA' \
+            && openssl req -newkey rsa:2048 -nodes -keyout st.key -out st.csr -subj '/CN=localhost' \
+            && printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\n' > ext.cnf \
+            && openssl x509 -req -in st.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out st.pem -days 1 -extfile ext.cnf"),
+        "making the test certificates"
+    );
+    let d = dir.display();
+    two_stations(
+        "tls",
+        &format!(
+            "[network.tls]\nroot_ca_certificate = \"{d}/ca.pem\"\nlisten_certificate = \"{d}/st.pem\"\nlisten_private_key = \"{d}/st.key\"\n"
+        ),
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two stations, `user2` connecting to `user1` with `scheme` (tcp or tls); `tls` is extra TOML.
+fn two_stations(scheme: &str, tls: &str) {
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-two-{session}"));
     std::fs::create_dir_all(&dir).expect("dir");
     let (pa, pb) = (free_port(), free_port());
     let write = |name: &str, listen: u16, connect: Option<u16>| {
-        let connect = connect.map_or(String::new(), |c| format!("\"tcp/127.0.0.1:{c}\""));
-        let network =
-            format!("[network]\nlisten = [\"tcp/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n");
+        let connect = connect.map_or(String::new(), |c| format!("\"{scheme}/127.0.0.1:{c}\""));
+        let network = format!(
+            "[network]\nlisten = [\"{scheme}/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n{tls}"
+        );
         station_config(&dir, &session, name, "", &network)
     };
     let a = start(&write("user1", pa, None));

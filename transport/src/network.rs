@@ -83,6 +83,25 @@ pub struct Endpoints {
     pub connect: Vec<String>,
     /// `peer` or `client`.
     pub mode: String,
+    /// TLS files, for `tls/` locators.
+    pub tls: Option<Tls>,
+}
+
+/// TLS for `tls/<host>:<port>` locators: PEM file paths (zenoh's `transport/link/tls`).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Tls {
+    /// CA certificate that signed the peers' (or router's) certificates.
+    pub root_ca_certificate: Option<String>,
+    /// This station's certificate when it listens.
+    pub listen_certificate: Option<String>,
+    /// Its private key.
+    pub listen_private_key: Option<String>,
+    /// This station's certificate when it connects (mutual TLS).
+    pub connect_certificate: Option<String>,
+    /// Its private key.
+    pub connect_private_key: Option<String>,
+    /// Require client certificates (mutual TLS).
+    pub enable_mtls: bool,
 }
 
 /// The receive-side emulation of a link.
@@ -173,6 +192,27 @@ pub fn config(endpoints: &Endpoints) -> Result<zenoh::Config, String> {
         .map_err(|e| format!("congestion control: {e}"))?;
     c.insert_json5(&format!("{q}/drop/wait_before_drop"), "200")
         .map_err(|e| format!("congestion control: {e}"))?;
+    // The size bound: zenoh reassembles fragmented messages up to this (default 1 GiB, which a
+    // hostile peer could use to make us allocate); a state is 289 bytes.
+    c.insert_json5("transport/link/rx/max_message_size", "65536")
+        .map_err(|e| format!("max message size: {e}"))?;
+    if let Some(t) = &endpoints.tls {
+        let tls = "transport/link/tls";
+        for (key, v) in [
+            ("root_ca_certificate", &t.root_ca_certificate),
+            ("listen_certificate", &t.listen_certificate),
+            ("listen_private_key", &t.listen_private_key),
+            ("connect_certificate", &t.connect_certificate),
+            ("connect_private_key", &t.connect_private_key),
+        ] {
+            if let Some(path) = v {
+                c.insert_json5(&format!("{tls}/{key}"), &format!("{path:?}"))
+                    .map_err(|e| format!("tls {key}: {e}"))?;
+            }
+        }
+        c.insert_json5(&format!("{tls}/enable_mtls"), &t.enable_mtls.to_string())
+            .map_err(|e| format!("tls enable_mtls: {e}"))?;
+    }
     if mode != "client" {
         c.insert_json5("listen/endpoints", &json(&endpoints.listen))
             .map_err(|e| format!("listen endpoints: {e}"))?;
@@ -896,6 +936,32 @@ mod tests {
         assert_eq!(next_wake(ms, 10 * ms, 12 * ms), 13 * ms);
         // A slow report rate: never sleep past the poll period.
         assert_eq!(next_wake(50 * ms, 10 * ms, 10 * ms), 11 * ms);
+    }
+
+    #[test]
+    fn configurations_zenoh_accepts() {
+        let mut e = Endpoints {
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            mode: "peer".into(),
+            tls: None,
+        };
+        assert!(config(&e).is_ok());
+        e.mode = "client".into();
+        assert!(config(&e).is_ok());
+        e.tls = Some(Tls {
+            root_ca_certificate: Some("/etc/coop/ca.pem".into()),
+            listen_certificate: Some("/etc/coop/station.pem".into()),
+            listen_private_key: Some("/etc/coop/station.key".into()),
+            enable_mtls: true,
+            ..Tls::default()
+        });
+        assert!(config(&e).is_ok());
+        e.mode = "router-ish".into();
+        assert!(config(&e).is_err(), "an unknown mode is refused");
+        e.mode = "peer".into();
+        e.listen = vec!["nonsense".into()];
+        assert!(config(&e).is_err(), "a bad locator is refused");
     }
 
     #[test]

@@ -221,6 +221,18 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             listen: net.listen.clone(),
             connect: net.connect.clone(),
             mode: net.mode.clone(),
+            tls: net.tls.as_ref().map(|t| {
+                let s =
+                    |p: &Option<std::path::PathBuf>| p.as_ref().map(|p| p.display().to_string());
+                coop_transport::network::Tls {
+                    root_ca_certificate: s(&t.root_ca_certificate),
+                    listen_certificate: s(&t.listen_certificate),
+                    listen_private_key: s(&t.listen_private_key),
+                    connect_certificate: s(&t.connect_certificate),
+                    connect_private_key: s(&t.connect_private_key),
+                    enable_mtls: t.enable_mtls,
+                }
+            }),
         },
         control: &ctl,
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,

@@ -60,6 +60,26 @@ pub struct NetworkSpec {
     /// `peer` (default: stations connect to each other) or `client` (through the `zenohd` routers
     /// in `connect`).
     pub mode: String,
+    /// TLS for `tls/<host>:<port>` locators (PEM files, relative to the config file).
+    pub tls: Option<TlsSpec>,
+}
+
+/// TLS files (zenoh's `transport/link/tls`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct TlsSpec {
+    /// CA certificate that signed the peers' or routers' certificates.
+    pub root_ca_certificate: Option<PathBuf>,
+    /// This station's certificate, to listen.
+    pub listen_certificate: Option<PathBuf>,
+    /// Its private key.
+    pub listen_private_key: Option<PathBuf>,
+    /// This station's certificate, to connect (mutual TLS).
+    pub connect_certificate: Option<PathBuf>,
+    /// Its private key.
+    pub connect_private_key: Option<PathBuf>,
+    /// Require the connecting side's certificate.
+    pub enable_mtls: bool,
 }
 
 impl Default for NetworkSpec {
@@ -69,6 +89,7 @@ impl Default for NetworkSpec {
             connect: Vec::new(),
             emulate: false,
             mode: "peer".into(),
+            tls: None,
         }
     }
 }
@@ -334,9 +355,31 @@ impl StationConfig {
             );
         }
         let mut config = self;
-        if let (Some(r), Some(b)) = (&config.record, base) {
-            if r.is_relative() {
-                config.record = Some(b.join(r));
+        let rebase = |p: &mut PathBuf| {
+            if let Some(b) = base.filter(|_| p.is_relative()) {
+                *p = b.join(&*p);
+            }
+        };
+        if let Some(r) = &mut config.record {
+            rebase(r);
+        }
+        if let Some(t) = &mut config.network.tls {
+            for (field, f) in [
+                ("root_ca_certificate", &mut t.root_ca_certificate),
+                ("listen_certificate", &mut t.listen_certificate),
+                ("listen_private_key", &mut t.listen_private_key),
+                ("connect_certificate", &mut t.connect_certificate),
+                ("connect_private_key", &mut t.connect_private_key),
+            ] {
+                if let Some(p) = f {
+                    rebase(p);
+                    if !p.is_file() {
+                        bail!(
+                            "network.tls.{field} = {:?}: no such file",
+                            p.display().to_string()
+                        );
+                    }
+                }
             }
         }
         let allowed = coop_rt::sched::allowed_cpus();
