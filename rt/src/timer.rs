@@ -27,7 +27,9 @@ pub fn monotonic_ns() -> u64 {
 }
 
 /// Sleeps until `deadline_ns` on CLOCK_MONOTONIC (absolute; EINTR sleeps again to the same time).
+#[inline]
 pub fn sleep_until(deadline_ns: u64) {
+    // REAL-TIME: the one system call a loop makes.
     let ts = TimeSpec::new(
         (deadline_ns / 1_000_000_000) as _,
         (deadline_ns % 1_000_000_000) as _,
@@ -88,16 +90,7 @@ impl PeriodicTimer {
     pub fn wait(&mut self) -> Wake {
         // REAL-TIME: no allocation, no lock, no logging; the only system call is clock_nanosleep.
         let deadline = self.next_ns;
-        let ts = TimeSpec::new(
-            (deadline / 1_000_000_000) as _,
-            (deadline % 1_000_000_000) as _,
-        );
-        // EINTR: a signal interrupted the sleep; sleep again to the same absolute deadline.
-        while let Err(Errno::EINTR) = clock_nanosleep(
-            ClockId::CLOCK_MONOTONIC,
-            ClockNanosleepFlags::TIMER_ABSTIME,
-            &ts,
-        ) {}
+        sleep_until(deadline);
         let woke = monotonic_ns();
         self.advance(deadline, woke)
     }

@@ -88,31 +88,52 @@ fn stations(
     Ok(h)
 }
 
+/// One end of the ping-pong: a zenoh peer (listening or connecting), publishing on `out` the way
+/// stations publish states, subscribed to `inp`.
+type End = (
+    zenoh::Session,
+    zenoh::pubsub::Publisher<'static>,
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+);
+
+fn end(
+    listen: Vec<String>,
+    connect: Vec<String>,
+    out: &'static str,
+    inp: &str,
+) -> anyhow::Result<End> {
+    let ep = Endpoints {
+        listen,
+        connect,
+        mode: "peer".into(),
+        tls: None,
+    };
+    let err = |e: zenoh::Error| anyhow::anyhow!("{e}");
+    let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
+        .wait()
+        .map_err(err)?;
+    let publisher = z
+        .declare_publisher(out)
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(err)?;
+    let sub = z.declare_subscriber(inp).wait().map_err(err)?;
+    Ok((z, publisher, sub))
+}
+
 /// The child: echoes every ping as a pong until stdin closes.
 ///
 /// # Errors
 /// Zenoh cannot be set up.
 pub fn pong(listen: &str) -> anyhow::Result<()> {
-    let ep = Endpoints {
-        listen: vec![listen.to_owned()],
-        connect: vec![],
-        mode: "peer".into(),
-        tls: None,
-    };
-    let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let publisher = z
-        .declare_publisher("coop/bench/pong")
-        .congestion_control(CongestionControl::Drop)
-        .priority(Priority::RealTime)
-        .express(true)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let sub = z
-        .declare_subscriber("coop/bench/ping")
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (_z, publisher, sub) = end(
+        vec![listen.to_owned()],
+        vec![],
+        "coop/bench/pong",
+        "coop/bench/ping",
+    )?;
     println!("ready");
     std::thread::spawn(|| {
         let mut s = String::new();
@@ -143,26 +164,7 @@ fn bare_zenoh(samples: u64) -> anyhow::Result<Histogram<u64>> {
         let _ = child.kill();
         bail!("the pong process did not start: {line:?}");
     }
-    let ep = Endpoints {
-        listen: vec![],
-        connect: vec![listen],
-        mode: "peer".into(),
-        tls: None,
-    };
-    let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let publisher = z
-        .declare_publisher("coop/bench/ping")
-        .congestion_control(CongestionControl::Drop)
-        .priority(Priority::RealTime)
-        .express(true)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let sub = z
-        .declare_subscriber("coop/bench/pong")
-        .wait()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (z, publisher, sub) = end(vec![], vec![listen], "coop/bench/ping", "coop/bench/pong")?;
     let payload = coop_transport::wire::encode(&coop_rt::msg::SiteReport {
         kind: 1,
         rot: [1.0, 0.0, 0.0, 0.0],
