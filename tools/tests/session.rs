@@ -281,8 +281,10 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         let mut long = captured.clone();
         long.extend_from_slice(&[0u8; 64]);
         put(&k1, long);
-        put(&k1, vec![1u8; 1 << 20]); // a megabyte
-        s.length += 3;
+        s.length += 2;
+        // A megabyte: zenoh's size bound (64 KiB, set by the stations) drops it before it reaches
+        // our decoder, so it is not in the stations' counts; it must not disturb them either.
+        put(&k1, vec![1u8; 1 << 20]);
         put(&k1, nan.clone());
         let mut junk = vec![1u8; 289];
         for (i, b) in junk.iter_mut().enumerate().skip(1) {
@@ -328,9 +330,9 @@ fn hostile_messages_are_counted_and_change_nothing() {
     assert!(sent.replayed > 20, "the attack ran: {sent:?}");
     let st = |site: &str| v["methods"]["paper"]["stations"][site].clone();
     // user2 hears everything sent on user1's key and on its own. The attacker sends rounds of one
-    // version, three length, two contents, one foreign and one replayed message; rounds sent before
-    // its zenoh session reached user2 or after the stations stopped are not heard, so the counts
-    // are checked per delivered round.
+    // version, two length (and a megabyte zenoh drops), two contents, one foreign and one
+    // replayed message; rounds sent before its zenoh session reached user2 or after the stations
+    // stopped are not heard, so the counts are checked per delivered round.
     let refused = st("user2")["final"]["refused"].clone();
     let r = |i: usize| refused[i].as_u64().unwrap_or(0);
     let rounds = r(0);
@@ -339,7 +341,7 @@ fn hostile_messages_are_counted_and_change_nothing() {
         "most rounds were heard: {refused} of {sent:?}"
     );
     let near = |got: u64, want: u64| got.abs_diff(want) <= 3;
-    assert!(near(r(1), 3 * rounds), "length: {refused} vs {sent:?}");
+    assert!(near(r(1), 2 * rounds), "length: {refused} vs {sent:?}");
     assert!(near(r(2), 2 * rounds), "contents: {refused} vs {sent:?}");
     assert!(near(r(3), rounds), "foreign: {refused} vs {sent:?}");
     assert!(r(4) + 1 >= rounds, "replayed: {refused} vs {sent:?}");
