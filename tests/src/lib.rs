@@ -145,7 +145,7 @@ pub fn station_config(
     std::fs::write(
         &path,
         format!(
-            "session = \"{session}\"\nstation = \"{station}\"\nmlockall = false\n{top}\
+            "session = \"{session}\"\nstation = \"{station}\"\nmlockall = false\ncpu_dma_latency_zero = false\n{top}\
              [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n{tables}"
         ),
     )

@@ -73,18 +73,40 @@ fn attach(
     Ok((names, opts, ctl))
 }
 
-/// Applies scheduling and memory locking, printing each missing privilege once.
-fn setup(cfg: &Resolved, req: &Request, what: &str) -> anyhow::Result<sched::InForce> {
+/// Applies scheduling and memory locking, printing each missing privilege once; holds
+/// `/dev/cpu_dma_latency` at 0 while the returned guard lives (when configured).
+fn setup(
+    cfg: &Resolved,
+    req: &Request,
+    what: &str,
+) -> anyhow::Result<(sched::InForce, Option<sched::DmaLatencyGuard>)> {
     if cfg.config.mlockall {
         if let Err(w) = sched::lock_memory() {
             eprintln!("station {what} {}: {w}", cfg.name);
         }
     }
+    // Without it the idle governor may halt the CPU between cycles, and every wake-up pays the way
+    // back (on this VM's haltpoll: the servo's wake-up p99 was 4x the latency tool's, which holds
+    // it as cyclictest does).
+    let dma = if cfg.config.cpu_dma_latency_zero {
+        match sched::hold_cpu_dma_latency_zero() {
+            Ok(g) => Some(g),
+            Err(e) => {
+                eprintln!(
+                    "station {what} {}: WARN: cannot hold /dev/cpu_dma_latency at 0 ({e}); CPUs may enter deep idle states between cycles. Fix: run as root (or give write access to /dev/cpu_dma_latency)",
+                    cfg.name
+                );
+                None
+            }
+        }
+    } else {
+        None
+    };
     let (in_force, warnings) = sched::apply_to_current_thread(req)?;
     for w in warnings {
         eprintln!("station {what} {}: {w}", cfg.name);
     }
-    Ok(in_force)
+    Ok((in_force, dma))
 }
 
 fn period(rate_hz: f64) -> Duration {
@@ -117,7 +139,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         tools,
         start,
     );
-    let in_force = setup(cfg, &cfg.servo_sched, "servo")?;
+    let (in_force, _dma) = setup(cfg, &cfg.servo_sched, "servo")?;
     run_periodic(
         &ctl,
         Child::Servo,
@@ -181,7 +203,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         resumed.unwrap_or_else(|| BodyState::at_rest(Vec3::from(sc.object.start_m))),
     );
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
-    let in_force = setup(cfg, &cfg.physics_sched, "physics")?;
+    let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;
     ctl.physics_report_period_ns
         .store(timing.report_period_ns, Ordering::Relaxed);

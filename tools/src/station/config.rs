@@ -154,6 +154,9 @@ pub struct StationConfig {
     pub method: Option<MethodName>,
     /// Lock all memory of the loop processes.
     pub mlockall: bool,
+    /// Hold `/dev/cpu_dma_latency` at 0 µs while the loops run (as cyclictest does): CPUs stay out
+    /// of deep idle states, at the cost of power (and, on a VM, host CPU spent polling).
+    pub cpu_dma_latency_zero: bool,
     /// The servo loop.
     pub servo: LoopSpec,
     /// The physics loop.
@@ -179,6 +182,7 @@ impl Default for StationConfig {
             scenario: None,
             method: None,
             mlockall: true,
+            cpu_dma_latency_zero: true,
             servo: LoopSpec::default(),
             physics: LoopSpec::default(),
             rings: RingSpec::default(),
