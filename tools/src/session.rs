@@ -169,6 +169,9 @@ pub fn run_method(
     sc.method = method;
     let dir = a.out.join(method.as_str());
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    // Absolute: the station configs name their recordings, and a relative path in a config is
+    // relative to the config's own directory.
+    let dir = std::fs::canonicalize(&dir).with_context(|| format!("finding {}", dir.display()))?;
     let sc_path = std::fs::canonicalize(&a.scenario)
         .with_context(|| format!("finding {}", a.scenario.display()))?;
     let n = sc.site.len();

@@ -148,10 +148,22 @@ fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
 fn four_stations_run_to_the_end_and_report_their_overruns() {
     let _turn = ONE_AT_A_TIME.lock();
     let out = out_dir("four");
-    let v = run_json(session(
-        &["scenarios/four-users.toml", "--method", "paper"],
-        &out,
-    ));
+    // Run from the output's parent with a relative --out (a user's `--out out/x`), the scenario
+    // given by its full path.
+    let base = out.parent().expect("temp dir").to_owned();
+    let mut cmd = session(
+        &[
+            &root()
+                .join("scenarios/four-users.toml")
+                .display()
+                .to_string(),
+            "--method",
+            "paper",
+        ],
+        Path::new(out.file_name().expect("name")),
+    );
+    cmd.current_dir(&base);
+    let v = run_json(cmd);
     let stations = v["methods"]["paper"]["stations"]
         .as_object()
         .expect("stations");

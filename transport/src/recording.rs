@@ -219,20 +219,20 @@ impl std::fmt::Debug for Recorder {
 #[derive(Debug, thiserror::Error)]
 pub enum RecordingError {
     /// File system.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// MCAP.
-    #[error("{path}: MCAP: {source}")]
+    #[error("{path}: MCAP: {error}")]
     Mcap {
         /// The file.
         path: String,
         /// Why.
-        source: mcap::McapError,
+        error: mcap::McapError,
     },
 }
 
@@ -255,19 +255,19 @@ impl Recorder {
     /// The file cannot be created or written.
     pub fn create(path: &Path, metadata: BTreeMap<String, String>) -> Result<Self, RecordingError> {
         let p = path.display().to_string();
-        let mcap_err = |source| RecordingError::Mcap {
+        let mcap_err = |error| RecordingError::Mcap {
             path: p.clone(),
-            source,
+            error,
         };
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|source| RecordingError::Io {
+            std::fs::create_dir_all(dir).map_err(|error| RecordingError::Io {
                 path: dir.display().to_string(),
-                source,
+                error,
             })?;
         }
-        let file = File::create(path).map_err(|source| RecordingError::Io {
+        let file = File::create(path).map_err(|error| RecordingError::Io {
             path: p.clone(),
-            source,
+            error,
         })?;
         let mut w = mcap::WriteOptions::new()
             .use_chunks(false)
@@ -445,17 +445,17 @@ pub struct Recording {
 /// The file cannot be read, is not MCAP, or a message is not what its channel says.
 pub fn read(path: &Path) -> Result<Recording, RecordingError> {
     let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| RecordingError::Io {
+    let bytes = std::fs::read(path).map_err(|error| RecordingError::Io {
         path: p.clone(),
-        source,
+        error,
     })?;
-    let mcap_err = |source| RecordingError::Mcap {
+    let mcap_err = |error| RecordingError::Mcap {
         path: p.clone(),
-        source,
+        error,
     };
     let bad = |what: String| RecordingError::Io {
         path: p.clone(),
-        source: std::io::Error::new(std::io::ErrorKind::InvalidData, what),
+        error: std::io::Error::new(std::io::ErrorKind::InvalidData, what),
     };
     let stream =
         mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
