@@ -67,6 +67,7 @@ fn stations(
         start_timeout: Duration::from_secs(30),
         station_bin: station_bin.clone(),
         progress: false,
+        stop: crate::cli::StopFlag::manual(),
     };
     crate::session::run_method(
         &a,
@@ -214,6 +215,7 @@ fn four_stations(
         start_timeout: Duration::from_secs(30),
         station_bin: station_bin.clone(),
         progress: false,
+        stop: crate::cli::StopFlag::manual(),
     };
     let o = crate::session::run_method(
         &a,

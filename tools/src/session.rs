@@ -49,6 +49,8 @@ pub struct RunArgs {
     pub station_bin: StationBin,
     /// Show progress on a terminal.
     pub progress: bool,
+    /// Raised by SIGINT/SIGTERM: stop the stations cleanly and return.
+    pub stop: crate::cli::StopFlag,
 }
 
 /// How to run a station: a program and the arguments before its subcommand (`session station run`
@@ -276,8 +278,17 @@ pub fn run_method(
         }
         Ok(())
     };
+    let interrupted = || {
+        anyhow::anyhow!(
+            "interrupted: the stations were stopped (their logs are in {})",
+            dir.display()
+        )
+    };
     let waited = Instant::now();
     loop {
+        if a.stop.is_raised() {
+            return Err(interrupted());
+        }
         check_alive(&mut stations)?;
         let have = present
             .lock()
@@ -349,6 +360,13 @@ pub fn run_method(
             }
         }
         check_alive(&mut stations)?;
+        if a.stop.is_raised() {
+            if let Some(b) = &bar {
+                b.finish_and_clear();
+            }
+            // Dropping the stations stops each one with its own stop ladder.
+            return Err(interrupted());
+        }
         if let Some(b) = &bar {
             b.set_position((t * 10.0) as u64);
         }

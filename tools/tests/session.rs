@@ -397,3 +397,75 @@ fn hostile_messages_are_counted_and_change_nothing() {
     assert!(f(&real["divergence_final_m"]) < 0.005, "{real}");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let name = format!("i{}", std::process::id());
+    let out = out_dir("interrupted");
+    let mut cmd = session(
+        &[
+            "scenarios/zero-delay.toml",
+            "--method",
+            "paper",
+            "--session",
+            &name,
+        ],
+        &out,
+    );
+    let mut launcher = coop_tests::Reaped::spawn(cmd.stderr(std::process::Stdio::piped()));
+    let session = format!("{name}-paper");
+    coop_tests::wait_until("both stations running", Duration::from_secs(60), || {
+        ["user1", "user2"]
+            .iter()
+            .all(|s| {
+                coop_tools::station::status::read(&session, s, &[])
+                    .is_ok_and(|v| v["running"] == true)
+            })
+            .then_some(())
+    });
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(launcher.pid() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .expect("SIGINT");
+    let status = launcher
+        .wait_timeout(Duration::from_secs(30))
+        .expect("the launcher stopped");
+    assert_eq!(
+        status.code(),
+        Some(1),
+        "an interrupted session is not a success"
+    );
+    let mut err = String::new();
+    if let Some(e) = launcher.0.as_mut().and_then(|c| c.stderr.as_mut()) {
+        use std::io::Read;
+        let _ = e.read_to_string(&mut err);
+    }
+    assert!(err.contains("interrupted"), "says why: {err}");
+    // Every station process is gone (they were started with SIGINT/SIGTERM blocked by the
+    // launcher's signal thread; a station unblocks them first thing), and so are their segments.
+    let left: Vec<(i32, String)> = std::fs::read_dir("/proc")
+        .expect("/proc")
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let pid: i32 = e.file_name().to_str()?.parse().ok()?;
+            let c = std::fs::read(e.path().join("cmdline")).ok()?;
+            Some((pid, String::from_utf8_lossy(&c).replace('\0', " ")))
+        })
+        .filter(|(_, c)| c.contains(&session))
+        .collect();
+    for (pid, _) in &left {
+        // A failing run must not leave real-time processes behind.
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(*pid),
+            nix::sys::signal::Signal::SIGKILL,
+        );
+    }
+    assert!(left.is_empty(), "processes left: {left:?}");
+    assert!(
+        coop_tests::shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

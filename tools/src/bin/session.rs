@@ -122,6 +122,8 @@ fn main() -> std::process::ExitCode {
                 anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
             }
             let station_bin = station_bin_or_default(station_bin)?;
+            // Before any thread (zenoh's) starts: SIGINT/SIGTERM stop the session cleanly.
+            let stop = coop_tools::cli::StopFlag::on_sigint_sigterm()?;
             let a = coop_tools::session::RunArgs {
                 scenario,
                 out,
@@ -132,6 +134,7 @@ fn main() -> std::process::ExitCode {
                 start_timeout: std::time::Duration::from_secs_f64(start_timeout_s),
                 station_bin,
                 progress: !json,
+                stop,
             };
             let (sc, rows, v) = coop_tools::session::run(&a)?;
             if json {

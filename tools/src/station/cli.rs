@@ -100,6 +100,19 @@ fn resolve(a: &ChildArgs) -> anyhow::Result<super::config::Resolved> {
 /// arguments that come before the subcommand when this executable re-runs itself (empty for the
 /// `station` binary, `["station"]` inside `session`).
 pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCode {
+    // A station must always be stoppable: a parent may have spawned us with SIGINT/SIGTERM blocked
+    // (a launcher waiting for them with sigwait; spawned processes inherit the mask). Blocked, they
+    // would keep the stop ladder and the children's parent-death signal from ever acting.
+    {
+        use nix::sys::signal::{SigSet, SigmaskHow, Signal};
+        let mut set = SigSet::empty();
+        set.add(Signal::SIGINT);
+        set.add(Signal::SIGTERM);
+        if let Err(e) = nix::sys::signal::pthread_sigmask(SigmaskHow::SIG_UNBLOCK, Some(&set), None)
+        {
+            eprintln!("station: cannot unblock SIGINT/SIGTERM ({e}); it may not stop on a signal");
+        }
+    }
     let args = match Args::try_parse_from(args) {
         Ok(a) => a,
         Err(e) => e.exit(),
