@@ -49,32 +49,44 @@ fn histogram() -> Histogram<u64> {
     Histogram::new_with_bounds(1, 60_000_000_000, 3).expect("valid bounds")
 }
 
-/// The station path: a two-station session, latencies from the receivers' recordings.
-fn stations(
+/// Runs `scenarios/<name>.toml` (paper method) as a session in a temporary directory: the scenario,
+/// the outcome, and the directory with the recordings (the caller removes it).
+fn bench_session(
     root: &Path,
+    name: &str,
+    emulate: bool,
     station_bin: &crate::session::StationBin,
-) -> anyhow::Result<Histogram<u64>> {
-    let scenario = root.join("scenarios/zero-delay.toml");
+) -> anyhow::Result<(
+    coop_model::scenario::Scenario,
+    crate::session::MethodOutcome,
+    PathBuf,
+)> {
+    let scenario = root.join(format!("scenarios/{name}.toml"));
     let sc = crate::scenario_file::load(&scenario)?;
-    let dir = std::env::temp_dir().join(format!("coop-netbench-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("coop-bench-{name}-{}", std::process::id()));
     let a = crate::session::RunArgs {
         scenario,
         out: dir.clone(),
         methods: vec![MethodName::Paper],
         session: None,
         late: vec![],
-        emulate: false,
+        emulate,
         start_timeout: Duration::from_secs(30),
         station_bin: station_bin.clone(),
         progress: false,
         stop: crate::cli::StopFlag::manual(),
     };
-    crate::session::run_method(
-        &a,
-        &sc,
-        MethodName::Paper,
-        &format!("nb{}", std::process::id()),
-    )?;
+    let session = format!("b{}{}", std::process::id(), &name[..1]);
+    let o = crate::session::run_method(&a, &sc, MethodName::Paper, &session)?;
+    Ok((sc, o, dir))
+}
+
+/// The station path: a two-station session, latencies from the receivers' recordings.
+fn stations(
+    root: &Path,
+    station_bin: &crate::session::StationBin,
+) -> anyhow::Result<Histogram<u64>> {
+    let (sc, _, dir) = bench_session(root, "zero-delay", false, station_bin)?;
     let mut h = histogram();
     for s in &sc.site {
         let rec = recording::read(&dir.join("paper").join(format!("{}.mcap", s.name)))?;
@@ -202,27 +214,7 @@ fn four_stations(
     root: &Path,
     station_bin: &crate::session::StationBin,
 ) -> anyhow::Result<serde_json::Value> {
-    let scenario = root.join("scenarios/four-users.toml");
-    let sc = crate::scenario_file::load(&scenario)?;
-    let dir = std::env::temp_dir().join(format!("coop-netbench4-{}", std::process::id()));
-    let a = crate::session::RunArgs {
-        scenario,
-        out: dir.clone(),
-        methods: vec![MethodName::Paper],
-        session: None,
-        late: vec![],
-        emulate: true,
-        start_timeout: Duration::from_secs(30),
-        station_bin: station_bin.clone(),
-        progress: false,
-        stop: crate::cli::StopFlag::manual(),
-    };
-    let o = crate::session::run_method(
-        &a,
-        &sc,
-        MethodName::Paper,
-        &format!("nf{}", std::process::id()),
-    )?;
+    let (sc, o, dir) = bench_session(root, "four-users", true, station_bin)?;
     let _ = std::fs::remove_dir_all(&dir);
     let mut rows = Vec::new();
     for s in &sc.site {
