@@ -6,7 +6,7 @@
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
 //!
-//! The network process is not a real-time loop: it runs tokio and zenoh at normal priority, and only
+//! The network process is not a real-time loop: it runs its threads and zenoh's at normal priority, and only
 //! touches the rings (lock-free, non-blocking) on the real-time side's behalf.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
