@@ -123,6 +123,8 @@ fn body_state(pos: [f64; 3], rot: [f64; 4], vel: [f64; 3], ang_mom: [f64; 3]) ->
 }
 
 impl ObjectSample {
+    /// Its size in 8-byte words.
+    pub const WORDS: usize = core::mem::size_of::<Self>() / 8;
     /// From a state computed with the tool sample of time `tool_t_ns`.
     pub fn new(t_ns: u64, seq: u64, s: &BodyState, adoptions: u64, tool_t_ns: u64) -> Self {
         let (pos, rot, vel, ang_mom) = state_fields(s);
@@ -141,8 +143,8 @@ impl ObjectSample {
     pub fn state(&self) -> Option<BodyState> {
         body_state(self.pos, self.rot, self.vel, self.ang_mom)
     }
-    /// Its 17 words, in field order (for the control block's resume seqlock).
-    pub fn words(&self) -> [u64; 17] {
+    /// Its words, in field order (for the control block's resume seqlock).
+    pub fn words(&self) -> [u64; Self::WORDS] {
         let f = |v: f64| v.to_bits();
         [
             self.t_ns,
@@ -165,7 +167,7 @@ impl ObjectSample {
         ]
     }
     /// The inverse of [`ObjectSample::words`].
-    pub fn from_words(w: [u64; 17]) -> Self {
+    pub fn from_words(w: [u64; Self::WORDS]) -> Self {
         let f = f64::from_bits;
         Self {
             t_ns: w[0],

@@ -53,6 +53,11 @@ pub struct RunArgs {
     pub stop: crate::cli::StopFlag,
 }
 
+/// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// How to run a station: a program and the arguments before its subcommand (`session station run`
 /// when the launcher runs its own executable, `station run` for a separate binary).
 #[derive(Debug, Clone)]
@@ -81,21 +86,39 @@ impl Station {
     }
 }
 
+impl Station {
+    /// Asks the station to stop (SIGTERM: its stop ladder ramps the force to zero, then unlinks).
+    fn terminate(&self) {
+        if let Some(c) = &self.child {
+            let _ = nix::sys::signal::kill(
+                nix::unistd::Pid::from_raw(c.id() as i32),
+                nix::sys::signal::Signal::SIGTERM,
+            );
+        }
+    }
+
+    /// Waits up to `limit` for the station to exit, then SIGKILLs it; its exit status, or `None`
+    /// when it had to be killed (or was not running).
+    fn reap(&mut self, limit: Duration) -> Option<std::process::ExitStatus> {
+        let mut c = self.child.take()?;
+        let deadline = Instant::now() + limit;
+        while Instant::now() < deadline {
+            if let Ok(Some(s)) = c.try_wait() {
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = c.kill();
+        let _ = c.wait();
+        None
+    }
+}
+
 impl Drop for Station {
     fn drop(&mut self) {
         // Whatever happened, no station outlives its session.
-        if let Some(c) = &mut self.child {
-            if matches!(c.try_wait(), Ok(None)) {
-                let pid = nix::unistd::Pid::from_raw(c.id() as i32);
-                let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-                let deadline = Instant::now() + Duration::from_secs(6);
-                while Instant::now() < deadline && matches!(c.try_wait(), Ok(None)) {
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
+        self.terminate();
+        self.reap(Duration::from_secs(6));
     }
 }
 
@@ -232,7 +255,7 @@ pub fn run_method(
         .history(true)
         .callback(move |s| {
             let site = keys::site_of(s.key_expr().as_str()).to_owned();
-            let mut set = p.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let mut set = lock(&p);
             if s.kind() == zenoh::sample::SampleKind::Put {
                 set.insert(site);
             } else {
@@ -246,7 +269,7 @@ pub fn run_method(
     let _epoch_q = z
         .declare_queryable(keys::epoch(session))
         .callback(move |q| {
-            let v = *e.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let v = *lock(&e);
             if let Some(v) = v {
                 let _ = q
                     .reply(q.key_expr().clone(), wire::encode_u64(v).to_vec())
@@ -290,10 +313,7 @@ pub fn run_method(
             return Err(interrupted());
         }
         check_alive(&mut stations)?;
-        let have = present
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .clone();
+        let have = lock(&present).clone();
         let missing: Vec<&str> = stations
             .iter()
             .filter(|s| s.child.is_some() && !have.contains(&s.site))
@@ -314,9 +334,7 @@ pub fn run_method(
     }
     // Time 0 a little ahead, so every station has it before it matters.
     let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
-    *epoch
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(t0);
+    *lock(&epoch) = Some(t0);
     z.put(keys::epoch(session), wire::encode_u64(t0).to_vec())
         .wait()
         .map_err(|e| anyhow::anyhow!("announcing the session start: {e}"))?;
@@ -396,37 +414,18 @@ pub fn run_method(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    // Stop: SIGTERM each station (its stop ladder ramps the force to zero, then unlinks), wait.
+    // Stop: SIGTERM every station at once (each runs its stop ladder), then wait for each.
     for st in &stations {
-        if let Some(c) = &st.child {
-            let _ = nix::sys::signal::kill(
-                nix::unistd::Pid::from_raw(c.id() as i32),
-                nix::sys::signal::Signal::SIGTERM,
-            );
-        }
+        st.terminate();
     }
-    for st in &mut stations {
-        if let Some(mut c) = st.child.take() {
-            let deadline = Instant::now() + Duration::from_secs(10);
-            let status = loop {
-                if let Some(s) = c.try_wait()? {
-                    break Some(s);
-                }
-                if Instant::now() > deadline {
-                    let _ = c.kill();
-                    let _ = c.wait();
-                    break None;
-                }
-                std::thread::sleep(Duration::from_millis(20));
-            };
-            match status {
-                Some(s) if s.success() => {}
-                other => bail!(
-                    "station {} did not stop cleanly ({other:?}); its log:\n{}",
-                    st.site,
-                    st.log_tail()
-                ),
-            }
+    for st in stations.iter_mut().filter(|s| s.child.is_some()) {
+        match st.reap(Duration::from_secs(10)) {
+            Some(s) if s.success() => {}
+            other => bail!(
+                "station {} did not stop cleanly ({other:?}); its log:\n{}",
+                st.site,
+                st.log_tail()
+            ),
         }
     }
     let _ = z.close().wait();

@@ -138,7 +138,7 @@ pub struct ControlBlock {
 }
 
 /// Words of the resume state.
-pub const RESUME_WORDS: usize = 17;
+pub const RESUME_WORDS: usize = ObjectSample::WORDS;
 /// Words of the locator text (512 bytes).
 pub const LOCATOR_WORDS: usize = 64;
 /// Sites the control block has per-peer slots for.
