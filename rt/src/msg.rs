@@ -288,9 +288,6 @@ impl TraceRecord {
     }
 }
 
-/// Sites a report's inclusion times cover.
-pub const INCLUDED_SITES: usize = MAX_SITES;
-
 const KIND_STATE: u64 = 1;
 const KIND_FORCE: u64 = 2;
 

@@ -8,6 +8,7 @@ use coop_model::contact::ContactForce;
 use coop_model::method::{Consistency, ObjectCopy, World};
 
 use crate::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
+use crate::shm::control::{ControlBlock, Ring};
 use crate::shm::{Consumer, Producer};
 
 /// Everything one physics loop owns.
@@ -37,8 +38,12 @@ pub struct PhysicsLoop {
     pub rejected: u64,
     /// Remote reports taken from the ring (valid or not).
     pub received: u64,
-    /// Object samples or reports dropped because a ring was full.
-    pub dropped: u64,
+    /// Object samples dropped because the ring to the servo was full.
+    pub object_drops: u64,
+    /// Reports dropped because the ring to the network was full.
+    pub report_drops: u64,
+    /// Trace records dropped because the recorder's ring was full.
+    pub trace_drops: u64,
 }
 
 /// A physics loop's clock: its fixed step, its report period, and when it starts (ns).
@@ -104,7 +109,9 @@ impl PhysicsLoop {
             adoptions: 0,
             rejected: 0,
             received: 0,
-            dropped: 0,
+            object_drops: 0,
+            report_drops: 0,
+            trace_drops: 0,
         }
     }
 
@@ -159,7 +166,7 @@ impl PhysicsLoop {
             ))
             .is_err()
         {
-            self.dropped += 1;
+            self.object_drops += 1;
         }
         if now_ns >= self.next_trace_ns {
             self.next_trace_ns = next_on_grid(self.next_trace_ns, now_ns, self.trace_period_ns);
@@ -178,7 +185,7 @@ impl PhysicsLoop {
                 .push(SiteReport::new(self.site, self.report_seq, &report))
                 .is_err()
             {
-                self.dropped += 1;
+                self.report_drops += 1;
             }
         }
     }
@@ -198,9 +205,21 @@ impl PhysicsLoop {
     fn push_trace(&mut self, r: TraceRecord) {
         if let Some(t) = &mut self.trace {
             if t.push(r).is_err() {
-                self.dropped += 1;
+                self.trace_drops += 1;
             }
         }
+    }
+
+    /// Publishes this loop's counters in the control block's physics group (the one writer).
+    pub fn publish_counters(&self, ctl: &ControlBlock) {
+        // REAL-TIME: relaxed stores only.
+        let p = &ctl.physics;
+        p.received.store(self.received, crate::sync::Ordering::Relaxed);
+        p.rejected.store(self.rejected, crate::sync::Ordering::Relaxed);
+        p.adoptions.store(self.adoptions, crate::sync::Ordering::Relaxed);
+        p.drops.set(Ring::Object, self.object_drops);
+        p.drops.set(Ring::Report, self.report_drops);
+        p.drops.set(Ring::Trace, self.trace_drops);
     }
 
     /// The last report sequence number used.

@@ -99,7 +99,7 @@ mod tests {
         let summary = run_periodic(
             &ctl,
             Child::Physics,
-            &ctl.physics,
+            &ctl.physics.stats,
             Duration::from_millis(1),
             &in_force,
             |_| {
@@ -111,7 +111,7 @@ mod tests {
             },
         );
         assert_eq!(summary.cycles, 50);
-        let s = ctl.physics.snapshot();
+        let s = ctl.physics.stats.snapshot();
         assert_eq!(s.cycles, 50);
         assert_eq!(s.period_ns, 1_000_000);
         assert_eq!(s.wake_us.len(), 50);

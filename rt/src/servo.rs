@@ -9,7 +9,7 @@ use coop_model::servo::{Servo, ServoInput, ServoOutput};
 
 use crate::device::Device;
 use crate::msg::{ObjectSample, ToolSample};
-use crate::shm::control::{ControlBlock, RunState};
+use crate::shm::control::{ControlBlock, Ring, RunState};
 use crate::shm::{Consumer, Producer};
 
 /// Everything one servo loop owns.
@@ -74,9 +74,9 @@ impl<D: Device> ServoLoop<D> {
             if n.value.tool_t_ns > self.last_roundtrip_tool_ns && n.value.tool_t_ns <= now_ns {
                 self.last_roundtrip_tool_ns = n.value.tool_t_ns;
                 if let Some(c) = control {
-                    let count = c.roundtrip_count.load(crate::sync::Ordering::Relaxed);
-                    c.roundtrip.record(now_ns - n.value.tool_t_ns, count == 0);
-                    c.roundtrip_count
+                    let count = c.servo.roundtrip_count.load(crate::sync::Ordering::Relaxed);
+                    c.servo.roundtrip.record(now_ns - n.value.tool_t_ns, count == 0);
+                    c.servo.roundtrip_count
                         .store(count + 1, crate::sync::Ordering::Relaxed);
                 }
             }
@@ -130,7 +130,7 @@ impl<D: Device> ServoLoop<D> {
         if self.tools.push(sample).is_err() {
             self.dropped += 1;
             if let Some(c) = control {
-                c.drops[0].store(self.dropped, crate::sync::Ordering::Relaxed);
+                c.servo.drops.set(Ring::Tool, self.dropped);
             }
         }
         // Record stale episodes: when the newest state was, and when the command reached zero.
@@ -139,22 +139,22 @@ impl<D: Device> ServoLoop<D> {
             self.stale_state_ns = Some(t_ns);
             self.stale_limp_recorded = false;
             if let Some(c) = control {
-                c.servo_stale_state_ns
+                c.servo.stale_state_ns
                     .store(t_ns, crate::sync::Ordering::Relaxed);
-                c.servo_stale_limp_ns
+                c.servo.stale_limp_ns
                     .store(0, crate::sync::Ordering::Relaxed);
             }
         }
         if stale && !self.stale_limp_recorded && out.f_command.norm() == 0.0 {
             self.stale_limp_recorded = true;
             if let Some(c) = control {
-                c.servo_stale_limp_ns
+                c.servo.stale_limp_ns
                     .store(now_ns, crate::sync::Ordering::Relaxed);
             }
         }
         if let Some(c) = control {
-            ControlBlock::store_f64(&c.servo_command_n, out.f_command.norm());
-            ControlBlock::store_f64(&c.servo_scale, out.scale);
+            ControlBlock::store_f64(&c.servo.command_n, out.f_command.norm());
+            ControlBlock::store_f64(&c.servo.scale, out.scale);
         }
         self.limp = out.scale == 0.0;
         out

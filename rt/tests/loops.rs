@@ -284,7 +284,7 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
     assert!(pressing > 0.3, "holding the disk: {pressing} N");
     assert!(!r.servo.is_limp());
     assert!(
-        (ControlBlock::load_f64(&ctl.servo_command_n) - pressing).abs() < 1e-12,
+        (ControlBlock::load_f64(&ctl.servo.command_n) - pressing).abs() < 1e-12,
         "published"
     );
     ctl.set_run_state(RunState::Stopping);
@@ -299,6 +299,6 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
             k - stop
         );
     }
-    assert_eq!(ControlBlock::load_f64(&ctl.servo_command_n), 0.0);
-    assert_eq!(ControlBlock::load_f64(&ctl.servo_scale), 0.0);
+    assert_eq!(ControlBlock::load_f64(&ctl.servo.command_n), 0.0);
+    assert_eq!(ControlBlock::load_f64(&ctl.servo.scale), 0.0);
 }

@@ -677,7 +677,7 @@ pub fn attach(
     )
     .with_context(|| format!("attaching to station {station} of session {session}"))?;
     let stop = StopFlag::on_sigint_sigterm().context("blocking SIGINT/SIGTERM")?;
-    let start = (ctl.servo.snapshot(), ctl.physics.snapshot());
+    let start = (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
     let began = Instant::now();
     let live = !quiet && std::io::stdout().is_terminal();
     let loops = [
@@ -714,9 +714,9 @@ pub fn attach(
             }
             for (name, c, i) in loops {
                 let (base, now) = if i == 0 {
-                    (&start.0, ctl.servo.snapshot())
+                    (&start.0, ctl.servo.stats.snapshot())
                 } else {
-                    (&start.1, ctl.physics.snapshot())
+                    (&start.1, ctl.physics.stats.snapshot())
                 };
                 let _ = writeln!(out, "{}\x1b[K", line(name, c, i, base, &now));
             }
@@ -741,8 +741,8 @@ pub fn attach(
         w
     };
     let (servo, physics) = (
-        window(ctl.servo.snapshot(), &start.0),
-        window(ctl.physics.snapshot(), &start.1),
+        window(ctl.servo.stats.snapshot(), &start.0),
+        window(ctl.physics.stats.snapshot(), &start.1),
     );
     println!(
         "# latency attach: station {station} of session {session}, {:.1} s attached",
@@ -799,9 +799,9 @@ pub fn attach(
             }),
         );
     }
-    let rt = ctl.roundtrip.to_hdr();
-    let rt_count = ctl.roundtrip_count.load(coop_rt::sync::Ordering::Relaxed);
-    let rt_max = ctl.roundtrip.max_ns.load(coop_rt::sync::Ordering::Relaxed) as f64 / 1e3;
+    let rt = ctl.servo.roundtrip.to_hdr();
+    let rt_count = ctl.servo.roundtrip_count.load(coop_rt::sync::Ordering::Relaxed);
+    let rt_max = ctl.servo.roundtrip.max_ns.load(coop_rt::sync::Ordering::Relaxed) as f64 / 1e3;
     println!(
         "# servo -> physics -> servo round trip us ({rt_count} samples): p50 {} p99 {} max {rt_max:.1}",
         rt.value_at_quantile(0.5),

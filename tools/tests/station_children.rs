@@ -66,9 +66,9 @@ fn servo_and_physics_processes_run_report_and_stop_limp() {
         ctl.child(Child::Physics).pid.load(Ordering::Relaxed),
         u64::from(physics.pid())
     );
-    assert!(ctl.servo.snapshot().cycles > 300 && ctl.physics.snapshot().cycles > 300);
+    assert!(ctl.servo.stats.snapshot().cycles > 300 && ctl.physics.stats.snapshot().cycles > 300);
     assert_eq!(
-        ctl.servo.snapshot().period_ns,
+        ctl.servo.stats.snapshot().period_ns,
         1_666_667,
         "600 Hz, user1's servo rate in the paper scenario"
     );
@@ -82,11 +82,11 @@ fn servo_and_physics_processes_run_report_and_stop_limp() {
     assert!(exited(&mut physics).success());
     assert!(exited(&mut servo).success());
     assert_eq!(
-        ControlBlock::load_f64(&ctl.servo_scale),
+        ControlBlock::load_f64(&ctl.servo.scale),
         0.0,
         "the servo left limp"
     );
-    assert_eq!(ControlBlock::load_f64(&ctl.servo_command_n), 0.0);
+    assert_eq!(ControlBlock::load_f64(&ctl.servo.command_n), 0.0);
     drop(reports);
     drop(segs);
     assert!(

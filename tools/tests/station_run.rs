@@ -67,7 +67,7 @@ fn runs_then_stops_on_sigterm_leaving_nothing() {
     let (servo, physics) = running(&ctl);
     // About five seconds of servo cycles at user1's 600 Hz.
     wait_until("5 s of servo cycles", LIMIT, || {
-        (ctl.servo.snapshot().cycles >= 3000).then_some(())
+        (ctl.servo.stats.snapshot().cycles >= 3000).then_some(())
     });
     kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
     let (status, _) = station.finish();
@@ -77,7 +77,7 @@ fn runs_then_stops_on_sigterm_leaving_nothing() {
         "children outlived the station"
     );
     assert_eq!(
-        ControlBlock::load_f64(&ctl.servo_scale),
+        ControlBlock::load_f64(&ctl.servo.scale),
         0.0,
         "the servo stopped limp"
     );
@@ -235,21 +235,18 @@ fn two_stations(scheme: &str, tls: &str) {
     wait_until("each physics to receive the other's states", LIMIT, || {
         let got = |c: &ControlBlock| {
             (
-                c.net_received.load(Ordering::Relaxed),
-                c.physics_received.load(Ordering::Relaxed),
-                c.physics_adoptions.load(Ordering::Relaxed),
+                c.network.received.load(Ordering::Relaxed),
+                c.physics.received.load(Ordering::Relaxed),
+                c.physics.adoptions.load(Ordering::Relaxed),
             )
         };
         let (ra, rb) = (got(&ca), got(&cb));
         (ra.0 > 20 && ra.1 > 20 && rb.0 > 20 && rb.1 > 20 && (ra.2 + rb.2) > 0).then_some(())
     });
-    assert!(ca
-        .net_refused
-        .iter()
-        .all(|c| c.load(Ordering::Relaxed) == 0));
+    assert!(ca.network.refused.all().all(|(_, n)| n == 0));
     assert!(
-        ca.net_published.load(Ordering::Relaxed) > 20
-            && cb.net_published.load(Ordering::Relaxed) > 20
+        ca.network.published.load(Ordering::Relaxed) > 20
+            && cb.network.published.load(Ordering::Relaxed) > 20
     );
     for s in [a, b] {
         kill(Pid::from_raw(s.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
@@ -292,13 +289,13 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
     let ctl = control(&session);
     let (_, physics) = running(&ctl);
     wait_until("the user pressing the disk", LIMIT, || {
-        (ControlBlock::load_f64(&ctl.servo_command_n) > 0.3).then_some(())
+        (ControlBlock::load_f64(&ctl.servo.command_n) > 0.3).then_some(())
     });
     kill(Pid::from_raw(physics as i32), Signal::SIGKILL).expect("SIGKILL physics");
     let (state_ns, limp_ns) = wait_until("the servo to record going limp", LIMIT, || {
         let (s, l) = (
-            ctl.servo_stale_state_ns.load(Ordering::Relaxed),
-            ctl.servo_stale_limp_ns.load(Ordering::Relaxed),
+            ctl.servo.stale_state_ns.load(Ordering::Relaxed),
+            ctl.servo.stale_limp_ns.load(Ordering::Relaxed),
         );
         (s > 0 && l > 0).then_some((s, l))
     });
@@ -370,7 +367,7 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
     let (before, seq) = wait_until("the pushed disk at rest", LIMIT, || {
         let s = ctl.resume()?;
         let t = s.t_ns.saturating_sub(epoch) as f64 * 1e-9;
-        (t > 2.2 && s.pos[0] > 0.0).then(|| (s, ctl.report_seq.load(Ordering::Relaxed)))
+        (t > 2.2 && s.pos[0] > 0.0).then(|| (s, ctl.physics.report_seq.load(Ordering::Relaxed)))
     });
     let old = pid(&ctl, Child::Physics);
     kill(Pid::from_raw(old as i32), Signal::SIGKILL).expect("SIGKILL physics");
@@ -386,7 +383,7 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
         before.pos[0]
     );
     assert!(
-        ctl.report_seq.load(Ordering::Relaxed) > seq,
+        ctl.physics.report_seq.load(Ordering::Relaxed) > seq,
         "the report sequence continued"
     );
     kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");

@@ -25,7 +25,7 @@ use std::time::Duration;
 use coop_model::rng::Rng;
 use coop_model::scenario::LinkSpec;
 use coop_rt::msg::{SiteReport, TraceRecord};
-use coop_rt::shm::control::{ControlBlock, RunState, MAX_SITES};
+use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, RunState, MAX_SITES};
 use coop_rt::shm::{Consumer, Producer};
 use coop_rt::sync::Ordering;
 use coop_rt::timer::monotonic_ns;
@@ -294,7 +294,8 @@ impl Receiver<'_> {
         let (from, mut r) = match self.inbound.check(keys::site_of(key), bytes) {
             Ok(x) => x,
             Err(e) => {
-                let slot = e.slot();
+                let reason = e.reason();
+                let slot = reason.slot();
                 if self.refused[slot] == 0 {
                     // The first of each kind, once: an operator sees what is arriving; the counts
                     // are in status.
@@ -303,19 +304,20 @@ impl Receiver<'_> {
                     );
                 }
                 self.refused[slot] += 1;
-                self.control.net_refused[slot].store(self.refused[slot], Ordering::Relaxed);
+                self.control.network.refused.set(reason, self.refused[slot]);
                 return;
             }
         };
         if from == self.me {
             return; // our own, echoed back
         }
-        let offset = self.control.clock_offset_ns[from].load(Ordering::Relaxed) as i64;
+        let offset = self.control.network.clock_offset_ns[from].load(Ordering::Relaxed) as i64;
         r.t_ns = r.t_ns.saturating_add_signed(-offset);
         if join {
             self.join_states += 1;
             self.control
-                .net_join_states
+                .network
+                .join_states
                 .store(self.join_states, Ordering::Relaxed);
         }
         let now = monotonic_ns();
@@ -337,7 +339,8 @@ impl Receiver<'_> {
                 if lost {
                     self.emulated_lost += 1;
                     self.control
-                        .net_emulated_lost
+                        .network
+                        .emulated_lost
                         .store(self.emulated_lost, Ordering::Relaxed);
                     return;
                 }
@@ -372,19 +375,21 @@ impl Receiver<'_> {
 
     fn hand_over(&mut self, h: Held, zenoh_ts: Option<String>, join: bool, now: u64) {
         if self.remote.push(h.report).is_err() {
-            self.control.drops[3].fetch_add(1, Ordering::Relaxed);
+            self.control.network.drops.add(Ring::Remote, 1);
             return;
         }
         self.received += 1;
         self.control
-            .net_received
+            .network
+            .received
             .store(self.received, Ordering::Relaxed);
         let age = now.saturating_sub(h.report.t_ns);
         if !join && self.emulation.is_none() {
-            let count = self.control.net_latency_count.load(Ordering::Relaxed);
-            self.control.net_latency.record(age, count == 0);
+            let count = self.control.network.latency_count.load(Ordering::Relaxed);
+            self.control.network.latency.record(age, count == 0);
             self.control
-                .net_latency_count
+                .network
+                .latency_count
                 .store(count + 1, Ordering::Relaxed);
         }
         self.log.push(RemoteMsg {
@@ -495,7 +500,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
         ),
         None => None,
     };
-    ctl.net_emulated
+    ctl.network
+        .emulated
         .store(u64::from(emulation.is_some()), Ordering::Relaxed);
     let session = zenoh::open(config(&endpoints)?)
         .wait()
@@ -680,7 +686,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                 let mut peers = vec![ClockPeer::default(); n];
                 let mut round = 0u32;
                 while stop.load(Ordering::Relaxed) == 0 {
-                    let present = ctl.peers_present.load(Ordering::Relaxed);
+                    let present = ctl.network.peers_present.load(Ordering::Relaxed);
                     for (j, name) in sites.iter().enumerate() {
                         if j == me || present & (1 << j) == 0 {
                             continue;
@@ -702,8 +708,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                             {
                                 let (rtt, offset) = clock_estimate(t0, remote, t2);
                                 let (rtt, offset) = peers[j].add(rtt, offset);
-                                ctl.clock_offset_ns[j].store(offset as u64, Ordering::Relaxed);
-                                ctl.clock_rtt_ns[j].store(rtt, Ordering::Relaxed);
+                                ctl.network.clock_offset_ns[j].store(offset as u64, Ordering::Relaxed);
+                                ctl.network.clock_rtt_ns[j].store(rtt, Ordering::Relaxed);
                                 lock(&cl).push(ClockMsg {
                                     t_ns: t2,
                                     site: j,
@@ -810,9 +816,9 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                     // A site that left and comes back starts its sequence afresh.
                     lock(&receiver).inbound.forget(j);
                 }
-                ctl.peers_present.store(present_mask, Ordering::Relaxed);
-                ctl.peer_joins.store(joins, Ordering::Relaxed);
-                ctl.peer_leaves.store(leaves, Ordering::Relaxed);
+                ctl.network.peers_present.store(present_mask, Ordering::Relaxed);
+                ctl.network.peer_joins.store(joins, Ordering::Relaxed);
+                ctl.network.peer_leaves.store(leaves, Ordering::Relaxed);
                 let m = PresenceMsg {
                     t_ns: at,
                     site: name,
@@ -848,7 +854,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                     write_to(&mut recorder, &mut write_err, |w| w.session(&m));
                 }
             }
-            ctl.net_published.store(published, Ordering::Relaxed);
+            ctl.network.published.store(published, Ordering::Relaxed);
             slot.heartbeat.fetch_add(1, Ordering::Relaxed);
             if let Some(e) = write_err.take() {
                 // A full disk must not take the station down; say it once and stop recording.
@@ -859,8 +865,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                 break;
             }
             coop_rt::timer::sleep_until(next_wake(
-                ctl.physics_report_period_ns.load(Ordering::Relaxed),
-                ctl.physics_last_report_ns.load(Ordering::Relaxed),
+                ctl.physics.report_period_ns.load(Ordering::Relaxed),
+                ctl.physics.last_report_ns.load(Ordering::Relaxed),
                 monotonic_ns(),
             ));
         }

@@ -12,6 +12,7 @@
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
 
 use coop_rt::msg::SiteReport;
+use coop_rt::shm::control::Refused;
 
 /// Current wire version.
 pub const VERSION: u8 = 1;
@@ -63,14 +64,14 @@ pub enum Refusal {
 }
 
 impl Refusal {
-    /// Its counter slot: version, length, contents, foreign, duplicate/out of order.
-    pub fn slot(&self) -> usize {
+    /// The reason it is counted under (`ControlBlock::network.refused`).
+    pub fn reason(&self) -> Refused {
         match self {
-            Refusal::Decode(DecodeError::Version { .. }) => 0,
-            Refusal::Decode(DecodeError::Length { .. }) => 1,
-            Refusal::Decode(DecodeError::Invalid) => 2,
-            Refusal::Foreign { .. } => 3,
-            Refusal::Stale { .. } => 4,
+            Refusal::Decode(DecodeError::Version { .. }) => Refused::Version,
+            Refusal::Decode(DecodeError::Length { .. }) => Refused::Length,
+            Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
+            Refusal::Foreign { .. } => Refused::Foreign,
+            Refusal::Stale { .. } => Refused::Stale,
         }
     }
 }
@@ -215,7 +216,7 @@ pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
     let vel = f3(&mut next);
     let ang_mom = f3(&mut next);
     let accel = f3(&mut next);
-    let mut included = [0.0; coop_rt::msg::INCLUDED_SITES];
+    let mut included = [0.0; coop_model::MAX_SITES];
     for v in included.iter_mut() {
         *v = f64::from_bits(next());
     }
@@ -311,8 +312,8 @@ mod tests {
         );
         r.seq = 8;
         assert_eq!(
-            rx.check("b", &encode(&r)).map_err(|e| e.slot()),
-            Err(4),
+            rx.check("b", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Stale),
             "reordered"
         );
         r.seq = 10;
@@ -322,14 +323,14 @@ mod tests {
             "key names another site"
         );
         assert_eq!(
-            rx.check("zz", &encode(&r)).map_err(|e| e.slot()),
-            Err(3),
+            rx.check("zz", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Foreign),
             "unknown site"
         );
         r.site = 5;
-        assert_eq!(rx.check("b", &encode(&r)).map_err(|e| e.slot()), Err(3));
+        assert_eq!(rx.check("b", &encode(&r)).map_err(|e| e.reason()), Err(Refused::Foreign));
         r.site = 1;
-        assert_eq!(rx.check("b", &[1, 2, 3]).map_err(|e| e.slot()), Err(1));
+        assert_eq!(rx.check("b", &[1, 2, 3]).map_err(|e| e.reason()), Err(Refused::Length));
         assert!(
             rx.check("b", &encode(&r)).is_ok(),
             "refusals changed nothing: 10 is still new"

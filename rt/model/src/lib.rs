@@ -22,3 +22,7 @@ pub mod servo;
 pub mod shape;
 pub mod sim;
 pub mod user;
+
+/// Sites a session can have: the one bound every fixed-size table (a report's inclusion times, the
+/// control block's per-peer slots, the wire's `included` field) is sized by.
+pub use method::MAX_SITES;

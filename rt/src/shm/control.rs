@@ -1,13 +1,17 @@
 //! A station's control block: its run state, one slot per child process (pid, heartbeat, restarts,
-//! scheduling in force), the servo and physics loops' live statistics, and ring drop counters. The
-//! supervisor creates it before spawning; children write their own slot and stats; `station status`
-//! and `latency attach` read it. Nothing here ever blocks a loop: every field is a relaxed atomic
-//! written by one party.
+//! scheduling in force), and one group of live figures per process that writes them: the servo's,
+//! physics' and the network's. The supervisor creates it before spawning; each child writes its own
+//! slot and its own group; `station status` and `latency attach` read it. Nothing here ever blocks a
+//! loop: every field is a relaxed atomic with exactly one writer, named on its group.
+
+use core::marker::PhantomData;
 
 use crate::msg::ObjectSample;
 use crate::shm::ShmShared;
-use crate::stats::LoopStats;
+use crate::stats::{LoopStats, SharedHistogram};
 use crate::sync::{AtomicU64, Ordering};
+
+pub use coop_model::MAX_SITES;
 
 /// The station's child processes, in slot order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -24,6 +28,19 @@ pub enum Child {
 /// Children per station.
 pub const CHILDREN: usize = 3;
 
+impl Child {
+    /// Every child, in slot order.
+    pub const ALL: [Child; CHILDREN] = [Child::Servo, Child::Physics, Child::Network];
+    /// Its name, as status and the command line spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Child::Servo => "servo",
+            Child::Physics => "physics",
+            Child::Network => "network",
+        }
+    }
+}
+
 /// Run state of the station, as the supervisor sets it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u64)]
@@ -36,6 +53,135 @@ pub enum RunState {
     Stopping = 2,
     /// Stopped.
     Stopped = 3,
+}
+
+/// A key of a [`Counters`] array: a small enum whose every value has a slot.
+pub trait CounterKey: Copy + 'static {
+    /// Every key, in slot order.
+    const ALL: &'static [Self];
+    /// Its slot (below [`COUNTER_SLOTS`]).
+    fn slot(self) -> usize;
+    /// Its name, as status prints it and `--json` keys it.
+    fn name(self) -> &'static str;
+}
+
+/// Slots of every [`Counters`] array (room for keys added later without a layout change).
+pub const COUNTER_SLOTS: usize = 16;
+
+/// Counters indexed by an enum instead of a number: `drops.add(Ring::Tool, 1)`.
+#[repr(C)]
+pub struct Counters<K> {
+    words: [AtomicU64; COUNTER_SLOTS],
+    _key: PhantomData<fn() -> K>,
+}
+
+impl<K: CounterKey> Counters<K> {
+    /// The count for `k`.
+    pub fn get(&self, k: K) -> u64 {
+        self.words[k.slot()].load(Ordering::Relaxed)
+    }
+    /// Sets the count for `k` (the one writer publishing its own tally).
+    pub fn set(&self, k: K, v: u64) {
+        self.words[k.slot()].store(v, Ordering::Relaxed);
+    }
+    /// Adds to the count for `k` (the one writer: a relaxed load and store, no locked instruction).
+    pub fn add(&self, k: K, by: u64) {
+        let w = &self.words[k.slot()];
+        w.store(w.load(Ordering::Relaxed).wrapping_add(by), Ordering::Relaxed);
+    }
+    /// Every key with its count, in slot order.
+    pub fn all(&self) -> impl Iterator<Item = (K, u64)> + '_ {
+        K::ALL.iter().map(|&k| (k, self.get(k)))
+    }
+    /// The sum over every key.
+    pub fn total(&self) -> u64 {
+        self.all().map(|(_, n)| n).sum()
+    }
+}
+
+impl<K: CounterKey + std::fmt::Debug> std::fmt::Debug for Counters<K> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_map().entries(self.all()).finish()
+    }
+}
+
+/// The rings of a station, each with one producer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ring {
+    /// Servo → physics: tool samples.
+    Tool,
+    /// Physics → servo: object states.
+    Object,
+    /// Physics → network: this site's reports.
+    Report,
+    /// Network → physics: the other sites' reports.
+    Remote,
+    /// Physics → network: trace records for the recording.
+    Trace,
+}
+
+impl Ring {
+    /// The child that pushes into it (and counts what it could not push).
+    pub fn producer(self) -> Child {
+        match self {
+            Ring::Tool => Child::Servo,
+            Ring::Object | Ring::Report | Ring::Trace => Child::Physics,
+            Ring::Remote => Child::Network,
+        }
+    }
+}
+
+impl CounterKey for Ring {
+    const ALL: &'static [Self] = &[Ring::Tool, Ring::Object, Ring::Report, Ring::Remote, Ring::Trace];
+    fn slot(self) -> usize {
+        self as usize
+    }
+    fn name(self) -> &'static str {
+        match self {
+            Ring::Tool => "tool",
+            Ring::Object => "object",
+            Ring::Report => "report",
+            Ring::Remote => "remote",
+            Ring::Trace => "trace",
+        }
+    }
+}
+
+/// Why the network process refused a received message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refused {
+    /// Another wire version.
+    Version,
+    /// Not exactly one message long.
+    Length,
+    /// Well-formed but invalid: non-finite, not a unit quaternion, unknown kind.
+    Contents,
+    /// Its site is not one of the session's, or not the one its key names.
+    Foreign,
+    /// A sequence number already seen from that site, or older than the newest seen.
+    Stale,
+}
+
+impl CounterKey for Refused {
+    const ALL: &'static [Self] = &[
+        Refused::Version,
+        Refused::Length,
+        Refused::Contents,
+        Refused::Foreign,
+        Refused::Stale,
+    ];
+    fn slot(self) -> usize {
+        self as usize
+    }
+    fn name(self) -> &'static str {
+        match self {
+            Refused::Version => "version",
+            Refused::Length => "length",
+            Refused::Contents => "contents",
+            Refused::Foreign => "foreign",
+            Refused::Stale => "duplicate_or_reordered",
+        }
+    }
 }
 
 /// One child's slot: written by the child (heartbeat, scheduling) and by the supervisor (pid,
@@ -57,97 +203,127 @@ pub struct ChildSlot {
     pub cpus: AtomicU64,
 }
 
-/// The control block (in a [`crate::shm::BlockSegment`]).
+/// What the servo process writes.
 #[derive(Debug)]
 #[repr(C)]
-pub struct ControlBlock {
-    /// [`RunState`] as u64.
-    pub run_state: AtomicU64,
-    /// Per child, indexed by [`Child`].
-    pub children: [ChildSlot; CHILDREN],
-    /// The servo loop's statistics.
-    pub servo: LoopStats,
-    /// The physics loop's statistics.
-    pub physics: LoopStats,
-    /// Pushes refused because the ring was full: tool, object, report, remote.
-    pub drops: [AtomicU64; 4],
-    /// The servo's last commanded force magnitude, N (f64 bits).
-    pub servo_command_n: AtomicU64,
-    /// The servo's display scale: 1 fresh, 0 stale (f64 bits).
-    pub servo_scale: AtomicU64,
-    /// Reports the network process published.
-    pub net_published: AtomicU64,
-    /// Other sites' reports it handed to physics.
-    pub net_received: AtomicU64,
-    /// Remote reports physics took from the ring.
-    pub physics_received: AtomicU64,
-    /// States physics adopted.
-    pub physics_adoptions: AtomicU64,
-    /// The servo's last stale episode: the time of the newest object state it had, ns.
-    pub servo_stale_state_ns: AtomicU64,
+pub struct ServoShared {
+    /// Its loop's statistics.
+    pub stats: LoopStats,
+    /// Pushes refused because a ring was full (its own: [`Ring::Tool`]).
+    pub drops: Counters<Ring>,
+    /// The last commanded force magnitude, N (f64 bits).
+    pub command_n: AtomicU64,
+    /// The display scale: 1 fresh, 0 stale (f64 bits).
+    pub scale: AtomicU64,
+    /// The last stale episode: the time of the newest object state it had, ns.
+    pub stale_state_ns: AtomicU64,
     /// ... and when its command first reached zero in that episode, ns (0: not yet).
-    pub servo_stale_limp_ns: AtomicU64,
-    /// Round trips measured by the servo: from a tool sample to the object state computed with it
-    /// arriving back (servo → physics → servo).
+    pub stale_limp_ns: AtomicU64,
+    /// Round trips measured: from a tool sample to the object state computed with it arriving back
+    /// (servo → physics → servo).
     pub roundtrip_count: AtomicU64,
     /// Their histogram.
-    pub roundtrip: crate::stats::SharedHistogram,
-    /// The session's time 0 on CLOCK_MONOTONIC, ns: the users' scripts run from it. 0 until known
-    /// (a station started alone sets it at start; one in a session learns it from the session).
-    pub epoch_ns: AtomicU64,
-    /// Physics' newest state, for a restarted physics to resume from (a seqlock: see
+    pub roundtrip: SharedHistogram,
+}
+
+/// What the physics process writes.
+#[derive(Debug)]
+#[repr(C)]
+pub struct PhysicsShared {
+    /// Its loop's statistics.
+    pub stats: LoopStats,
+    /// Pushes refused because a ring was full (its own: object, report, trace).
+    pub drops: Counters<Ring>,
+    /// Remote reports taken from the ring.
+    pub received: AtomicU64,
+    /// Remote reports that did not convert to the model's (cannot happen from our own network
+    /// process, which validated them; counted so that a foreign writer of the ring shows).
+    pub rejected: AtomicU64,
+    /// States adopted.
+    pub adoptions: AtomicU64,
+    /// The newest state, for a restarted physics to resume from (a seqlock: see
     /// [`ControlBlock::store_resume`]).
     pub resume_seq: AtomicU64,
-    /// The words of that state: an [`ObjectSample`] (t_ns, seq, pos, rot, vel, ang_mom, ...).
+    /// The words of that state: an [`ObjectSample`].
     pub resume: [AtomicU64; RESUME_WORDS],
-    /// Physics' last report sequence number, so a restarted physics continues the sequence (a
-    /// receiver ignores sequence numbers it has seen).
+    /// The last report sequence number, so a restarted physics continues the sequence (a receiver
+    /// ignores sequence numbers it has seen).
     pub report_seq: AtomicU64,
-    /// Messages refused by the network process, by reason: version, length, contents, foreign
-    /// (unknown site, or a site other than its key says), duplicate or out of order.
-    pub net_refused: [AtomicU64; 5],
-    /// 1 when the network process emulates delay, jitter and loss on receive.
-    pub net_emulated: AtomicU64,
+    /// When the last report was made (the step's wake time, ns), and the report period: the network
+    /// process wakes just after the next one instead of polling.
+    pub last_report_ns: AtomicU64,
+    /// See `last_report_ns`.
+    pub report_period_ns: AtomicU64,
+}
+
+/// What the network process writes.
+#[derive(Debug)]
+#[repr(C)]
+pub struct NetworkShared {
+    /// Pushes refused because a ring was full (its own: [`Ring::Remote`]).
+    pub drops: Counters<Ring>,
+    /// Reports published.
+    pub published: AtomicU64,
+    /// Other sites' reports handed to physics.
+    pub received: AtomicU64,
+    /// Messages refused, by reason.
+    pub refused: Counters<Refused>,
+    /// 1 when it emulates delay, jitter and loss on receive.
+    pub emulated: AtomicU64,
     /// Messages the emulation dropped.
-    pub net_emulated_lost: AtomicU64,
+    pub emulated_lost: AtomicU64,
     /// Sites present in the session (liveliness), as a bit mask by site index.
     pub peers_present: AtomicU64,
-    /// Sites that joined / left since the network process started.
+    /// Sites that joined since the network process started.
     pub peer_joins: AtomicU64,
-    /// See `peer_joins`.
+    /// Sites that left since the network process started.
     pub peer_leaves: AtomicU64,
     /// States a late joiner got from the session's queryable at start.
-    pub net_join_states: AtomicU64,
+    pub join_states: AtomicU64,
     /// Per site: its clock minus ours, ns (i64 bits), from the NTP-style exchange.
     pub clock_offset_ns: [AtomicU64; MAX_SITES],
     /// Per site: the round trip of the exchange the offset came from, ns (0: not measured).
     pub clock_rtt_ns: [AtomicU64; MAX_SITES],
     /// Station-to-station latency, physics at the sender to the ring into our physics, ns.
-    pub net_latency: crate::stats::SharedHistogram,
-    /// Count of `net_latency` samples.
-    pub net_latency_count: AtomicU64,
-    /// When physics last made a report (the step's wake time, ns), and its report period: the
-    /// network process wakes just after the next one instead of polling.
-    pub physics_last_report_ns: AtomicU64,
-    /// See `physics_last_report_ns`.
-    pub physics_report_period_ns: AtomicU64,
+    pub latency: SharedHistogram,
+    /// Count of `latency` samples.
+    pub latency_count: AtomicU64,
     /// Bytes of `locators` in use (written last, Release).
     pub locators_len: AtomicU64,
-    /// The zenoh locators the network process listens on and its peers' ids, as text.
+    /// The zenoh locators it listens on and its zenoh id, as text.
     pub locators: [AtomicU64; LOCATOR_WORDS],
+}
+
+/// The control block (in a [`crate::shm::BlockSegment`]).
+#[derive(Debug)]
+#[repr(C)]
+pub struct ControlBlock {
+    /// [`RunState`] as u64 (the supervisor).
+    pub run_state: AtomicU64,
+    /// Per child, indexed by [`Child`].
+    pub children: [ChildSlot; CHILDREN],
+    /// The session's time 0 on CLOCK_MONOTONIC, ns: the users' scripts run from it. 0 until known;
+    /// set once (compare-exchange from 0) by whoever learns it first: the supervisor of a station
+    /// started alone, or the network process from the session's launcher.
+    pub epoch_ns: AtomicU64,
+    /// The servo's figures.
+    pub servo: ServoShared,
+    /// Physics' figures.
+    pub physics: PhysicsShared,
+    /// The network's figures.
+    pub network: NetworkShared,
 }
 
 /// Words of the resume state.
 pub const RESUME_WORDS: usize = ObjectSample::WORDS;
 /// Words of the locator text (512 bytes).
 pub const LOCATOR_WORDS: usize = 64;
-/// Sites the control block has per-peer slots for.
-pub const MAX_SITES: usize = coop_model::method::MAX_SITES;
 
-// SAFETY: repr(C), made only of AtomicU64 (directly, in arrays and in LoopStats/ChildSlot, which are
-// the same); all-zero and every bit pattern are valid.
+// SAFETY: repr(C), made only of AtomicU64 (directly, in arrays, and in LoopStats, ChildSlot,
+// Counters and the per-process groups, which are the same; Counters' PhantomData is zero-sized);
+// all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v4";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v5";
 }
 
 impl ControlBlock {
@@ -169,6 +345,14 @@ impl ControlBlock {
     pub fn child(&self, c: Child) -> &ChildSlot {
         &self.children[c as usize]
     }
+    /// Pushes into `ring` refused because it was full, as its producer counted them.
+    pub fn ring_drops(&self, ring: Ring) -> u64 {
+        match ring.producer() {
+            Child::Servo => self.servo.drops.get(ring),
+            Child::Physics => self.physics.drops.get(ring),
+            Child::Network => self.network.drops.get(ring),
+        }
+    }
     /// Stores an f64 field.
     pub fn store_f64(field: &AtomicU64, v: f64) {
         field.store(v.to_bits(), Ordering::Relaxed);
@@ -186,32 +370,32 @@ impl ControlBlock {
     /// Physics (the one writer) stores its newest state for a successor to resume from. A seqlock
     /// of relaxed atomic words: odd sequence while writing, even when done.
     pub fn store_resume(&self, s: &ObjectSample) {
-        let seq = self.resume_seq.load(Ordering::Relaxed);
-        self.resume_seq.store(seq | 1, Ordering::Relaxed);
+        let seq = self.physics.resume_seq.load(Ordering::Relaxed);
+        self.physics.resume_seq.store(seq | 1, Ordering::Relaxed);
         // SYNC: the odd sequence is visible before any word changes.
         core::sync::atomic::fence(Ordering::Release);
-        for (w, v) in self.resume.iter().zip(s.words()) {
+        for (w, v) in self.physics.resume.iter().zip(s.words()) {
             w.store(v, Ordering::Relaxed);
         }
         // SYNC: Release publishes the words with the even sequence; pairs with `resume`'s Acquire.
-        self.resume_seq
+        self.physics.resume_seq
             .store((seq | 1).wrapping_add(1), Ordering::Release);
     }
 
     /// The newest state physics stored, if any and if it reads back whole and valid.
     pub fn resume(&self) -> Option<ObjectSample> {
         for _ in 0..100 {
-            let before = self.resume_seq.load(Ordering::Acquire);
+            let before = self.physics.resume_seq.load(Ordering::Acquire);
             if before == 0 {
                 return None;
             }
             let mut words = [0u64; RESUME_WORDS];
-            for (v, w) in words.iter_mut().zip(&self.resume) {
+            for (v, w) in words.iter_mut().zip(&self.physics.resume) {
                 *v = w.load(Ordering::Relaxed);
             }
             // SYNC: the word loads complete before the sequence is read again.
             core::sync::atomic::fence(Ordering::Acquire);
-            if before & 1 == 0 && self.resume_seq.load(Ordering::Relaxed) == before {
+            if before & 1 == 0 && self.physics.resume_seq.load(Ordering::Relaxed) == before {
                 let s = ObjectSample::from_words(words);
                 return s.state().map(|_| s);
             }
@@ -222,23 +406,23 @@ impl ControlBlock {
 
     /// Writes the locator text (the network process, once it knows it).
     pub fn set_locators(&self, text: &str) {
-        self.locators_len.store(0, Ordering::Release);
+        self.network.locators_len.store(0, Ordering::Release);
         let bytes = &text.as_bytes()[..text.len().min(LOCATOR_WORDS * 8)];
         for (i, chunk) in bytes.chunks(8).enumerate() {
             let mut w = [0u8; 8];
             w[..chunk.len()].copy_from_slice(chunk);
-            self.locators[i].store(u64::from_le_bytes(w), Ordering::Relaxed);
+            self.network.locators[i].store(u64::from_le_bytes(w), Ordering::Relaxed);
         }
         // SYNC: Release publishes the bytes; pairs with the Acquire in `locators`.
-        self.locators_len
+        self.network.locators_len
             .store(bytes.len() as u64, Ordering::Release);
     }
 
     /// The locator text (lossy UTF-8; empty until the network process wrote it).
     pub fn locators(&self) -> String {
-        let len = (self.locators_len.load(Ordering::Acquire) as usize).min(LOCATOR_WORDS * 8);
+        let len = (self.network.locators_len.load(Ordering::Acquire) as usize).min(LOCATOR_WORDS * 8);
         let mut bytes = Vec::with_capacity(len);
-        for w in &self.locators {
+        for w in &self.network.locators {
             bytes.extend_from_slice(&w.load(Ordering::Relaxed).to_le_bytes());
         }
         bytes.truncate(len);

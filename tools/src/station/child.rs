@@ -143,7 +143,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     run_periodic(
         &ctl,
         Child::Servo,
-        &ctl.servo,
+        &ctl.servo.stats,
         period(sc.site[i].servo_rate_hz),
         &in_force,
         |now| {
@@ -188,7 +188,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             .unwrap_or(10_000_000),
         start_ns: monotonic_ns(),
         trace_period_ns: u64::try_from(period(sc.sample_rate_hz).as_nanos()).unwrap_or(5_000_000),
-        report_seq: ctl.report_seq.load(Ordering::Relaxed),
+        report_seq: ctl.physics.report_seq.load(Ordering::Relaxed),
     };
     // A restarted physics resumes from the newest state its predecessor published, not from the
     // scenario's start (the servo kept displaying that state; a jump back would be felt).
@@ -205,19 +205,17 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;
-    ctl.physics_report_period_ns
+    ctl.physics
+        .report_period_ns
         .store(timing.report_period_ns, Ordering::Relaxed);
-    run_periodic(&ctl, Child::Physics, &ctl.physics, step, &in_force, |now| {
+    run_periodic(&ctl, Child::Physics, &ctl.physics.stats, step, &in_force, |now| {
         physics.step(now);
-        ctl.physics_received
-            .store(physics.received, Ordering::Relaxed);
-        ctl.physics_adoptions
-            .store(physics.adoptions(), Ordering::Relaxed);
+        physics.publish_counters(&ctl);
         if physics.report_seq() != last_report_seq {
             // At the report rate: what a successor resumes from.
             last_report_seq = physics.report_seq();
-            ctl.physics_last_report_ns.store(now, Ordering::Relaxed);
-            ctl.report_seq.store(last_report_seq, Ordering::Relaxed);
+            ctl.physics.last_report_ns.store(now, Ordering::Relaxed);
+            ctl.physics.report_seq.store(last_report_seq, Ordering::Relaxed);
             ctl.store_resume(&physics.object_sample(now));
         }
         matches!(ctl.run_state(), RunState::Starting | RunState::Running)

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
-use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_rt::shm::control::{Child, ControlBlock, Ring, RunState};
 use coop_rt::shm::{BlockSegment, RingOpenOptions, RingSegment};
 use coop_rt::stats::LoopSnapshot;
 use coop_rt::sync::Ordering;
@@ -54,8 +54,8 @@ pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
     let names = Names::of(session, station)?;
     let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))?;
     Ok([
-        ctl.servo.overruns.load(Ordering::Relaxed),
-        ctl.physics.overruns.load(Ordering::Relaxed),
+        ctl.servo.stats.overruns.load(Ordering::Relaxed),
+        ctl.physics.stats.overruns.load(Ordering::Relaxed),
     ])
 }
 
@@ -67,9 +67,9 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<se
     let names = Names::of(session, station)?;
     let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))
         .with_context(|| format!("station {station} of session {session}"))?;
-    let (s0, p0, t0) = (ctl.servo.snapshot(), ctl.physics.snapshot(), Instant::now());
+    let (s0, p0, t0) = (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot(), Instant::now());
     std::thread::sleep(Duration::from_millis(200));
-    let (s1, p1) = (ctl.servo.snapshot(), ctl.physics.snapshot());
+    let (s1, p1) = (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
     let dt = t0.elapsed().as_secs_f64();
     let rate = |a: &LoopSnapshot, b: &LoopSnapshot| (b.cycles.saturating_sub(a.cycles)) as f64 / dt;
     let opts = RingOpenOptions {
@@ -110,56 +110,52 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<se
             "object": fill(RingSegment::<ObjectSample>::inspect(&names.object, &opts)),
             "report": fill(RingSegment::<SiteReport>::inspect(&names.report, &opts)),
             "remote": fill(RingSegment::<SiteReport>::inspect(&names.remote, &opts)),
-            "drops": { "tool": ctl.drops[0].load(Ordering::Relaxed), "object": ctl.drops[1].load(Ordering::Relaxed),
-                       "report": ctl.drops[2].load(Ordering::Relaxed), "remote": ctl.drops[3].load(Ordering::Relaxed) },
+            "drops": { "tool": ctl.ring_drops(Ring::Tool), "object": ctl.ring_drops(Ring::Object),
+                       "report": ctl.ring_drops(Ring::Report), "remote": ctl.ring_drops(Ring::Remote) },
         },
         "network": network_json(&ctl, sites),
         "physics": {
-            "remote_received": ctl.physics_received.load(Ordering::Relaxed),
-            "adoptions": ctl.physics_adoptions.load(Ordering::Relaxed),
+            "remote_received": ctl.physics.received.load(Ordering::Relaxed),
+            "adoptions": ctl.physics.adoptions.load(Ordering::Relaxed),
         },
         "servo": {
-            "command_n": ControlBlock::load_f64(&ctl.servo_command_n),
-            "display_scale": ControlBlock::load_f64(&ctl.servo_scale),
+            "command_n": ControlBlock::load_f64(&ctl.servo.command_n),
+            "display_scale": ControlBlock::load_f64(&ctl.servo.scale),
         },
         "running": ctl.run_state() == RunState::Running,
     }))
 }
 
 fn network_json(ctl: &ControlBlock, sites: &[String]) -> serde_json::Value {
-    let refused: Vec<u64> = ctl
-        .net_refused
-        .iter()
-        .map(|c| c.load(Ordering::Relaxed))
-        .collect();
-    let present = ctl.peers_present.load(Ordering::Relaxed);
+    let refused: Vec<u64> = ctl.network.refused.all().map(|(_, n)| n).collect();
+    let present = ctl.network.peers_present.load(Ordering::Relaxed);
     let peers: Vec<serde_json::Value> = sites
         .iter()
         .enumerate()
         .map(|(j, name)| {
-            let rtt = ctl.clock_rtt_ns[j].load(Ordering::Relaxed);
+            let rtt = ctl.network.clock_rtt_ns[j].load(Ordering::Relaxed);
             json!({
                 "site": name,
                 "present": present & (1 << j) != 0,
-                "clock_offset_us": (rtt > 0).then(|| ctl.clock_offset_ns[j].load(Ordering::Relaxed) as i64 as f64 / 1e3),
+                "clock_offset_us": (rtt > 0).then(|| ctl.network.clock_offset_ns[j].load(Ordering::Relaxed) as i64 as f64 / 1e3),
                 "clock_rtt_us": (rtt > 0).then(|| rtt as f64 / 1e3),
             })
         })
         .collect();
-    let lat = ctl.net_latency.to_hdr();
-    let n = ctl.net_latency_count.load(Ordering::Relaxed);
+    let lat = ctl.network.latency.to_hdr();
+    let n = ctl.network.latency_count.load(Ordering::Relaxed);
     let q = |p: f64| lat.value_at_quantile(p);
     json!({
         "locators": ctl.locators(),
-        "published": ctl.net_published.load(Ordering::Relaxed),
-        "received": ctl.net_received.load(Ordering::Relaxed),
+        "published": ctl.network.published.load(Ordering::Relaxed),
+        "received": ctl.network.received.load(Ordering::Relaxed),
         "rejected": refused.iter().sum::<u64>(),
         "refused": { "version": refused[0], "length": refused[1], "contents": refused[2], "foreign": refused[3], "duplicate_or_reordered": refused[4] },
-        "emulation": if ctl.net_emulated.load(Ordering::Relaxed) == 1 { "EMULATED (delay, jitter, loss on receive)" } else { "none" },
-        "emulated_lost": ctl.net_emulated_lost.load(Ordering::Relaxed),
-        "join_states": ctl.net_join_states.load(Ordering::Relaxed),
-        "joins": ctl.peer_joins.load(Ordering::Relaxed),
-        "leaves": ctl.peer_leaves.load(Ordering::Relaxed),
+        "emulation": if ctl.network.emulated.load(Ordering::Relaxed) == 1 { "EMULATED (delay, jitter, loss on receive)" } else { "none" },
+        "emulated_lost": ctl.network.emulated_lost.load(Ordering::Relaxed),
+        "join_states": ctl.network.join_states.load(Ordering::Relaxed),
+        "joins": ctl.network.peer_joins.load(Ordering::Relaxed),
+        "leaves": ctl.network.peer_leaves.load(Ordering::Relaxed),
         "peers": peers,
         "latency_us": if n > 0 { json!({ "count": n, "p50": q(0.5), "p99": q(0.99), "max": lat.max() }) } else { json!(null) },
         "epoch_ns": ctl.epoch(),
