@@ -1,4 +1,7 @@
-//! coop-actors: the station supervisor, on ractor and tokio.
+//! coop-actors: the station as a library, and its supervisor on ractor and tokio.
+//!
+//! [`station`] is one site's processes: configuration, the children's entry points, `station run`
+//! with its stop ladder, and `station status`. The binaries in `coop-tools` are thin mains over it.
 //!
 //! One [`child::ChildProcess`] actor per OS child (servo, physics, network), each owning its process,
 //! started as a process-group leader and watched by a heartbeat; one [`supervisor::StationSupervisor`]
@@ -11,4 +14,6 @@
 
 pub mod child;
 pub mod policy;
+pub mod scenario_file;
+pub mod station;
 pub mod supervisor;

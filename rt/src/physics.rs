@@ -214,9 +214,12 @@ impl PhysicsLoop {
     pub fn publish_counters(&self, ctl: &ControlBlock) {
         // REAL-TIME: relaxed stores only.
         let p = &ctl.physics;
-        p.received.store(self.received, crate::sync::Ordering::Relaxed);
-        p.rejected.store(self.rejected, crate::sync::Ordering::Relaxed);
-        p.adoptions.store(self.adoptions, crate::sync::Ordering::Relaxed);
+        p.received
+            .store(self.received, crate::sync::Ordering::Relaxed);
+        p.rejected
+            .store(self.rejected, crate::sync::Ordering::Relaxed);
+        p.adoptions
+            .store(self.adoptions, crate::sync::Ordering::Relaxed);
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);

@@ -75,8 +75,11 @@ impl<D: Device> ServoLoop<D> {
                 self.last_roundtrip_tool_ns = n.value.tool_t_ns;
                 if let Some(c) = control {
                     let count = c.servo.roundtrip_count.load(crate::sync::Ordering::Relaxed);
-                    c.servo.roundtrip.record(now_ns - n.value.tool_t_ns, count == 0);
-                    c.servo.roundtrip_count
+                    c.servo
+                        .roundtrip
+                        .record(now_ns - n.value.tool_t_ns, count == 0);
+                    c.servo
+                        .roundtrip_count
                         .store(count + 1, crate::sync::Ordering::Relaxed);
                 }
             }
@@ -139,16 +142,19 @@ impl<D: Device> ServoLoop<D> {
             self.stale_state_ns = Some(t_ns);
             self.stale_limp_recorded = false;
             if let Some(c) = control {
-                c.servo.stale_state_ns
+                c.servo
+                    .stale_state_ns
                     .store(t_ns, crate::sync::Ordering::Relaxed);
-                c.servo.stale_limp_ns
+                c.servo
+                    .stale_limp_ns
                     .store(0, crate::sync::Ordering::Relaxed);
             }
         }
         if stale && !self.stale_limp_recorded && out.f_command.norm() == 0.0 {
             self.stale_limp_recorded = true;
             if let Some(c) = control {
-                c.servo.stale_limp_ns
+                c.servo
+                    .stale_limp_ns
                     .store(now_ns, crate::sync::Ordering::Relaxed);
             }
         }

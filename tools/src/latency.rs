@@ -670,7 +670,7 @@ pub fn attach(
     json: Option<&std::path::Path>,
 ) -> anyhow::Result<()> {
     use coop_rt::shm::control::{Child, ControlBlock};
-    let names = crate::station::segments::Names::of(session, station)?;
+    let names = coop_rt::shm::station::Names::of(session, station)?;
     let ctl = coop_rt::shm::BlockSegment::<ControlBlock>::open(
         &names.control,
         Duration::from_millis(500),
@@ -800,8 +800,16 @@ pub fn attach(
         );
     }
     let rt = ctl.servo.roundtrip.to_hdr();
-    let rt_count = ctl.servo.roundtrip_count.load(coop_rt::sync::Ordering::Relaxed);
-    let rt_max = ctl.servo.roundtrip.max_ns.load(coop_rt::sync::Ordering::Relaxed) as f64 / 1e3;
+    let rt_count = ctl
+        .servo
+        .roundtrip_count
+        .load(coop_rt::sync::Ordering::Relaxed);
+    let rt_max = ctl
+        .servo
+        .roundtrip
+        .max_ns
+        .load(coop_rt::sync::Ordering::Relaxed) as f64
+        / 1e3;
     println!(
         "# servo -> physics -> servo round trip us ({rt_count} samples): p50 {} p99 {} max {rt_max:.1}",
         rt.value_at_quantile(0.5),

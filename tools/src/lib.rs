@@ -3,7 +3,7 @@
 //! - [`latency`]: the wake-up latency tool users of cyclictest already know (issue 3).
 //! - [`ringbench`]: the shared-memory ring against rtrb between two cores (issue 3).
 //! - [`sim`]: the deterministic multi-site simulator's CLI (issue 4).
-//! - [`station`]: one site's processes (issue 5).
+//! - [`station`]: the `station` command line over [`coop_actors::station`].
 //! - [`session`]: a multi-site session of real stations, recorded and measured (issue 6).
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
@@ -29,7 +29,6 @@ pub mod latency;
 pub mod netbench;
 pub mod plots;
 pub mod ringbench;
-pub mod scenario_file;
 pub mod session;
 pub mod sim;
 pub mod simbench;

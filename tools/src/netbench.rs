@@ -62,7 +62,7 @@ fn bench_session(
     PathBuf,
 )> {
     let scenario = root.join(format!("scenarios/{name}.toml"));
-    let sc = crate::scenario_file::load(&scenario)?;
+    let sc = coop_actors::scenario_file::load(&scenario)?;
     let dir = std::env::temp_dir().join(format!("coop-bench-{name}-{}", std::process::id()));
     let a = crate::session::RunArgs {
         scenario,

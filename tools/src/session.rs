@@ -26,7 +26,7 @@ use coop_transport::recording::{self, Recording};
 use coop_transport::{keys, network, wire};
 use zenoh::Wait;
 
-use crate::scenario_file;
+use coop_actors::scenario_file;
 
 /// What `session run` was asked.
 #[derive(Debug, Clone)]
@@ -346,7 +346,7 @@ pub fn run_method(
         .filter_map(|s| {
             Some((
                 s.site.clone(),
-                crate::station::status::overruns(session, &s.site).ok()?,
+                coop_actors::station::status::overruns(session, &s.site).ok()?,
             ))
         })
         .collect();
@@ -395,8 +395,9 @@ pub fn run_method(
         if now + 300_000_000 >= end && statuses.is_empty() {
             let sites: Vec<String> = sc.site.iter().map(|s| s.name.clone()).collect();
             for st in &stations {
-                let at_end = crate::station::status::overruns(session, &st.site).ok();
-                if let Ok(mut v) = crate::station::status::read(session, &st.site, &sites) {
+                let at_end = coop_actors::station::status::overruns(session, &st.site).ok();
+                if let Ok(s) = coop_actors::station::status::read(session, &st.site, &sites) {
+                    let mut v = s.to_json();
                     // A late joiner's whole run is in the session.
                     let start = overruns_at_start.get(&st.site).copied().unwrap_or([0, 0]);
                     if let Some(e) = at_end {

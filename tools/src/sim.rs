@@ -14,7 +14,7 @@ use coop_model::metrics::{self, Metrics};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
 
-use crate::scenario_file;
+use coop_actors::scenario_file;
 
 /// Command line of `sim`.
 #[derive(Debug, Parser)]

@@ -13,7 +13,7 @@ use coop_model::scenario::MethodName;
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::sim::{self, Mode};
 
-use crate::scenario_file;
+use coop_actors::scenario_file;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);

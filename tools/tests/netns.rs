@@ -108,7 +108,9 @@ fn two_stations_in_separate_network_namespaces_talk_over_tcp() {
             &format!("{me} receiving {other}'s states over the veth"),
             Duration::from_secs(60),
             || {
-                let v = coop_tools::station::status::read(&session, me, &sites).ok()?;
+                let v = coop_actors::station::status::read(&session, me, &sites)
+                    .ok()?
+                    .to_json();
                 let net = &v["network"];
                 let peer_present = net["peers"]
                     .as_array()?

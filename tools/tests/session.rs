@@ -247,7 +247,9 @@ struct Sent {
 fn attack(session: &str, stop: &AtomicU64) -> Sent {
     use zenoh::Wait;
     let locator = coop_tests::wait_until("user1's locators", Duration::from_secs(60), || {
-        let v = coop_tools::station::status::read(session, "user1", &[]).ok()?;
+        let v = coop_actors::station::status::read(session, "user1", &[])
+            .ok()?
+            .to_json();
         let text = v["network"]["locators"].as_str()?.to_owned();
         let (_, rest) = text.split_once("listen [")?;
         Some(rest.split([']', ',']).next()?.trim().to_owned())
@@ -427,10 +429,7 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
     coop_tests::wait_until("both stations running", Duration::from_secs(60), || {
         ["user1", "user2"]
             .iter()
-            .all(|s| {
-                coop_tools::station::status::read(&session, s, &[])
-                    .is_ok_and(|v| v["running"] == true)
-            })
+            .all(|s| coop_actors::station::status::read(&session, s, &[]).is_ok_and(|v| v.running))
             .then_some(())
     });
     nix::sys::signal::kill(

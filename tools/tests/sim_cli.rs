@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use coop_actors::scenario_file;
 use coop_model::metrics;
 use coop_model::scenario::MethodName;
 use coop_model::sim::{self, Mode};
-use coop_tools::scenario_file;
 
 const SIM: &str = env!("CARGO_BIN_EXE_sim");
 

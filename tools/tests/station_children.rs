@@ -7,11 +7,12 @@
 use std::process::Command;
 use std::time::Duration;
 
-use coop_rt::shm::control::{Child, ControlBlock, RunState};
+use coop_actors::station::config::StationConfig;
+use coop_rt::shm::control::{Child, ControlBlock, Ring, RunState};
+use coop_rt::shm::station::RingSlots;
+use coop_rt::shm::station::{Names, StationSegments};
 use coop_rt::sync::Ordering;
 use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
-use coop_tools::station::config::{RingSpec, StationConfig};
-use coop_tools::station::segments::{Names, StationSegments};
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
 const LIMIT: Duration = Duration::from_secs(60);
@@ -37,7 +38,7 @@ fn servo_and_physics_processes_run_report_and_stop_limp() {
     let session = unique_session();
     let config = config_file(&session);
     let names = Names::of(&session, "user1").expect("names");
-    let segs = StationSegments::create(&names, &RingSpec::default()).expect("segments");
+    let segs = StationSegments::create(&names, &RingSlots::default()).expect("segments");
     segs.control.set_run_state(RunState::Running);
     let me = std::process::id();
     let mut physics = spawn("physics", &config, me);
@@ -93,6 +94,38 @@ fn servo_and_physics_processes_run_report_and_stop_limp() {
         shm_entries(&format!("coop_{session}_")).is_empty(),
         "segments left behind"
     );
+    let _ = std::fs::remove_dir_all(config.parent().expect("dir"));
+}
+
+/// Ring drops are published where the producer counts them and shown by `station status`: a real
+/// physics process pushing into a two-slot object ring that no servo drains drops nearly every
+/// state, and status says so (it used to show 0 object and report drops whatever happened).
+#[test]
+fn a_full_ring_shows_as_drops_in_station_status() {
+    let session = unique_session();
+    let config = config_file(&session);
+    let names = Names::of(&session, "user1").expect("names");
+    let rings = RingSlots {
+        object_slots: 2,
+        ..RingSlots::default()
+    };
+    let segs = StationSegments::create(&names, &rings).expect("segments");
+    segs.control.set_run_state(RunState::Running);
+    let mut physics = spawn("physics", &config, std::process::id());
+    let status = wait_until("status to show object drops", LIMIT, || {
+        let s = coop_actors::station::status::read(&session, "user1", &[]).ok()?;
+        (s.rings.drops["object"] > 50).then_some(s)
+    });
+    let drops = segs.control.physics.drops.get(Ring::Object);
+    assert!(drops >= status.rings.drops["object"], "{drops}");
+    assert_eq!(status.rings.drops["tool"], 0, "nothing pushed tool samples");
+    let printed = status.to_string();
+    assert!(printed.contains("drops: object "), "{printed}");
+    segs.control.set_run_state(RunState::Stopping);
+    wait_until("physics exits after the stop", LIMIT, || {
+        physics.0.as_mut().and_then(|p| p.try_wait().ok().flatten())
+    });
+    drop(segs);
     let _ = std::fs::remove_dir_all(config.parent().expect("dir"));
 }
 

@@ -708,7 +708,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                             {
                                 let (rtt, offset) = clock_estimate(t0, remote, t2);
                                 let (rtt, offset) = peers[j].add(rtt, offset);
-                                ctl.network.clock_offset_ns[j].store(offset as u64, Ordering::Relaxed);
+                                ctl.network.clock_offset_ns[j]
+                                    .store(offset as u64, Ordering::Relaxed);
                                 ctl.network.clock_rtt_ns[j].store(rtt, Ordering::Relaxed);
                                 lock(&cl).push(ClockMsg {
                                     t_ns: t2,
@@ -816,7 +817,9 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, String> {
                     // A site that left and comes back starts its sequence afresh.
                     lock(&receiver).inbound.forget(j);
                 }
-                ctl.network.peers_present.store(present_mask, Ordering::Relaxed);
+                ctl.network
+                    .peers_present
+                    .store(present_mask, Ordering::Relaxed);
                 ctl.network.peer_joins.store(joins, Ordering::Relaxed);
                 ctl.network.peer_leaves.store(leaves, Ordering::Relaxed);
                 let m = PresenceMsg {

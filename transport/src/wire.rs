@@ -328,9 +328,15 @@ mod tests {
             "unknown site"
         );
         r.site = 5;
-        assert_eq!(rx.check("b", &encode(&r)).map_err(|e| e.reason()), Err(Refused::Foreign));
+        assert_eq!(
+            rx.check("b", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Foreign)
+        );
         r.site = 1;
-        assert_eq!(rx.check("b", &[1, 2, 3]).map_err(|e| e.reason()), Err(Refused::Length));
+        assert_eq!(
+            rx.check("b", &[1, 2, 3]).map_err(|e| e.reason()),
+            Err(Refused::Length)
+        );
         assert!(
             rx.check("b", &encode(&r)).is_ok(),
             "refusals changed nothing: 10 is still new"

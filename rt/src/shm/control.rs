@@ -87,7 +87,10 @@ impl<K: CounterKey> Counters<K> {
     /// Adds to the count for `k` (the one writer: a relaxed load and store, no locked instruction).
     pub fn add(&self, k: K, by: u64) {
         let w = &self.words[k.slot()];
-        w.store(w.load(Ordering::Relaxed).wrapping_add(by), Ordering::Relaxed);
+        w.store(
+            w.load(Ordering::Relaxed).wrapping_add(by),
+            Ordering::Relaxed,
+        );
     }
     /// Every key with its count, in slot order.
     pub fn all(&self) -> impl Iterator<Item = (K, u64)> + '_ {
@@ -132,7 +135,13 @@ impl Ring {
 }
 
 impl CounterKey for Ring {
-    const ALL: &'static [Self] = &[Ring::Tool, Ring::Object, Ring::Report, Ring::Remote, Ring::Trace];
+    const ALL: &'static [Self] = &[
+        Ring::Tool,
+        Ring::Object,
+        Ring::Report,
+        Ring::Remote,
+        Ring::Trace,
+    ];
     fn slot(self) -> usize {
         self as usize
     }
@@ -378,7 +387,8 @@ impl ControlBlock {
             w.store(v, Ordering::Relaxed);
         }
         // SYNC: Release publishes the words with the even sequence; pairs with `resume`'s Acquire.
-        self.physics.resume_seq
+        self.physics
+            .resume_seq
             .store((seq | 1).wrapping_add(1), Ordering::Release);
     }
 
@@ -414,13 +424,15 @@ impl ControlBlock {
             self.network.locators[i].store(u64::from_le_bytes(w), Ordering::Relaxed);
         }
         // SYNC: Release publishes the bytes; pairs with the Acquire in `locators`.
-        self.network.locators_len
+        self.network
+            .locators_len
             .store(bytes.len() as u64, Ordering::Release);
     }
 
     /// The locator text (lossy UTF-8; empty until the network process wrote it).
     pub fn locators(&self) -> String {
-        let len = (self.network.locators_len.load(Ordering::Acquire) as usize).min(LOCATOR_WORDS * 8);
+        let len =
+            (self.network.locators_len.load(Ordering::Acquire) as usize).min(LOCATOR_WORDS * 8);
         let mut bytes = Vec::with_capacity(len);
         for w in &self.network.locators {
             bytes.extend_from_slice(&w.load(Ordering::Relaxed).to_le_bytes());

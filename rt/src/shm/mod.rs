@@ -15,6 +15,7 @@ pub mod ring;
 #[cfg(not(loom))]
 pub mod segment;
 #[cfg(not(loom))]
+pub mod station;
 pub mod stats;
 
 #[cfg(not(loom))]

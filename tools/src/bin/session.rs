@@ -103,7 +103,7 @@ fn main() -> std::process::ExitCode {
     if argv.get(1).map(String::as_str) == Some("station") {
         let mut rest = vec![format!("{} station", argv[0])];
         rest.extend(argv[2..].iter().cloned());
-        return coop_tools::station::cli::main(rest, vec!["station".into()]);
+        return coop_tools::station::main(rest, vec!["station".into()]);
     }
     let args = Args::parse();
     coop_tools::run_main(|| match args.command {

@@ -25,7 +25,7 @@ use coop_rt::sync::Ordering;
 use coop_rt::timer::monotonic_ns;
 
 use super::config::Resolved;
-use super::segments::Names;
+use coop_rt::shm::station::Names;
 
 /// How long a child waits for its supervisor's segments to be ready.
 const OPEN_TIMEOUT: Duration = Duration::from_secs(2);
@@ -208,18 +208,27 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     ctl.physics
         .report_period_ns
         .store(timing.report_period_ns, Ordering::Relaxed);
-    run_periodic(&ctl, Child::Physics, &ctl.physics.stats, step, &in_force, |now| {
-        physics.step(now);
-        physics.publish_counters(&ctl);
-        if physics.report_seq() != last_report_seq {
-            // At the report rate: what a successor resumes from.
-            last_report_seq = physics.report_seq();
-            ctl.physics.last_report_ns.store(now, Ordering::Relaxed);
-            ctl.physics.report_seq.store(last_report_seq, Ordering::Relaxed);
-            ctl.store_resume(&physics.object_sample(now));
-        }
-        matches!(ctl.run_state(), RunState::Starting | RunState::Running)
-    });
+    run_periodic(
+        &ctl,
+        Child::Physics,
+        &ctl.physics.stats,
+        step,
+        &in_force,
+        |now| {
+            physics.step(now);
+            physics.publish_counters(&ctl);
+            if physics.report_seq() != last_report_seq {
+                // At the report rate: what a successor resumes from.
+                last_report_seq = physics.report_seq();
+                ctl.physics.last_report_ns.store(now, Ordering::Relaxed);
+                ctl.physics
+                    .report_seq
+                    .store(last_report_seq, Ordering::Relaxed);
+                ctl.store_resume(&physics.object_sample(now));
+            }
+            matches!(ctl.run_state(), RunState::Starting | RunState::Running)
+        },
+    );
     Ok(())
 }
 

@@ -11,9 +11,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::child::{ChildSpec, Watch};
+use crate::supervisor::{End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg};
 use anyhow::{bail, Context};
-use coop_actors::child::{ChildSpec, Watch};
-use coop_actors::supervisor::{End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg};
 use coop_rt::shm::control::{Child, RunState};
 use coop_rt::shm::{self, SegmentName, SegmentStatus};
 use coop_rt::sync::Ordering;
@@ -23,7 +23,7 @@ use tokio::signal::unix::{signal, SignalKind};
 use tokio::sync::watch;
 
 use super::config::Resolved;
-use super::segments::{Names, StationSegments};
+use coop_rt::shm::station::{Names, StationSegments};
 
 /// How long children get to stop by themselves after the run state says stop: the servo ramps its
 /// force to zero (50 ms by default) and each loop notices within one cycle; two seconds leaves room

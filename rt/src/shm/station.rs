@@ -1,11 +1,42 @@
-//! The shared-memory segments of one station, created by its supervisor before any child starts and
-//! unlinked when the supervisor's handles drop: the control block and the five rings.
+//! The shared-memory segments of one station, by name and layout: the control block and the five
+//! rings, created by its supervisor before any child starts and unlinked when the supervisor's handles
+//! drop. Every process of the station (and `station status`, `latency attach`) finds them here.
 
-use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
-use coop_rt::shm::control::ControlBlock;
-use coop_rt::shm::{BlockSegment, RingSegment, SegmentName};
+use crate::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
+use crate::shm::control::ControlBlock;
+use crate::shm::{BlockSegment, CreateError, NameError, RingSegment, SegmentName};
 
-use super::config::RingSpec;
+/// Ring sizes, in slots (powers of two): the station config's `[rings]` table.
+#[derive(Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct RingSlots {
+    /// Servo → physics tool samples.
+    pub tool_slots: usize,
+    /// Physics → servo object states.
+    pub object_slots: usize,
+    /// Physics → network reports.
+    pub report_slots: usize,
+    /// Network → physics remote reports.
+    pub remote_slots: usize,
+    /// Physics → recorder trace records (the scenario's sample rate plus adoptions).
+    pub trace_slots: usize,
+}
+
+impl Default for RingSlots {
+    fn default() -> Self {
+        Self {
+            tool_slots: 64,
+            object_slots: 64,
+            report_slots: 256,
+            remote_slots: 256,
+            trace_slots: 4096,
+        }
+    }
+}
 
 /// Segment names of a station, by role.
 #[derive(Debug, Clone)]
@@ -29,7 +60,7 @@ impl Names {
     ///
     /// # Errors
     /// A name component breaks the naming rule.
-    pub fn of(session: &str, station: &str) -> anyhow::Result<Self> {
+    pub fn of(session: &str, station: &str) -> Result<Self, NameError> {
         let n = |w: &str| SegmentName::new(session, station, w);
         Ok(Self {
             control: n("ctl")?,
@@ -64,7 +95,7 @@ impl StationSegments {
     ///
     /// # Errors
     /// A segment exists (live or stale) or the OS refuses.
-    pub fn create(names: &Names, rings: &RingSpec) -> anyhow::Result<Self> {
+    pub fn create(names: &Names, rings: &RingSlots) -> Result<Self, CreateError> {
         Ok(Self {
             control: BlockSegment::create(&names.control)?,
             tool: RingSegment::create(&names.tool, rings.tool_slots)?,

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
-use super::{child, config::StationConfig};
+use coop_actors::station::{child, config::StationConfig, run, status};
 
 /// Command line of `station`.
 #[derive(Debug, Parser)]
@@ -81,7 +81,7 @@ struct ChildArgs {
     parent: Option<u32>,
 }
 
-fn resolve(a: &ChildArgs) -> anyhow::Result<super::config::Resolved> {
+fn resolve(a: &ChildArgs) -> anyhow::Result<coop_actors::station::config::Resolved> {
     let mut r = StationConfig::load(a.config.as_deref())?;
     if a.station.is_some() || a.session.is_some() {
         let mut c = r.config.clone();
@@ -128,11 +128,11 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             let session = session.unwrap_or(r.config.session);
             let station = station.unwrap_or(r.name);
             let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
-            let v = super::status::read(&session, &station, &sites)?;
+            let v = status::read(&session, &station, &sites)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
-                super::status::print(&v);
+                println!("{v}");
             }
             Ok(())
         }
@@ -170,12 +170,12 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
                 // Started by a launcher (`session`): stop (SIGTERM: the stop ladder) when it dies.
                 child::die_with_parent(a.parent)?;
             }
-            let opts = super::run::RunOptions {
+            let opts = run::RunOptions {
                 config: a.config.clone(),
                 duration,
                 exe_prefix,
             };
-            super::run::run(&resolve(&a)?, &opts)
+            run::run(&resolve(&a)?, &opts)
         }
         Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
         Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),

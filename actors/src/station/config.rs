@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_rt::sched::{Policy, Request};
+use coop_rt::shm::station::RingSlots;
 use coop_rt::shm::SegmentName;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::scenario_file;
 
@@ -17,7 +18,7 @@ use crate::scenario_file;
 pub const DEFAULT_SCENARIO: &str = include_str!("../../../scenarios/paper.toml");
 
 /// Scheduling of one loop.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopSpec {
     /// CPU to pin to. Default: the servo gets the last allowed CPU to itself; physics, the network
@@ -30,24 +31,8 @@ pub struct LoopSpec {
     pub priority: Option<i32>,
 }
 
-/// Ring sizes, in slots (powers of two).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RingSpec {
-    /// Servo → physics tool samples.
-    pub tool_slots: usize,
-    /// Physics → servo object states.
-    pub object_slots: usize,
-    /// Physics → network reports.
-    pub report_slots: usize,
-    /// Network → physics remote reports.
-    pub remote_slots: usize,
-    /// Physics → recorder trace records (the scenario's sample rate plus adoptions).
-    pub trace_slots: usize,
-}
-
 /// The network process's zenoh endpoints.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NetworkSpec {
     /// Locators to listen on (default: a free TCP port on loopback).
@@ -65,7 +50,7 @@ pub struct NetworkSpec {
 }
 
 /// TLS files (zenoh's `transport/link/tls`).
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct TlsSpec {
     /// CA certificate that signed the peers' or routers' certificates.
@@ -95,7 +80,7 @@ impl Default for NetworkSpec {
 }
 
 /// When the users' scripts start (the session's time 0).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum StartMode {
     /// When this station starts.
@@ -106,7 +91,7 @@ pub enum StartMode {
 }
 
 /// The supervisor's policy.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SupervisorSpec {
     /// never, on-failure or always.
@@ -140,7 +125,7 @@ impl Default for SupervisorSpec {
 }
 
 /// The configuration file.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StationConfig {
     /// Session name: stations of one session see each other.
@@ -162,7 +147,7 @@ pub struct StationConfig {
     /// The physics loop.
     pub physics: LoopSpec,
     /// Ring sizes.
-    pub rings: RingSpec,
+    pub rings: RingSlots,
     /// Restart policy and watchdog.
     pub supervisor: SupervisorSpec,
     /// Zenoh endpoints.
@@ -185,7 +170,7 @@ impl Default for StationConfig {
             cpu_dma_latency_zero: true,
             servo: LoopSpec::default(),
             physics: LoopSpec::default(),
-            rings: RingSpec::default(),
+            rings: RingSlots::default(),
             supervisor: SupervisorSpec::default(),
             network: NetworkSpec::default(),
             start: StartMode::Now,
@@ -200,18 +185,6 @@ impl Default for LoopSpec {
             cpu: None,
             policy: "fifo".into(),
             priority: None,
-        }
-    }
-}
-
-impl Default for RingSpec {
-    fn default() -> Self {
-        Self {
-            tool_slots: 64,
-            object_slots: 64,
-            report_slots: 256,
-            remote_slots: 256,
-            trace_slots: 4096,
         }
     }
 }
@@ -234,7 +207,7 @@ pub struct Resolved {
     /// CPUs for everything that is not the servo (physics, network, supervisor).
     pub housekeeping_cpus: Vec<usize>,
     /// The supervisor's restart policy.
-    pub policy: coop_actors::policy::RestartPolicy,
+    pub policy: crate::policy::RestartPolicy,
 }
 
 fn sched(
@@ -422,7 +395,7 @@ impl StationConfig {
                 bail!("{field} = {v}: must be from {lo} to 600000");
             }
         }
-        let policy = coop_actors::policy::RestartPolicy {
+        let policy = crate::policy::RestartPolicy {
             mode,
             max_restarts: sup.max_restarts,
             window: std::time::Duration::from_secs_f64(sup.restart_window_s),

@@ -1,0 +1,16 @@
+//! The station: one site — one user, one device, a full local copy of the world — as separate
+//! processes for the servo loop, the physics loop and the network, connected by shared-memory rings
+//! (named and laid out in [`coop_rt::shm::station`]).
+//!
+//! - [`config`]: the station's configuration, validated (field, value, rule, file), and written
+//!   back as TOML for the stations a launcher starts;
+//! - [`child`]: the entry points of the servo, physics and network processes;
+//! - [`run`]: `station run`, the supervisor bringing the children up and the stop ladder taking them
+//!   down, leaving nothing behind;
+//! - [`status`]: [`status::StationStatus`], what a running station is doing, read from its control
+//!   block without touching the loops.
+
+pub mod child;
+pub mod config;
+pub mod run;
+pub mod status;

@@ -1,0 +1,542 @@
+//! `station status`: what a running station is doing, read from its control block and rings without
+//! touching the loops (no claim, no lock; two snapshots 200 ms apart give the achieved rates).
+//!
+//! [`StationStatus`] is the one model of it: serialised as is for `--json` (and by `session run`
+//! into its report), printed for people by its `Display`.
+
+use std::fmt;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
+use coop_rt::shm::control::{Child, ControlBlock, CounterKey, Ring, RunState};
+use coop_rt::shm::station::Names;
+use coop_rt::shm::{BlockSegment, RingFill, RingOpenOptions, RingSegment};
+use coop_rt::stats::LoopSnapshot;
+use coop_rt::sync::Ordering;
+use serde::Serialize;
+
+/// Everything `station status` shows.
+#[derive(Debug, Clone, Serialize)]
+pub struct StationStatus {
+    /// Session name.
+    pub session: String,
+    /// Station (site) name.
+    pub station: String,
+    /// `starting`, `running`, `stopping` or `stopped`.
+    pub run_state: String,
+    /// One row per child process.
+    pub children: Vec<ChildStatus>,
+    /// The two real-time loops.
+    pub loops: Loops,
+    /// Ring fill and drops.
+    pub rings: Rings,
+    /// The network process.
+    pub network: NetworkStatus,
+    /// What physics did with the remote reports.
+    pub physics: PhysicsStatus,
+    /// What the servo displays.
+    pub servo: ServoStatus,
+    /// The run state is `running`.
+    pub running: bool,
+}
+
+/// One child process.
+#[derive(Debug, Clone, Serialize)]
+pub struct ChildStatus {
+    /// servo, physics or network.
+    pub name: &'static str,
+    /// Its pid (0: not running).
+    pub pid: u64,
+    /// Its heartbeat counter.
+    pub heartbeat: u64,
+    /// Restarts so far.
+    pub restarts: u64,
+    /// Scheduling policy in force.
+    pub policy: &'static str,
+    /// Priority in force.
+    pub priority: u64,
+    /// CPUs in force, e.g. `1` or `0,1` (`-`: not known).
+    pub cpus: String,
+}
+
+/// The servo's and physics' loops.
+#[derive(Debug, Clone, Serialize)]
+pub struct Loops {
+    /// The servo loop.
+    pub servo: LoopStatus,
+    /// The physics loop.
+    pub physics: LoopStatus,
+}
+
+/// One loop's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct LoopStatus {
+    /// Its period, µs.
+    pub period_us: f64,
+    /// Its achieved rate over the 200 ms between two snapshots, Hz.
+    pub rate_hz: f64,
+    /// Cycles so far.
+    pub cycles: u64,
+    /// Deadlines missed so far.
+    pub overruns: u64,
+    /// Wake-up latency, µs.
+    pub wake_us: Quantiles,
+    /// Compute time, µs.
+    pub compute_us: Quantiles,
+}
+
+/// A distribution's landmarks, µs.
+#[derive(Debug, Clone, Serialize)]
+pub struct Quantiles {
+    /// Smallest (wake-up latency only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    /// Median.
+    pub p50: u64,
+    /// 99th percentile.
+    pub p99: u64,
+    /// 99.9th percentile (wake-up latency only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub p999: Option<u64>,
+    /// Largest.
+    pub max: f64,
+}
+
+/// One ring's fill, or why it could not be read.
+#[derive(Debug, Clone, Serialize)]
+#[serde(untagged)]
+pub enum RingStatus {
+    /// Read.
+    Fill {
+        /// Slots in use.
+        used: u64,
+        /// Slots.
+        capacity: u64,
+        /// Pushed so far.
+        pushed: u64,
+    },
+    /// Not readable.
+    Error {
+        /// Why.
+        error: String,
+    },
+}
+
+/// Ring fill and drops.
+#[derive(Debug, Clone, Serialize)]
+pub struct Rings {
+    /// Servo → physics.
+    pub tool: RingStatus,
+    /// Physics → servo.
+    pub object: RingStatus,
+    /// Physics → network.
+    pub report: RingStatus,
+    /// Network → physics.
+    pub remote: RingStatus,
+    /// Physics → recorder.
+    pub trace: RingStatus,
+    /// Pushes refused because the ring was full, by ring name.
+    pub drops: std::collections::BTreeMap<&'static str, u64>,
+}
+
+/// The network process's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct NetworkStatus {
+    /// Its zenoh id, mode, listen and connect locators.
+    pub locators: String,
+    /// Reports published.
+    pub published: u64,
+    /// Other sites' reports handed to physics.
+    pub received: u64,
+    /// Messages refused, all reasons.
+    pub rejected: u64,
+    /// Messages refused, by reason.
+    pub refused: std::collections::BTreeMap<&'static str, u64>,
+    /// `none`, or what is emulated on receive.
+    pub emulation: &'static str,
+    /// Messages the emulation dropped.
+    pub emulated_lost: u64,
+    /// States a late joiner got from the session at start.
+    pub join_states: u64,
+    /// Sites that joined since the network process started.
+    pub joins: u64,
+    /// Sites that left.
+    pub leaves: u64,
+    /// Every site of the session.
+    pub peers: Vec<PeerStatus>,
+    /// Station-to-station latency, µs (none before the first sample).
+    pub latency_us: Option<Latency>,
+    /// The session's time 0, ns (none until known).
+    pub epoch_ns: Option<u64>,
+}
+
+/// One site as the network process sees it.
+#[derive(Debug, Clone, Serialize)]
+pub struct PeerStatus {
+    /// Site name.
+    pub site: String,
+    /// Its liveliness token is seen.
+    pub present: bool,
+    /// Its clock minus ours, µs (none before the first exchange).
+    pub clock_offset_us: Option<f64>,
+    /// The round trip of the exchange the offset came from, µs.
+    pub clock_rtt_us: Option<f64>,
+}
+
+/// Station-to-station latency.
+#[derive(Debug, Clone, Serialize)]
+pub struct Latency {
+    /// Samples.
+    pub count: u64,
+    /// Median, µs.
+    pub p50: u64,
+    /// 99th percentile, µs.
+    pub p99: u64,
+    /// Largest, µs.
+    pub max: u64,
+}
+
+/// Physics' figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct PhysicsStatus {
+    /// Remote reports taken from the ring.
+    pub remote_received: u64,
+    /// Remote reports that did not convert (a foreign writer of the ring).
+    pub remote_rejected: u64,
+    /// States adopted.
+    pub adoptions: u64,
+}
+
+/// The servo's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct ServoStatus {
+    /// The commanded force, N.
+    pub command_n: f64,
+    /// The display scale: 1 fresh, 0 stale.
+    pub display_scale: f64,
+}
+
+fn policy_name(n: u64) -> &'static str {
+    match n {
+        0 => "SCHED_OTHER",
+        1 => "SCHED_FIFO",
+        2 => "SCHED_RR",
+        _ => "other",
+    }
+}
+
+fn cpus(mask: u64) -> String {
+    let v: Vec<String> = (0..64)
+        .filter(|c| mask & (1 << c) != 0)
+        .map(|c| c.to_string())
+        .collect();
+    if v.is_empty() {
+        "-".into()
+    } else {
+        v.join(",")
+    }
+}
+
+impl LoopStatus {
+    fn of(s: &LoopSnapshot, rate_hz: f64) -> Self {
+        let q = |p: f64| s.wake_us.value_at_quantile(p);
+        Self {
+            period_us: s.period_ns as f64 / 1e3,
+            rate_hz,
+            cycles: s.cycles,
+            overruns: s.overruns,
+            wake_us: Quantiles {
+                min: Some(s.wake_min_ns as f64 / 1e3),
+                p50: q(0.5),
+                p99: q(0.99),
+                p999: Some(q(0.999)),
+                max: s.wake_max_ns as f64 / 1e3,
+            },
+            compute_us: Quantiles {
+                min: None,
+                p50: s.compute_us.value_at_quantile(0.5),
+                p99: s.compute_us.value_at_quantile(0.99),
+                p999: None,
+                max: s.compute_max_ns as f64 / 1e3,
+            },
+        }
+    }
+}
+
+impl RingStatus {
+    fn of<E: fmt::Display>(r: Result<RingFill, E>) -> Self {
+        match r {
+            Ok(f) => RingStatus::Fill {
+                used: f.used,
+                capacity: f.capacity,
+                pushed: f.pushed,
+            },
+            Err(e) => RingStatus::Error {
+                error: e.to_string(),
+            },
+        }
+    }
+}
+
+impl fmt::Display for RingStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RingStatus::Fill { used, capacity, .. } => write!(f, "{used}/{capacity}"),
+            RingStatus::Error { .. } => f.write_str("?"),
+        }
+    }
+}
+
+fn open(session: &str, station: &str) -> anyhow::Result<(Names, BlockSegment<ControlBlock>)> {
+    let names = Names::of(session, station)?;
+    let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))
+        .with_context(|| format!("station {station} of session {session}"))?;
+    Ok((names, ctl))
+}
+
+/// The overrun counters of a running station's servo and physics loops (cheap: no snapshot).
+///
+/// # Errors
+/// No such station.
+pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
+    let (_, ctl) = open(session, station)?;
+    Ok([
+        ctl.servo.stats.overruns.load(Ordering::Relaxed),
+        ctl.physics.stats.overruns.load(Ordering::Relaxed),
+    ])
+}
+
+/// Reads the status of station `station` in `session`; `sites` names the session's sites in order
+/// (for the per-peer rows; empty: none).
+///
+/// # Errors
+/// No such station, or its segments fail validation (stale: run `station clean`).
+pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<StationStatus> {
+    let (names, ctl) = open(session, station)?;
+    let snap = || (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
+    let ((s0, p0), t0) = (snap(), Instant::now());
+    std::thread::sleep(Duration::from_millis(200));
+    let (s1, p1) = snap();
+    let dt = t0.elapsed().as_secs_f64();
+    let rate = |a: &LoopSnapshot, b: &LoopSnapshot| (b.cycles.saturating_sub(a.cycles)) as f64 / dt;
+    let opts = RingOpenOptions {
+        capacity: None,
+        ready_timeout: Duration::from_millis(500),
+    };
+    let children = Child::ALL
+        .iter()
+        .map(|&c| {
+            let slot = ctl.child(c);
+            let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
+            ChildStatus {
+                name: c.name(),
+                pid: load(&slot.pid),
+                heartbeat: load(&slot.heartbeat),
+                restarts: load(&slot.restarts),
+                policy: policy_name(load(&slot.policy)),
+                priority: load(&slot.priority),
+                cpus: cpus(load(&slot.cpus)),
+            }
+        })
+        .collect();
+    let run_state = ctl.run_state();
+    Ok(StationStatus {
+        session: session.to_owned(),
+        station: station.to_owned(),
+        run_state: format!("{run_state:?}").to_lowercase(),
+        children,
+        loops: Loops {
+            servo: LoopStatus::of(&s1, rate(&s0, &s1)),
+            physics: LoopStatus::of(&p1, rate(&p0, &p1)),
+        },
+        rings: Rings {
+            tool: RingStatus::of(RingSegment::<ToolSample>::inspect(&names.tool, &opts)),
+            object: RingStatus::of(RingSegment::<ObjectSample>::inspect(&names.object, &opts)),
+            report: RingStatus::of(RingSegment::<SiteReport>::inspect(&names.report, &opts)),
+            remote: RingStatus::of(RingSegment::<SiteReport>::inspect(&names.remote, &opts)),
+            trace: RingStatus::of(RingSegment::<TraceRecord>::inspect(&names.trace, &opts)),
+            drops: Ring::ALL
+                .iter()
+                .map(|&r| (r.name(), ctl.ring_drops(r)))
+                .collect(),
+        },
+        network: NetworkStatus::of(&ctl, sites),
+        physics: PhysicsStatus {
+            remote_received: ctl.physics.received.load(Ordering::Relaxed),
+            remote_rejected: ctl.physics.rejected.load(Ordering::Relaxed),
+            adoptions: ctl.physics.adoptions.load(Ordering::Relaxed),
+        },
+        servo: ServoStatus {
+            command_n: ControlBlock::load_f64(&ctl.servo.command_n),
+            display_scale: ControlBlock::load_f64(&ctl.servo.scale),
+        },
+        running: run_state == RunState::Running,
+    })
+}
+
+impl NetworkStatus {
+    fn of(ctl: &ControlBlock, sites: &[String]) -> Self {
+        let n = &ctl.network;
+        let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
+        let present = load(&n.peers_present);
+        let peers = sites
+            .iter()
+            .enumerate()
+            .map(|(j, name)| {
+                let rtt = load(&n.clock_rtt_ns[j]);
+                PeerStatus {
+                    site: name.clone(),
+                    present: present & (1 << j) != 0,
+                    clock_offset_us: (rtt > 0)
+                        .then(|| load(&n.clock_offset_ns[j]) as i64 as f64 / 1e3),
+                    clock_rtt_us: (rtt > 0).then(|| rtt as f64 / 1e3),
+                }
+            })
+            .collect();
+        let count = load(&n.latency_count);
+        let latency_us = (count > 0).then(|| {
+            let h = n.latency.to_hdr();
+            Latency {
+                count,
+                p50: h.value_at_quantile(0.5),
+                p99: h.value_at_quantile(0.99),
+                max: h.max(),
+            }
+        });
+        Self {
+            locators: ctl.locators(),
+            published: load(&n.published),
+            received: load(&n.received),
+            rejected: n.refused.total(),
+            refused: n.refused.all().map(|(k, v)| (k.name(), v)).collect(),
+            emulation: if load(&n.emulated) == 1 {
+                "EMULATED (delay, jitter, loss on receive)"
+            } else {
+                "none"
+            },
+            emulated_lost: load(&n.emulated_lost),
+            join_states: load(&n.join_states),
+            joins: load(&n.peer_joins),
+            leaves: load(&n.peer_leaves),
+            peers,
+            latency_us,
+            epoch_ns: ctl.epoch(),
+        }
+    }
+}
+
+impl StationStatus {
+    /// As JSON (what `--json` prints).
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or(serde_json::Value::Null)
+    }
+}
+
+fn opt<T: fmt::Display>(v: &Option<T>) -> String {
+    v.as_ref().map_or("null".into(), ToString::to_string)
+}
+
+impl fmt::Display for StationStatus {
+    /// For people: a few aligned tables.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "station {} (session {}): {}",
+            self.station, self.session, self.run_state
+        )?;
+        writeln!(
+            f,
+            "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  cpus",
+            "child", "pid", "heartbeat", "restarts", "policy", "prio"
+        )?;
+        for c in &self.children {
+            writeln!(
+                f,
+                "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  {}",
+                c.name, c.pid, c.heartbeat, c.restarts, c.policy, c.priority, c.cpus
+            )?;
+        }
+        writeln!(
+            f,
+            "{:<9}{:>9}{:>10}{:>10}{:>10}  {:<26}{:>14}",
+            "loop",
+            "rate Hz",
+            "period us",
+            "cycles",
+            "overruns",
+            "wake p50/p99/p99.9/max us",
+            "compute max us"
+        )?;
+        for (name, l) in [
+            ("servo", &self.loops.servo),
+            ("physics", &self.loops.physics),
+        ] {
+            let w = &l.wake_us;
+            writeln!(
+                f,
+                "{:<9}{:>9.1}{:>10.1}{:>10}{:>10}  {:<26}{:>14.1}",
+                name,
+                l.rate_hz,
+                l.period_us,
+                l.cycles,
+                l.overruns,
+                format!("{}/{}/{}/{:.0}", w.p50, w.p99, opt(&w.p999), w.max),
+                l.compute_us.max
+            )?;
+        }
+        let r = &self.rings;
+        let drops: Vec<String> = r.drops.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        writeln!(
+            f,
+            "rings (used/slots): tool {}, object {}, report {}, remote {}, trace {}; drops: {}",
+            r.tool,
+            r.object,
+            r.report,
+            r.remote,
+            r.trace,
+            drops.join(", ")
+        )?;
+        let n = &self.network;
+        writeln!(f, "zenoh: {}", n.locators)?;
+        let refused: Vec<String> = n.refused.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        writeln!(
+            f,
+            "network: published {}, received {}, refused {} ({}); emulation: {} (lost {}); late-join states {}",
+            n.published,
+            n.received,
+            n.rejected,
+            refused.join(", "),
+            n.emulation,
+            n.emulated_lost,
+            n.join_states
+        )?;
+        for p in n.peers.iter().filter(|p| p.site != self.station) {
+            writeln!(
+                f,
+                "  peer {:<10} {:<8} clock offset {} us, rtt {} us",
+                p.site,
+                if p.present { "present" } else { "absent" },
+                opt(&p.clock_offset_us),
+                opt(&p.clock_rtt_us)
+            )?;
+        }
+        if let Some(l) = &n.latency_us {
+            writeln!(
+                f,
+                "state latency (sender physics -> our physics ring): p50 {} us, p99 {} us, max {} us over {}",
+                l.p50, l.p99, l.max, l.count
+            )?;
+        }
+        writeln!(
+            f,
+            "physics: took {} remote reports (rejected {}), adopted {}",
+            self.physics.remote_received, self.physics.remote_rejected, self.physics.adoptions
+        )?;
+        write!(
+            f,
+            "servo: commanding {:.2} N, display scale {:.2}",
+            self.servo.command_n, self.servo.display_scale
+        )
+    }
+}
