@@ -1,4 +1,4 @@
-//! The shared-memory ring between real processes (issue 3): ten million sequenced messages arrive once
+//! The shared-memory ring between real processes: ten million sequenced messages arrive once
 //! and in order; a producer SIGKILLed midway loses nothing it pushed and nothing appears after it; a
 //! second claimant is refused while the first lives and may take over once it died; a segment whose
 //! creator died is detected as stale and removed.

@@ -11,7 +11,7 @@
 # Usage: tools/bench/latency-vs-cyclictest.sh [--quick] [--duration SECONDS] [--rounds N] [--cpu N]
 #   default: 60 s per run, 2 rounds, CPU 1.   --quick: 3 s, 1 round (CI smoke run).
 # Needs: cyclictest (Debian package rt-tests), python3, root for SCHED_FIFO.
-# Goal (issue 3): latency's p99.9 <= 1.2x cyclictest's.
+# Goal: latency's p99.9 <= 1.2x cyclictest's.
 set -euo pipefail
 
 duration=60 rounds=2 cpu=1

@@ -5,7 +5,7 @@
 #
 # Usage: tools/bench/station-vs-latency.sh [--quick] [--duration SECONDS]
 #   default 60 s each; --quick: 3 s each (CI smoke run).
-# Goal (issue 5): station servo p99.9 <= 1.5x the standalone tool's; zero overruns at 1 kHz over 60 s
+# Goal: station servo p99.9 <= 1.5x the standalone tool's; zero overruns at 1 kHz over 60 s
 # on an idle machine.
 set -euo pipefail
 duration=60

@@ -1,4 +1,4 @@
-//! The simulator as a user runs it (issue 4): bad scenario files are refused with the field, value and
+//! The simulator as a user runs it: bad scenario files are refused with the field, value and
 //! rule and create nothing; runs are deterministic to the byte; on the paper's experiment the naive
 //! Eq. 8 method diverges far beyond the disk while the paper's method keeps the copies together once
 //! contacts end; with zero delay and equal rates both match the reference run.

@@ -1,4 +1,4 @@
-//! `station run` with real processes (issue 5): it comes up, keeps going through killed children,
+//! `station run` with real processes: it comes up, keeps going through killed children,
 //! stops on SIGTERM leaving nothing behind, its children die with it, and a live station's name is
 //! refused. Unique session names keep parallel tests apart; every wait has a deadline; nothing
 //! asserts on timing.

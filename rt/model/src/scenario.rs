@@ -445,10 +445,31 @@ fn validate_contact(c: &ContactParams, at: &str) -> Result<(), ScenarioError> {
     })
 }
 
-fn valid_name(s: &str) -> bool {
+/// The rule for scenario and site names, which key expressions and segment names carry: 1 to 48
+/// characters from A-Z a-z 0-9 . -, starting with a letter or digit (so no `.`, `..` or `-x`).
+pub const NAME_RULE: &str =
+    "1 to 48 characters from A-Z a-z 0-9 . -, starting with a letter or digit";
+
+/// Whether `s` keeps [`NAME_RULE`].
+pub fn valid_name(s: &str) -> bool {
     (1..=48).contains(&s.len())
+        && s.as_bytes()[0].is_ascii_alphanumeric()
         && s.bytes()
             .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'-')
+}
+
+/// `lo <= v <= hi` and finite, with the unit in the rule: a lower bound that keeps the value
+/// meaningful (a rate of 1e-300 Hz, a mass of 1e-300 kg), not only positive.
+fn bounded(field: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), ScenarioError> {
+    if v >= lo && v <= hi && v.is_finite() {
+        Ok(())
+    } else {
+        Err(err(
+            field,
+            v,
+            format!("must be a finite number from {lo} to {hi} {unit}"),
+        ))
+    }
 }
 
 impl Scenario {
@@ -458,13 +479,9 @@ impl Scenario {
     /// A [`ScenarioError`] naming the field, the value and the rule.
     pub fn validate(&self) -> Result<(), ScenarioError> {
         if !valid_name(&self.name) {
-            return Err(err(
-                "name",
-                &self.name,
-                "1 to 48 characters from A-Z a-z 0-9 . -",
-            ));
+            return Err(err("name", &self.name, NAME_RULE));
         }
-        in_range("duration_s", self.duration_s, 0.0, 3600.0)?;
+        bounded("duration_s", self.duration_s, 0.01, 3600.0, "s")?;
         if self.dead_reckoning_order > 2 {
             return Err(err(
                 "dead_reckoning_order",
@@ -472,18 +489,18 @@ impl Scenario {
                 "must be 0, 1 or 2",
             ));
         }
-        in_range("sample_rate_hz", self.sample_rate_hz, 0.0, 10_000.0)?;
+        bounded("sample_rate_hz", self.sample_rate_hz, 1.0, 10_000.0, "Hz")?;
         let o = &self.object;
-        in_range("object.mass_kg", o.mass_kg, 0.0, 1000.0)?;
+        bounded("object.mass_kg", o.mass_kg, 1e-3, 1000.0, "kg")?;
         match o.shape {
-            ShapeName::Sphere => in_range("object.radius_m", o.radius_m, 0.0, 10.0)?,
+            ShapeName::Sphere => bounded("object.radius_m", o.radius_m, 1e-3, 10.0, "m")?,
             ShapeName::Cylinder => {
-                in_range("object.radius_m", o.radius_m, 0.0, 10.0)?;
-                in_range("object.half_height_m", o.half_height_m, 0.0, 10.0)?;
+                bounded("object.radius_m", o.radius_m, 1e-3, 10.0, "m")?;
+                bounded("object.half_height_m", o.half_height_m, 1e-3, 10.0, "m")?;
             }
             ShapeName::Box => {
                 for (i, h) in o.half_extents_m.iter().enumerate() {
-                    in_range(&format!("object.half_extents_m[{i}]"), *h, 0.0, 10.0)?;
+                    bounded(&format!("object.half_extents_m[{i}]"), *h, 1e-3, 10.0, "m")?;
                 }
             }
         }
@@ -530,7 +547,13 @@ impl Scenario {
             rule: format!("{} (and at least delay_min_ms)", e.rule),
             ..e
         })?;
-        in_range("network.delay_period_s", n.delay_period_s, 0.0, 3600.0)?;
+        bounded(
+            "network.delay_period_s",
+            n.delay_period_s,
+            0.01,
+            3600.0,
+            "s",
+        )?;
         in_closed("network.jitter_ms", n.jitter_ms, 0.0, 10_000.0)?;
         if !(n.loss >= 0.0 && n.loss < 1.0) {
             return Err(err(
@@ -549,22 +572,25 @@ impl Scenario {
         for (i, s) in self.site.iter().enumerate() {
             let at = |f: &str| format!("site[{i}].{f}");
             if !valid_name(&s.name) {
-                return Err(err(
-                    at("name"),
-                    &s.name,
-                    "1 to 48 characters from A-Z a-z 0-9 . -",
-                ));
+                return Err(err(at("name"), &s.name, NAME_RULE));
             }
             if self.site[..i].iter().any(|o| o.name == s.name) {
                 return Err(err(at("name"), &s.name, "site names must be unique"));
             }
-            in_range(&at("servo_rate_hz"), s.servo_rate_hz, 0.0, 20_000.0)?;
-            in_range(&at("physics_rate_hz"), s.physics_rate_hz, 0.0, 20_000.0)?;
-            in_range(
+            bounded(&at("servo_rate_hz"), s.servo_rate_hz, 100.0, 20_000.0, "Hz")?;
+            bounded(
+                &at("physics_rate_hz"),
+                s.physics_rate_hz,
+                100.0,
+                20_000.0,
+                "Hz",
+            )?;
+            bounded(
                 &at("report_rate_hz"),
                 s.report_rate_hz,
-                0.0,
+                0.1,
                 s.physics_rate_hz,
+                "Hz",
             )
             .map_err(|e| ScenarioError {
                 rule: format!("{} (physics_rate_hz)", e.rule),
@@ -574,10 +600,10 @@ impl Scenario {
             if s.elbow != 1.0 && s.elbow != -1.0 {
                 return Err(err(at("elbow"), s.elbow, "must be 1 or -1"));
             }
-            in_range(&at("tool_radius_m"), s.tool_radius_m, 0.0, 1.0)?;
+            bounded(&at("tool_radius_m"), s.tool_radius_m, 1e-4, 1.0, "m")?;
             in_closed(&at("sensor_noise_n"), s.sensor_noise_n, 0.0, 100.0)?;
-            in_range(&at("stale_limit_ms"), s.stale_limit_ms, 0.0, 60_000.0)?;
-            in_range(&at("stale_ramp_ms"), s.stale_ramp_ms, 0.0, 60_000.0)?;
+            bounded(&at("stale_limit_ms"), s.stale_limit_ms, 1.0, 60_000.0, "ms")?;
+            bounded(&at("stale_ramp_ms"), s.stale_ramp_ms, 1.0, 60_000.0, "ms")?;
             in_range(
                 &at("max_adoption_step_n"),
                 s.max_adoption_step_n,
@@ -585,7 +611,7 @@ impl Scenario {
                 1000.0,
             )?;
             let h = &s.hand;
-            in_range(&at("hand.mass_kg"), h.mass_kg, 0.0, 100.0)?;
+            bounded(&at("hand.mass_kg"), h.mass_kg, 1e-3, 100.0, "kg")?;
             in_range(&at("hand.stiffness_n_per_m"), h.stiffness_n_per_m, 0.0, 1e5)?;
             in_closed(&at("hand.damping_n_s_per_m"), h.damping_n_s_per_m, 0.0, 1e4)?;
             in_range(
@@ -636,6 +662,8 @@ impl Scenario {
                 }
             }
         }
+        self.validate_stability()?;
+        self.validate_start()?;
         for (i, p) in self.phase.iter().enumerate() {
             let at = |f: &str| format!("phase[{i}].{f}");
             if p.name.is_empty() {
@@ -656,6 +684,81 @@ impl Scenario {
             in_closed(&at("min_force_n"), p.min_force_n, 0.0, 1000.0)?;
             in_closed(&at("object_moves_m"), p.object_moves_m, 0.0, 100.0)?;
             in_closed(&at("lifted_m"), p.lifted_m, 0.0, 100.0)?;
+        }
+        Ok(())
+    }
+
+    /// The integrator's stability rule: the object, in the stiffest contact it can be in at once
+    /// along one direction (every site's tool and two planes, normal or tangential, whichever is
+    /// stiffer), with the damping of those contacts, is a mass-spring-damper whose fastest mode is
+    /// |λ|. Every site's physics step dt must keep |λ|·dt ≤ 1: half the limit (2) of the step's
+    /// explicit force evaluation, the margin left for rotation (a lever arm over an inertia) and
+    /// for penalty forces that are not quite linear. Beyond it a contact pumps energy into the
+    /// object and throws it out of the world.
+    fn validate_stability(&self) -> Result<(), ScenarioError> {
+        let (c, e) = (&self.contact, &self.environment_contact);
+        let users = self.site.len() as f64;
+        let planes = self.world.planes.len().min(2) as f64;
+        let k = users * c.stiffness_n_per_m.max(c.tangential_stiffness_n_per_m)
+            + planes * e.stiffness_n_per_m.max(e.tangential_stiffness_n_per_m);
+        let d = users * c.damping_n_s_per_m.max(c.tangential_damping_n_s_per_m)
+            + planes * e.damping_n_s_per_m.max(e.tangential_damping_n_s_per_m);
+        let m = self.object.mass_kg;
+        let (omega2, gamma) = (k / m, d / m);
+        // The roots of λ² + γλ + ω² = 0: complex (|λ| = ω) or real (the larger one).
+        let disc = gamma * gamma / 4.0 - omega2;
+        let lambda = if disc > 0.0 {
+            gamma / 2.0 + disc.sqrt()
+        } else {
+            omega2.sqrt()
+        };
+        for (i, s) in self.site.iter().enumerate() {
+            let dt = 1.0 / s.physics_rate_hz;
+            if !(lambda * dt <= 1.0) {
+                return Err(err(
+                    format!("site[{i}].physics_rate_hz"),
+                    s.physics_rate_hz,
+                    format!(
+                        "too slow for the contacts: with object.mass_kg = {m}, contact and \
+                         environment_contact stiffness {k:.0} N/m and damping {d:.1} N·s/m in all \
+                         (every tool and two planes at once), the fastest mode is {lambda:.0} 1/s, \
+                         and the rule |λ|·dt ≤ 1 needs at least {:.0} Hz (or softer contacts, or \
+                         a heavier object)",
+                        lambda.ceil()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The object must start outside every plane of the environment (up to 1 mm of contact sag):
+    /// a start inside a wall would be ejected by the penalty force at kilometres per second.
+    fn validate_start(&self) -> Result<(), ScenarioError> {
+        let o = &self.object;
+        let start = Vec3::from(o.start_m);
+        for (i, p) in self.world.planes.iter().enumerate() {
+            let n = Vec3::from(p.normal).normalize();
+            // How far the object reaches towards the plane (identity orientation at start).
+            let extent = match o.shape {
+                ShapeName::Sphere => o.radius_m,
+                ShapeName::Cylinder => {
+                    o.radius_m * (n.x * n.x + n.y * n.y).sqrt() + o.half_height_m * n.z.abs()
+                }
+                ShapeName::Box => Vec3::from(o.half_extents_m).dot(&n.abs()),
+            };
+            let depth = p.offset_m + extent - n.dot(&start);
+            if !(depth <= 1e-3) {
+                return Err(err(
+                    "object.start_m",
+                    o.start_m,
+                    format!(
+                        "starts {:.1} mm inside world.planes[{i}]: the object must start outside \
+                         the environment (at most 1 mm of contact)",
+                        depth * 1e3
+                    ),
+                ));
+            }
         }
         Ok(())
     }

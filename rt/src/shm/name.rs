@@ -7,7 +7,7 @@ pub const PREFIX: &str = "coop_";
 
 /// A segment name component breaks the rule.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("invalid {what} {value:?}: use 1 to 48 characters from A-Z a-z 0-9 . -")]
+#[error("invalid {what} {value:?}: use 1 to 48 characters from A-Z a-z 0-9 . -, starting with a letter or digit")]
 pub struct NameError {
     /// Which component ("session", "station", "segment").
     pub what: &'static str,
@@ -54,7 +54,10 @@ impl std::fmt::Display for SegmentName {
 }
 
 fn check_component<'a>(what: &'static str, value: &'a str) -> Result<&'a str, NameError> {
+    // The scenario's name rule (`coop_model::scenario::NAME_RULE`): no `_` (the separator), no
+    // leading `.` or `-` (so neither `.`, `..` nor an option-like name).
     let ok = (1..=48).contains(&value.len())
+        && value.as_bytes()[0].is_ascii_alphanumeric()
         && value
             .bytes()
             .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'-');
@@ -104,6 +107,9 @@ mod tests {
             assert!(bad.parse::<SegmentName>().is_err(), "{bad}");
         }
         assert!(SegmentName::new("a_b", "c", "d").is_err());
+        for bad in ["..", ".", "-x", ".hidden"] {
+            assert!(SegmentName::new(bad, "c", "d").is_err(), "{bad}");
+        }
         assert!(SegmentName::new(&"x".repeat(49), "c", "d").is_err());
     }
 }
