@@ -374,7 +374,7 @@ impl ControlBlock {
         self.physics.resume_seq.store(seq | 1, Ordering::Relaxed);
         // SYNC: the odd sequence is visible before any word changes.
         core::sync::atomic::fence(Ordering::Release);
-        for (w, v) in self.physics.resume.iter().zip(s.words()) {
+        for (w, v) in self.physics.resume.iter().zip(s.to_words()) {
             w.store(v, Ordering::Relaxed);
         }
         // SYNC: Release publishes the words with the even sequence; pairs with `resume`'s Acquire.
@@ -396,7 +396,7 @@ impl ControlBlock {
             // SYNC: the word loads complete before the sequence is read again.
             core::sync::atomic::fence(Ordering::Acquire);
             if before & 1 == 0 && self.physics.resume_seq.load(Ordering::Relaxed) == before {
-                let s = ObjectSample::from_words(words);
+                let s = ObjectSample::from_words(&words);
                 return s.state().map(|_| s);
             }
             std::thread::yield_now();
