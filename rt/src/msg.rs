@@ -427,6 +427,16 @@ impl SiteReport {
 
     /// The sender and the model's report, or `None` for an unknown kind, a site index out of range,
     /// a non-finite number or a non-unit quaternion.
+    ///
+    /// This is the one validation of a report; nothing else re-checks one. It runs at the two places
+    /// a report crosses into code that trusts it:
+    /// - `coop_transport::wire::decode`, where a report enters from the network: a bad one is
+    ///   refused there (counted as `contents`) and never reaches the remote ring;
+    /// - physics, as its ring → model conversion. Physics has to convert anyway (the ring carries
+    ///   this plain-old-data layout, not the model's [`Report`]), and it converts with the checking
+    ///   function rather than trusting the ring: a ring is shared memory that any process opening
+    ///   the segment can write, so the network's check does not cover it (refusals there count as
+    ///   `physics.rejected`). It costs a few `is_finite` and one quaternion norm per report.
     pub fn report(&self) -> Option<(usize, Report)> {
         let site = usize::try_from(self.site).ok().filter(|&s| s < MAX_SITES)?;
         let t_s = self.t_ns as f64 * 1e-9;

@@ -17,6 +17,9 @@
 //! | `/clock`    | each new estimate            | per peer clock offset and round trip                 |
 //! | `/status`   | at the end                   | the network counters                                  |
 //!
+//! Physics' trace records go in whole ([`Recorder::trace`]); each channel's `jsonschema` is derived
+//! from its message struct's fields.
+//!
 //! The file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps everything
 //! up to the last flush; [`read`] accepts such a file (no summary, no end magic).
 

@@ -368,7 +368,8 @@ impl ControlBlock {
     }
 
     /// Physics (the one writer) stores its newest state for a successor to resume from. A seqlock
-    /// of relaxed atomic words: odd sequence while writing, even when done.
+    /// of relaxed atomic words (the sample's `to_words`): odd sequence while writing, even when
+    /// done.
     pub fn store_resume(&self, s: &ObjectSample) {
         let seq = self.physics.resume_seq.load(Ordering::Relaxed);
         self.physics.resume_seq.store(seq | 1, Ordering::Relaxed);
