@@ -1,9 +1,11 @@
 //! The messages on a station's rings, as plain old data (H5): servo → physics [`ToolSample`],
 //! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`], physics → recorder
-//! [`TraceRecord`]. Each has a stable
-//! `TYPE_NAME` and a compile-time size check; conversions to the model's types validate what they
-//! read (finite numbers, unit quaternion, known site), because a ring's bytes are only as good as its
-//! writer.
+//! [`TraceRecord`]. Each is declared once with [`pod_message!`], which derives from the one field
+//! list its words (`WORDS`, `to_words`, `from_words`) and its `LAYOUT`: the wire format
+//! (`coop_transport::wire`) and the control block's resume seqlock are built on those, never on a
+//! second, hand-written field order. Each has a stable `TYPE_NAME` and a compile-time size check;
+//! conversions to the model's types validate what they read (finite numbers, unit quaternion, known
+//! site), because a ring's bytes are only as good as its writer.
 #![allow(unsafe_code)] // the four `unsafe impl ShmPod` below, each with its SAFETY argument
 
 use coop_model::body::{BodyState, Vec3};
@@ -12,6 +14,133 @@ use coop_model::method::{Report, MAX_SITES};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
+
+/// A field of a [`pod_message!`] struct: a `u64`, an `f64` or an array of one of them, as 8-byte
+/// words. The words are the field's bits (`f64::to_bits`), so a round trip is exact, NaN included.
+pub trait WordField: Copy {
+    /// `"u64"` or `"f64"`.
+    const KIND: &'static str;
+    /// How many words.
+    const COUNT: usize;
+    /// Writes its words into `out` (exactly [`WordField::COUNT`] long).
+    fn put(&self, out: &mut [u64]);
+    /// Reads it back from `w` (exactly [`WordField::COUNT`] long).
+    fn get(w: &[u64]) -> Self;
+}
+impl WordField for u64 {
+    const KIND: &'static str = "u64";
+    const COUNT: usize = 1;
+    fn put(&self, out: &mut [u64]) {
+        out[0] = *self;
+    }
+    fn get(w: &[u64]) -> Self {
+        w[0]
+    }
+}
+impl WordField for f64 {
+    const KIND: &'static str = "f64";
+    const COUNT: usize = 1;
+    fn put(&self, out: &mut [u64]) {
+        out[0] = self.to_bits();
+    }
+    fn get(w: &[u64]) -> Self {
+        f64::from_bits(w[0])
+    }
+}
+impl<const N: usize> WordField for [u64; N] {
+    const KIND: &'static str = "u64";
+    const COUNT: usize = N;
+    fn put(&self, out: &mut [u64]) {
+        out.copy_from_slice(self);
+    }
+    fn get(w: &[u64]) -> Self {
+        core::array::from_fn(|i| w[i])
+    }
+}
+impl<const N: usize> WordField for [f64; N] {
+    const KIND: &'static str = "f64";
+    const COUNT: usize = N;
+    fn put(&self, out: &mut [u64]) {
+        for (o, v) in out.iter_mut().zip(self) {
+            *o = v.to_bits();
+        }
+    }
+    fn get(w: &[u64]) -> Self {
+        core::array::from_fn(|i| f64::from_bits(w[i]))
+    }
+}
+
+/// A message's field order: (field name, `"u64"` or `"f64"`, number of words), in declaration order.
+pub type Layout = &'static [(&'static str, &'static str, usize)];
+
+/// A layout as text, one field a line: `name kind count` (what the wire pin hashes; see
+/// `coop_transport::wire`).
+pub fn layout_text(layout: Layout) -> String {
+    layout
+        .iter()
+        .map(|(name, kind, count)| format!("{name} {kind} {count}\n"))
+        .collect()
+}
+
+/// Declares a ring message once: a `#[repr(C)]` struct of [`WordField`] fields, and from that one
+/// field list its `WORDS` (size in 8-byte words), `to_words`/`from_words` (the fields' words in
+/// declaration order) and `LAYOUT` (the order, for pinning it to `docs/wire.md`). Every other
+/// representation of a message's bytes (the wire, the resume seqlock) is derived from these, so
+/// changing the struct changes them all, and the wire's pin test notices.
+///
+/// It also checks at compile time that the words cover the struct exactly (no padding). The
+/// `unsafe impl ShmPod` stays with each struct, with its own SAFETY argument.
+macro_rules! pod_message {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident {
+            $( $(#[$fmeta:meta])* pub $field:ident : $t:ty ),* $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(C)]
+        pub struct $name {
+            $( $(#[$fmeta])* pub $field: $t, )*
+        }
+
+        impl $name {
+            /// Its size in 8-byte words.
+            pub const WORDS: usize = 0 $( + <$t as WordField>::COUNT )*;
+            /// Its fields in declaration order: (name, `"u64"`/`"f64"`, words).
+            pub const LAYOUT: Layout = &[ $( (stringify!($field), <$t as WordField>::KIND, <$t as WordField>::COUNT) ),* ];
+
+            /// Its words: every field's, in declaration order.
+            pub fn to_words(&self) -> [u64; Self::WORDS] {
+                let mut out = [0u64; Self::WORDS];
+                let mut at = 0;
+                $(
+                    let n = <$t as WordField>::COUNT;
+                    WordField::put(&self.$field, &mut out[at..at + n]);
+                    at += n;
+                )*
+                debug_assert_eq!(at, Self::WORDS);
+                out
+            }
+            /// The inverse of `to_words`.
+            pub fn from_words(w: &[u64; Self::WORDS]) -> Self {
+                let mut at = 0;
+                $(
+                    let n = <$t as WordField>::COUNT;
+                    let $field = <$t as WordField>::get(&w[at..at + n]);
+                    at += n;
+                )*
+                debug_assert_eq!(at, Self::WORDS);
+                Self { $( $field, )* }
+            }
+        }
+
+        const _: () = assert!(
+            core::mem::size_of::<$name>() == 8 * $name::WORDS
+                && core::mem::align_of::<$name>() == 8,
+            "a pod_message is its words: no padding"
+        );
+    };
+}
 
 fn v3(a: [f64; 3]) -> Vec3 {
     Vec3::new(a[0], a[1], a[2])
@@ -23,32 +152,33 @@ fn finite(xs: &[f64]) -> bool {
     xs.iter().all(|x| x.is_finite())
 }
 
-/// Servo → physics, every servo tick: the tool and its contact with the object.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[repr(C)]
-pub struct ToolSample {
-    /// When, ns on CLOCK_MONOTONIC.
-    pub t_ns: u64,
-    /// Servo tick counter.
-    pub seq: u64,
-    /// Tool position, m.
-    pub tool_pos: [f64; 3],
-    /// Tool velocity, m/s.
-    pub tool_vel: [f64; 3],
-    /// Contact force on the object, N.
-    pub force: [f64; 3],
-    /// Where it acts, m.
-    pub point: [f64; 3],
-    /// Penetration, m.
-    pub depth: f64,
-    /// 1 when touching.
-    pub touching: u64,
-    /// Desired force at the hand F_h, N.
-    pub f_desired: [f64; 3],
-    /// Measured force F_m, N.
-    pub f_measured: [f64; 3],
-    /// Commanded handle force after limits, N.
-    pub f_command: [f64; 3],
+pod_message! {
+    /// Servo → physics, every servo tick: the tool and its contact with the object.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct ToolSample {
+        /// When, ns on CLOCK_MONOTONIC.
+        pub t_ns: u64,
+        /// Servo tick counter.
+        pub seq: u64,
+        /// Tool position, m.
+        pub tool_pos: [f64; 3],
+        /// Tool velocity, m/s.
+        pub tool_vel: [f64; 3],
+        /// Contact force on the object, N.
+        pub force: [f64; 3],
+        /// Where it acts, m.
+        pub point: [f64; 3],
+        /// Penetration, m.
+        pub depth: f64,
+        /// 1 when touching.
+        pub touching: u64,
+        /// Desired force at the hand F_h, N.
+        pub f_desired: [f64; 3],
+        /// Measured force F_m, N.
+        pub f_measured: [f64; 3],
+        /// Commanded handle force after limits, N.
+        pub f_command: [f64; 3],
+    }
 }
 const _: () = assert!(core::mem::size_of::<ToolSample>() == 200);
 // SAFETY: repr(C), only u64 and f64 fields (200 bytes, no padding); every bit pattern is valid.
@@ -72,27 +202,28 @@ impl ToolSample {
     }
 }
 
-/// Physics → servo, every physics step: the object state this site believes.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[repr(C)]
-pub struct ObjectSample {
-    /// Time of the state, ns on CLOCK_MONOTONIC.
-    pub t_ns: u64,
-    /// Physics step counter.
-    pub seq: u64,
-    /// Centre of mass, m.
-    pub pos: [f64; 3],
-    /// Orientation quaternion (w, x, y, z).
-    pub rot: [f64; 4],
-    /// Velocity, m/s.
-    pub vel: [f64; 3],
-    /// Angular momentum, kg·m²/s.
-    pub ang_mom: [f64; 3],
-    /// Adoptions so far (the servo bounds the force step when it changes).
-    pub adoptions: u64,
-    /// Time of the newest tool sample this state was computed with, ns (0: none yet): the servo
-    /// measures the servo → physics → servo round trip from it.
-    pub tool_t_ns: u64,
+pod_message! {
+    /// Physics → servo, every physics step: the object state this site believes.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct ObjectSample {
+        /// Time of the state, ns on CLOCK_MONOTONIC.
+        pub t_ns: u64,
+        /// Physics step counter.
+        pub seq: u64,
+        /// Centre of mass, m.
+        pub pos: [f64; 3],
+        /// Orientation quaternion (w, x, y, z).
+        pub rot: [f64; 4],
+        /// Velocity, m/s.
+        pub vel: [f64; 3],
+        /// Angular momentum, kg·m²/s.
+        pub ang_mom: [f64; 3],
+        /// Adoptions so far (the servo bounds the force step when it changes).
+        pub adoptions: u64,
+        /// Time of the newest tool sample this state was computed with, ns (0: none yet): the servo
+        /// measures the servo → physics → servo round trip from it.
+        pub tool_t_ns: u64,
+    }
 }
 const _: () = assert!(core::mem::size_of::<ObjectSample>() == 136);
 // SAFETY: repr(C), only u64 and f64 fields (136 bytes, no padding); every bit pattern is valid.
@@ -123,8 +254,6 @@ fn body_state(pos: [f64; 3], rot: [f64; 4], vel: [f64; 3], ang_mom: [f64; 3]) ->
 }
 
 impl ObjectSample {
-    /// Its size in 8-byte words.
-    pub const WORDS: usize = core::mem::size_of::<Self>() / 8;
     /// From a state computed with the tool sample of time `tool_t_ns`.
     pub fn new(t_ns: u64, seq: u64, s: &BodyState, adoptions: u64, tool_t_ns: u64) -> Self {
         let (pos, rot, vel, ang_mom) = state_fields(s);
@@ -143,78 +272,42 @@ impl ObjectSample {
     pub fn state(&self) -> Option<BodyState> {
         body_state(self.pos, self.rot, self.vel, self.ang_mom)
     }
-    /// Its words, in field order (for the control block's resume seqlock).
-    pub fn words(&self) -> [u64; Self::WORDS] {
-        let f = |v: f64| v.to_bits();
-        [
-            self.t_ns,
-            self.seq,
-            f(self.pos[0]),
-            f(self.pos[1]),
-            f(self.pos[2]),
-            f(self.rot[0]),
-            f(self.rot[1]),
-            f(self.rot[2]),
-            f(self.rot[3]),
-            f(self.vel[0]),
-            f(self.vel[1]),
-            f(self.vel[2]),
-            f(self.ang_mom[0]),
-            f(self.ang_mom[1]),
-            f(self.ang_mom[2]),
-            self.adoptions,
-            self.tool_t_ns,
-        ]
-    }
-    /// The inverse of [`ObjectSample::words`].
-    pub fn from_words(w: [u64; Self::WORDS]) -> Self {
-        let f = f64::from_bits;
-        Self {
-            t_ns: w[0],
-            seq: w[1],
-            pos: [f(w[2]), f(w[3]), f(w[4])],
-            rot: [f(w[5]), f(w[6]), f(w[7]), f(w[8])],
-            vel: [f(w[9]), f(w[10]), f(w[11])],
-            ang_mom: [f(w[12]), f(w[13]), f(w[14])],
-            adoptions: w[15],
-            tool_t_ns: w[16],
-        }
-    }
 }
 
-/// What a site reports to the others (physics → network), and what arrives from them (network →
-/// physics): the model's [`Report`] in a fixed layout, with the sender's site index.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[repr(C)]
-pub struct SiteReport {
-    /// 1 = a state (paper), 2 = a force (naive).
-    pub kind: u64,
-    /// Sender's time, ns.
-    pub t_ns: u64,
-    /// Sender's report counter.
-    pub seq: u64,
-    /// Sender's site index.
-    pub site: u64,
-    /// State: centre of mass, m.
-    pub pos: [f64; 3],
-    /// State: orientation (w, x, y, z).
-    pub rot: [f64; 4],
-    /// State: velocity, m/s.
-    pub vel: [f64; 3],
-    /// State: angular momentum.
-    pub ang_mom: [f64; 3],
-    /// State: acceleration to dead-reckon with, m/s².
-    pub accel: [f64; 3],
-    /// State: per site, time its impulses are included up to, s (sender's clock).
-    pub included: [f64; MAX_SITES],
-    /// Force: force on the object, N.
-    pub force: [f64; 3],
-    /// Force: where it acts, m.
-    pub point: [f64; 3],
-    /// Force: penetration, m.
-    pub depth: f64,
-    /// Force: 1 when touching.
-    pub touching: u64,
+pod_message! {
+    /// What a site reports to the others (physics → network), and what arrives from them (network →
+    /// physics): the model's [`Report`] in a fixed layout, with the sender's site index.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct SiteReport {
+        /// 1 = a state (paper), 2 = a force (naive).
+        pub kind: u64,
+        /// Sender's time, ns.
+        pub t_ns: u64,
+        /// Sender's report counter.
+        pub seq: u64,
+        /// Sender's site index.
+        pub site: u64,
+        /// State: centre of mass, m.
+        pub pos: [f64; 3],
+        /// State: orientation (w, x, y, z).
+        pub rot: [f64; 4],
+        /// State: velocity, m/s.
+        pub vel: [f64; 3],
+        /// State: angular momentum.
+        pub ang_mom: [f64; 3],
+        /// State: acceleration to dead-reckon with, m/s².
+        pub accel: [f64; 3],
+        /// State: per site, time its impulses are included up to, s (sender's clock).
+        pub included: [f64; MAX_SITES],
+        /// Force: force on the object, N.
+        pub force: [f64; 3],
+        /// Force: where it acts, m.
+        pub point: [f64; 3],
+        /// Force: penetration, m.
+        pub depth: f64,
+        /// Force: 1 when touching.
+        pub touching: u64,
+    }
 }
 const _: () = assert!(core::mem::size_of::<SiteReport>() == 288);
 // SAFETY: repr(C), only u64 and f64 fields and arrays of them (288 bytes, no padding); every bit
@@ -223,39 +316,40 @@ unsafe impl ShmPod for SiteReport {
     const TYPE_NAME: &'static str = "coop.SiteReport.v1";
 }
 
-/// Physics → network (the recorder), at the scenario's sample rate and at every adoption: what this
-/// site believed and displayed, for the station's recording. Nothing on the real-time side reads it.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-#[repr(C)]
-pub struct TraceRecord {
-    /// [`TraceRecord::SAMPLE`] or [`TraceRecord::ADOPTION`].
-    pub kind: u64,
-    /// When, ns on CLOCK_MONOTONIC.
-    pub t_ns: u64,
-    /// Object position as this site believes it, m.
-    pub pos: [f64; 3],
-    /// Object orientation (w, x, y, z).
-    pub rot: [f64; 4],
-    /// Object velocity, m/s.
-    pub vel: [f64; 3],
-    /// Tool position (from the newest tool sample), m.
-    pub tool_pos: [f64; 3],
-    /// Desired force at the hand F_h, N.
-    pub f_desired: [f64; 3],
-    /// Measured force F_m, N.
-    pub f_measured: [f64; 3],
-    /// Users' contact force acting on this copy (own, plus the others' in naive), N.
-    pub f_object: [f64; 3],
-    /// 1 when the own user touches the object.
-    pub touching: u64,
-    /// Adoptions so far.
-    pub adoptions: u64,
-    /// Adoption: the sender's site index.
-    pub from: u64,
-    /// Adoption: position before minus after, m.
-    pub jump_m: f64,
-    /// Adoption: how far the received state was dead-reckoned, s.
-    pub age_s: f64,
+pod_message! {
+    /// Physics → network (the recorder), at the scenario's sample rate and at every adoption: what this
+    /// site believed and displayed, for the station's recording. Nothing on the real-time side reads it.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TraceRecord {
+        /// [`TraceRecord::SAMPLE`] or [`TraceRecord::ADOPTION`].
+        pub kind: u64,
+        /// When, ns on CLOCK_MONOTONIC.
+        pub t_ns: u64,
+        /// Object position as this site believes it, m.
+        pub pos: [f64; 3],
+        /// Object orientation (w, x, y, z).
+        pub rot: [f64; 4],
+        /// Object velocity, m/s.
+        pub vel: [f64; 3],
+        /// Tool position (from the newest tool sample), m.
+        pub tool_pos: [f64; 3],
+        /// Desired force at the hand F_h, N.
+        pub f_desired: [f64; 3],
+        /// Measured force F_m, N.
+        pub f_measured: [f64; 3],
+        /// Users' contact force acting on this copy (own, plus the others' in naive), N.
+        pub f_object: [f64; 3],
+        /// 1 when the own user touches the object.
+        pub touching: u64,
+        /// Adoptions so far.
+        pub adoptions: u64,
+        /// Adoption: the sender's site index.
+        pub from: u64,
+        /// Adoption: position before minus after, m.
+        pub jump_m: f64,
+        /// Adoption: how far the received state was dead-reckoned, s.
+        pub age_s: f64,
+    }
 }
 const _: () = assert!(core::mem::size_of::<TraceRecord>() == 232);
 // SAFETY: repr(C), only u64 and f64 fields (232 bytes, no padding); every bit pattern is valid.
@@ -333,6 +427,16 @@ impl SiteReport {
 
     /// The sender and the model's report, or `None` for an unknown kind, a site index out of range,
     /// a non-finite number or a non-unit quaternion.
+    ///
+    /// This is the one validation of a report; nothing else re-checks one. It runs at the two places
+    /// a report crosses into code that trusts it:
+    /// - `coop_transport::wire::decode`, where a report enters from the network: a bad one is
+    ///   refused there (counted as `contents`) and never reaches the remote ring;
+    /// - physics, as its ring → model conversion. Physics has to convert anyway (the ring carries
+    ///   this plain-old-data layout, not the model's [`Report`]), and it converts with the checking
+    ///   function rather than trusting the ring: a ring is shared memory that any process opening
+    ///   the segment can write, so the network's check does not cover it (refusals there count as
+    ///   `physics.rejected`). It costs a few `is_finite` and one quaternion norm per report.
     pub fn report(&self) -> Option<(usize, Report)> {
         let site = usize::try_from(self.site).ok().filter(|&s| s < MAX_SITES)?;
         let t_s = self.t_ns as f64 * 1e-9;
@@ -430,6 +534,43 @@ mod tests {
             SiteReport::new(0, 1, &f).report(),
             Some((0, Report::Force { .. }))
         ));
+    }
+
+    #[test]
+    fn words_follow_the_declared_layout_and_round_trip_bit_exactly() {
+        let mut s = ObjectSample::new(5, 6, &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)), 2, 4);
+        s.vel[1] = f64::NAN;
+        let w = s.to_words();
+        assert_eq!(w.len(), 17);
+        assert_eq!(
+            (w[0], w[1], w[15], w[16]),
+            (5, 6, 2, 4),
+            "t_ns, seq … adoptions, tool_t_ns"
+        );
+        assert_eq!(w[4], 0.01f64.to_bits(), "pos[2]");
+        let back = ObjectSample::from_words(&w);
+        assert_eq!(back.to_words(), w, "bit exact, NaN included");
+        assert_eq!(
+            ObjectSample::LAYOUT.iter().map(|f| f.2).sum::<usize>(),
+            ObjectSample::WORDS
+        );
+        assert_eq!(ObjectSample::LAYOUT[2], ("pos", "f64", 3));
+        assert_eq!(SiteReport::LAYOUT[9], ("included", "f64", MAX_SITES));
+        assert_eq!(SiteReport::LAYOUT.len(), 14);
+        assert_eq!(SiteReport::WORDS, 36);
+        assert_eq!(TraceRecord::WORDS * 8, 232);
+        assert_eq!(ToolSample::WORDS * 8, 200);
+        assert!(layout_text(ObjectSample::LAYOUT).starts_with("t_ns u64 1\nseq u64 1\npos f64 3\n"));
+        let mut r = SiteReport {
+            kind: 1,
+            site: 1,
+            depth: -0.5,
+            touching: 1,
+            ..SiteReport::default()
+        };
+        r.included[7] = 3.0;
+        assert_eq!(SiteReport::from_words(&r.to_words()), r);
+        assert_eq!(r.to_words()[4 + 3 + 4 + 3 + 3 + 3 + 7], 3.0f64.to_bits());
     }
 
     #[test]

@@ -129,6 +129,8 @@ impl PhysicsLoop {
         }
         while let Ok(r) = self.remote.pop() {
             self.received += 1;
+            // The one validating conversion (see `SiteReport::report`): the network's decode
+            // already refused bad reports; this guards the model against any other ring writer.
             match r.report() {
                 Some((from, msg)) if from != self.site => {
                     if let Some(a) =

@@ -1,8 +1,11 @@
 //! The wire format between stations: one encode and one decode per message (`docs/wire.md` is the
 //! specification a foreign client can be written from).
 //!
-//! A site report is `version: u8 = 1`, then the [`SiteReport`] fields in declaration order as
-//! little-endian u64/f64, nothing else: exactly [`ENCODED_LEN`] bytes. Decoding checks the version,
+//! A site report is `version: u8 = 1`, then [`SiteReport::to_words`] (its fields in declaration
+//! order, as `pod_message!` declares them) as little-endian u64/f64, nothing else: exactly
+//! [`ENCODED_LEN`] bytes. There is no second field list here: the layout is the struct's, and
+//! [`PINNED`] ties it to [`VERSION`] and to the table in `docs/wire.md` (a unit test fails when the
+//! struct changes without a version bump and the doc). Decoding checks the version,
 //! the length (no truncation, no trailing bytes) and then everything [`SiteReport::report`] checks
 //! (finite numbers, unit quaternion, known kind). [`Inbound::check`] adds what only a receiver knows:
 //! the site is one of the session's and the one its key names, and its sequence number is newer
@@ -16,8 +19,13 @@ use coop_rt::shm::control::Refused;
 
 /// Current wire version.
 pub const VERSION: u8 = 1;
+/// The site report layout [`VERSION`] stands for: (version, FNV-1a 64 of
+/// `coop_rt::msg::layout_text(SiteReport::LAYOUT)`). Changing [`SiteReport`] changes the hash, and
+/// the test `the_layout_is_pinned_to_the_version_and_the_doc` fails until [`VERSION`] is bumped,
+/// `docs/wire.md` describes the new layout, and this is re-pinned (the test prints the new value).
+pub const PINNED: (u8, u64) = (1, 0xfbfded3318dbe2b7);
 /// Bytes of an encoded report.
-pub const ENCODED_LEN: usize = 1 + core::mem::size_of::<SiteReport>();
+pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
 
 /// Why a message was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -153,32 +161,19 @@ pub fn decode_u64(bytes: &[u8]) -> Result<u64, DecodeError> {
     }
 }
 
-fn words(r: &SiteReport) -> impl Iterator<Item = u64> + '_ {
-    let f = |v: &f64| v.to_bits();
-    [r.kind, r.t_ns, r.seq, r.site]
-        .into_iter()
-        .chain(r.pos.iter().map(f))
-        .chain(r.rot.iter().map(f))
-        .chain(r.vel.iter().map(f))
-        .chain(r.ang_mom.iter().map(f))
-        .chain(r.accel.iter().map(f))
-        .chain(r.included.iter().map(f))
-        .chain(r.force.iter().map(f))
-        .chain(r.point.iter().map(f))
-        .chain([r.depth.to_bits(), r.touching])
-}
-
-/// Encodes a report.
+/// Encodes a report: the version, then [`SiteReport::to_words`] little-endian.
 pub fn encode(r: &SiteReport) -> Vec<u8> {
     let mut out = Vec::with_capacity(ENCODED_LEN);
     out.push(VERSION);
-    for w in words(r) {
+    for w in r.to_words() {
         out.extend_from_slice(&w.to_le_bytes());
     }
     out
 }
 
-/// Decodes and validates a report.
+/// Decodes a report and validates it: this is where a report from the network is checked, with
+/// [`SiteReport::report`], the one validation of a report (physics applies the same function as
+/// its ring → model conversion, against whatever else might write the ring).
 ///
 /// # Errors
 /// [`DecodeError`]: wrong version, wrong length, or invalid contents.
@@ -192,54 +187,13 @@ pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
     if bytes.len() != ENCODED_LEN {
         return Err(DecodeError::Length { found: bytes.len() });
     }
-    let mut it = body.chunks_exact(8).map(|c| {
-        let mut w = [0u8; 8];
-        w.copy_from_slice(c);
-        u64::from_le_bytes(w)
-    });
-    let mut next = || it.next().unwrap_or(0);
-    let f3 = |n: &mut dyn FnMut() -> u64| {
-        [
-            f64::from_bits(n()),
-            f64::from_bits(n()),
-            f64::from_bits(n()),
-        ]
-    };
-    let (kind, t_ns, seq, site) = (next(), next(), next(), next());
-    let pos = f3(&mut next);
-    let rot = [
-        f64::from_bits(next()),
-        f64::from_bits(next()),
-        f64::from_bits(next()),
-        f64::from_bits(next()),
-    ];
-    let vel = f3(&mut next);
-    let ang_mom = f3(&mut next);
-    let accel = f3(&mut next);
-    let mut included = [0.0; coop_model::MAX_SITES];
-    for v in included.iter_mut() {
-        *v = f64::from_bits(next());
+    let mut words = [0u64; SiteReport::WORDS];
+    for (w, c) in words.iter_mut().zip(body.chunks_exact(8)) {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(c);
+        *w = u64::from_le_bytes(b);
     }
-    let force = f3(&mut next);
-    let point = f3(&mut next);
-    let depth = f64::from_bits(next());
-    let touching = next();
-    let r = SiteReport {
-        kind,
-        t_ns,
-        seq,
-        site,
-        pos,
-        rot,
-        vel,
-        ang_mom,
-        accel,
-        included,
-        force,
-        point,
-        depth,
-        touching,
-    };
+    let r = SiteReport::from_words(&words);
     r.report().ok_or(DecodeError::Invalid)?;
     Ok(r)
 }
@@ -247,6 +201,82 @@ pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use coop_rt::msg::layout_text;
+    use coop_rt::shm::pod::fnv1a64;
+
+    /// The site report section of `docs/wire.md`: its heading, its text, and its field table as
+    /// (name, kind, words).
+    fn documented_layout() -> (String, String, Vec<(String, &'static str, usize)>) {
+        let doc = include_str!("../../docs/wire.md");
+        let start = doc
+            .find("\n## Site report")
+            .expect("docs/wire.md has no \"## Site report\" section");
+        let section = &doc[start + 1..];
+        let section = &section[..section[1..].find("\n## ").map_or(section.len(), |e| e + 1)];
+        let heading = section.lines().next().unwrap_or_default().to_string();
+        let mut fields = Vec::new();
+        for row in section.lines().filter(|l| l.starts_with('|')) {
+            let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+            let (words, name) = (cells[1], cells[2]);
+            if words == "words" || words.starts_with('-') {
+                continue; // the header and its rule
+            }
+            fn bad<T>(row: &str) -> T {
+                panic!("docs/wire.md: a site report row is not `| <n> u|f | `name` | … |`: {row}")
+            }
+            let (n, kind) = words.split_once(' ').unwrap_or_else(|| bad(row));
+            let n: usize = n.parse().unwrap_or_else(|_| bad(row));
+            let kind = match kind.trim() {
+                "u" => "u64",
+                "f" => "f64",
+                _ => bad(row),
+            };
+            let name = name
+                .strip_prefix('`')
+                .and_then(|n| n.strip_suffix('`'))
+                .unwrap_or_else(|| bad(row));
+            fields.push((name.to_string(), kind, n));
+        }
+        (heading, section.to_string(), fields)
+    }
+
+    #[test]
+    fn the_layout_is_pinned_to_the_version_and_the_doc() {
+        let text = layout_text(SiteReport::LAYOUT);
+        let hash = fnv1a64(text.as_bytes());
+        assert!(
+            PINNED.0 == VERSION,
+            "wire::VERSION is {VERSION} but the site report layout was pinned for version {}: once \
+             docs/wire.md describes version {VERSION}, re-pin `PINNED = ({VERSION}, {hash:#018x})`",
+            PINNED.0
+        );
+        assert!(
+            PINNED.1 == hash,
+            "SiteReport's layout changed but wire::VERSION is still {VERSION}: another field order is \
+             another wire format. Bump VERSION, update the site report table in docs/wire.md, and \
+             re-pin `PINNED = (<new VERSION>, {hash:#018x})`. The layout now:\n{text}"
+        );
+        let (heading, section, fields) = documented_layout();
+        let ours: Vec<(String, &str, usize)> = SiteReport::LAYOUT
+            .iter()
+            .map(|&(n, k, c)| (n.to_string(), k, c))
+            .collect();
+        assert_eq!(
+            fields, ours,
+            "docs/wire.md's site report table (left) is not SiteReport::LAYOUT (right)"
+        );
+        assert!(
+            heading.contains(&format!("(version {VERSION})"))
+                && heading.contains(&format!("exactly {ENCODED_LEN} bytes")),
+            "docs/wire.md: the heading `{heading}` should name version {VERSION} and {ENCODED_LEN} bytes"
+        );
+        assert!(
+            section.contains(&format!("Byte 0 is the version, `{VERSION}`"))
+                && section.contains(&format!("Then {} little-endian", SiteReport::WORDS)),
+            "docs/wire.md: the site report text should say version `{VERSION}` and {} words",
+            SiteReport::WORDS
+        );
+    }
 
     fn sample() -> SiteReport {
         let mut r = SiteReport {
@@ -268,6 +298,13 @@ mod tests {
         let bytes = encode(&r);
         assert_eq!(bytes.len(), ENCODED_LEN);
         assert_eq!(ENCODED_LEN, 289, "docs/wire.md says 289 bytes");
+        // Where docs/wire.md puts them: kind in word 0, pos[0] in word 4, included[1] in word 21.
+        let word = |i: usize| &bytes[1 + 8 * i..9 + 8 * i];
+        assert_eq!(bytes[0], 1);
+        assert_eq!(word(0), 1u64.to_le_bytes());
+        assert_eq!(word(2), 9u64.to_le_bytes());
+        assert_eq!(word(4), 0.1f64.to_le_bytes());
+        assert_eq!(word(21), 4.5f64.to_le_bytes());
         assert_eq!(decode(&bytes), Ok(r));
         let mut v2 = bytes.clone();
         v2[0] = 2;

@@ -377,13 +377,14 @@ impl ControlBlock {
     }
 
     /// Physics (the one writer) stores its newest state for a successor to resume from. A seqlock
-    /// of relaxed atomic words: odd sequence while writing, even when done.
+    /// of relaxed atomic words (the sample's `to_words`): odd sequence while writing, even when
+    /// done.
     pub fn store_resume(&self, s: &ObjectSample) {
         let seq = self.physics.resume_seq.load(Ordering::Relaxed);
         self.physics.resume_seq.store(seq | 1, Ordering::Relaxed);
         // SYNC: the odd sequence is visible before any word changes.
         core::sync::atomic::fence(Ordering::Release);
-        for (w, v) in self.physics.resume.iter().zip(s.words()) {
+        for (w, v) in self.physics.resume.iter().zip(s.to_words()) {
             w.store(v, Ordering::Relaxed);
         }
         // SYNC: Release publishes the words with the even sequence; pairs with `resume`'s Acquire.
@@ -406,7 +407,7 @@ impl ControlBlock {
             // SYNC: the word loads complete before the sequence is read again.
             core::sync::atomic::fence(Ordering::Acquire);
             if before & 1 == 0 && self.physics.resume_seq.load(Ordering::Relaxed) == before {
-                let s = ObjectSample::from_words(words);
+                let s = ObjectSample::from_words(&words);
                 return s.state().map(|_| s);
             }
             std::thread::yield_now();
