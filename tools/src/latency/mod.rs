@@ -10,24 +10,20 @@
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use std::sync::{mpsc, Arc, Barrier};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use clap::{ArgAction, Parser};
-use coop_rt::sched::{self, InForce, Policy, Request, Warning};
-use coop_rt::sync::{AtomicU64, Ordering};
-use coop_rt::timer::{monotonic_ns, PeriodicTimer};
+use coop_rt::sched::{self, InForce, Policy, Request};
+use coop_rt::sync::Ordering;
 use hdrhistogram::Histogram;
 
 use crate::cli::{parse_cpu_list, parse_duration, StopFlag};
 
-/// Largest latency the histogram holds: 10 s (larger samples saturate at this value; max is kept).
-const HIST_MAX_NS: u64 = 10_000_000_000;
-/// Missed deadlines recorded per wake at most; the rest are still counted as overruns.
-const MISSED_RECORD_CAP: u64 = 10_000;
-/// Stack pre-faulted for each measuring thread.
-const PREFAULT_STACK: usize = 256 * 1024;
+mod measure;
+
+pub use measure::{Report, ThreadResult};
+use measure::{Live, Plan, Threads, PREFAULT_STACK};
 
 /// Command line of `latency`. Flags follow cyclictest's; `-h` is `--histogram` as there, and help is
 /// `--help` only.
@@ -126,70 +122,6 @@ fn parse_policy(s: &str) -> Result<Policy, String> {
     s.parse()
 }
 
-/// Live figures a measuring thread publishes for the monitor (single writer, relaxed).
-#[derive(Debug, Default)]
-struct Live {
-    cycles: AtomicU64,
-    last_ns: AtomicU64,
-    min_ns: AtomicU64,
-    max_ns: AtomicU64,
-    sum_ns: AtomicU64,
-    overruns: AtomicU64,
-}
-
-/// What one measuring thread found.
-#[derive(Debug, Clone)]
-pub struct ThreadResult {
-    /// Thread number, from 0.
-    pub index: usize,
-    /// Kernel thread id.
-    pub tid: i32,
-    /// Policy, priority and CPUs in force while measuring.
-    pub in_force: InForce,
-    /// Cycles measured.
-    pub cycles: u64,
-    /// Deadlines missed.
-    pub overruns: u64,
-    /// Smallest latency, ns.
-    pub min_ns: u64,
-    /// Latest latency, ns.
-    pub last_ns: u64,
-    /// Sum of latencies, ns.
-    pub sum_ns: u64,
-    /// Wake-up latencies, one per cycle (cyclictest's semantics), ns.
-    pub hist: Histogram<u64>,
-    /// Wake-up latencies plus the latency of every missed deadline (no coordinated omission), ns.
-    pub hist_all: Histogram<u64>,
-}
-
-impl ThreadResult {
-    fn avg_ns(&self) -> u64 {
-        self.sum_ns.checked_div(self.cycles).unwrap_or(0)
-    }
-    fn pct_us(&self, q: f64) -> f64 {
-        self.hist.value_at_quantile(q) as f64 / 1_000.0
-    }
-}
-
-/// What a whole run found.
-#[derive(Debug)]
-pub struct Report {
-    /// The command line, for the JSON.
-    pub cmdline: String,
-    /// Per thread.
-    pub threads: Vec<ThreadResult>,
-    /// Privilege warnings, each once.
-    pub warnings: Vec<Warning>,
-    /// Memory locked in force.
-    pub mlocked: bool,
-    /// Whether /dev/cpu_dma_latency is held at 0, or why not.
-    pub dma_latency: Result<(), String>,
-    /// Kernel facts.
-    pub kernel: sched::KernelInfo,
-    /// Whether the run was stopped by a signal.
-    pub interrupted: bool,
-}
-
 fn thread_requests(args: &Args) -> anyhow::Result<Vec<Request>> {
     let allowed = sched::allowed_cpus();
     let n = if args.threads == 0 {
@@ -222,6 +154,7 @@ fn thread_requests(args: &Args) -> anyhow::Result<Vec<Request>> {
     Ok(reqs)
 }
 
+
 /// Runs the measurement: sets up, prints the header (unless `print` is false), measures, and returns
 /// the report. Live lines go to stdout when it is a terminal and `--quiet` is not given.
 ///
@@ -242,89 +175,14 @@ pub fn run(args: &Args, cmdline: String, print: bool) -> anyhow::Result<Report> 
     } else {
         sched::hold_cpu_dma_latency_zero().map_err(|e| e.kind().to_string())
     };
-    let period = Duration::from_micros(args.interval_us);
-    let live: Arc<Vec<Live>> = Arc::new((0..reqs.len()).map(|_| Live::default()).collect());
-    let barrier = Arc::new(Barrier::new(reqs.len() + 1));
-    let (setup_tx, setup_rx) = mpsc::channel();
     let end_after = args.duration;
-    let loops = args.loops;
-    let mut handles = Vec::new();
-    for (index, req) in reqs.into_iter().enumerate() {
-        let (live, barrier, setup_tx, stop) = (
-            live.clone(),
-            barrier.clone(),
-            setup_tx.clone(),
-            stop.clone(),
-        );
-        let handle = std::thread::Builder::new()
-            .name(format!("latency-{index}"))
-            .spawn(move || {
-                let setup = sched::apply_to_current_thread(&req);
-                let (in_force, warns) = match setup {
-                    Ok(v) => v,
-                    Err(e) => {
-                        let _ = setup_tx.send(Err(e.to_string()));
-                        return None;
-                    }
-                };
-                let mut hist = Histogram::<u64>::new_with_bounds(1, HIST_MAX_NS, 3)
-                    .expect("1..10 s with 3 digits is a valid histogram");
-                // Touch every counter page now so the loop never page-faults on first use.
-                hist.reset();
-                let mut hist_all = hist.clone();
-                hist_all.reset();
-                let tid = nix::unistd::gettid().as_raw();
-                let _ = setup_tx.send(Ok((index, in_force.clone(), warns)));
-                barrier.wait();
-                let r = measure(
-                    &live[index],
-                    &mut hist,
-                    &mut hist_all,
-                    period,
-                    loops,
-                    end_after,
-                    &stop,
-                );
-                Some(ThreadResult {
-                    index,
-                    tid,
-                    in_force,
-                    cycles: r.0,
-                    overruns: r.1,
-                    min_ns: r.2,
-                    last_ns: r.3,
-                    sum_ns: r.4,
-                    hist,
-                    hist_all,
-                })
-            })
-            .context("starting a measuring thread")?;
-        handles.push(handle);
-    }
-    drop(setup_tx);
-    let mut in_force = Vec::new();
-    // Exactly one setup message per thread: each keeps its sender while it measures, so iterating
-    // until the channel closes would wait for the whole run.
-    for _ in 0..handles.len() {
-        let msg = setup_rx
-            .recv()
-            .context("a measuring thread died during setup")?;
-        match msg {
-            Ok((i, f, w)) => {
-                in_force.push((i, f));
-                for w in w {
-                    if !warnings.iter().any(|x: &Warning| x.key == w.key) {
-                        warnings.push(w);
-                    }
-                }
-            }
-            Err(e) => {
-                stop.raise();
-                bail!("{e}");
-            }
-        }
-    }
-    in_force.sort_by_key(|(i, _)| *i);
+    let plan = Plan {
+        period: Duration::from_micros(args.interval_us),
+        loops: args.loops,
+        end_after,
+    };
+    let threads = Threads::start(reqs, plan, &stop)?;
+    let in_force = threads.wait_for_setup(&stop, &mut warnings)?;
     let kernel = sched::kernel_info();
     let mlocked = sched::memory_locked();
     if print {
@@ -339,86 +197,30 @@ pub fn run(args: &Args, cmdline: String, print: bool) -> anyhow::Result<Report> 
             &dma.as_ref().map(drop).map_err(Clone::clone),
         );
     }
-    barrier.wait();
+    threads.go();
     let started = Instant::now();
     let live_lines = print && !args.quiet && std::io::stdout().is_terminal();
     let mut printed = false;
-    while handles.iter().any(|h| !h.is_finished()) {
+    while threads.running() {
         std::thread::sleep(Duration::from_millis(100));
         if end_after.is_some_and(|d| started.elapsed() >= d + Duration::from_millis(200)) {
             stop.raise(); // threads stop on their own at the deadline; this is the backstop
         }
         if live_lines {
-            print_live(&live, &in_force, args.interval_us, printed);
+            print_live(threads.live(), &in_force, args.interval_us, printed);
             printed = true;
         }
     }
     let interrupted = stop.is_raised() && end_after.is_none_or(|d| started.elapsed() < d);
-    let mut threads: Vec<ThreadResult> = handles
-        .into_iter()
-        .filter_map(|h| h.join().ok().flatten())
-        .collect();
-    threads.sort_by_key(|t| t.index);
     Ok(Report {
         cmdline,
-        threads,
+        threads: threads.join(),
         warnings,
         mlocked,
         dma_latency: dma.map(drop),
         kernel,
         interrupted,
     })
-}
-
-/// The measuring loop of one thread. Returns (cycles, overruns, min, last, sum).
-fn measure(
-    live: &Live,
-    hist: &mut Histogram<u64>,
-    hist_all: &mut Histogram<u64>,
-    period: Duration,
-    loops: u64,
-    end_after: Option<Duration>,
-    stop: &StopFlag,
-) -> (u64, u64, u64, u64, u64) {
-    let start = monotonic_ns();
-    let end_ns = end_after.map_or(u64::MAX, |d| start.saturating_add(d.as_nanos() as u64));
-    let mut timer = PeriodicTimer::starting_at(start, period);
-    let period_ns = timer.period_ns();
-    let (mut cycles, mut overruns, mut min, mut sum, mut max) = (0u64, 0u64, u64::MAX, 0u64, 0);
-    let mut last;
-    loop {
-        // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep.
-        let w = timer.wait();
-        let lat = w.latency_ns;
-        hist.saturating_record(lat.max(1));
-        hist_all.saturating_record(lat.max(1));
-        // Deadlines that passed while we were late: their latency too (no coordinated omission).
-        for k in 1..=w.missed.min(MISSED_RECORD_CAP) {
-            hist_all.saturating_record(lat.saturating_sub(k * period_ns).max(1));
-        }
-        cycles += 1;
-        overruns += w.missed;
-        min = min.min(lat);
-        max = max.max(lat);
-        last = lat;
-        sum = sum.wrapping_add(lat);
-        live.cycles.store(cycles, Ordering::Relaxed);
-        live.last_ns.store(lat, Ordering::Relaxed);
-        live.min_ns.store(min, Ordering::Relaxed);
-        live.max_ns.store(max, Ordering::Relaxed);
-        live.sum_ns.store(sum, Ordering::Relaxed);
-        live.overruns.store(overruns, Ordering::Relaxed);
-        if (loops > 0 && cycles >= loops) || w.woke_ns >= end_ns || stop.is_raised() {
-            break;
-        }
-    }
-    (
-        cycles,
-        overruns,
-        if cycles == 0 { 0 } else { min },
-        last,
-        sum,
-    )
 }
 
 fn us(ns: u64) -> u64 {
