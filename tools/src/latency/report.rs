@@ -77,7 +77,12 @@ fn cpus_text(cpus: &[usize]) -> String {
 }
 
 /// The live cyclictest lines, one per thread, over the previous ones when `again`.
-pub(super) fn print_live(live: &[Live], in_force: &[(usize, InForce)], interval_us: u64, again: bool) {
+pub(super) fn print_live(
+    live: &[Live],
+    in_force: &[(usize, InForce)],
+    interval_us: u64,
+    again: bool,
+) {
     let mut out = std::io::stdout().lock();
     if again {
         let _ = write!(out, "\x1b[{}A", live.len());
