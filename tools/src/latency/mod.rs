@@ -7,8 +7,12 @@
 //! histogram also records each missed deadline's latency (the coordinated-omission-corrected view:
 //! a 30 ms stall at 1 kHz is 30 late deadlines, not one late wake), printed whenever there were
 //! overruns. The header reports what is *in force*, read back from the kernel, not what was asked for.
+//!
+//! `measure` holds the threads and their timer loop, `report` everything printed (text and JSON,
+//! which tests and the bench scripts parse), `attach` the reading of a running station; this file
+//! the command line and the wiring of a run.
 
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -18,14 +22,16 @@ use coop_rt::sched::{self, Policy, Request};
 
 use crate::cli::{parse_cpu_list, parse_duration, StopFlag};
 
+mod attach;
 mod measure;
 mod report;
 
+pub use attach::attach;
 pub use measure::{Report, ThreadResult};
 pub use report::{print_report, report_json};
 
 use measure::{Plan, Threads, PREFAULT_STACK};
-use report::{print_header, print_live, us};
+use report::{print_header, print_live};
 
 /// Command line of `latency`. Flags follow cyclictest's; `-h` is `--histogram` as there, and help is
 /// `--help` only.
@@ -156,7 +162,6 @@ fn thread_requests(args: &Args) -> anyhow::Result<Vec<Request>> {
     Ok(reqs)
 }
 
-
 /// Runs the measurement: sets up, prints the header (unless `print` is false), measures, and returns
 /// the report. Live lines go to stdout when it is a terminal and `--quiet` is not given.
 ///
@@ -223,165 +228,6 @@ pub fn run(args: &Args, cmdline: String, print: bool) -> anyhow::Result<Report> 
         kernel,
         interrupted,
     })
-}
-
-/// `latency attach`: a running station's loops, in this tool's format. Live lines on a terminal
-/// unless quiet; the summary (header, T: lines, percentiles) at the end.
-///
-/// # Errors
-/// No such station, or its control block fails validation.
-pub fn attach(
-    station: &str,
-    session: &str,
-    duration: Option<Duration>,
-    quiet: bool,
-    json: Option<&std::path::Path>,
-) -> anyhow::Result<()> {
-    use coop_rt::shm::control::{Child, ControlBlock};
-    let names = crate::station::segments::Names::of(session, station)?;
-    let ctl = coop_rt::shm::BlockSegment::<ControlBlock>::open(
-        &names.control,
-        Duration::from_millis(500),
-    )
-    .with_context(|| format!("attaching to station {station} of session {session}"))?;
-    let stop = StopFlag::on_sigint_sigterm().context("blocking SIGINT/SIGTERM")?;
-    let start = (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
-    let began = Instant::now();
-    let live = !quiet && std::io::stdout().is_terminal();
-    let loops = [
-        ("servo", Child::Servo, 0usize),
-        ("physics", Child::Physics, 1),
-    ];
-    let line = |name: &str,
-                c: Child,
-                i: usize,
-                base: &coop_rt::stats::LoopSnapshot,
-                now: &coop_rt::stats::LoopSnapshot| {
-        let slot = ctl.child(c);
-        let cycles = now.cycles.saturating_sub(base.cycles);
-        let _ = name;
-        format!(
-            "T:{i:2} ({:6}) P:{:2} I:{} C:{cycles:8} Min:{:7} Act:{:5} Avg:{:5} Max:{:8}",
-            slot.pid.load(coop_rt::sync::Ordering::Relaxed),
-            slot.priority.load(coop_rt::sync::Ordering::Relaxed),
-            now.period_ns / 1000,
-            us(now.wake_min_ns),
-            us(now.last_wake_ns),
-            us(now.wake_sum_ns.checked_div(now.cycles).unwrap_or(0)),
-            us(now.wake_max_ns),
-        )
-    };
-    let mut printed = false;
-    loop {
-        std::thread::sleep(Duration::from_millis(200));
-        let done = stop.is_raised() || duration.is_some_and(|d| began.elapsed() >= d);
-        if live && !done {
-            let mut out = std::io::stdout().lock();
-            if printed {
-                let _ = write!(out, "\x1b[{}A", loops.len());
-            }
-            for (name, c, i) in loops {
-                let (base, now) = if i == 0 {
-                    (&start.0, ctl.servo.stats.snapshot())
-                } else {
-                    (&start.1, ctl.physics.stats.snapshot())
-                };
-                let _ = writeln!(out, "{}\x1b[K", line(name, c, i, base, &now));
-            }
-            let _ = out.flush();
-            printed = true;
-        }
-        if done {
-            break;
-        }
-    }
-    // The summary covers the attach window only: the histograms now, less the ones at attach start
-    // (a station's start-up, mlockall faulting its pages in, is not what the loop does once running).
-    let window = |now: coop_rt::stats::LoopSnapshot, base: &coop_rt::stats::LoopSnapshot| {
-        let mut w = now.clone();
-        let _ = w.wake_us.subtract(&base.wake_us);
-        let _ = w.compute_us.subtract(&base.compute_us);
-        w.cycles = now.cycles.saturating_sub(base.cycles);
-        w.overruns = now.overruns.saturating_sub(base.overruns);
-        w.wake_sum_ns = now.wake_sum_ns.saturating_sub(base.wake_sum_ns);
-        w.wake_min_ns = w.wake_us.min() * 1_000;
-        w.wake_max_ns = w.wake_us.max() * 1_000;
-        w
-    };
-    let (servo, physics) = (
-        window(ctl.servo.stats.snapshot(), &start.0),
-        window(ctl.physics.stats.snapshot(), &start.1),
-    );
-    println!(
-        "# latency attach: station {station} of session {session}, {:.1} s attached",
-        began.elapsed().as_secs_f64()
-    );
-    let policy = |c: Child| match ctl.child(c).policy.load(coop_rt::sync::Ordering::Relaxed) {
-        1 => "SCHED_FIFO",
-        2 => "SCHED_RR",
-        _ => "SCHED_OTHER",
-    };
-    for (name, c, i) in loops {
-        let mask = ctl.child(c).cpus.load(coop_rt::sync::Ordering::Relaxed);
-        let cpus: Vec<String> = (0..64)
-            .filter(|b| mask & (1 << b) != 0)
-            .map(|b| b.to_string())
-            .collect();
-        println!(
-            "# T:{i:2} {name}: policy: {} priority: {} affinity: {}",
-            policy(c),
-            ctl.child(c).priority.load(coop_rt::sync::Ordering::Relaxed),
-            cpus.join(",")
-        );
-    }
-    let mut threads = serde_json::Map::new();
-    for (name, c, i) in loops {
-        let snap = if i == 0 { &servo } else { &physics };
-        let zero = coop_rt::stats::LoopSnapshot {
-            cycles: 0,
-            ..snap.clone()
-        };
-        println!("{}", line(name, c, i, &zero, snap));
-        let q = |p: f64| snap.wake_us.value_at_quantile(p);
-        println!(
-            "# T:{i:2} latency us: p50 {} p99 {} p99.9 {} p99.99 {} max {:.1} overruns {}",
-            q(0.5),
-            q(0.99),
-            q(0.999),
-            q(0.9999),
-            snap.wake_max_ns as f64 / 1e3,
-            snap.overruns
-        );
-        let hist: serde_json::Map<String, serde_json::Value> = snap
-            .wake_us
-            .iter_recorded()
-            .map(|v| (v.value_iterated_to().to_string(), v.count_at_value().into()))
-            .collect();
-        threads.insert(
-            i.to_string(),
-            serde_json::json!({
-                "loop": name, "cycles": snap.cycles, "overruns": snap.overruns, "interval_us": snap.period_ns / 1000,
-                "min_us": snap.wake_min_ns as f64 / 1e3, "max_us": snap.wake_max_ns as f64 / 1e3,
-                "p50_us": q(0.5), "p99_us": q(0.99), "p999_us": q(0.999), "p9999_us": q(0.9999),
-                "histogram_us": hist,
-            }),
-        );
-    }
-    let rt = ctl.servo.roundtrip.to_hdr();
-    let rt_count = ctl.servo.roundtrip_count.load(coop_rt::sync::Ordering::Relaxed);
-    let rt_max = ctl.servo.roundtrip.max_ns.load(coop_rt::sync::Ordering::Relaxed) as f64 / 1e3;
-    println!(
-        "# servo -> physics -> servo round trip us ({rt_count} samples): p50 {} p99 {} max {rt_max:.1}",
-        rt.value_at_quantile(0.5),
-        rt.value_at_quantile(0.99)
-    );
-    if let Some(path) = json {
-        let roundtrip = serde_json::json!({ "samples": rt_count, "p50_us": rt.value_at_quantile(0.5), "p99_us": rt.value_at_quantile(0.99), "max_us": rt_max });
-        let v = serde_json::json!({ "file_version": 1, "tool": "coop-haptics latency attach", "station": station, "session": session, "thread": threads, "roundtrip": roundtrip, "return_code": 0 });
-        std::fs::write(path, serde_json::to_string_pretty(&v)? + "\n")
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]
