@@ -1,10 +1,11 @@
 //! coop-tools: the command-line programs of coop-haptics, as thin `main`s over library modules.
 //!
-//! - [`latency`]: the wake-up latency tool users of cyclictest already know (issue 3).
-//! - [`ringbench`]: the shared-memory ring against rtrb between two cores (issue 3).
-//! - [`sim`]: the deterministic multi-site simulator's CLI (issue 4).
+//! - [`latency`]: the wake-up latency tool users of cyclictest already know, also attachable to a
+//!   running station.
+//! - [`ringbench`]: the shared-memory ring against rtrb between two cores.
+//! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
-//! - [`session`]: a multi-site session of real stations, recorded and measured (issue 6).
+//! - [`session`]: a multi-site session of real stations, recorded and measured.
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
 //! measured loops, which follow coop-rt's contract (no allocation, lock, logging or system call but
