@@ -210,10 +210,12 @@ fn serve(
         let mut presence = Presence::declare(session, name, site)?;
         receive::join_from_current(session, name, receiver);
         let states = receive::subscribe(session, name)?;
-        scope.spawn(move || receive::deliver(&states, receiver, stop));
         publish.serve_current(session, name, site)?;
         let _clock = clock::serve(session, name, site)?;
         let epoch = epoch::EpochListener::declare(session, name)?;
+        // Every declaration is made before the threads start: an error returns before anything
+        // would wait for `stop`.
+        scope.spawn(move || receive::deliver(&states, receiver, stop));
         scope.spawn(|| epoch::ask(session, name, ctx.ctl));
         let sampler = clock::Sampler {
             session,
