@@ -5,8 +5,8 @@
 //! - hands the other sites' reports to physics (network → physics ring) the moment zenoh delivers
 //!   them, after [`wire::Inbound::check`](crate::wire::Inbound::check) (typed refusals are counted,
 //!   never applied), with their time corrected by the sender's clock offset, through the
-//!   receive-side network emulation when configured ([`receive`], [`emulate`]);
-//! - declares a liveliness token (who is present) and watches everyone's ([`presence`]); answers
+//!   receive-side network emulation when configured (`receive`, [`emulate`]);
+//! - declares a liveliness token (who is present) and watches everyone's (`presence`); answers
 //!   queries for its newest state (late joiners start from the session's state) and for its clock
 //!   (NTP-style offset and round trip per peer, [`clock`]);
 //! - learns the session's time 0 from the launcher when the station waits for it ([`epoch`], which
