@@ -118,7 +118,7 @@ fn end(
     let ep = Endpoints {
         listen,
         connect,
-        mode: "peer".into(),
+        mode: network::Mode::Peer,
         tls: None,
     };
     let err = |e: zenoh::Error| anyhow::anyhow!("{e}");

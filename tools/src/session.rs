@@ -23,7 +23,7 @@ use coop_model::metrics::{self, Metrics};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{AdoptionEvent, Mode, RunResult, SiteTrace};
 use coop_transport::recording::{self, Recording};
-use coop_transport::{keys, network, wire};
+use coop_transport::{keys, network};
 use zenoh::Wait;
 
 use coop_actors::scenario_file;
@@ -241,7 +241,7 @@ pub fn run_method(
     let endpoints = network::Endpoints {
         listen: vec![ports[n].clone()],
         connect: ports[..n].to_vec(),
-        mode: "peer".into(),
+        mode: network::Mode::Peer,
         tls: None,
     };
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
@@ -264,20 +264,7 @@ pub fn run_method(
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
-    let epoch: Arc<Mutex<Option<u64>>> = Arc::default();
-    let e = epoch.clone();
-    let _epoch_q = z
-        .declare_queryable(keys::epoch(session))
-        .callback(move |q| {
-            let v = *lock(&e);
-            if let Some(v) = v {
-                let _ = q
-                    .reply(q.key_expr().clone(), wire::encode_u64(v).to_vec())
-                    .wait();
-            }
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("declaring the epoch queryable: {e}"))?;
+    let epoch = network::EpochAnnouncer::declare(&z, session)?;
 
     for st in stations
         .iter_mut()
@@ -334,10 +321,7 @@ pub fn run_method(
     }
     // Time 0 a little ahead, so every station has it before it matters.
     let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
-    *lock(&epoch) = Some(t0);
-    z.put(keys::epoch(session), wire::encode_u64(t0).to_vec())
-        .wait()
-        .map_err(|e| anyhow::anyhow!("announcing the session start: {e}"))?;
+    epoch.announce(t0)?;
 
     // Overruns from here on are the session's (startup, with every station's processes and zenoh
     // coming up on two cores, is reported apart).

@@ -257,7 +257,7 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
     let ep = coop_transport::network::Endpoints {
         listen: vec![],
         connect: vec![locator],
-        mode: "peer".into(),
+        mode: coop_transport::network::Mode::Peer,
         tls: None,
     };
     let z = zenoh::open(coop_transport::network::config(&ep).expect("config"))

@@ -464,7 +464,7 @@ impl Recorder {
     ///
     /// # Errors
     /// Writing failed.
-    pub fn sample(&mut self, m: &SampleMsg) -> Result<(), mcap::McapError> {
+    fn sample(&mut self, m: &SampleMsg) -> Result<(), mcap::McapError> {
         self.put(
             1,
             m.t_ns,
@@ -493,7 +493,7 @@ impl Recorder {
     ///
     /// # Errors
     /// Writing failed.
-    pub fn adoption(&mut self, m: &AdoptionMsg) -> Result<(), mcap::McapError> {
+    fn adoption(&mut self, m: &AdoptionMsg) -> Result<(), mcap::McapError> {
         self.put(3, m.t_ns, m)
     }
     /// `/remote`.

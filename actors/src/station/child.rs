@@ -249,18 +249,19 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         endpoints: coop_transport::network::Endpoints {
             listen: net.listen.clone(),
             connect: net.connect.clone(),
-            mode: net.mode.clone(),
-            tls: net.tls.as_ref().map(|t| {
-                let s =
-                    |p: &Option<std::path::PathBuf>| p.as_ref().map(|p| p.display().to_string());
-                coop_transport::network::Tls {
-                    root_ca_certificate: s(&t.root_ca_certificate),
-                    listen_certificate: s(&t.listen_certificate),
-                    listen_private_key: s(&t.listen_private_key),
-                    connect_certificate: s(&t.connect_certificate),
-                    connect_private_key: s(&t.connect_private_key),
-                    enable_mtls: t.enable_mtls,
-                }
+            // Validated: peer or client.
+            mode: if net.mode == "client" {
+                coop_transport::network::Mode::Client
+            } else {
+                coop_transport::network::Mode::Peer
+            },
+            tls: net.tls.as_ref().map(|t| coop_transport::network::Tls {
+                root_ca_certificate: t.root_ca_certificate.clone(),
+                listen_certificate: t.listen_certificate.clone(),
+                listen_private_key: t.listen_private_key.clone(),
+                connect_certificate: t.connect_certificate.clone(),
+                connect_private_key: t.connect_private_key.clone(),
+                enable_mtls: t.enable_mtls,
             }),
         },
         control: &ctl,
@@ -276,6 +277,6 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.
     keep_off_the_servo(cfg);
-    coop_transport::network::run(args).map_err(anyhow::Error::msg)?;
+    coop_transport::network::run(args)?;
     Ok(())
 }

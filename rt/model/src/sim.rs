@@ -15,12 +15,10 @@
 //! with every user's contact summed at once (Eq. 8 without delay), integrated at the fastest site's
 //! physics rate: the "truth" the methods are measured against.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::device::Plant;
+use crate::link::DueQueue;
 use crate::method::{integrate, Consistency, EnergyAccount, Naive, ObjectCopy, Paper, Report};
 use crate::rng::Rng;
 use crate::scenario::{MethodName, Scenario};
@@ -109,27 +107,9 @@ pub struct RunResult {
 /// A message in flight.
 #[derive(Debug, Clone, Copy)]
 struct InFlight {
-    at_ns: u64,
-    seq: u64,
     from: usize,
     to: usize,
     msg: Report,
-}
-impl PartialEq for InFlight {
-    fn eq(&self, o: &Self) -> bool {
-        (self.at_ns, self.seq) == (o.at_ns, o.seq)
-    }
-}
-impl Eq for InFlight {}
-impl PartialOrd for InFlight {
-    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(o))
-    }
-}
-impl Ord for InFlight {
-    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-        (self.at_ns, self.seq).cmp(&(o.at_ns, o.seq))
-    }
 }
 
 struct Site {
@@ -216,8 +196,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         .map(|k| Rng::derive(scenario.seed, k as u64))
         .collect();
     let net = &scenario.network;
-    let mut in_flight: BinaryHeap<Reverse<InFlight>> = BinaryHeap::new();
-    let mut seq = 0u64;
+    let mut in_flight: DueQueue<InFlight> = DueQueue::new();
     let mut messages = (0u64, 0u64, 0u64);
     let end_ns = (scenario.duration_s * 1e9).round() as u64;
     let period_sample = period_ns(scenario.sample_rate_hz);
@@ -246,8 +225,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         if reference {
             t = t.min(next_ref);
         }
-        if let Some(Reverse(m)) = in_flight.peek() {
-            t = t.min(m.at_ns);
+        if let Some(at_ns) = in_flight.next_at() {
+            t = t.min(at_ns);
         }
         if t > end_ns {
             break;
@@ -267,11 +246,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             }
         }
         // Deliveries.
-        while let Some(Reverse(m)) = in_flight.peek().copied() {
-            if m.at_ns != t {
-                break;
-            }
-            in_flight.pop();
+        // Nothing is due before `t` (it is the earliest event), so due means due now.
+        while let Some(m) = in_flight.pop_due(t) {
             messages.1 += 1;
             let s = &mut sites[m.to];
             if let Some(a) = s
@@ -341,26 +317,11 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 let msg = s.method.report(&s.copy, &s.own, ns_to_s(t));
                 for to in (0..n).filter(|&to| to != i) {
                     messages.0 += 1;
-                    let rng = &mut links[i * n + to];
-                    let lost = rng.uniform() < net.loss;
-                    let swing =
-                        0.5 - 0.5 * (std::f64::consts::TAU * ns_to_s(t) / net.delay_period_s).cos();
-                    let delay_ms = net.delay_min_ms
-                        + (net.delay_max_ms - net.delay_min_ms) * swing
-                        + rng.range(-net.jitter_ms, net.jitter_ms);
-                    if lost {
+                    let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
                         messages.2 += 1;
                         continue;
-                    }
-                    let at_ns = t + (delay_ms.max(0.0) * 1e6).round() as u64;
-                    seq += 1;
-                    in_flight.push(Reverse(InFlight {
-                        at_ns,
-                        seq,
-                        from: i,
-                        to,
-                        msg,
-                    }));
+                    };
+                    in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
                 }
                 s.next_report += s.period_report;
             }

@@ -1,0 +1,222 @@
+//! The zenoh configuration of a station (or of a tool that joins a session): where it listens, whom
+//! it connects to, peer or client, TLS. [`Endpoints`] reads as the station configuration's
+//! `[network]` fields, so the station's file can embed it.
+
+use std::path::PathBuf;
+
+use super::NetworkError;
+
+/// How the session reaches the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Stations connect to each other.
+    #[default]
+    Peer,
+    /// Through the zenohd routers in `connect`.
+    Client,
+}
+
+impl Mode {
+    /// `peer` or `client`, as zenoh and the configuration files spell it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Peer => "peer",
+            Mode::Client => "client",
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Where the session listens and whom it connects to.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Endpoints {
+    /// Zenoh locators to listen on, e.g. `tcp/127.0.0.1:7447` (port 0: a free port, chosen here).
+    /// Default: a free TCP port on loopback.
+    pub listen: Vec<String>,
+    /// Zenoh locators of peers or routers to connect to.
+    pub connect: Vec<String>,
+    /// Peer (default) or client.
+    pub mode: Mode,
+    /// TLS files, for `tls/` locators.
+    pub tls: Option<Tls>,
+}
+
+impl Default for Endpoints {
+    fn default() -> Self {
+        Self {
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            connect: Vec::new(),
+            mode: Mode::Peer,
+            tls: None,
+        }
+    }
+}
+
+/// TLS for `tls/<host>:<port>` locators: PEM files (zenoh's `transport/link/tls`).
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Tls {
+    /// CA certificate that signed the peers' (or routers') certificates.
+    pub root_ca_certificate: Option<PathBuf>,
+    /// This station's certificate when it listens.
+    pub listen_certificate: Option<PathBuf>,
+    /// Its private key.
+    pub listen_private_key: Option<PathBuf>,
+    /// This station's certificate when it connects (mutual TLS).
+    pub connect_certificate: Option<PathBuf>,
+    /// Its private key.
+    pub connect_private_key: Option<PathBuf>,
+    /// Require the connecting side's certificate (mutual TLS).
+    pub enable_mtls: bool,
+}
+
+/// A zenoh configuration: the mode, explicit endpoints, no multicast scouting, timestamps on.
+///
+/// # Errors
+/// An endpoint or file zenoh does not accept.
+pub fn config(endpoints: &Endpoints) -> Result<zenoh::Config, NetworkError> {
+    let json = |v: &[String]| {
+        format!(
+            "[{}]",
+            v.iter()
+                .map(|e| format!("{e:?}"))
+                .collect::<Vec<_>>()
+                .join(",")
+        )
+    };
+    let mut c = zenoh::Config::default();
+    let mut set = |key: &str, value: &str| {
+        c.insert_json5(key, value)
+            .map_err(|error| NetworkError::Config {
+                key: key.to_owned(),
+                error,
+            })
+    };
+    set("mode", &format!("{:?}", endpoints.mode.as_str()))?;
+    set("scouting/multicast/enabled", "false")?;
+    set("timestamping/enabled", "true")?;
+    // A peer that stops reading (stalled, or hostile) must not stall the session: zenoh closes a
+    // link a blocking message cannot enter within 0.2 s (default 5 s, longer than the watchdog's
+    // 0.5 s), and a state that cannot go within 0.2 ms is dropped (the next one replaces it).
+    let q = "transport/link/tx/queue/congestion_control";
+    set(&format!("{q}/block/wait_before_close"), "200000")?;
+    set(&format!("{q}/drop/wait_before_drop"), "200")?;
+    // The size bound: zenoh reassembles fragmented messages up to this (default 1 GiB, which a
+    // hostile peer could use to make us allocate); a state is 289 bytes.
+    set("transport/link/rx/max_message_size", "65536")?;
+    if let Some(t) = &endpoints.tls {
+        let tls = "transport/link/tls";
+        for (key, v) in [
+            ("root_ca_certificate", &t.root_ca_certificate),
+            ("listen_certificate", &t.listen_certificate),
+            ("listen_private_key", &t.listen_private_key),
+            ("connect_certificate", &t.connect_certificate),
+            ("connect_private_key", &t.connect_private_key),
+        ] {
+            if let Some(path) = v {
+                let path = path.display().to_string();
+                set(&format!("{tls}/{key}"), &format!("{path:?}"))?;
+            }
+        }
+        set(&format!("{tls}/enable_mtls"), &t.enable_mtls.to_string())?;
+    }
+    if endpoints.mode != Mode::Client {
+        set("listen/endpoints", &json(&endpoints.listen))?;
+    }
+    set("connect/endpoints", &json(&endpoints.connect))?;
+    Ok(c)
+}
+
+/// Replaces port 0 of `tcp/<ip>:0` locators with a port that is free now, so the station knows (and
+/// status shows) where it listens.
+pub fn concrete_listen(listen: &[String]) -> Vec<String> {
+    listen
+        .iter()
+        .map(|l| {
+            let Some(addr) = l.strip_prefix("tcp/") else {
+                return l.clone();
+            };
+            let (host, tail) = match addr.split_once('#') {
+                Some((h, t)) => (h, format!("#{t}")),
+                None => (addr, String::new()),
+            };
+            match host.parse::<std::net::SocketAddr>() {
+                Ok(sa) if sa.port() == 0 => std::net::TcpListener::bind(sa)
+                    .and_then(|s| s.local_addr())
+                    .map_or_else(|_| l.clone(), |a| format!("tcp/{a}{tail}")),
+                _ => l.clone(),
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn configurations_zenoh_accepts() {
+        let mut e = Endpoints {
+            listen: vec!["tcp/127.0.0.1:0".into()],
+            connect: vec!["tcp/127.0.0.1:7447".into()],
+            mode: Mode::Peer,
+            tls: None,
+        };
+        assert!(config(&e).is_ok());
+        e.mode = Mode::Client;
+        assert!(config(&e).is_ok());
+        e.tls = Some(Tls {
+            root_ca_certificate: Some("/etc/coop/ca.pem".into()),
+            listen_certificate: Some("/etc/coop/station.pem".into()),
+            listen_private_key: Some("/etc/coop/station.key".into()),
+            enable_mtls: true,
+            ..Tls::default()
+        });
+        assert!(config(&e).is_ok());
+        assert!(
+            serde_json::from_str::<Endpoints>(r#"{"mode": "router-ish"}"#).is_err(),
+            "an unknown mode is refused"
+        );
+        e.mode = Mode::Peer;
+        e.listen = vec!["nonsense".into()];
+        assert!(config(&e).is_err(), "a bad locator is refused");
+    }
+
+    #[test]
+    fn endpoints_read_as_the_station_configuration_writes_them() {
+        let e: Endpoints = serde_json::from_str(
+            r#"{"connect": ["tls/r:7447"], "mode": "client",
+                "tls": {"root_ca_certificate": "ca.pem", "enable_mtls": true}}"#,
+        )
+        .expect("the station's field names");
+        assert_eq!(
+            e.listen,
+            Endpoints::default().listen,
+            "defaults fill the rest"
+        );
+        assert_eq!(e.mode, Mode::Client);
+        assert_eq!(
+            e.tls.and_then(|t| t.root_ca_certificate),
+            Some(PathBuf::from("ca.pem"))
+        );
+        assert_eq!(Endpoints::default().mode, Mode::Peer);
+        assert!(serde_json::from_str::<Endpoints>(r#"{"lisen": []}"#).is_err());
+    }
+
+    #[test]
+    fn port_zero_becomes_a_concrete_free_port() {
+        let l = concrete_listen(&["tcp/127.0.0.1:0".into(), "tcp/127.0.0.1:7447".into()]);
+        assert!(
+            l[0].starts_with("tcp/127.0.0.1:") && !l[0].ends_with(":0"),
+            "{l:?}"
+        );
+        assert_eq!(l[1], "tcp/127.0.0.1:7447");
+    }
+}

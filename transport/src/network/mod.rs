@@ -1,0 +1,323 @@
+//! The station's network process: a zenoh session that
+//!
+//! - publishes this site's reports (read from the physics → network ring) on its state key, express,
+//!   real-time priority, dropped rather than queued under congestion ([`publish`]);
+//! - hands the other sites' reports to physics (network → physics ring) the moment zenoh delivers
+//!   them, after [`wire::Inbound::check`](crate::wire::Inbound::check) (typed refusals are counted,
+//!   never applied), with their time corrected by the sender's clock offset, through the
+//!   receive-side network emulation when configured (`receive`, [`emulate`]);
+//! - declares a liveliness token (who is present) and watches everyone's (`presence`); answers
+//!   queries for its newest state (late joiners start from the session's state) and for its clock
+//!   (NTP-style offset and round trip per peer, [`clock`]);
+//! - learns the session's time 0 from the launcher when the station waits for it ([`epoch`], which
+//!   also holds the launcher's side);
+//! - writes the station's MCAP recording (physics' trace ring, the states received, presence,
+//!   clocks, final counters).
+//!
+//! It is not a real-time loop: zenoh's own threads and this process's loop run at normal priority,
+//! off the servo's CPU, and touch the rings (lock-free, non-blocking) only on the real-time side's
+//! behalf.
+//!
+//! [`run`] wires the pieces: the session and its declarations, a delivery thread (received states),
+//! a clock thread, a one-off epoch query, and the loop (publish, release emulated states, record,
+//! presence, heartbeat), until the control block's run state says stop.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
+
+use coop_rt::msg::{SiteReport, TraceRecord};
+use coop_rt::shm::control::{Child, ControlBlock, RunState, MAX_SITES};
+use coop_rt::shm::{Consumer, Producer};
+use coop_rt::sync::{AtomicU64, Ordering};
+use coop_rt::timer::monotonic_ns;
+use zenoh::{Session, Wait};
+
+use crate::recording::{ClockMsg, SessionMsg, StatusMsg};
+
+pub mod clock;
+pub mod config;
+pub mod emulate;
+pub mod epoch;
+mod error;
+mod presence;
+pub mod publish;
+mod receive;
+mod record;
+
+pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
+pub use config::{concrete_listen, config, Endpoints, Mode, Tls};
+pub use emulate::Emulation;
+pub use epoch::EpochAnnouncer;
+pub use error::NetworkError;
+pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_REPORT_NS};
+
+use presence::Presence;
+use publish::Publish;
+use receive::Receiver;
+use record::Recording;
+
+/// What the network process needs.
+#[derive(Debug)]
+pub struct NetworkArgs<'a> {
+    /// Session name.
+    pub session: &'a str,
+    /// The scenario's site names, in order.
+    pub sites: Vec<String>,
+    /// This site's index.
+    pub site_index: usize,
+    /// Scenario name (for the recording).
+    pub scenario: String,
+    /// Method name (for the recording).
+    pub method: String,
+    /// Endpoints.
+    pub endpoints: Endpoints,
+    /// The control block.
+    pub control: &'a ControlBlock,
+    /// Reports from physics.
+    pub reports: Consumer<SiteReport>,
+    /// Reports to physics.
+    pub remote: Producer<SiteReport>,
+    /// Physics' trace records, for the recording.
+    pub trace: Consumer<TraceRecord>,
+    /// Recording file, if any.
+    pub record: Option<PathBuf>,
+    /// Receive-side emulation, if any.
+    pub emulation: Option<Emulation>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panic in a callback must not take the network down with a poisoned lock.
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Who this process is, for every piece.
+struct Ctx<'a> {
+    session_name: &'a str,
+    sites: &'a [String],
+    me: usize,
+    site: &'a str,
+    ctl: &'a ControlBlock,
+    /// [`Emulation::describe`], or `none`.
+    emulation: String,
+}
+
+/// Runs the network process until the run state says stop.
+///
+/// # Errors
+/// The zenoh session or a declaration cannot be set up, or the recording cannot be created.
+pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
+    let site = a
+        .sites
+        .get(a.site_index)
+        .cloned()
+        .ok_or(NetworkError::NoSuchSite(a.site_index))?;
+    if a.sites.len() > MAX_SITES {
+        return Err(NetworkError::TooManySites(a.sites.len()));
+    }
+    let ctx = Ctx {
+        session_name: a.session,
+        sites: &a.sites,
+        me: a.site_index,
+        site: &site,
+        ctl: a.control,
+        emulation: a
+            .emulation
+            .as_ref()
+            .map_or("none".into(), Emulation::describe),
+    };
+    let recording = Recording::create(
+        a.record.as_deref(),
+        BTreeMap::from([
+            ("session".into(), ctx.session_name.to_owned()),
+            ("site".into(), site.clone()),
+            ("scenario".into(), a.scenario.clone()),
+            ("method".into(), a.method.clone()),
+            ("emulation".into(), ctx.emulation.clone()),
+        ]),
+    )?;
+    ctx.ctl
+        .network
+        .emulated
+        .store(u64::from(a.emulation.is_some()), Ordering::Relaxed);
+    let session = open(&ctx, a.endpoints)?;
+    let mut publish = Publish::declare(&session, ctx.session_name, &site)?;
+    let receiver = Mutex::new(Receiver::new(
+        ctx.sites,
+        ctx.me,
+        ctx.ctl,
+        a.remote,
+        a.emulation.as_ref(),
+    ));
+    let names = (a.scenario, a.method);
+    let status = serve(
+        &ctx,
+        &session,
+        &mut publish,
+        &receiver,
+        Loop {
+            reports: a.reports,
+            trace: a.trace,
+            recording,
+            names,
+        },
+    )?;
+    drop(publish);
+    session.close().wait().map_err(NetworkError::Close)?;
+    Ok(status)
+}
+
+/// Opens the session on `endpoints` (port 0 made concrete) and shows where it is in the control
+/// block.
+fn open(ctx: &Ctx<'_>, mut endpoints: Endpoints) -> Result<Session, NetworkError> {
+    endpoints.listen = concrete_listen(&endpoints.listen);
+    let session = zenoh::open(config(&endpoints)?)
+        .wait()
+        .map_err(NetworkError::Open)?;
+    ctx.ctl.set_locators(&format!(
+        "zid {} mode {} listen [{}] connect [{}]",
+        session.zid(),
+        endpoints.mode,
+        endpoints.listen.join(", "),
+        endpoints.connect.join(", ")
+    ));
+    Ok(session)
+}
+
+/// What the loop owns.
+struct Loop {
+    reports: Consumer<SiteReport>,
+    trace: Consumer<TraceRecord>,
+    recording: Recording,
+    /// Scenario and method names, for the recording's session message.
+    names: (String, String),
+}
+
+/// Declares the rest, starts the threads and runs the loop; the threads end with it.
+fn serve(
+    ctx: &Ctx<'_>,
+    session: &Session,
+    publish: &mut Publish,
+    receiver: &Mutex<Receiver<'_>>,
+    mut lp: Loop,
+) -> Result<StatusMsg, NetworkError> {
+    let (name, site) = (ctx.session_name, ctx.site);
+    // Zenoh's callbacks own what they touch; the threads here borrow the control block (mapped
+    // for longer than the session lives) and the receiver, so they are scoped.
+    let stop = &AtomicU64::new(0);
+    let clock_log: &Mutex<Vec<ClockMsg>> = &Mutex::default();
+    std::thread::scope(|scope| {
+        let mut presence = Presence::declare(session, name, site)?;
+        receive::join_from_current(session, name, receiver);
+        let states = receive::subscribe(session, name)?;
+        publish.serve_current(session, name, site)?;
+        let _clock = clock::serve(session, name, site)?;
+        let epoch = epoch::EpochListener::declare(session, name)?;
+        // Every declaration is made before the threads start: an error returns before anything
+        // would wait for `stop`.
+        scope.spawn(move || receive::deliver(&states, receiver, stop));
+        scope.spawn(|| epoch::ask(session, name, ctx.ctl));
+        let sampler = clock::Sampler {
+            session,
+            session_name: name,
+            sites: ctx.sites,
+            me: ctx.me,
+            ctl: ctx.ctl,
+        };
+        scope.spawn(move || sampler.run(clock_log, stop));
+
+        let slot = ctx.ctl.child(Child::Network);
+        slot.pid
+            .store(u64::from(std::process::id()), Ordering::Relaxed);
+        let mut session_recorded = false;
+        loop {
+            let now = lp.turn(ctx, publish, receiver, &mut presence, clock_log);
+            epoch.poll(ctx.ctl);
+            if !session_recorded {
+                session_recorded = lp.record_session(ctx, now);
+            }
+            ctx.ctl
+                .network
+                .published
+                .store(publish.published, Ordering::Relaxed);
+            slot.heartbeat.fetch_add(1, Ordering::Relaxed);
+            lp.recording.stop_on_error(site);
+            if !matches!(ctx.ctl.run_state(), RunState::Starting | RunState::Running) {
+                break;
+            }
+            coop_rt::timer::sleep_until(next_wake(
+                ctx.ctl.physics.report_period_ns.load(Ordering::Relaxed),
+                ctx.ctl.physics.last_report_ns.load(Ordering::Relaxed),
+                monotonic_ns(),
+            ));
+        }
+        stop.store(1, Ordering::Relaxed);
+        let status = {
+            let rx = lock(receiver);
+            StatusMsg {
+                t_ns: monotonic_ns(),
+                published: publish.published,
+                received: rx.received,
+                refused: rx.refused,
+                emulated_lost: rx.emulated_lost,
+                join_states: rx.join_states,
+                stale_skipped: publish.stale_skipped,
+            }
+        };
+        lp.recording.finish(site, &status);
+        Ok(status)
+    })
+}
+
+impl Loop {
+    /// One turn: publish the newest report, release the emulated states due, and record what
+    /// happened since the last turn; returns the time the states were released at.
+    fn turn(
+        &mut self,
+        ctx: &Ctx<'_>,
+        publish: &mut Publish,
+        receiver: &Mutex<Receiver<'_>>,
+        presence: &mut Presence,
+        clock_log: &Mutex<Vec<ClockMsg>>,
+    ) -> u64 {
+        if let Some(m) = publish.newest(&mut self.reports) {
+            self.recording.write(|w| w.published(&m));
+        }
+        let now = monotonic_ns();
+        let log = {
+            let mut rx = lock(receiver);
+            rx.release_due(now);
+            std::mem::take(&mut rx.log)
+        };
+        for m in &log {
+            self.recording.write(|w| w.remote(m));
+        }
+        self.recording.drain_trace(&mut self.trace);
+        for m in presence.update(ctx.sites, ctx.ctl, receiver) {
+            self.recording.write(|w| w.presence(&m));
+        }
+        for m in std::mem::take(&mut *lock(clock_log)) {
+            self.recording.write(|w| w.clock(&m));
+        }
+        now
+    }
+
+    /// Records the session (names, time 0, emulation) once time 0 is known; whether it did.
+    fn record_session(&mut self, ctx: &Ctx<'_>, now: u64) -> bool {
+        let Some(epoch_ns) = ctx.ctl.epoch() else {
+            return false;
+        };
+        let m = SessionMsg {
+            t_ns: now,
+            session: ctx.session_name.to_owned(),
+            site: ctx.site.to_owned(),
+            site_index: ctx.me,
+            scenario: self.names.0.clone(),
+            method: self.names.1.clone(),
+            epoch_ns,
+            emulation: ctx.emulation.clone(),
+        };
+        self.recording.write(|w| w.session(&m));
+        true
+    }
+}
