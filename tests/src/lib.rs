@@ -3,6 +3,7 @@
 //! (never leaked) when a test fails.
 #![forbid(unsafe_code)]
 
+pub use coop_actors::station::config::StationConfig;
 use coop_rt::sync::{AtomicU64, Ordering};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -126,10 +127,10 @@ pub fn shm_entries(prefix: &str) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Writes a station configuration for a test to `dir/<station>.toml` and returns its path: the
-/// session, the station, no mlockall, and both loops under SCHED_OTHER priority 0 (parallel tests
-/// need no privilege and starve nothing; the loops still sleep to absolute deadlines). `top` holds
-/// extra top-level keys (before any table), `tables` extra tables.
+/// Writes a station configuration for a test into `dir` and returns its path: the session, the
+/// station, no mlockall, no `/dev/cpu_dma_latency`, and both loops under SCHED_OTHER priority 0
+/// (parallel tests need no privilege and starve nothing; the loops still sleep to absolute
+/// deadlines); `edit` changes what the test needs. Written by the configuration's own serialiser.
 ///
 /// # Panics
 /// If the directory or file cannot be written.
@@ -137,18 +138,22 @@ pub fn station_config(
     dir: &std::path::Path,
     session: &str,
     station: &str,
-    top: &str,
-    tables: &str,
+    edit: impl FnOnce(&mut StationConfig),
 ) -> std::path::PathBuf {
+    let mut c = StationConfig {
+        session: session.to_owned(),
+        station: Some(station.to_owned()),
+        mlockall: false,
+        cpu_dma_latency_zero: false,
+        ..StationConfig::default()
+    };
+    for l in [&mut c.servo, &mut c.physics] {
+        l.policy = "other".into();
+        l.priority = Some(0);
+    }
+    edit(&mut c);
     std::fs::create_dir_all(dir).expect("config dir");
     let path = dir.join(format!("{station}.toml"));
-    std::fs::write(
-        &path,
-        format!(
-            "session = \"{session}\"\nstation = \"{station}\"\nmlockall = false\ncpu_dma_latency_zero = false\n{top}\
-             [servo]\npolicy = \"other\"\npriority = 0\n[physics]\npolicy = \"other\"\npriority = 0\n{tables}"
-        ),
-    )
-    .expect("write config");
+    std::fs::write(&path, c.to_toml().expect("config as TOML")).expect("write config");
     path
 }

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use coop_model::scenario::MethodName;
-use coop_transport::network::{self, Endpoints};
+use coop_transport::network::{self, NetworkConfig};
 use coop_transport::recording;
 use hdrhistogram::Histogram;
 use zenoh::qos::{CongestionControl, Priority};
@@ -115,11 +115,12 @@ fn end(
     out: &'static str,
     inp: &str,
 ) -> anyhow::Result<End> {
-    let ep = Endpoints {
+    let ep = NetworkConfig {
         listen,
         connect,
         mode: network::Mode::Peer,
         tls: None,
+        emulate: false,
     };
     let err = |e: zenoh::Error| anyhow::anyhow!("{e}");
     let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)

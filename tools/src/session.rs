@@ -27,6 +27,7 @@ use coop_transport::{keys, network};
 use zenoh::Wait;
 
 use coop_actors::scenario_file;
+use coop_actors::station::config::{StartMode, StationConfig};
 
 /// What `session run` was asked.
 #[derive(Debug, Clone)]
@@ -135,33 +136,38 @@ pub struct MethodOutcome {
     pub stations: serde_json::Value,
 }
 
-/// The station configuration `session run` writes for one site.
-struct StationToml<'a> {
-    scenario: &'a Path,
-    session: &'a str,
-    site: &'a str,
+/// The station configuration `session run` writes for one site: the defaults, with this session's
+/// names, scenario, method, recording and loopback endpoints, started by the launcher's epoch.
+#[allow(clippy::too_many_arguments)]
+fn station_config(
+    scenario: &Path,
+    session: &str,
+    site: &str,
     method: MethodName,
-    listen: &'a str,
-    connect: &'a [String],
-    record: &'a Path,
+    listen: &str,
+    connect: &[String],
+    record: &Path,
     emulate: bool,
-}
-
-impl StationToml<'_> {
-    fn text(&self) -> String {
-        let connect: Vec<String> = self.connect.iter().map(|s| format!("{s:?}")).collect();
-        format!(
-            "# Written by `session run` for site {site}.\nsession = {session:?}\nstation = {site:?}\nscenario = {scenario:?}\nmethod = {method:?}\nstart = \"session\"\nrecord = {record:?}\n\n[network]\nlisten = [{listen:?}]\nconnect = [{connect}]\nemulate = {emulate}\n",
-            site = self.site,
-            session = self.session,
-            scenario = self.scenario.display().to_string(),
-            method = self.method.as_str(),
-            record = self.record.display().to_string(),
-            listen = self.listen,
-            connect = connect.join(", "),
-            emulate = self.emulate,
-        )
-    }
+) -> anyhow::Result<String> {
+    let c = StationConfig {
+        session: session.to_owned(),
+        station: Some(site.to_owned()),
+        scenario: Some(scenario.to_owned()),
+        method: Some(method),
+        start: StartMode::Session,
+        record: Some(record.to_owned()),
+        network: network::NetworkConfig {
+            listen: vec![listen.to_owned()],
+            connect: connect.to_vec(),
+            emulate,
+            ..network::NetworkConfig::default()
+        },
+        ..StationConfig::default()
+    };
+    Ok(format!(
+        "# Written by `session run` for site {site}.\n{}",
+        c.to_toml()?
+    ))
 }
 
 fn spawn(bin: &StationBin, st: &Station) -> anyhow::Result<Child> {
@@ -214,17 +220,9 @@ pub fn run_method(
         let config = dir.join(format!("{}.toml", s.name));
         std::fs::write(
             &config,
-            StationToml {
-                scenario: &sc_path,
-                session,
-                site: &s.name,
-                method,
-                listen: &ports[i],
-                connect: &others,
-                record: &record,
-                emulate: a.emulate,
-            }
-            .text(),
+            station_config(
+                &sc_path, session, &s.name, method, &ports[i], &others, &record, a.emulate,
+            )?,
         )
         .with_context(|| format!("writing {}", config.display()))?;
         stations.push(Station {
@@ -238,11 +236,12 @@ pub fn run_method(
     let late: BTreeMap<&str, f64> = a.late.iter().map(|(s, t)| (s.as_str(), *t)).collect();
 
     // The launcher is a zenoh peer too: it watches presence and announces the session's time 0.
-    let endpoints = network::Endpoints {
+    let endpoints = network::NetworkConfig {
         listen: vec![ports[n].clone()],
         connect: ports[..n].to_vec(),
         mode: network::Mode::Peer,
         tls: None,
+        emulate: false,
     };
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
         .wait()

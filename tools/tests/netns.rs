@@ -6,7 +6,7 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use coop_tests::{station_config, wait_until, Reaped};
+use coop_tests::{station_config, wait_until, Reaped, StationConfig};
 
 /// Runs `ip` with `args`; `Err` with its message when it fails.
 fn ip(args: &[&str]) -> Result<(), String> {
@@ -71,16 +71,18 @@ fn two_stations_in_separate_network_namespaces_talk_over_tcp() {
     let dir = std::env::temp_dir().join(format!("coop-netns-{pid}"));
     std::fs::create_dir_all(&dir).expect("dir");
     let session = format!("ns{pid}");
-    let net = |listen: &str, connect: &str| {
-        format!("[network]\nlisten = [\"tcp/{listen}:7447\"]\nconnect = [{connect}]\n")
+    let net = |listen: &'static str, connect: Option<&'static str>| {
+        move |c: &mut StationConfig| {
+            c.network.listen = vec![format!("tcp/{listen}:7447")];
+            c.network.connect = connect.map(String::from).into_iter().collect();
+        }
     };
-    let a = station_config(&dir, &session, "user1", "", &net("192.0.2.1", ""));
+    let a = station_config(&dir, &session, "user1", net("192.0.2.1", None));
     let b = station_config(
         &dir,
         &session,
         "user2",
-        "",
-        &net("192.0.2.2", "\"tcp/192.0.2.1:7447\""),
+        net("192.0.2.2", Some("tcp/192.0.2.1:7447")),
     );
     let station = env!("CARGO_BIN_EXE_station");
     let start = |n: &str, cfg: &std::path::Path| {

@@ -254,11 +254,12 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         let (_, rest) = text.split_once("listen [")?;
         Some(rest.split([']', ',']).next()?.trim().to_owned())
     });
-    let ep = coop_transport::network::Endpoints {
+    let ep = coop_transport::network::NetworkConfig {
         listen: vec![],
         connect: vec![locator],
         mode: coop_transport::network::Mode::Peer,
         tls: None,
+        emulate: false,
     };
     let z = zenoh::open(coop_transport::network::config(&ep).expect("config"))
         .wait()

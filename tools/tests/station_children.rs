@@ -19,7 +19,7 @@ const LIMIT: Duration = Duration::from_secs(60);
 
 fn config_file(session: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("coop-station-{session}"));
-    station_config(&dir, session, "user1", "", "")
+    station_config(&dir, session, "user1", |_| {})
 }
 
 fn spawn(what: &str, config: &std::path::Path, parent: u32) -> Reaped {

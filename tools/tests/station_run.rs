@@ -10,6 +10,7 @@ use coop_rt::shm::control::{Child, ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::Ordering;
 use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
+use coop_transport::network::Tls;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
@@ -18,13 +19,9 @@ const LIMIT: Duration = Duration::from_secs(60);
 
 fn config(session: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("coop-run-{session}"));
-    station_config(
-        &dir,
-        session,
-        "user1",
-        "",
-        "[supervisor]\nbackoff_initial_ms = 20\n",
-    )
+    station_config(&dir, session, "user1", |c| {
+        c.supervisor.backoff_initial_ms = 20
+    })
 }
 
 fn start(cfg: &std::path::Path) -> Reaped {
@@ -171,7 +168,7 @@ fn free_port() -> u16 {
 /// other's states over zenoh (and adopts them), through its network process and rings.
 #[test]
 fn two_stations_by_hand_see_each_other() {
-    two_stations("tcp", "");
+    two_stations("tcp", None);
 }
 
 /// The same over TLS, with a CA and a station certificate made for the test by `openssl`
@@ -200,28 +197,33 @@ fn two_stations_see_each_other_over_tls() {
             && openssl x509 -req -in st.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out st.pem -days 1 -extfile ext.cnf"),
         "making the test certificates"
     );
-    let d = dir.display();
     two_stations(
         "tls",
-        &format!(
-            "[network.tls]\nroot_ca_certificate = \"{d}/ca.pem\"\nlisten_certificate = \"{d}/st.pem\"\nlisten_private_key = \"{d}/st.key\"\n"
-        ),
+        Some(Tls {
+            root_ca_certificate: Some(dir.join("ca.pem")),
+            listen_certificate: Some(dir.join("st.pem")),
+            listen_private_key: Some(dir.join("st.key")),
+            ..Tls::default()
+        }),
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Two stations, `user2` connecting to `user1` with `scheme` (tcp or tls); `tls` is extra TOML.
-fn two_stations(scheme: &str, tls: &str) {
+/// Two stations, `user2` connecting to `user1` with `scheme` (tcp or tls) and these TLS files.
+fn two_stations(scheme: &str, tls: Option<Tls>) {
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-two-{session}"));
     std::fs::create_dir_all(&dir).expect("dir");
     let (pa, pb) = (free_port(), free_port());
     let write = |name: &str, listen: u16, connect: Option<u16>| {
-        let connect = connect.map_or(String::new(), |c| format!("\"{scheme}/127.0.0.1:{c}\""));
-        let network = format!(
-            "[network]\nlisten = [\"{scheme}/127.0.0.1:{listen}\"]\nconnect = [{connect}]\n{tls}"
-        );
-        station_config(&dir, &session, name, "", &network)
+        station_config(&dir, &session, name, |c| {
+            c.network.listen = vec![format!("{scheme}/127.0.0.1:{listen}")];
+            c.network.connect = connect
+                .map(|c| format!("{scheme}/127.0.0.1:{c}"))
+                .into_iter()
+                .collect();
+            c.network.tls = tls.clone();
+        })
     };
     let a = start(&write("user1", pa, None));
     let b = start(&write("user2", pb, Some(pa)));
@@ -278,13 +280,10 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
          script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
     )
     .expect("scenario");
-    let cfg = station_config(
-        &dir,
-        &session,
-        "user1",
-        "scenario = \"press.toml\"\n",
-        "[supervisor]\nbackoff_initial_ms = 300\n",
-    );
+    let cfg = station_config(&dir, &session, "user1", |c| {
+        c.scenario = Some("press.toml".into());
+        c.supervisor.backoff_initial_ms = 300;
+    });
     let station = start(&cfg);
     let ctl = control(&session);
     let (_, physics) = running(&ctl);
@@ -331,8 +330,11 @@ fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
     let port = taken.local_addr().expect("addr").port();
     let dir = std::env::temp_dir().join(format!("coop-crash-{session}"));
-    let tables = format!("[network]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n[supervisor]\nmax_restarts = 2\nbackoff_initial_ms = 20\n");
-    let cfg = station_config(&dir, &session, "user1", "", &tables);
+    let cfg = station_config(&dir, &session, "user1", |c| {
+        c.network.listen = vec![format!("tcp/127.0.0.1:{port}")];
+        c.supervisor.max_restarts = 2;
+        c.supervisor.backoff_initial_ms = 20;
+    });
     let out = Command::new(STATION)
         .arg("run")
         .arg("--config")

@@ -246,24 +246,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         site_index: cfg.site,
         scenario: sc.name.clone(),
         method: sc.method.as_str().to_owned(),
-        endpoints: coop_transport::network::Endpoints {
-            listen: net.listen.clone(),
-            connect: net.connect.clone(),
-            // Validated: peer or client.
-            mode: if net.mode == "client" {
-                coop_transport::network::Mode::Client
-            } else {
-                coop_transport::network::Mode::Peer
-            },
-            tls: net.tls.as_ref().map(|t| coop_transport::network::Tls {
-                root_ca_certificate: t.root_ca_certificate.clone(),
-                listen_certificate: t.listen_certificate.clone(),
-                listen_private_key: t.listen_private_key.clone(),
-                connect_certificate: t.connect_certificate.clone(),
-                connect_private_key: t.connect_private_key.clone(),
-                enable_mtls: t.enable_mtls,
-            }),
-        },
+        endpoints: net.clone(),
         control: &ctl,
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,

@@ -10,6 +10,7 @@ use coop_model::scenario::{MethodName, Scenario};
 use coop_rt::sched::{Policy, Request};
 use coop_rt::shm::station::RingSlots;
 use coop_rt::shm::SegmentName;
+use coop_transport::network::{Mode, NetworkConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::scenario_file;
@@ -29,54 +30,6 @@ pub struct LoopSpec {
     /// 1..=99 for fifo/rr, 0 for other. Default: 80 for the servo, 70 for physics under fifo/rr,
     /// 0 under other.
     pub priority: Option<i32>,
-}
-
-/// The network process's zenoh endpoints.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct NetworkSpec {
-    /// Locators to listen on (default: a free TCP port on loopback).
-    pub listen: Vec<String>,
-    /// Locators of other stations or zenoh routers to connect to.
-    pub connect: Vec<String>,
-    /// Emulate the scenario's `[network]` link (delay, jitter, loss, seeded) on receive, so long
-    /// delays can be run on one machine. Shown as EMULATED in status and recordings.
-    pub emulate: bool,
-    /// `peer` (default: stations connect to each other) or `client` (through the `zenohd` routers
-    /// in `connect`).
-    pub mode: String,
-    /// TLS for `tls/<host>:<port>` locators (PEM files, relative to the config file).
-    pub tls: Option<TlsSpec>,
-}
-
-/// TLS files (zenoh's `transport/link/tls`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(deny_unknown_fields, default)]
-pub struct TlsSpec {
-    /// CA certificate that signed the peers' or routers' certificates.
-    pub root_ca_certificate: Option<PathBuf>,
-    /// This station's certificate, to listen.
-    pub listen_certificate: Option<PathBuf>,
-    /// Its private key.
-    pub listen_private_key: Option<PathBuf>,
-    /// This station's certificate, to connect (mutual TLS).
-    pub connect_certificate: Option<PathBuf>,
-    /// Its private key.
-    pub connect_private_key: Option<PathBuf>,
-    /// Require the connecting side's certificate.
-    pub enable_mtls: bool,
-}
-
-impl Default for NetworkSpec {
-    fn default() -> Self {
-        Self {
-            listen: vec!["tcp/127.0.0.1:0".into()],
-            connect: Vec::new(),
-            emulate: false,
-            mode: "peer".into(),
-            tls: None,
-        }
-    }
 }
 
 /// When the users' scripts start (the session's time 0).
@@ -150,8 +103,8 @@ pub struct StationConfig {
     pub rings: RingSlots,
     /// Restart policy and watchdog.
     pub supervisor: SupervisorSpec,
-    /// Zenoh endpoints.
-    pub network: NetworkSpec,
+    /// The network process: zenoh endpoints, mode, TLS, link emulation.
+    pub network: NetworkConfig,
     /// When the users' scripts start: `now` or `session`.
     pub start: StartMode,
     /// Record what this station believed and displayed to this MCAP file (relative to the config
@@ -172,7 +125,7 @@ impl Default for StationConfig {
             physics: LoopSpec::default(),
             rings: RingSlots::default(),
             supervisor: SupervisorSpec::default(),
-            network: NetworkSpec::default(),
+            network: NetworkConfig::default(),
             start: StartMode::Now,
             record: None,
         }
@@ -236,6 +189,15 @@ fn sched(
 }
 
 impl StationConfig {
+    /// The configuration as a TOML file, the form [`StationConfig::load`] reads back (a launcher
+    /// writes its stations' files with it; nothing spells the format out by hand).
+    ///
+    /// # Errors
+    /// A value TOML cannot hold (none of this type's).
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        toml::to_string(self)
+    }
+
     /// Reads `path` (or the defaults when `None`) and resolves it.
     ///
     /// # Errors
@@ -320,13 +282,7 @@ impl StationConfig {
                 bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
             }
         }
-        if !["peer", "client"].contains(&self.network.mode.as_str()) {
-            bail!(
-                "network.mode = {:?}: must be peer or client",
-                self.network.mode
-            );
-        }
-        if self.network.mode == "client" && self.network.connect.is_empty() {
+        if self.network.mode == Mode::Client && self.network.connect.is_empty() {
             bail!(
                 "network.mode = \"client\" needs network.connect: the zenohd routers to go through"
             );

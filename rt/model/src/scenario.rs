@@ -714,7 +714,7 @@ impl Scenario {
         };
         for (i, s) in self.site.iter().enumerate() {
             let dt = 1.0 / s.physics_rate_hz;
-            if !(lambda * dt <= 1.0) {
+            if lambda * dt > 1.0 || !lambda.is_finite() {
                 return Err(err(
                     format!("site[{i}].physics_rate_hz"),
                     s.physics_rate_hz,
@@ -748,7 +748,7 @@ impl Scenario {
                 ShapeName::Box => Vec3::from(o.half_extents_m).dot(&n.abs()),
             };
             let depth = p.offset_m + extent - n.dot(&start);
-            if !(depth <= 1e-3) {
+            if depth > 1e-3 || !depth.is_finite() {
                 return Err(err(
                     "object.start_m",
                     o.start_m,

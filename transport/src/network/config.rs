@@ -1,5 +1,5 @@
 //! The zenoh configuration of a station (or of a tool that joins a session): where it listens, whom
-//! it connects to, peer or client, TLS. [`Endpoints`] reads as the station configuration's
+//! it connects to, peer or client, TLS. [`NetworkConfig`] reads as the station configuration's
 //! `[network]` fields, so the station's file can embed it.
 
 use std::path::PathBuf;
@@ -33,10 +33,12 @@ impl std::fmt::Display for Mode {
     }
 }
 
-/// Where the session listens and whom it connects to.
+/// The network process's configuration, the station configuration's `[network]` table: where the
+/// zenoh session listens and whom it connects to, peer or client, TLS, and whether the scenario's
+/// link is emulated on receive.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct Endpoints {
+pub struct NetworkConfig {
     /// Zenoh locators to listen on, e.g. `tcp/127.0.0.1:7447` (port 0: a free port, chosen here).
     /// Default: a free TCP port on loopback.
     pub listen: Vec<String>,
@@ -46,15 +48,19 @@ pub struct Endpoints {
     pub mode: Mode,
     /// TLS files, for `tls/` locators.
     pub tls: Option<Tls>,
+    /// Emulate the scenario's `[network]` link (delay, jitter, loss, seeded) on receive, so long
+    /// delays can be run on one machine. Shown as EMULATED in status and recordings.
+    pub emulate: bool,
 }
 
-impl Default for Endpoints {
+impl Default for NetworkConfig {
     fn default() -> Self {
         Self {
             listen: vec!["tcp/127.0.0.1:0".into()],
             connect: Vec::new(),
             mode: Mode::Peer,
             tls: None,
+            emulate: false,
         }
     }
 }
@@ -81,7 +87,7 @@ pub struct Tls {
 ///
 /// # Errors
 /// An endpoint or file zenoh does not accept.
-pub fn config(endpoints: &Endpoints) -> Result<zenoh::Config, NetworkError> {
+pub fn config(endpoints: &NetworkConfig) -> Result<zenoh::Config, NetworkError> {
     let json = |v: &[String]| {
         format!(
             "[{}]",
@@ -163,11 +169,12 @@ mod tests {
 
     #[test]
     fn configurations_zenoh_accepts() {
-        let mut e = Endpoints {
+        let mut e = NetworkConfig {
             listen: vec!["tcp/127.0.0.1:0".into()],
             connect: vec!["tcp/127.0.0.1:7447".into()],
             mode: Mode::Peer,
             tls: None,
+            emulate: false,
         };
         assert!(config(&e).is_ok());
         e.mode = Mode::Client;
@@ -181,7 +188,7 @@ mod tests {
         });
         assert!(config(&e).is_ok());
         assert!(
-            serde_json::from_str::<Endpoints>(r#"{"mode": "router-ish"}"#).is_err(),
+            serde_json::from_str::<NetworkConfig>(r#"{"mode": "router-ish"}"#).is_err(),
             "an unknown mode is refused"
         );
         e.mode = Mode::Peer;
@@ -191,14 +198,14 @@ mod tests {
 
     #[test]
     fn endpoints_read_as_the_station_configuration_writes_them() {
-        let e: Endpoints = serde_json::from_str(
+        let e: NetworkConfig = serde_json::from_str(
             r#"{"connect": ["tls/r:7447"], "mode": "client",
                 "tls": {"root_ca_certificate": "ca.pem", "enable_mtls": true}}"#,
         )
         .expect("the station's field names");
         assert_eq!(
             e.listen,
-            Endpoints::default().listen,
+            NetworkConfig::default().listen,
             "defaults fill the rest"
         );
         assert_eq!(e.mode, Mode::Client);
@@ -206,8 +213,8 @@ mod tests {
             e.tls.and_then(|t| t.root_ca_certificate),
             Some(PathBuf::from("ca.pem"))
         );
-        assert_eq!(Endpoints::default().mode, Mode::Peer);
-        assert!(serde_json::from_str::<Endpoints>(r#"{"lisen": []}"#).is_err());
+        assert_eq!(NetworkConfig::default().mode, Mode::Peer);
+        assert!(serde_json::from_str::<NetworkConfig>(r#"{"lisen": []}"#).is_err());
     }
 
     #[test]

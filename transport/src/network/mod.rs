@@ -46,7 +46,7 @@ mod receive;
 mod record;
 
 pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
-pub use config::{concrete_listen, config, Endpoints, Mode, Tls};
+pub use config::{concrete_listen, config, Mode, NetworkConfig, Tls};
 pub use emulate::Emulation;
 pub use epoch::EpochAnnouncer;
 pub use error::NetworkError;
@@ -70,8 +70,8 @@ pub struct NetworkArgs<'a> {
     pub scenario: String,
     /// Method name (for the recording).
     pub method: String,
-    /// Endpoints.
-    pub endpoints: Endpoints,
+    /// NetworkConfig.
+    pub endpoints: NetworkConfig,
     /// The control block.
     pub control: &'a ControlBlock,
     /// Reports from physics.
@@ -169,7 +169,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
 
 /// Opens the session on `endpoints` (port 0 made concrete) and shows where it is in the control
 /// block.
-fn open(ctx: &Ctx<'_>, mut endpoints: Endpoints) -> Result<Session, NetworkError> {
+fn open(ctx: &Ctx<'_>, mut endpoints: NetworkConfig) -> Result<Session, NetworkError> {
     endpoints.listen = concrete_listen(&endpoints.listen);
     let session = zenoh::open(config(&endpoints)?)
         .wait()
