@@ -385,7 +385,25 @@ impl TraceRecord {
 const KIND_STATE: u64 = 1;
 const KIND_FORCE: u64 = 2;
 
+fn zero(xs: &[f64]) -> bool {
+    xs.iter().all(|&x| x == 0.0)
+}
+
 impl SiteReport {
+    /// The kind the network process hands physics, never sent on the wire: site `site` is lost
+    /// (silent past the loss limit) as of `t_ns`.
+    pub const KIND_LOST: u64 = 3;
+
+    /// A notice to physics that `site` is lost as of `t_ns` (see [`SiteReport::KIND_LOST`]).
+    pub fn lost(site: usize, t_ns: u64) -> Self {
+        Self {
+            kind: Self::KIND_LOST,
+            t_ns,
+            site: site as u64,
+            ..Self::default()
+        }
+    }
+
     /// Lays out `report` from `site` at `seq`; times in seconds become ns.
     pub fn new(site: usize, seq: u64, report: &Report) -> Self {
         let ns = |s: f64| (s.max(0.0) * 1e9).round() as u64;
@@ -444,6 +462,9 @@ impl SiteReport {
             KIND_STATE => {
                 let state = body_state(self.pos, self.rot, self.vel, self.ang_mom)?;
                 (finite(&self.accel) && finite(&self.included)).then_some(())?;
+                // The force fields are not a state's: zero, as the sender lays them out.
+                (zero(&self.force) && zero(&self.point) && self.depth == 0.0 && self.touching == 0)
+                    .then_some(())?;
                 Some((
                     site,
                     Report::State {
@@ -456,6 +477,15 @@ impl SiteReport {
             }
             KIND_FORCE => {
                 (finite(&self.force) && finite(&self.point) && self.depth.is_finite())
+                    .then_some(())?;
+                // The state fields are not a force's: zero, as the sender lays them out.
+                (zero(&self.pos)
+                    && zero(&self.rot)
+                    && zero(&self.vel)
+                    && zero(&self.ang_mom)
+                    && zero(&self.accel)
+                    && zero(&self.included)
+                    && self.touching <= 1)
                     .then_some(())?;
                 let force = ContactForce {
                     force: v3(self.force),

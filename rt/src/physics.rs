@@ -38,6 +38,8 @@ pub struct PhysicsLoop {
     pub rejected: u64,
     /// Remote reports taken from the ring (valid or not).
     pub received: u64,
+    /// Adoptions or steps that would have made the copy non-finite (the copy kept its state).
+    pub nonfinite_kept: u64,
     /// Object samples dropped because the ring to the servo was full.
     pub object_drops: u64,
     /// Reports dropped because the ring to the network was full.
@@ -109,6 +111,7 @@ impl PhysicsLoop {
             adoptions: 0,
             rejected: 0,
             received: 0,
+            nonfinite_kept: 0,
             object_drops: 0,
             report_drops: 0,
             trace_drops: 0,
@@ -131,12 +134,26 @@ impl PhysicsLoop {
             self.received += 1;
             // The one validating conversion (see `SiteReport::report`): the network's decode
             // already refused bad reports; this guards the model against any other ring writer.
+            if r.kind == SiteReport::KIND_LOST {
+                match usize::try_from(r.site) {
+                    Ok(from) if from != self.site => self.method.peer_lost(from, now_s),
+                    _ => self.rejected += 1,
+                }
+                continue;
+            }
             match r.report() {
                 Some((from, msg)) if from != self.site => {
-                    if let Some(a) =
+                    let before = self.copy;
+                    let adopted =
                         self.method
-                            .receive(&self.world, &mut self.copy, from, &msg, now_s)
-                    {
+                            .receive(&self.world, &mut self.copy, from, &msg, now_s);
+                    if !self.copy.state.is_finite() {
+                        // Whatever arrived, the copy never becomes NaN or infinite: keep it.
+                        self.copy = before;
+                        self.nonfinite_kept += 1;
+                        continue;
+                    }
+                    if let Some(a) = adopted {
                         self.adoptions += 1;
                         let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
                         rec.from = from as u64;
@@ -149,12 +166,17 @@ impl PhysicsLoop {
             }
         }
         self.copy.time_s = now_s - self.period_ns as f64 * 1e-9;
+        let before = self.copy;
         self.method.physics_step(
             &self.world,
             &mut self.copy,
             &self.own,
             self.period_ns as f64 * 1e-9,
         );
+        if !self.copy.state.is_finite() {
+            self.copy = before;
+            self.nonfinite_kept += 1;
+        }
         self.copy.time_s = now_s;
         self.seq += 1;
         if self
@@ -222,6 +244,8 @@ impl PhysicsLoop {
             .store(self.rejected, crate::sync::Ordering::Relaxed);
         p.adoptions
             .store(self.adoptions, crate::sync::Ordering::Relaxed);
+        p.nonfinite_kept
+            .store(self.nonfinite_kept, crate::sync::Ordering::Relaxed);
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);

@@ -157,3 +157,31 @@ pub fn station_config(
     std::fs::write(&path, c.to_toml().expect("config as TOML")).expect("write config");
     path
 }
+
+/// The paper's world (`scenarios/paper.toml`: object, contacts, both sites' devices and rates)
+/// with other users' scripts and duration, and no phases: `user1` and `user2` are TOML keyframe
+/// arrays, e.g. `[{ t_s = 0.0, target_m = [-0.2, 0.0, 0.01] }]`.
+///
+/// # Panics
+/// If `scenarios/paper.toml` is not where this crate expects it.
+pub fn paper_with_scripts(name: &str, duration_s: f64, user1: &str, user2: &str) -> String {
+    let paper = include_str!("../../scenarios/paper.toml");
+    let world = &paper[..paper.find("[[site]]").expect("paper.toml has sites")];
+    let site = |n: usize| {
+        let from = paper.match_indices("[[site]]").nth(n).expect("two sites").0;
+        let text = &paper[from..];
+        let end = text.find("script = [").expect("a script");
+        text[..end].to_owned()
+    };
+    let mut s = format!(
+        "{world}{}script = {user1}\n\n{}script = {user2}\n",
+        site(0),
+        site(1)
+    );
+    s = s.replacen("name = \"paper\"", &format!("name = \"{name}\""), 1);
+    s.replacen(
+        "duration_s = 14.0",
+        &format!("duration_s = {duration_s}"),
+        1,
+    )
+}

@@ -121,6 +121,7 @@ fn end(
         mode: network::Mode::Peer,
         tls: None,
         emulate: false,
+        ..NetworkConfig::default()
     };
     let err = |e: zenoh::Error| anyhow::anyhow!("{e}");
     let z = zenoh::open(network::config(&ep).map_err(anyhow::Error::msg)?)

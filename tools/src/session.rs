@@ -242,6 +242,7 @@ pub fn run_method(
         mode: network::Mode::Peer,
         tls: None,
         emulate: false,
+        ..network::NetworkConfig::default()
     };
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
         .wait()

@@ -260,6 +260,7 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         mode: coop_transport::network::Mode::Peer,
         tls: None,
         emulate: false,
+        ..coop_transport::network::NetworkConfig::default()
     };
     let z = zenoh::open(coop_transport::network::config(&ep).expect("config"))
         .wait()

@@ -2,6 +2,8 @@
 //!
 //! - [`keys`]: every key expression, from one place.
 //! - [`wire`]: the one encode and the one decode of what stations send each other.
+//! - [`admit`]: what a receiver takes of a decoded report (its site, its time, its plausibility,
+//!   its sequence), every refusal typed and counted.
 //! - [`recording`]: the station's MCAP recording, written and read.
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
@@ -11,6 +13,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod admit;
 pub mod keys;
 pub mod network;
 pub mod recording;

@@ -14,6 +14,7 @@
 //! | `/remote`   | each state handed to physics | sender, sequence, sent time, age, emulated delay      |
 //! | `/published`| each report published        | sequence and time of the state                        |
 //! | `/presence` | each join or leave           | site, present                                         |
+//! | `/peer`     | each loss or rejoin          | site, lost or rejoined, how long it was silent        |
 //! | `/clock`    | each new estimate            | per peer clock offset and round trip                 |
 //! | `/status`   | at the end                   | the network counters                                  |
 //!
@@ -30,6 +31,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use coop_rt::msg::TraceRecord;
+use coop_rt::shm::control::REFUSED_REASONS;
 use serde::{Deserialize, Serialize};
 
 /// How often the writer pushes what it has to the file.
@@ -248,6 +250,21 @@ json_message! {
 }
 
 json_message! {
+    /// `/peer`: a site lost (silent past the loss limit) or heard again.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+    pub struct PeerMsg {
+        /// ns (monotonic).
+        pub t_ns: u64,
+        /// Site name.
+        pub site: String,
+        /// `lost` or `rejoined`.
+        pub event: String,
+        /// How long it had been silent, s.
+        pub silent_s: f64,
+    }
+}
+
+json_message! {
     /// `/presence`.
     #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
     pub struct PresenceMsg {
@@ -285,8 +302,10 @@ json_message! {
         pub published: u64,
         /// Reports handed to physics.
         pub received: u64,
-        /// Refused: version, length, contents, foreign, duplicate/out of order.
-        pub refused: [u64; 5],
+        /// Refused, by reason in `coop_rt::shm::control::Refused` order: version, length,
+        /// contents, foreign, duplicate/out of order, no clock offset yet, too old, in the future,
+        /// implausible.
+        pub refused: [u64; REFUSED_REASONS],
         /// Dropped by the emulation.
         pub emulated_lost: u64,
         /// States from the session's queryable at start.
@@ -297,7 +316,7 @@ json_message! {
     }
 }
 
-const TOPICS: [&str; 9] = [
+const TOPICS: [&str; 10] = [
     "/session",
     "/object",
     "/tool",
@@ -307,6 +326,7 @@ const TOPICS: [&str; 9] = [
     "/clock",
     "/status",
     "/published",
+    "/peer",
 ];
 
 /// Writes a recording.
@@ -354,6 +374,7 @@ fn schema_of(topic: &str) -> serde_json::Value {
         "/adoption" => AdoptionMsg::schema(),
         "/remote" => RemoteMsg::schema(),
         "/presence" => PresenceMsg::schema(),
+        "/peer" => PeerMsg::schema(),
         "/clock" => ClockMsg::schema(),
         "/status" => StatusMsg::schema(),
         "/published" => PublishedMsg::schema(),
@@ -510,6 +531,13 @@ impl Recorder {
     pub fn presence(&mut self, m: &PresenceMsg) -> Result<(), mcap::McapError> {
         self.put(5, m.t_ns, m)
     }
+    /// `/peer`.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn peer(&mut self, m: &PeerMsg) -> Result<(), mcap::McapError> {
+        self.put(9, m.t_ns, m)
+    }
     /// `/clock`.
     ///
     /// # Errors
@@ -557,6 +585,8 @@ pub struct Recording {
     pub published: Vec<PublishedMsg>,
     /// Joins and leaves.
     pub presence: Vec<PresenceMsg>,
+    /// Sites lost and heard again.
+    pub peers: Vec<PeerMsg>,
     /// Clock estimates.
     pub clock: Vec<ClockMsg>,
     /// Final counters, if the station stopped cleanly.
@@ -608,6 +638,7 @@ pub fn read(path: &Path) -> Result<Recording, RecordingError> {
             "/adoption" => r.adoptions.push(serde_json::from_slice(data).map_err(e)?),
             "/remote" => r.remote.push(serde_json::from_slice(data).map_err(e)?),
             "/presence" => r.presence.push(serde_json::from_slice(data).map_err(e)?),
+            "/peer" => r.peers.push(serde_json::from_slice(data).map_err(e)?),
             "/clock" => r.clock.push(serde_json::from_slice(data).map_err(e)?),
             "/status" => r.status = Some(serde_json::from_slice(data).map_err(e)?),
             "/published" => r.published.push(serde_json::from_slice(data).map_err(e)?),
@@ -760,6 +791,7 @@ mod tests {
             ("/adoption", serde_json::to_value(AdoptionMsg::default())),
             ("/remote", serde_json::to_value(RemoteMsg::default())),
             ("/presence", serde_json::to_value(PresenceMsg::default())),
+            ("/peer", serde_json::to_value(PeerMsg::default())),
             ("/clock", serde_json::to_value(ClockMsg::default())),
             ("/status", serde_json::to_value(StatusMsg::default())),
             ("/published", serde_json::to_value(PublishedMsg::default())),

@@ -7,15 +7,13 @@
 //! [`PINNED`] ties it to [`VERSION`] and to the table in `docs/wire.md` (a unit test fails when the
 //! struct changes without a version bump and the doc). Decoding checks the version,
 //! the length (no truncation, no trailing bytes) and then everything [`SiteReport::report`] checks
-//! (finite numbers, unit quaternion, known kind). [`Inbound::check`] adds what only a receiver knows:
-//! the site is one of the session's and the one its key names, and its sequence number is newer
-//! than any seen from it (duplicates and reordering are refused, never applied twice). Any failure
-//! is a typed error and changes nothing.
+//! (finite numbers in every field, a unit quaternion, a known kind, and zero in the fields the
+//! kind does not use). What only a receiver can check (the site, the time, plausibility, the
+//! sequence) is [`crate::admit`]'s. Any failure is a typed error and changes nothing.
 //!
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
 
 use coop_rt::msg::SiteReport;
-use coop_rt::shm::control::Refused;
 
 /// Current wire version.
 pub const VERSION: u8 = 1;
@@ -45,95 +43,6 @@ pub enum DecodeError {
     /// Well-formed but not a valid report (non-finite value, bad quaternion, unknown site or kind).
     #[error("invalid report contents")]
     Invalid,
-}
-
-/// Why a receiver refused a message, by counter slot (see `ControlBlock::net_refused`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum Refusal {
-    /// It does not decode.
-    #[error(transparent)]
-    Decode(#[from] DecodeError),
-    /// Its site is not one of the session's, or not the one its key names.
-    #[error("site {site} is not the sender its key names")]
-    Foreign {
-        /// The site index in the message.
-        site: u64,
-    },
-    /// A sequence number already seen from this site, or older than the newest seen.
-    #[error("sequence {seq} from site {site} is not newer than {newest}")]
-    Stale {
-        /// The site.
-        site: usize,
-        /// Its sequence number.
-        seq: u64,
-        /// The newest seen.
-        newest: u64,
-    },
-}
-
-impl Refusal {
-    /// The reason it is counted under (`ControlBlock::network.refused`).
-    pub fn reason(&self) -> Refused {
-        match self {
-            Refusal::Decode(DecodeError::Version { .. }) => Refused::Version,
-            Refusal::Decode(DecodeError::Length { .. }) => Refused::Length,
-            Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
-            Refusal::Foreign { .. } => Refused::Foreign,
-            Refusal::Stale { .. } => Refused::Stale,
-        }
-    }
-}
-
-/// A receiver's view of the session: which sites exist, and the newest sequence number seen from
-/// each.
-#[derive(Debug, Clone)]
-pub struct Inbound {
-    sites: Vec<String>,
-    newest: Vec<Option<u64>>,
-}
-
-impl Inbound {
-    /// A receiver for a session of these sites (in scenario order).
-    pub fn new(sites: Vec<String>) -> Self {
-        let n = sites.len();
-        Self {
-            sites,
-            newest: vec![None; n],
-        }
-    }
-    /// The index of a site name.
-    pub fn index_of(&self, site: &str) -> Option<usize> {
-        self.sites.iter().position(|s| s == site)
-    }
-    /// Decodes `bytes` received on a key naming `key_site`, and accepts it only if it is that
-    /// site's and newer than anything seen from it.
-    ///
-    /// # Errors
-    /// [`Refusal`]; nothing changes then.
-    pub fn check(&mut self, key_site: &str, bytes: &[u8]) -> Result<(usize, SiteReport), Refusal> {
-        let r = decode(bytes)?;
-        let site = self
-            .index_of(key_site)
-            .filter(|&i| i as u64 == r.site)
-            .ok_or(Refusal::Foreign { site: r.site })?;
-        if let Some(newest) = self.newest[site] {
-            if r.seq <= newest {
-                return Err(Refusal::Stale {
-                    site,
-                    seq: r.seq,
-                    newest,
-                });
-            }
-        }
-        self.newest[site] = Some(r.seq);
-        Ok((site, r))
-    }
-    /// Forgets a site's sequence numbers (it left the session; a new run of it starts afresh).
-    pub fn forget(&mut self, site: usize) {
-        if let Some(n) = self.newest.get_mut(site) {
-            *n = None;
-        }
-    }
 }
 
 /// Encodes a u64 message (session time 0, clock reading).
@@ -334,56 +243,7 @@ mod tests {
     }
 
     #[test]
-    fn a_receiver_refuses_foreign_sites_duplicates_and_reordering() {
-        let mut rx = Inbound::new(vec!["a".into(), "b".into()]);
-        let mut r = sample(); // site 1 = "b", seq 9
-        assert_eq!(rx.check("b", &encode(&r)).map(|x| x.0), Ok(1));
-        assert_eq!(
-            rx.check("b", &encode(&r)),
-            Err(Refusal::Stale {
-                site: 1,
-                seq: 9,
-                newest: 9
-            }),
-            "a replay"
-        );
-        r.seq = 8;
-        assert_eq!(
-            rx.check("b", &encode(&r)).map_err(|e| e.reason()),
-            Err(Refused::Stale),
-            "reordered"
-        );
-        r.seq = 10;
-        assert_eq!(
-            rx.check("a", &encode(&r)),
-            Err(Refusal::Foreign { site: 1 }),
-            "key names another site"
-        );
-        assert_eq!(
-            rx.check("zz", &encode(&r)).map_err(|e| e.reason()),
-            Err(Refused::Foreign),
-            "unknown site"
-        );
-        r.site = 5;
-        assert_eq!(
-            rx.check("b", &encode(&r)).map_err(|e| e.reason()),
-            Err(Refused::Foreign)
-        );
-        r.site = 1;
-        assert_eq!(
-            rx.check("b", &[1, 2, 3]).map_err(|e| e.reason()),
-            Err(Refused::Length)
-        );
-        assert!(
-            rx.check("b", &encode(&r)).is_ok(),
-            "refusals changed nothing: 10 is still new"
-        );
-        rx.forget(1);
-        r.seq = 1;
-        assert!(
-            rx.check("b", &encode(&r)).is_ok(),
-            "a site that left starts afresh"
-        );
+    fn u64_messages_round_trip_and_refuse_garbage() {
         assert_eq!(decode_u64(&encode_u64(42)), Ok(42));
         assert_eq!(
             decode_u64(&[2, 0, 0, 0, 0, 0, 0, 0, 0]),

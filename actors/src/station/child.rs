@@ -256,6 +256,12 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             link: sc.network.clone(),
             seed: sc.seed,
         }),
+        bounds: coop_transport::admit::Bounds::from_scenario(sc, net.max_state_age_ms),
+        silence_ns: sc
+            .site
+            .iter()
+            .map(|s| net.silence_ns(s.report_rate_hz))
+            .collect(),
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.

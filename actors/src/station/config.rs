@@ -282,6 +282,15 @@ impl StationConfig {
                 bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
             }
         }
+        if let Some(age) = self.network.max_state_age_ms {
+            if !(10.0..=60_000.0).contains(&age) {
+                bail!("network.max_state_age_ms = {age}: must be from 10 to 60000 ms");
+            }
+        }
+        let lost = self.network.lost_after_reports;
+        if !(2..=10_000).contains(&lost) {
+            bail!("network.lost_after_reports = {lost}: must be from 2 to 10000 report periods");
+        }
         if self.network.mode == Mode::Client && self.network.connect.is_empty() {
             bail!(
                 "network.mode = \"client\" needs network.connect: the zenohd routers to go through"

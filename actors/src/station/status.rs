@@ -163,6 +163,12 @@ pub struct NetworkStatus {
     pub joins: u64,
     /// Sites that left.
     pub leaves: u64,
+    /// Times a site was lost (silent past its limit).
+    pub losses: u64,
+    /// Times a lost site was heard again.
+    pub rejoins: u64,
+    /// Times a site's sequence was resynchronised.
+    pub resyncs: u64,
     /// Every site of the session.
     pub peers: Vec<PeerStatus>,
     /// Station-to-station latency, µs (none before the first sample).
@@ -178,6 +184,8 @@ pub struct PeerStatus {
     pub site: String,
     /// Its liveliness token is seen.
     pub present: bool,
+    /// Silent past its loss limit (what physics applied of it fades out).
+    pub lost: bool,
     /// Its clock minus ours, µs (none before the first exchange).
     pub clock_offset_us: Option<f64>,
     /// The round trip of the exchange the offset came from, µs.
@@ -206,6 +214,8 @@ pub struct PhysicsStatus {
     pub remote_rejected: u64,
     /// States adopted.
     pub adoptions: u64,
+    /// Adoptions or steps that would have made the copy non-finite (it kept its state).
+    pub nonfinite_kept: u64,
 }
 
 /// The servo's figures.
@@ -366,6 +376,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
             remote_received: ctl.physics.received.load(Ordering::Relaxed),
             remote_rejected: ctl.physics.rejected.load(Ordering::Relaxed),
             adoptions: ctl.physics.adoptions.load(Ordering::Relaxed),
+            nonfinite_kept: ctl.physics.nonfinite_kept.load(Ordering::Relaxed),
         },
         servo: ServoStatus {
             command_n: ControlBlock::load_f64(&ctl.servo.command_n),
@@ -380,6 +391,7 @@ impl NetworkStatus {
         let n = &ctl.network;
         let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
         let present = load(&n.peers_present);
+        let lost = load(&n.peers_lost);
         let peers = sites
             .iter()
             .enumerate()
@@ -388,6 +400,7 @@ impl NetworkStatus {
                 PeerStatus {
                     site: name.clone(),
                     present: present & (1 << j) != 0,
+                    lost: lost & (1 << j) != 0,
                     clock_offset_us: (rtt > 0)
                         .then(|| load(&n.clock_offset_ns[j]) as i64 as f64 / 1e3),
                     clock_rtt_us: (rtt > 0).then(|| rtt as f64 / 1e3),
@@ -419,6 +432,9 @@ impl NetworkStatus {
             join_states: load(&n.join_states),
             joins: load(&n.peer_joins),
             leaves: load(&n.peer_leaves),
+            losses: load(&n.peer_losses),
+            rejoins: load(&n.peer_rejoins),
+            resyncs: load(&n.resyncs),
             peers,
             latency_us,
             epoch_ns: ctl.epoch(),
@@ -511,12 +527,21 @@ impl fmt::Display for StationStatus {
             n.emulated_lost,
             n.join_states
         )?;
+        writeln!(
+            f,
+            "peers: {} joins, {} leaves, {} losses, {} rejoins, {} resyncs",
+            n.joins, n.leaves, n.losses, n.rejoins, n.resyncs
+        )?;
         for p in n.peers.iter().filter(|p| p.site != self.station) {
             writeln!(
                 f,
                 "  peer {:<10} {:<8} clock offset {} us, rtt {} us",
                 p.site,
-                if p.present { "present" } else { "absent" },
+                match (p.present, p.lost) {
+                    (_, true) => "LOST",
+                    (true, false) => "present",
+                    (false, false) => "absent",
+                },
                 opt(&p.clock_offset_us),
                 opt(&p.clock_rtt_us)
             )?;
@@ -530,8 +555,11 @@ impl fmt::Display for StationStatus {
         }
         writeln!(
             f,
-            "physics: took {} remote reports (rejected {}), adopted {}",
-            self.physics.remote_received, self.physics.remote_rejected, self.physics.adoptions
+            "physics: took {} remote reports (rejected {}), adopted {}, kept a finite copy {} times",
+            self.physics.remote_received,
+            self.physics.remote_rejected,
+            self.physics.adoptions,
+            self.physics.nonfinite_kept
         )?;
         write!(
             f,

@@ -158,7 +158,15 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn remote_force(&self) -> Vec3 {
         Vec3::zeros()
     }
+    /// Site `from` went silent at `now_s` (it is lost): whatever this method still applies of it
+    /// must fade out rather than freeze at its last value. Hearing from it again ends that.
+    fn peer_lost(&mut self, from: usize, now_s: f64) {
+        let _ = (from, now_s);
+    }
 }
+
+/// How long a lost site's influence takes to fade to nothing, s.
+pub const LOST_FADE_S: f64 = 0.1;
 
 /// Integrates a copy by `dt` under `users` (contacts held over the step) and the environment, keeping
 /// the energy account. `own_count` of the users are the site's own (the rest are remote). Returns the
@@ -320,6 +328,8 @@ fn push_out_of_environment(world: &World, s: &mut BodyState) {
 #[derive(Debug, Clone, Default)]
 pub struct Naive {
     remote: [Option<(f64, ContactForce)>; MAX_SITES],
+    /// Per site: when it was lost (its force fades out over [`LOST_FADE_S`] from then).
+    lost_at: [Option<f64>; MAX_SITES],
 }
 
 impl Consistency for Naive {
@@ -330,14 +340,33 @@ impl Consistency for Naive {
         "naive"
     }
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let mut users = [ContactForce::default(); MAX_SITES + 1];
         users[0] = *own;
         let mut n = 1;
-        for (_, f) in self.remote.iter().flatten() {
-            users[n] = *f;
+        for (k, slot) in self.remote.iter_mut().enumerate() {
+            let Some((_, f)) = slot else { continue };
+            let mut f = *f;
+            if let Some(at) = self.lost_at[k] {
+                let left = 1.0 - (copy.time_s - at) / LOST_FADE_S;
+                if left <= 0.0 {
+                    *slot = None;
+                    self.lost_at[k] = None;
+                    continue;
+                }
+                f.force *= left.min(1.0);
+            }
+            users[n] = f;
             n += 1;
         }
         integrate(world, copy, &users[..n], 1, dt);
+    }
+    fn peer_lost(&mut self, from: usize, now_s: f64) {
+        if let Some(at) = self.lost_at.get_mut(from) {
+            if self.remote[from].is_some() {
+                at.get_or_insert(now_s);
+            }
+        }
     }
     fn report(&self, _copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report {
         Report::Force {
@@ -356,6 +385,7 @@ impl Consistency for Naive {
         if let (Report::Force { t_s, force }, Some(slot)) = (msg, self.remote.get_mut(from)) {
             if slot.is_none_or(|(t, _)| *t_s > t) {
                 *slot = Some((*t_s, *force));
+                self.lost_at[from] = None; // heard again
             }
         }
         None
@@ -526,6 +556,51 @@ impl Consistency for Paper {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_lost_sites_force_fades_out_instead_of_freezing() {
+        let w = world();
+        let mut naive = Naive::default();
+        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 1.0)));
+        let push = ContactForce {
+            force: Vec3::new(1.0, 0.0, 0.0),
+            point: Vec3::new(0.0, 0.0, 1.0),
+            depth: 1e-3,
+            touching: true,
+            slipping: false,
+        };
+        let msg = Report::Force {
+            t_s: 0.0,
+            force: push,
+        };
+        naive.receive(&w, &mut copy, 1, &msg, 0.0);
+        assert_eq!(naive.remote_force().x, 1.0);
+        naive.peer_lost(1, 0.0);
+        let none = ContactForce::default();
+        let mut seen = Vec::new();
+        for k in 1..=200 {
+            copy.time_s = k as f64 * 1e-3;
+            naive.physics_step(&w, &mut copy, &none, 1e-3);
+            seen.push(naive.remote_force().x);
+        }
+        assert_eq!(naive.remote_force(), Vec3::zeros(), "gone after the fade");
+        assert!(
+            naive.remote.iter().all(Option::is_none),
+            "the lost site's force is dropped"
+        );
+        // Heard again: its new force applies in full.
+        naive.receive(
+            &w,
+            &mut copy,
+            1,
+            &Report::Force {
+                t_s: 0.3,
+                force: push,
+            },
+            0.3,
+        );
+        assert_eq!(naive.remote_force().x, 1.0);
+    }
 
     fn world() -> World {
         let shape = Shape::Cylinder {

@@ -169,6 +169,16 @@ pub enum Refused {
     Foreign,
     /// A sequence number already seen from that site, or older than the newest seen.
     Stale,
+    /// A state from a site whose clock offset is not known yet: its time cannot be read.
+    NoOffset,
+    /// Its time, corrected by the sender's clock offset, is older than the age limit: a backlog
+    /// after a partition, or a replay.
+    TooOld,
+    /// Its corrected time lies in the future beyond the window: a wrong clock or a forgery.
+    Future,
+    /// Finite but impossible for this world: outside its extent, faster or spinning faster than
+    /// anything in it can make the object, or inclusion times that no site has reached.
+    Implausible,
 }
 
 impl CounterKey for Refused {
@@ -178,6 +188,10 @@ impl CounterKey for Refused {
         Refused::Contents,
         Refused::Foreign,
         Refused::Stale,
+        Refused::NoOffset,
+        Refused::TooOld,
+        Refused::Future,
+        Refused::Implausible,
     ];
     fn slot(self) -> usize {
         self as usize
@@ -189,9 +203,17 @@ impl CounterKey for Refused {
             Refused::Contents => "contents",
             Refused::Foreign => "foreign",
             Refused::Stale => "duplicate_or_reordered",
+            Refused::NoOffset => "no_clock_offset_yet",
+            Refused::TooOld => "too_old",
+            Refused::Future => "in_the_future",
+            Refused::Implausible => "implausible",
         }
     }
 }
+
+/// Reasons a message can be refused for ([`Refused`]'s values).
+pub const REFUSED_REASONS: usize = 9;
+const _: () = assert!(<Refused as CounterKey>::ALL.len() == REFUSED_REASONS);
 
 /// One child's slot: written by the child (heartbeat, scheduling) and by the supervisor (pid,
 /// restarts).
@@ -250,6 +272,8 @@ pub struct PhysicsShared {
     pub rejected: AtomicU64,
     /// States adopted.
     pub adoptions: AtomicU64,
+    /// Adoptions or steps that would have made the copy non-finite: the copy kept its state.
+    pub nonfinite_kept: AtomicU64,
     /// The newest state, for a restarted physics to resume from (a seqlock: see
     /// [`ControlBlock::store_resume`]).
     pub resume_seq: AtomicU64,
@@ -287,6 +311,15 @@ pub struct NetworkShared {
     pub peer_joins: AtomicU64,
     /// Sites that left since the network process started.
     pub peer_leaves: AtomicU64,
+    /// Sites lost (silent for longer than the loss limit), as a bit mask by site index.
+    pub peers_lost: AtomicU64,
+    /// Times a site was lost since the network process started.
+    pub peer_losses: AtomicU64,
+    /// Times a lost site was heard again.
+    pub peer_rejoins: AtomicU64,
+    /// Times a site's sequence was resynchronised after its genuine, newer states kept being
+    /// refused as out of order (a forged or reset sequence number cannot silence a site).
+    pub resyncs: AtomicU64,
     /// States a late joiner got from the session's queryable at start.
     pub join_states: AtomicU64,
     /// Per site: its clock minus ours, ns (i64 bits), from the NTP-style exchange.
@@ -332,7 +365,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // Counters and the per-process groups, which are the same; Counters' PhantomData is zero-sized);
 // all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v5";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v6";
 }
 
 impl ControlBlock {

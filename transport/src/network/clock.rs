@@ -3,7 +3,7 @@
 //! receive side corrects the peers' state times by these offsets.
 
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use coop_rt::shm::control::ControlBlock;
 use coop_rt::sync::{AtomicU64, Ordering};
@@ -70,69 +70,135 @@ pub(super) fn serve(
         .map_err(NetworkError::declare("clock queryable"))
 }
 
-/// Samples the present peers' clocks into the control block (and `log`, for the recording).
-pub(super) struct Sampler<'a> {
-    pub(super) session: &'a Session,
-    pub(super) session_name: &'a str,
-    pub(super) sites: &'a [String],
-    pub(super) me: usize,
-    pub(super) ctl: &'a ControlBlock,
+/// How often the clock thread looks for a present peer whose offset is unknown or due.
+const LOOK_EVERY: Duration = Duration::from_millis(5);
+/// Exchanges at the faster pace once a peer is present (a new peer's offset settles quickly).
+const FAST_SAMPLES: u32 = 5;
+
+/// One peer's sampling: its window of exchanges, how many, and when the next is due (our clock).
+#[derive(Debug, Default, Clone)]
+struct Peer {
+    window: ClockPeer,
+    count: u32,
+    due_ns: u64,
 }
 
-impl Sampler<'_> {
-    /// The clock thread: a round over the present peers, a pause, again, until `stop`.
-    pub(super) fn run(&self, log: &Mutex<Vec<ClockMsg>>, stop: &AtomicU64) {
-        let mut peers = vec![ClockPeer::default(); self.sites.len()];
-        let mut round = 0u32;
+/// Samples the present peers' clocks into the control block (and `log`, for the recording). A
+/// peer whose offset is not known (it just appeared, or came back) is sampled within
+/// [`LOOK_EVERY`]: until then its states cannot be read and are refused.
+pub(super) struct Sampler<'a> {
+    session: &'a Session,
+    session_name: &'a str,
+    sites: &'a [String],
+    me: usize,
+    ctl: &'a ControlBlock,
+    peers: Mutex<Vec<Peer>>,
+    log: Mutex<Vec<ClockMsg>>,
+}
+
+impl<'a> Sampler<'a> {
+    /// A sampler of `sites`' clocks (this site is `me`).
+    pub(super) fn new(
+        session: &'a Session,
+        session_name: &'a str,
+        sites: &'a [String],
+        me: usize,
+        ctl: &'a ControlBlock,
+    ) -> Self {
+        Self {
+            session,
+            session_name,
+            sites,
+            me,
+            ctl,
+            peers: Mutex::new(vec![Peer::default(); sites.len()]),
+            log: Mutex::default(),
+        }
+    }
+
+    /// The estimates made since the last call, for the recording.
+    pub(super) fn take_log(&self) -> Vec<ClockMsg> {
+        std::mem::take(&mut *lock(&self.log))
+    }
+
+    fn known(&self, j: usize) -> bool {
+        self.ctl.network.clock_rtt_ns[j].load(Ordering::Relaxed) > 0
+    }
+
+    /// Samples site `j` now unless its offset is already known (a late joiner reading the
+    /// session's state).
+    pub(super) fn sample_if_unknown(&self, j: usize) {
+        if j != self.me && j < self.sites.len() && !self.known(j) {
+            self.sample(j);
+        }
+    }
+
+    /// The clock thread: every present peer whose offset is unknown or due is sampled, until
+    /// `stop`.
+    pub(super) fn run(&self, stop: &AtomicU64) {
         while stop.load(Ordering::Relaxed) == 0 {
             let present = self.ctl.network.peers_present.load(Ordering::Relaxed);
-            for (j, peer) in peers.iter_mut().enumerate() {
+            for j in 0..self.sites.len() {
                 if j == self.me || present & (1 << j) == 0 {
                     continue;
                 }
-                if let Some(m) = self.sample(j, peer) {
-                    lock(log).push(m);
+                let due = {
+                    let mut peers = lock(&self.peers);
+                    let p = &mut peers[j];
+                    if !self.known(j) && p.count > 0 {
+                        // It left and came back (its run may have another clock): start over.
+                        *p = Peer::default();
+                    }
+                    p.count == 0 || monotonic_ns() >= p.due_ns
+                };
+                if due {
+                    self.sample(j);
                 }
             }
-            round += 1;
-            let pause = if round < 5 {
-                CLOCK_EVERY / 5
-            } else {
-                CLOCK_EVERY
-            };
-            let until = Instant::now() + pause;
-            while Instant::now() < until && stop.load(Ordering::Relaxed) == 0 {
-                std::thread::sleep(Duration::from_millis(20));
-            }
+            std::thread::sleep(LOOK_EVERY);
         }
     }
 
     /// One exchange with site `j`; its estimate goes to the control block.
-    fn sample(&self, j: usize, peer: &mut ClockPeer) -> Option<ClockMsg> {
+    fn sample(&self, j: usize) {
         let t0 = monotonic_ns();
-        let replies = self
+        let reply = self
             .session
             .get(keys::clock(self.session_name, &self.sites[j]))
             .timeout(Duration::from_millis(200))
             .wait()
-            .ok()?;
-        let reply = replies.recv().ok()?;
+            .ok()
+            .and_then(|replies| replies.recv().ok());
         let t2 = monotonic_ns();
         let remote = reply
-            .result()
-            .ok()
-            .and_then(|s| wire::decode_u64(&s.payload().to_bytes()).ok())?;
+            .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()))
+            .and_then(|b| wire::decode_u64(&b).ok());
+        let mut peers = lock(&self.peers);
+        let p = &mut peers[j];
+        let Some(remote) = remote else {
+            // No answer: try again a little later.
+            p.due_ns = t2 + CLOCK_EVERY.as_nanos() as u64 / 10;
+            return;
+        };
         let (rtt, offset) = clock_estimate(t0, remote, t2);
-        let (rtt, offset) = peer.add(rtt, offset);
+        let (rtt, offset) = p.window.add(rtt.max(1), offset);
+        p.count += 1;
+        let pace = if p.count < FAST_SAMPLES {
+            CLOCK_EVERY / 5
+        } else {
+            CLOCK_EVERY
+        };
+        p.due_ns = t2 + pace.as_nanos() as u64;
         let net = &self.ctl.network;
         net.clock_offset_ns[j].store(offset as u64, Ordering::Relaxed);
-        net.clock_rtt_ns[j].store(rtt, Ordering::Relaxed);
-        Some(ClockMsg {
+        // Stored last: a round trip above 0 says the offset beside it is known.
+        net.clock_rtt_ns[j].store(rtt, Ordering::Release);
+        lock(&self.log).push(ClockMsg {
             t_ns: t2,
             site: j,
             offset_ns: offset,
             rtt_ns: rtt,
-        })
+        });
     }
 }
 

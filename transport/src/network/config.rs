@@ -36,7 +36,7 @@ impl std::fmt::Display for Mode {
 /// The network process's configuration, the station configuration's `[network]` table: where the
 /// zenoh session listens and whom it connects to, peer or client, TLS, and whether the scenario's
 /// link is emulated on receive.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NetworkConfig {
     /// Zenoh locators to listen on, e.g. `tcp/127.0.0.1:7447` (port 0: a free port, chosen here).
@@ -51,6 +51,23 @@ pub struct NetworkConfig {
     /// Emulate the scenario's `[network]` link (delay, jitter, loss, seeded) on receive, so long
     /// delays can be run on one machine. Shown as EMULATED in status and recordings.
     pub emulate: bool,
+    /// The oldest a received state may be when physics gets it, ms (older: refused, counted).
+    /// Default: the scenario's largest delay plus jitter, three of its slowest report periods and
+    /// 100 ms.
+    pub max_state_age_ms: Option<f64>,
+    /// A site silent for this many of its report periods (at least [`MIN_SILENCE_S`]) is lost.
+    pub lost_after_reports: u32,
+}
+
+/// The shortest silence that makes a site lost, s (a loaded machine stalls for tens of ms).
+pub const MIN_SILENCE_S: f64 = 0.25;
+
+impl NetworkConfig {
+    /// How long a site reporting at `report_rate_hz` may be silent before it is lost, ns.
+    pub fn silence_ns(&self, report_rate_hz: f64) -> u64 {
+        let s = (f64::from(self.lost_after_reports) / report_rate_hz).max(MIN_SILENCE_S);
+        (s * 1e9) as u64
+    }
 }
 
 impl Default for NetworkConfig {
@@ -61,6 +78,8 @@ impl Default for NetworkConfig {
             mode: Mode::Peer,
             tls: None,
             emulate: false,
+            max_state_age_ms: None,
+            lost_after_reports: 10,
         }
     }
 }
@@ -175,6 +194,7 @@ mod tests {
             mode: Mode::Peer,
             tls: None,
             emulate: false,
+            ..NetworkConfig::default()
         };
         assert!(config(&e).is_ok());
         e.mode = Mode::Client;

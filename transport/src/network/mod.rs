@@ -33,7 +33,8 @@ use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
-use crate::recording::{ClockMsg, SessionMsg, StatusMsg};
+use crate::admit::Bounds;
+use crate::recording::{SessionMsg, StatusMsg};
 
 pub mod clock;
 pub mod config;
@@ -84,6 +85,10 @@ pub struct NetworkArgs<'a> {
     pub record: Option<PathBuf>,
     /// Receive-side emulation, if any.
     pub emulation: Option<Emulation>,
+    /// What a received state may be ([`Bounds::from_scenario`]).
+    pub bounds: Bounds,
+    /// Per site: how long it may be silent before it is lost, ns.
+    pub silence_ns: Vec<u64>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -148,6 +153,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         ctx.ctl,
         a.remote,
         a.emulation.as_ref(),
+        a.bounds,
+        a.silence_ns,
     ));
     let names = (a.scenario, a.method);
     let status = serve(
@@ -205,10 +212,10 @@ fn serve(
     // Zenoh's callbacks own what they touch; the threads here borrow the control block (mapped
     // for longer than the session lives) and the receiver, so they are scoped.
     let stop = &AtomicU64::new(0);
-    let clock_log: &Mutex<Vec<ClockMsg>> = &Mutex::default();
+    let clocks = &clock::Sampler::new(session, name, ctx.sites, ctx.me, ctx.ctl);
     std::thread::scope(|scope| {
         let mut presence = Presence::declare(session, name, site)?;
-        receive::join_from_current(session, name, receiver);
+        receive::join_from_current(session, name, receiver, clocks);
         let states = receive::subscribe(session, name)?;
         publish.serve_current(session, name, site)?;
         let _clock = clock::serve(session, name, site)?;
@@ -217,21 +224,14 @@ fn serve(
         // would wait for `stop`.
         scope.spawn(move || receive::deliver(&states, receiver, stop));
         scope.spawn(|| epoch::ask(session, name, ctx.ctl));
-        let sampler = clock::Sampler {
-            session,
-            session_name: name,
-            sites: ctx.sites,
-            me: ctx.me,
-            ctl: ctx.ctl,
-        };
-        scope.spawn(move || sampler.run(clock_log, stop));
+        scope.spawn(move || clocks.run(stop));
 
         let slot = ctx.ctl.child(Child::Network);
         slot.pid
             .store(u64::from(std::process::id()), Ordering::Relaxed);
         let mut session_recorded = false;
         loop {
-            let now = lp.turn(ctx, publish, receiver, &mut presence, clock_log);
+            let now = lp.turn(ctx, publish, receiver, &mut presence, clocks);
             epoch.poll(ctx.ctl);
             if !session_recorded {
                 session_recorded = lp.record_session(ctx, now);
@@ -278,25 +278,32 @@ impl Loop {
         publish: &mut Publish,
         receiver: &Mutex<Receiver<'_>>,
         presence: &mut Presence,
-        clock_log: &Mutex<Vec<ClockMsg>>,
+        clocks: &clock::Sampler<'_>,
     ) -> u64 {
         if let Some(m) = publish.newest(&mut self.reports) {
             self.recording.write(|w| w.published(&m));
         }
         let now = monotonic_ns();
-        let log = {
+        let (log, peers) = {
             let mut rx = lock(receiver);
             rx.release_due(now);
-            std::mem::take(&mut rx.log)
+            rx.check_lost(now);
+            (
+                std::mem::take(&mut rx.log),
+                std::mem::take(&mut rx.peer_log),
+            )
         };
         for m in &log {
             self.recording.write(|w| w.remote(m));
+        }
+        for m in &peers {
+            self.recording.write(|w| w.peer(m));
         }
         self.recording.drain_trace(&mut self.trace);
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
         }
-        for m in std::mem::take(&mut *lock(clock_log)) {
+        for m in clocks.take_log() {
             self.recording.write(|w| w.clock(&m));
         }
         now

@@ -83,8 +83,8 @@ impl Presence {
             } else {
                 self.mask &= !(1 << j);
                 self.leaves += 1;
-                // A site that left and comes back starts its sequence afresh.
-                lock(rx).inbound.forget(j);
+                // A site that left and comes back starts its sequence, clock and silence afresh.
+                lock(rx).left(j);
             }
             ctl.network
                 .peers_present

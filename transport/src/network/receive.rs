@@ -1,13 +1,16 @@
-//! Receiving the other sites' states: each one is checked ([`wire::Inbound::check`]: typed refusals
-//! are counted, never applied), its time corrected by the sender's clock offset, passed through the
-//! emulated link when configured, and handed to physics through the network → physics ring. A late
-//! joiner first asks for the session's current states.
+//! Receiving the other sites' states: each one is checked ([`admit::Inbound::check`]: its site, its
+//! time once corrected by the sender's clock offset, its plausibility, its sequence; typed refusals
+//! are counted, never applied), passed through the emulated link when configured, checked against
+//! the age limit again, and handed to physics through the network → physics ring. A late joiner
+//! first asks for the session's current states. A site silent for longer than its loss limit is
+//! *lost*: physics is told (so what it still applies of that site fades out), status and the
+//! recording show it, and so they show when it is heard again.
 
 use std::sync::Mutex;
 use std::time::Duration;
 
 use coop_rt::msg::SiteReport;
-use coop_rt::shm::control::{ControlBlock, CounterKey, Ring};
+use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, REFUSED_REASONS};
 use coop_rt::shm::Producer;
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
@@ -16,10 +19,12 @@ use zenoh::pubsub::Subscriber;
 use zenoh::sample::{Locality, Sample};
 use zenoh::{Session, Wait};
 
+use super::clock::Sampler;
 use super::emulate::{Emulation, Emulator};
 use super::{lock, NetworkError};
-use crate::recording::RemoteMsg;
-use crate::{keys, wire};
+use crate::admit::{self, Bounds, Refusal};
+use crate::keys;
+use crate::recording::{PeerMsg, RemoteMsg};
 
 /// A checked state on its way to physics (now, or when the emulated link delivers it).
 #[derive(Debug, Clone, Copy)]
@@ -35,39 +40,156 @@ pub(super) struct Delivery {
 /// Everything that handles received states, shared by the delivery thread and the loop.
 pub(super) struct Receiver<'a> {
     me: usize,
+    sites: Vec<String>,
     control: &'a ControlBlock,
-    pub(super) inbound: wire::Inbound,
+    pub(super) inbound: admit::Inbound,
     remote: Producer<SiteReport>,
     emulator: Option<Emulator>,
     pub(super) received: u64,
     pub(super) join_states: u64,
-    pub(super) refused: [u64; 5],
+    pub(super) refused: [u64; REFUSED_REASONS],
     pub(super) emulated_lost: u64,
+    /// Per site: how long it may be silent before it is lost, ns.
+    silence_ns: Vec<u64>,
+    /// Per site: when a state of it was last taken (our clock), if ever since it joined.
+    last_heard: Vec<Option<u64>>,
+    lost: u64,
+    losses: u64,
+    rejoins: u64,
+    resyncs: u64,
     /// What was handed to physics since the loop last took it, for the recording.
     pub(super) log: Vec<RemoteMsg>,
+    /// Sites lost and heard again since the loop last took them, for the recording.
+    pub(super) peer_log: Vec<PeerMsg>,
 }
 
 impl<'a> Receiver<'a> {
-    /// Site `me` of `sites`, handing over into `remote`.
+    /// Site `me` of `sites` in a world of `bounds`, handing over into `remote`; site j is lost
+    /// after `silence_ns[j]` without a state.
     pub(super) fn new(
         sites: &[String],
         me: usize,
         control: &'a ControlBlock,
         remote: Producer<SiteReport>,
         emulation: Option<&Emulation>,
+        bounds: Bounds,
+        silence_ns: Vec<u64>,
     ) -> Self {
         Self {
             me,
+            sites: sites.to_vec(),
             control,
-            inbound: wire::Inbound::new(sites.to_vec()),
+            inbound: admit::Inbound::new(sites.to_vec(), bounds),
             remote,
             emulator: emulation.map(|e| Emulator::new(e, sites.len(), me)),
             received: 0,
             join_states: 0,
-            refused: [0; 5],
+            refused: [0; REFUSED_REASONS],
             emulated_lost: 0,
+            silence_ns,
+            last_heard: vec![None; sites.len()],
+            lost: 0,
+            losses: 0,
+            rejoins: 0,
+            resyncs: 0,
             log: Vec::new(),
+            peer_log: Vec::new(),
         }
+    }
+
+    /// Each site's clock offset where it is known (a measured round trip), ours being 0.
+    fn offsets(&self) -> Vec<Option<i64>> {
+        let net = &self.control.network;
+        (0..self.sites.len())
+            .map(|j| {
+                if j == self.me {
+                    Some(0)
+                } else if net.clock_rtt_ns[j].load(Ordering::Acquire) > 0 {
+                    // SYNC: Acquire pairs with the sampler's Release of the round trip, stored
+                    // after the offset.
+                    Some(net.clock_offset_ns[j].load(Ordering::Relaxed) as i64)
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
+
+    /// Counts a refusal (the first of each kind is said once: an operator sees what is arriving;
+    /// the counts are in status).
+    fn refuse(&mut self, key: &str, e: &Refusal) {
+        let reason = e.reason();
+        let slot = reason.slot();
+        if self.refused[slot] == 0 {
+            eprintln!("network: refused a message on {key}: {e} (further ones are only counted)");
+        }
+        self.refused[slot] += 1;
+        self.control.network.refused.set(reason, self.refused[slot]);
+    }
+
+    /// A state of `site` was taken at `now`: a lost site is heard again.
+    fn heard(&mut self, site: usize, now: u64) {
+        let before = self.last_heard[site].replace(now);
+        if self.lost & (1 << site) != 0 {
+            self.lost &= !(1 << site);
+            self.rejoins += 1;
+            let net = &self.control.network;
+            net.peers_lost.store(self.lost, Ordering::Relaxed);
+            net.peer_rejoins.store(self.rejoins, Ordering::Relaxed);
+            let silent_s = before.map_or(0.0, |b| now.saturating_sub(b) as f64 * 1e-9);
+            eprintln!(
+                "network: site {} heard again after {silent_s:.2} s",
+                self.sites[site]
+            );
+            self.peer_log.push(PeerMsg {
+                t_ns: now,
+                site: self.sites[site].clone(),
+                event: "rejoined".into(),
+                silent_s,
+            });
+        }
+    }
+
+    /// Marks the sites silent past their limit at `now` as lost, and tells physics.
+    pub(super) fn check_lost(&mut self, now: u64) {
+        for j in 0..self.sites.len() {
+            let Some(t) = self.last_heard[j] else {
+                continue;
+            };
+            let silent = now.saturating_sub(t);
+            if j == self.me || self.lost & (1 << j) != 0 || silent <= self.silence_ns[j] {
+                continue;
+            }
+            if self.remote.push(SiteReport::lost(j, now)).is_err() {
+                // Physics must hear of it: try again next turn.
+                self.control.network.drops.add(Ring::Remote, 1);
+                continue;
+            }
+            self.lost |= 1 << j;
+            self.losses += 1;
+            let net = &self.control.network;
+            net.peers_lost.store(self.lost, Ordering::Relaxed);
+            net.peer_losses.store(self.losses, Ordering::Relaxed);
+            let silent_s = silent as f64 * 1e-9;
+            eprintln!(
+                "network: site {} lost: silent for {silent_s:.2} s",
+                self.sites[j]
+            );
+            self.peer_log.push(PeerMsg {
+                t_ns: now,
+                site: self.sites[j].clone(),
+                event: "lost".into(),
+                silent_s,
+            });
+        }
+    }
+
+    /// Site `j` left the session (its liveliness token went away): a new run of it starts its
+    /// sequence, its clock and its silence afresh.
+    pub(super) fn left(&mut self, j: usize) {
+        self.inbound.forget(j);
+        self.last_heard[j] = None;
+        self.control.network.clock_rtt_ns[j].store(0, Ordering::Relaxed);
     }
 
     /// A message on `key`; `join`: a late joiner's catch-up state (not a message on a link).
@@ -78,28 +200,24 @@ impl<'a> Receiver<'a> {
         zenoh_ts: Option<String>,
         join: bool,
     ) {
-        let (from, mut r) = match self.inbound.check(keys::site_of(key), bytes) {
-            Ok(x) => x,
-            Err(e) => {
-                let reason = e.reason();
-                let slot = reason.slot();
-                if self.refused[slot] == 0 {
-                    // The first of each kind, once: an operator sees what is arriving; the counts
-                    // are in status.
-                    eprintln!(
-                        "network: refused a message on {key}: {e} (further ones are only counted)"
-                    );
-                }
-                self.refused[slot] += 1;
-                self.control.network.refused.set(reason, self.refused[slot]);
-                return;
-            }
+        let now = monotonic_ns();
+        let offsets = self.offsets();
+        let a = match self.inbound.check(keys::site_of(key), bytes, now, &offsets) {
+            Ok(a) => a,
+            Err(e) => return self.refuse(key, &e),
         };
+        let (from, r, offset) = (a.site, a.report, a.offset_ns);
         if from == self.me {
             return; // our own, echoed back
         }
-        let offset = self.control.network.clock_offset_ns[from].load(Ordering::Relaxed) as i64;
-        r.t_ns = r.t_ns.saturating_add_signed(-offset);
+        if a.resync {
+            self.resyncs += 1;
+            self.control
+                .network
+                .resyncs
+                .store(self.resyncs, Ordering::Relaxed);
+        }
+        self.heard(from, now);
         if join {
             self.join_states += 1;
             self.control
@@ -107,7 +225,6 @@ impl<'a> Receiver<'a> {
                 .join_states
                 .store(self.join_states, Ordering::Relaxed);
         }
-        let now = monotonic_ns();
         let (release, delay_s) = match &mut self.emulator {
             Some(emu) if !join => {
                 let Some(at) = emu.arrival(from, r.t_ns, self.control.epoch()) else {
@@ -142,6 +259,12 @@ impl<'a> Receiver<'a> {
     }
 
     fn hand_over(&mut self, d: Delivery, zenoh_ts: Option<String>, join: bool, now: u64) {
+        // Held by the emulated link, or queued by zenoh behind a partition: still within the age
+        // limit when physics gets it, or not at all.
+        if let Err(e) = self.inbound.age_ok(d.from, d.report.t_ns, now) {
+            let key = format!("{}'s state, at hand-over", self.sites[d.from]);
+            return self.refuse(&key, &e);
+        }
         if self.remote.push(d.report).is_err() {
             self.control.network.drops.add(Ring::Remote, 1);
             return;
@@ -176,7 +299,12 @@ impl<'a> Receiver<'a> {
 
 /// Late join: the session's current states, asked for before subscribing (so they are what physics
 /// adopts first, not refused as older than a live state that overtook them).
-pub(super) fn join_from_current(session: &Session, session_name: &str, rx: &Mutex<Receiver<'_>>) {
+pub(super) fn join_from_current(
+    session: &Session,
+    session_name: &str,
+    rx: &Mutex<Receiver<'_>>,
+    clocks: &Sampler<'_>,
+) {
     let Ok(replies) = session
         .get(keys::all_current(session_name, 0))
         .allowed_destination(Locality::Remote)
@@ -187,8 +315,13 @@ pub(super) fn join_from_current(session: &Session, session_name: &str, rx: &Mute
     };
     while let Ok(reply) = replies.recv() {
         if let Ok(s) = reply.result() {
-            // The replying site's own key carries its name.
+            // The replying site's own key carries its name. Its time is read only with its
+            // clock offset: measure it now rather than refuse the session's state.
             let key = s.key_expr().as_str().to_owned();
+            let site = lock(rx).inbound.index_of(keys::site_of(&key));
+            if let Some(j) = site {
+                clocks.sample_if_unknown(j);
+            }
             lock(rx).on_bytes(&key, &s.payload().to_bytes(), None, true);
         }
     }

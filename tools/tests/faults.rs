@@ -1,0 +1,148 @@
+//! Faults of a real deployment, with real stations: clocks that differ by 1000 s (one station in a
+//! time namespace whose CLOCK_MONOTONIC is shifted, as separate machines' clocks always are).
+//! Skipped with a message where time namespaces are not permitted.
+
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use coop_tests::{paper_with_scripts, station_config, unique_session, wait_until, Reaped};
+
+const STATION: &str = env!("CARGO_BIN_EXE_station");
+const LIMIT: Duration = Duration::from_secs(60);
+const SKEW_S: i64 = 1000;
+
+/// User 1 pushes the disk at 0.5–1.0 s and lets go; it slides into user 2's tool (the catch),
+/// user 2 pushes it back at 2.5–3.0 s and goes away, and it comes to rest. Each copy must take the
+/// other's part from the other's states.
+fn push_catch_and_rest(name: &str, duration_s: f64) -> String {
+    paper_with_scripts(
+        name,
+        duration_s,
+        "[{ t_s = 0.0, target_m = [-0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [-0.06, 0.0, 0.01] }, { t_s = 1.4, target_m = [-0.20, 0.0, 0.01] }]",
+        "[{ t_s = 0.0, target_m = [0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [0.095, 0.0, 0.01] }, { t_s = 2.5, target_m = [0.095, 0.0, 0.01] }, \
+          { t_s = 3.0, target_m = [0.04, 0.0, 0.01] }, { t_s = 3.4, target_m = [0.20, -0.10, 0.01] }]",
+    )
+}
+
+fn time_namespaces_work() -> Result<(), String> {
+    let out = Command::new("unshare")
+        .args(["--time", "--monotonic", "1", "--fork", "true"])
+        .output()
+        .map_err(|e| format!("unshare: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr).trim().to_owned())
+    }
+}
+
+/// Two stations whose clocks differ by 1000 s: each measures the other's offset (within 1 ms),
+/// reads no state before it knows it, and adopts the other's states for the whole run; the copies
+/// end together. Before, a state that arrived ahead of the first clock sample was corrected with
+/// offset 0, "newest seen" jumped 1000 s ahead, and the station behind adopted nothing.
+#[test]
+fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
+    if let Err(why) = time_namespaces_work() {
+        eprintln!("SKIPPED stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together: time namespaces are not permitted here ({why})");
+        return;
+    }
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-skew-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::write(dir.join("push.toml"), push_catch_and_rest("push", 5.0)).expect("scenario");
+    let port = |l: &std::net::TcpListener| l.local_addr().expect("addr").port();
+    let (la, lb) = (
+        std::net::TcpListener::bind("127.0.0.1:0").expect("bind"),
+        std::net::TcpListener::bind("127.0.0.1:0").expect("bind"),
+    );
+    let (pa, pb) = (port(&la), port(&lb));
+    drop((la, lb));
+    let config = |name: &str, listen: u16, connect: Option<u16>| {
+        station_config(&dir, &session, name, |c| {
+            c.scenario = Some("push.toml".into());
+            c.network.listen = vec![format!("tcp/127.0.0.1:{listen}")];
+            c.network.connect = connect
+                .map(|p| format!("tcp/127.0.0.1:{p}"))
+                .into_iter()
+                .collect();
+        })
+    };
+    let (ca, cb) = (config("user1", pa, None), config("user2", pb, Some(pa)));
+    let run = |cfg: &std::path::Path| {
+        [
+            STATION.to_owned(),
+            "run".into(),
+            // Long enough for the checks below on a loaded machine; the stations stop by themselves.
+            "--duration-s".into(),
+            "10".into(),
+            "--config".into(),
+            cfg.display().to_string(),
+        ]
+    };
+    let mut a = Reaped::spawn(
+        Command::new(STATION)
+            .args(&run(&ca)[1..])
+            .stderr(Stdio::inherit()),
+    );
+    // Station B lives 1000 s ahead.
+    let mut b = Reaped::spawn(
+        Command::new("unshare")
+            .args(["--time", "--monotonic", &SKEW_S.to_string()])
+            .args(["--fork", "--kill-child=SIGTERM", "--"])
+            .args(run(&cb))
+            .stderr(Stdio::inherit()),
+    );
+    let sites = ["user1".to_owned(), "user2".to_owned()];
+    let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
+    // Both measure the skew, to within a millisecond.
+    for (me, other, sign) in [("user1", 1usize, 1.0), ("user2", 0, -1.0)] {
+        let off = wait_until(&format!("{me} to know the other's clock"), LIMIT, || {
+            status(me)?.network.peers[other].clock_offset_us
+        });
+        let err_us = off - sign * SKEW_S as f64 * 1e6;
+        assert!(
+            err_us.abs() < 1000.0,
+            "{me}: offset {off} us, off by {err_us} us"
+        );
+    }
+    // After the push, the disk rests; both copies adopted the other's states throughout.
+    let (sa, sb) = wait_until("both stations past the push and adopting", LIMIT, || {
+        let (sa, sb) = (status("user1")?, status("user2")?);
+        let done = sa.loops.physics.cycles > 4800 && sb.loops.physics.cycles > 4800;
+        (done && sa.physics.adoptions > 10 && sb.physics.adoptions > 10).then_some((sa, sb))
+    });
+    for s in [&sa, &sb] {
+        let r = &s.network.refused;
+        for reason in [
+            "too_old",
+            "in_the_future",
+            "implausible",
+            "duplicate_or_reordered",
+        ] {
+            assert_eq!(r[reason], 0, "{}: refused {reason}: {r:?}", s.station);
+        }
+    }
+    // The copies end together: the resting disk is where user1's copy has it.
+    let resume = |name: &str| {
+        let n = coop_rt::shm::SegmentName::new(&session, name, "ctl").expect("name");
+        let ctl = coop_rt::shm::BlockSegment::<coop_rt::shm::control::ControlBlock>::open(
+            &n,
+            Duration::from_secs(1),
+        )
+        .expect("control block");
+        ctl.resume().expect("a published state").pos
+    };
+    let (pa, pb) = (resume("user1"), resume("user2"));
+    let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
+    assert!(pa[0] > -0.04, "the disk was pushed: {pa:?}");
+    assert!(apart < 0.002, "copies {apart} m apart: {pa:?} vs {pb:?}");
+    for s in [&mut a, &mut b] {
+        let st = s
+            .wait_timeout(LIMIT)
+            .expect("stopped at the end of its duration");
+        assert!(st.success(), "a station stopped cleanly: {st}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,610 @@
+//! What a receiver admits: a decoded report is taken only if it is its site's (the one its key
+//! names), its time can be read (the sender's clock offset is known) and lies in a window around now
+//! once corrected, it is possible in this world ([`Bounds`], derived from the scenario), and its
+//! sequence number is newer than any seen from that site. Anything else is a typed [`Refusal`],
+//! counted by reason, that changes nothing: no refused message moves "newest seen" for its site.
+//!
+//! One forged message must not silence a genuine site: a sequence number far ahead (2⁶⁴−1, or a
+//! sender that restarted) would make every later genuine state look old. So a site whose states
+//! keep arriving with *newer, plausible times* but sequence numbers at or below the newest seen is
+//! resynchronised after [`RESYNC_STRIKES`] of them in a row (counted), while a replay (an old time)
+//! stays refused.
+
+use coop_model::scenario::Scenario;
+use coop_model::MAX_SITES;
+use coop_rt::msg::SiteReport;
+use coop_rt::shm::control::Refused;
+
+use crate::wire::{decode, DecodeError};
+
+/// Genuine states refused in a row as out of order, with newer plausible times, before the site's
+/// sequence is resynchronised.
+pub const RESYNC_STRIKES: u32 = 4;
+
+/// Why a receiver refused a message.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum Refusal {
+    /// It does not decode.
+    #[error(transparent)]
+    Decode(#[from] DecodeError),
+    /// Its site is not one of the session's, or not the one its key names.
+    #[error("site {site} is not the sender its key names")]
+    Foreign {
+        /// The site index in the message.
+        site: u64,
+    },
+    /// A sequence number already seen from this site, or older than the newest seen.
+    #[error("sequence {seq} from site {site} is not newer than {newest}")]
+    Stale {
+        /// The site.
+        site: usize,
+        /// Its sequence number.
+        seq: u64,
+        /// The newest seen.
+        newest: u64,
+    },
+    /// The sender's clock offset is not known yet, so its time cannot be read.
+    #[error("site {site}'s clock offset is not known yet")]
+    NoOffset {
+        /// The site.
+        site: usize,
+    },
+    /// Older than the age limit once corrected.
+    #[error("state of site {site} is {age_ms:.1} ms old, beyond the {limit_ms:.1} ms age limit")]
+    TooOld {
+        /// The site.
+        site: usize,
+        /// Its age, ms.
+        age_ms: f64,
+        /// The limit, ms.
+        limit_ms: f64,
+    },
+    /// Ahead of now beyond the window once corrected.
+    #[error("state of site {site} is {ahead_ms:.1} ms in the future")]
+    Future {
+        /// The site.
+        site: usize,
+        /// How far ahead, ms.
+        ahead_ms: f64,
+    },
+    /// Finite but impossible in this world.
+    #[error("state of site {site}: {what} is beyond what this world allows")]
+    Implausible {
+        /// The site.
+        site: usize,
+        /// Which quantity.
+        what: &'static str,
+    },
+}
+
+impl Refusal {
+    /// The reason it is counted under (`ControlBlock::network.refused`).
+    pub fn reason(&self) -> Refused {
+        match self {
+            Refusal::Decode(DecodeError::Version { .. }) => Refused::Version,
+            Refusal::Decode(DecodeError::Length { .. }) => Refused::Length,
+            Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
+            Refusal::Foreign { .. } => Refused::Foreign,
+            Refusal::Stale { .. } => Refused::Stale,
+            Refusal::NoOffset { .. } => Refused::NoOffset,
+            Refusal::TooOld { .. } => Refused::TooOld,
+            Refusal::Future { .. } => Refused::Future,
+            Refusal::Implausible { .. } => Refused::Implausible,
+        }
+    }
+}
+
+/// What is possible in one world, and how old a state may be: the receiver's plausibility bounds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    /// Largest distance from the origin the object (or a contact point) can be at, m.
+    pub extent_m: f64,
+    /// Largest speed, m/s.
+    pub speed_m_per_s: f64,
+    /// Largest angular momentum, kg·m²/s.
+    pub ang_mom: f64,
+    /// Largest dead-reckoning acceleration (gravity less support), m/s².
+    pub accel_m_per_s2: f64,
+    /// Largest contact force a site can report, N.
+    pub force_n: f64,
+    /// Oldest a state may be when it is handed to physics, ns.
+    pub max_age_ns: u64,
+    /// How far ahead of now a corrected time may be (clock-offset error), ns.
+    pub future_ns: u64,
+}
+
+/// The default window ahead of now: offsets are estimated to within half a round trip.
+pub const FUTURE_NS: u64 = 100_000_000;
+
+impl Bounds {
+    /// The bounds of `sc`'s world. The age limit is `max_age_ms` if given, else the largest delay
+    /// the scenario expects (its link's maximum plus jitter) plus three of its slowest report
+    /// periods plus 100 ms.
+    pub fn from_scenario(sc: &Scenario, max_age_ms: Option<f64>) -> Self {
+        let o = &sc.object;
+        let size = o
+            .radius_m
+            .max(o.half_height_m)
+            .max(o.half_extents_m.iter().copied().fold(0.0, f64::max));
+        let mut extent = norm(o.start_m) + size;
+        for i in 0..sc.site.len() {
+            let arm = sc.arm(i);
+            extent = extent.max(norm(sc.site[i].device_base_m) + arm.link1_m + arm.link2_m);
+        }
+        for p in &sc.world.planes {
+            extent = extent.max(p.offset_m.abs() + size);
+        }
+        let extent_m = extent + 1.0;
+        let force_n: f64 = sc.site.iter().map(|s| s.controller.max_force_n).sum();
+        let g = norm(sc.world.gravity_m_per_s2);
+        // The fastest the users and gravity can make the object across the whole world, twice.
+        let accel = force_n / o.mass_kg + g;
+        let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
+        let mass = sc.world().mass;
+        let i_max = mass.inertia_body.max();
+        let r_min = [o.radius_m, o.half_height_m]
+            .into_iter()
+            .chain(o.half_extents_m)
+            .filter(|&r| r > 0.0)
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-3);
+        let ang_mom = i_max * speed_m_per_s / r_min;
+        let slowest_report_s = sc
+            .site
+            .iter()
+            .map(|s| 1.0 / s.report_rate_hz)
+            .fold(0.0, f64::max);
+        let expected_ms = sc.network.delay_max_ms + sc.network.jitter_ms;
+        let max_age_ms = max_age_ms.unwrap_or(expected_ms + 3e3 * slowest_report_s + 100.0);
+        Self {
+            extent_m,
+            speed_m_per_s,
+            ang_mom,
+            accel_m_per_s2: g * (1.0 + 1e-6) + 1e-9,
+            force_n: 2.0 * force_n.max(1.0),
+            max_age_ns: (max_age_ms * 1e6) as u64,
+            future_ns: FUTURE_NS,
+        }
+    }
+
+    /// Bounds that admit any finite state of any age (tests of the other rules).
+    pub fn unbounded() -> Self {
+        Self {
+            extent_m: f64::MAX,
+            speed_m_per_s: f64::MAX,
+            ang_mom: f64::MAX,
+            accel_m_per_s2: f64::MAX,
+            force_n: f64::MAX,
+            max_age_ns: u64::MAX,
+            future_ns: u64::MAX,
+        }
+    }
+
+    /// The first quantity of `r` (from `site`) beyond these bounds; `now_of` gives each site's
+    /// clock now, in its own seconds, where it is known.
+    fn implausible(
+        &self,
+        r: &SiteReport,
+        now_of: impl Fn(usize) -> Option<f64>,
+    ) -> Option<&'static str> {
+        if r.kind == 1 {
+            if norm(r.pos) > self.extent_m {
+                return Some("position");
+            }
+            if norm(r.vel) > self.speed_m_per_s {
+                return Some("velocity");
+            }
+            if norm(r.ang_mom) > self.ang_mom {
+                return Some("angular momentum");
+            }
+            if norm(r.accel) > self.accel_m_per_s2 {
+                return Some("acceleration");
+            }
+            let window_s = self.future_ns as f64 * 1e-9;
+            for (k, &t) in r.included.iter().enumerate() {
+                // -1: that site's user has not touched it; else a time on that site's clock, which
+                // cannot be later than that site's now.
+                let late = now_of(k).is_some_and(|now| t > now + window_s);
+                if !(t == -1.0 || (0.0..=1e12).contains(&t)) || late {
+                    return Some("inclusion time");
+                }
+            }
+        } else {
+            if norm(r.force) > self.force_n {
+                return Some("force");
+            }
+            if norm(r.point) > self.extent_m || !(0.0..=1.0).contains(&r.depth.abs()) {
+                return Some("contact point");
+            }
+        }
+        None
+    }
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// What the receiver remembers of one site.
+#[derive(Debug, Clone, Copy, Default)]
+struct Seen {
+    /// The newest sequence number accepted.
+    seq: Option<u64>,
+    /// The newest (corrected) state time accepted, ns.
+    t_ns: u64,
+    /// Genuine-looking states refused in a row as out of order.
+    strikes: u32,
+}
+
+/// A message the receiver took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Admitted {
+    /// The sender's site index.
+    pub site: usize,
+    /// The report, its time corrected to our clock.
+    pub report: SiteReport,
+    /// The sender's clock offset it was corrected by, ns.
+    pub offset_ns: i64,
+    /// It was taken by resynchronising the site's sequence.
+    pub resync: bool,
+}
+
+/// A receiver's view of the session: which sites exist, what is plausible, and what it has taken
+/// from each.
+#[derive(Debug, Clone)]
+pub struct Inbound {
+    sites: Vec<String>,
+    bounds: Bounds,
+    seen: Vec<Seen>,
+}
+
+impl Inbound {
+    /// A receiver for a session of these sites (in scenario order) in a world of `bounds`.
+    pub fn new(sites: Vec<String>, bounds: Bounds) -> Self {
+        let n = sites.len();
+        Self {
+            sites,
+            bounds,
+            seen: vec![Seen::default(); n],
+        }
+    }
+    /// The index of a site name.
+    pub fn index_of(&self, site: &str) -> Option<usize> {
+        self.sites.iter().position(|s| s == site)
+    }
+    /// The bounds it checks against.
+    pub fn bounds(&self) -> &Bounds {
+        &self.bounds
+    }
+
+    /// Decodes `bytes` received on a key naming `key_site` at `now_ns` (our clock) and takes it
+    /// only if it passes every rule of this module; `offsets[j]` is site j's clock minus ours, ns,
+    /// where known.
+    ///
+    /// # Errors
+    /// [`Refusal`]; nothing changes then (but a resynchronisation's strike count).
+    pub fn check(
+        &mut self,
+        key_site: &str,
+        bytes: &[u8],
+        now_ns: u64,
+        offsets: &[Option<i64>],
+    ) -> Result<Admitted, Refusal> {
+        let mut r = decode(bytes)?;
+        let site = self
+            .index_of(key_site)
+            .filter(|&i| i as u64 == r.site)
+            .ok_or(Refusal::Foreign { site: r.site })?;
+        let offset_ns = offsets
+            .get(site)
+            .copied()
+            .flatten()
+            .ok_or(Refusal::NoOffset { site })?;
+        r.t_ns = r.t_ns.saturating_add_signed(offset_ns.saturating_neg());
+        let now_of = |k: usize| -> Option<f64> {
+            let off = offsets.get(k).copied().flatten()?;
+            Some(now_ns.saturating_add_signed(off) as f64 * 1e-9)
+        };
+        let seen = self.seen[site];
+        let plausible = self.window(site, &r, now_ns).and_then(|()| {
+            match self.bounds.implausible(&r, now_of) {
+                Some(what) => Err(Refusal::Implausible { site, what }),
+                None => Ok(()),
+            }
+        });
+        if let Some(newest) = seen.seq.filter(|&n| r.seq <= n) {
+            // Out of order: a replay (an old time), or a genuine sender whose sequence is behind a
+            // forged or stale one (newer, plausible times).
+            let genuine = plausible.is_ok() && r.t_ns > seen.t_ns;
+            if !genuine {
+                return Err(Refusal::Stale {
+                    site,
+                    seq: r.seq,
+                    newest,
+                });
+            }
+            let s = &mut self.seen[site];
+            s.strikes += 1;
+            if s.strikes < RESYNC_STRIKES {
+                return Err(Refusal::Stale {
+                    site,
+                    seq: r.seq,
+                    newest,
+                });
+            }
+        } else {
+            plausible?;
+        }
+        let resync = seen.seq.is_some_and(|n| r.seq <= n);
+        self.seen[site] = Seen {
+            seq: Some(r.seq),
+            t_ns: r.t_ns,
+            strikes: 0,
+        };
+        Ok(Admitted {
+            site,
+            report: r,
+            offset_ns,
+            resync,
+        })
+    }
+
+    /// The time rule: `r`'s corrected time lies within the age limit behind `now_ns` and the
+    /// window ahead of it.
+    fn window(&self, site: usize, r: &SiteReport, now_ns: u64) -> Result<(), Refusal> {
+        self.age_ok(site, r.t_ns, now_ns)?;
+        let ahead = r.t_ns.saturating_sub(now_ns);
+        if ahead > self.bounds.future_ns {
+            return Err(Refusal::Future {
+                site,
+                ahead_ms: ahead as f64 * 1e-6,
+            });
+        }
+        Ok(())
+    }
+
+    /// The age rule alone, for a state about to be handed over (after an emulated delay).
+    ///
+    /// # Errors
+    /// [`Refusal::TooOld`].
+    pub fn age_ok(&self, site: usize, t_ns: u64, now_ns: u64) -> Result<(), Refusal> {
+        let age = now_ns.saturating_sub(t_ns);
+        if age > self.bounds.max_age_ns {
+            return Err(Refusal::TooOld {
+                site,
+                age_ms: age as f64 * 1e-6,
+                limit_ms: self.bounds.max_age_ns as f64 * 1e-6,
+            });
+        }
+        Ok(())
+    }
+
+    /// Forgets a site's sequence numbers (it left the session; a new run of it starts afresh).
+    pub fn forget(&mut self, site: usize) {
+        if let Some(s) = self.seen.get_mut(site) {
+            *s = Seen::default();
+        }
+    }
+}
+
+/// Offsets for `n` sites, all known and zero (one clock).
+pub fn same_clock(n: usize) -> Vec<Option<i64>> {
+    vec![Some(0); n.min(MAX_SITES)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::encode;
+
+    fn sample() -> SiteReport {
+        let mut r = SiteReport {
+            kind: 1,
+            t_ns: 5,
+            seq: 9,
+            site: 1,
+            rot: [1.0, 0.0, 0.0, 0.0],
+            ..SiteReport::default()
+        };
+        r.pos = [0.1, 0.2, 0.3];
+        r.included = [-1.0; MAX_SITES];
+        r.included[1] = 4.5e-9;
+        r
+    }
+
+    #[test]
+    fn a_receiver_refuses_foreign_sites_duplicates_and_reordering() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], Bounds::unbounded());
+        let clocks = same_clock(2);
+        let check = |rx: &mut Inbound, key: &str, bytes: &[u8]| rx.check(key, bytes, 5, &clocks);
+        let mut r = sample(); // site 1 = "b", seq 9
+        assert_eq!(check(&mut rx, "b", &encode(&r)).map(|x| x.site), Ok(1));
+        assert_eq!(
+            check(&mut rx, "b", &encode(&r)),
+            Err(Refusal::Stale {
+                site: 1,
+                seq: 9,
+                newest: 9
+            }),
+            "a replay"
+        );
+        r.seq = 8;
+        assert_eq!(
+            check(&mut rx, "b", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Stale),
+            "reordered"
+        );
+        r.seq = 10;
+        assert_eq!(
+            check(&mut rx, "a", &encode(&r)),
+            Err(Refusal::Foreign { site: 1 }),
+            "key names another site"
+        );
+        assert_eq!(
+            check(&mut rx, "zz", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Foreign),
+            "unknown site"
+        );
+        r.site = 5;
+        assert_eq!(
+            check(&mut rx, "b", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Foreign)
+        );
+        r.site = 1;
+        assert_eq!(
+            check(&mut rx, "b", &[1, 2, 3]).map_err(|e| e.reason()),
+            Err(Refused::Length)
+        );
+        assert!(
+            check(&mut rx, "b", &encode(&r)).is_ok(),
+            "refusals changed nothing: 10 is still new"
+        );
+        rx.forget(1);
+        r.seq = 1;
+        assert!(
+            check(&mut rx, "b", &encode(&r)).is_ok(),
+            "a site that left starts afresh"
+        );
+    }
+
+    fn paper_bounds() -> Bounds {
+        Bounds {
+            extent_m: 2.0,
+            speed_m_per_s: 40.0,
+            ang_mom: 1.0,
+            accel_m_per_s2: 3.27,
+            force_n: 40.0,
+            max_age_ns: 700_000_000,
+            future_ns: FUTURE_NS,
+        }
+    }
+
+    const S: u64 = 1_000_000_000;
+
+    #[test]
+    fn no_time_is_read_before_the_senders_offset_is_known() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], paper_bounds());
+        let mut r = sample();
+        r.t_ns = 1000 * S + 10 * S; // their clock is 1000 s ahead of ours
+        let now = 10 * S;
+        assert_eq!(
+            rx.check("b", &encode(&r), now, &[Some(0), None]),
+            Err(Refusal::NoOffset { site: 1 })
+        );
+        // Nothing moved: once the offset is known the same state is taken, at our time.
+        let a = rx
+            .check("b", &encode(&r), now, &[Some(0), Some(1000 * S as i64)])
+            .expect("taken");
+        assert_eq!(a.report.t_ns, 10 * S);
+    }
+
+    #[test]
+    fn times_outside_the_window_are_refused_and_move_nothing() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], paper_bounds());
+        let clocks = same_clock(2);
+        let now = 100 * S;
+        let mut r = sample();
+        for (t, reason) in [
+            (u64::MAX, Refused::Future),
+            (now + S, Refused::Future),
+            (now - 5 * S, Refused::TooOld),
+            (0, Refused::TooOld),
+        ] {
+            r.t_ns = t;
+            r.seq += 1;
+            assert_eq!(
+                rx.check("b", &encode(&r), now, &clocks)
+                    .map_err(|e| e.reason()),
+                Err(reason),
+                "t = {t}"
+            );
+        }
+        // The newest seen did not move: a genuine state at now is taken.
+        r.t_ns = now;
+        r.seq = 10;
+        assert!(rx.check("b", &encode(&r), now, &clocks).is_ok());
+    }
+
+    #[test]
+    fn finite_but_absurd_states_are_refused() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], paper_bounds());
+        let clocks = same_clock(2);
+        let now = 100 * S;
+        let base = SiteReport {
+            t_ns: now,
+            ..sample()
+        };
+        let cases: [(&str, fn(&mut SiteReport)); 6] = [
+            ("position", |r| r.pos = [11.0, 0.0, 0.0]),
+            ("velocity", |r| r.vel = [1e3, 0.0, 0.0]),
+            ("angular momentum", |r| r.ang_mom = [0.0, 0.0, 1e6]),
+            ("acceleration", |r| r.accel = [0.0, 0.0, -1e4]),
+            ("inclusion time", |r| r.included[0] = 1e300),
+            ("inclusion time", |r| r.included[1] = 1e6),
+        ];
+        for (k, (what, bad)) in cases.iter().enumerate() {
+            let mut r = base;
+            r.seq = 100 + k as u64;
+            bad(&mut r);
+            assert_eq!(
+                rx.check("b", &encode(&r), now, &clocks),
+                Err(Refusal::Implausible { site: 1, what }),
+                "{what}"
+            );
+        }
+        let mut r = base;
+        r.seq = 50;
+        assert!(
+            rx.check("b", &encode(&r), now, &clocks).is_ok(),
+            "refusals moved nothing"
+        );
+    }
+
+    #[test]
+    fn one_forged_sequence_number_cannot_silence_a_site() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], paper_bounds());
+        let clocks = same_clock(2);
+        let mut now = 100 * S;
+        let mut r = sample();
+        r.t_ns = now;
+        assert!(rx.check("b", &encode(&r), now, &clocks).is_ok());
+        let mut forged = r;
+        forged.seq = u64::MAX;
+        forged.t_ns = now + 1;
+        assert!(
+            rx.check("b", &encode(&forged), now, &clocks).is_ok(),
+            "plausible: taken once"
+        );
+        // The genuine sender goes on; replays of old states stay refused, but its newer states
+        // resynchronise the sequence after a few.
+        let mut taken = Vec::new();
+        for k in 1..=10 {
+            now += 10_000_000;
+            r.seq += 1;
+            r.t_ns = now;
+            taken.push(rx.check("b", &encode(&r), now, &clocks).map(|a| a.resync));
+            let mut replay = r;
+            replay.t_ns = now - 20_000_000 * k;
+            assert_eq!(
+                rx.check("b", &encode(&replay), now, &clocks)
+                    .map_err(|e| e.reason()),
+                Err(Refused::Stale)
+            );
+        }
+        let first = (RESYNC_STRIKES - 1) as usize;
+        assert!(taken[..first].iter().all(Result::is_err), "{taken:?}");
+        assert_eq!(taken[first], Ok(true), "{taken:?}");
+        assert!(
+            taken[first + 1..].iter().all(|t| *t == Ok(false)),
+            "{taken:?}"
+        );
+    }
+
+    #[test]
+    fn bounds_of_the_paper_world_admit_its_states() {
+        let b = Bounds::from_scenario(&Scenario::default(), None);
+        assert!(b.extent_m > 1.0 && b.extent_m < 10.0, "{b:?}");
+        assert!(b.speed_m_per_s > 5.0 && b.speed_m_per_s < 1e3, "{b:?}");
+        assert!(b.max_age_ns >= 100_000_000, "{b:?}");
+    }
+}
