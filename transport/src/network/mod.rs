@@ -33,7 +33,7 @@ use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
-use crate::recording::{ClockMsg, SessionMsg, StatusMsg};
+use crate::recording::{ClockMsg, Rotation, SessionMsg, StatusMsg};
 
 pub mod clock;
 pub mod config;
@@ -80,8 +80,10 @@ pub struct NetworkArgs<'a> {
     pub remote: Producer<SiteReport>,
     /// Physics' trace records, for the recording.
     pub trace: Consumer<TraceRecord>,
-    /// Recording file, if any.
+    /// Recording file (its first part), if any.
     pub record: Option<PathBuf>,
+    /// When the recording goes on in its next part, and how many parts are kept.
+    pub record_rotation: Rotation,
     /// Receive-side emulation, if any.
     pub emulation: Option<Emulation>,
 }
@@ -135,6 +137,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ("method".into(), a.method.clone()),
             ("emulation".into(), ctx.emulation.clone()),
         ]),
+        a.record_rotation,
     )?;
     ctx.ctl
         .network
