@@ -1,5 +1,5 @@
-//! A station's recording: what it believed and displayed, as an [MCAP](https://mcap.dev) file that
-//! Foxglove, the `mcap` CLI and the `mcap` Python package read.
+//! A station's recording: what it believed and displayed, as [MCAP](https://mcap.dev) files (one
+//! or more parts, see below) that Foxglove, the `mcap` CLI and the `mcap` Python package read.
 //!
 //! Every message is JSON (`message_encoding = "json"`, each channel with a `jsonschema` schema). Times
 //! inside messages (`t_ns`) are CLOCK_MONOTONIC ns of the recording station; the MCAP `log_time` is
@@ -7,7 +7,7 @@
 //!
 //! | topic       | rate                         | contents                                              |
 //! |-------------|------------------------------|-------------------------------------------------------|
-//! | `/session`  | once the session time is known | session, site, scenario, method, epoch, emulation   |
+//! | `/session`  | once the session time is known, again atop each later part | session, site, scenario, method, epoch, emulation |
 //! | `/object`   | scenario sample rate         | object pose and velocity as this site believes it     |
 //! | `/tool`     | scenario sample rate         | tool position, desired/measured force, force on object |
 //! | `/adoption` | each adoption                | sender, position jump, how far it was dead-reckoned  |
@@ -20,8 +20,8 @@
 //! Physics' trace records go in whole ([`Recorder::trace`]); each channel's `jsonschema` is derived
 //! from its message struct's fields.
 //!
-//! The file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps everything
-//! up to the last flush; [`read`] accepts such a file (no summary, no end magic).
+//! Each file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps
+//! everything up to the last flush; [`read`] accepts such a file (no summary, no end magic).
 //!
 //! # Parts
 //!
