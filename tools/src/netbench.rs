@@ -75,6 +75,7 @@ fn bench_session(
         station_bin: station_bin.clone(),
         progress: false,
         stop: crate::cli::StopFlag::manual(),
+        record_max_file_s: None,
     };
     let session = format!("b{}{}", std::process::id(), &name[..1]);
     let o = crate::session::run_method(&a, &sc, MethodName::Paper, &session)?;

@@ -52,6 +52,8 @@ pub struct RunArgs {
     pub progress: bool,
     /// Raised by SIGINT/SIGTERM: stop the stations cleanly and return.
     pub stop: crate::cli::StopFlag,
+    /// The stations' `record_max_file_s` (default: the station's own).
+    pub record_max_file_s: Option<u64>,
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
@@ -137,7 +139,8 @@ pub struct MethodOutcome {
 }
 
 /// The station configuration `session run` writes for one site: the defaults, with this session's
-/// names, scenario, method, recording and loopback endpoints, started by the launcher's epoch.
+/// names, scenario, method, recording (and its time bound when asked) and loopback endpoints,
+/// started by the launcher's epoch.
 #[allow(clippy::too_many_arguments)]
 fn station_config(
     scenario: &Path,
@@ -147,8 +150,10 @@ fn station_config(
     listen: &str,
     connect: &[String],
     record: &Path,
-    emulate: bool,
+    a: &RunArgs,
 ) -> anyhow::Result<String> {
+    let defaults = StationConfig::default();
+    let emulate = a.emulate;
     let c = StationConfig {
         session: session.to_owned(),
         station: Some(site.to_owned()),
@@ -162,7 +167,8 @@ fn station_config(
             emulate,
             ..network::NetworkConfig::default()
         },
-        ..StationConfig::default()
+        record_max_file_s: a.record_max_file_s.unwrap_or(defaults.record_max_file_s),
+        ..defaults
     };
     Ok(format!(
         "# Written by `session run` for site {site}.\n{}",
@@ -221,7 +227,7 @@ pub fn run_method(
         std::fs::write(
             &config,
             station_config(
-                &sc_path, session, &s.name, method, &ports[i], &others, &record, a.emulate,
+                &sc_path, session, &s.name, method, &ports[i], &others, &record, a,
             )?,
         )
         .with_context(|| format!("writing {}", config.display()))?;
@@ -446,6 +452,7 @@ pub fn run_method(
             st.site.clone(),
             serde_json::json!({
                 "recording": st.record.display().to_string(),
+                "recording_parts": rec.files.len(),
                 "final": rec.status,
                 "live": statuses.get(&st.site),
                 // When its network joined the session (its own presence seen).

@@ -1,5 +1,6 @@
-//! Multi-site sessions on real stations (`session run`): the paper's experiment, four stations at
-//! 1 kHz, a late joiner, hostile messages, and the recordings read by a foreign MCAP reader.
+//! Multi-site sessions on real stations (`session run`): the paper's experiment (its recordings in
+//! parts, each read alone by a foreign MCAP reader), four stations at 1 kHz, a late joiner, hostile
+//! messages.
 //!
 //! Every session is real processes (a supervisor with servo, physics and network per site) talking
 //! zenoh on loopback. Sessions in this file take turns (one lock): each runs its scenario in real
@@ -87,7 +88,11 @@ fn foreign_topics(path: &Path) -> Option<Vec<(String, u64)>> {
 fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
     let _turn = ONE_AT_A_TIME.lock();
     let out = out_dir("paper");
-    let v = run_json(session(&["scenarios/paper.toml"], &out));
+    // Recordings in parts of 4 s: the metrics below come from rotated recordings read as one.
+    let v = run_json(session(
+        &["scenarios/paper.toml", "--record-max-file-s", "4"],
+        &out,
+    ));
     let naive = &v["methods"]["naive"]["real"];
     let paper = &v["methods"]["paper"]["real"];
     // Naive parts at the push and never rejoins: its copies end centimetres apart.
@@ -115,30 +120,63 @@ fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
             );
             assert_eq!(fin["emulated_lost"], 0, "the paper's link loses nothing");
             assert_eq!(st["truncated"], false, "{m} {site}: recording finished");
+            // About 15 s of recording from the station's start, in parts of 4 s.
+            assert!(
+                st["recording_parts"].as_u64() >= Some(4),
+                "{m} {site}: the recording went on in parts: {st}"
+            );
             assert!(
                 f(&st["last_sample_s"]) > 13.9,
                 "{m} {site} recorded to the end: {st}"
             );
         }
     }
-    // The recordings open with a reader that is not ours, and hold the expected channels.
+    // The recording opens with a reader that is not ours, part by part (each a whole MCAP file),
+    // and together the parts hold the expected channels.
     let rec = out.join("paper").join("user2.mcap");
-    match foreign_topics(&rec) {
-        None if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() => {
-            panic!("python3 with the mcap package is required (pip install mcap)")
-        }
-        None => eprintln!(
-            "SKIPPED the foreign-reader check: python3 -c 'import mcap' fails (pip install mcap)"
-        ),
-        Some(topics) => {
-            let count = |t: &str| topics.iter().find(|(n, _)| n == t).map_or(0, |x| x.1);
-            assert!(count("/object") > 2000, "{topics:?}"); // 200 Hz over 14 s
-            assert_eq!(count("/object"), count("/tool"), "{topics:?}");
-            assert!(count("/adoption") > 10, "{topics:?}");
-            assert!(count("/remote") > 100, "{topics:?}");
-            for t in ["/session", "/presence", "/clock", "/status"] {
-                assert!(count(t) >= 1, "{t} missing: {topics:?}");
+    let parts = coop_transport::recording::read(&rec)
+        .expect("the parts read as one")
+        .files;
+    let mut totals: Vec<(String, u64)> = Vec::new();
+    let mut session_seen = false;
+    for part in &parts {
+        let Some(topics) = foreign_topics(part) else {
+            if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() {
+                panic!("python3 with the mcap package is required (pip install mcap)")
             }
+            eprintln!(
+                "SKIPPED the foreign-reader check: python3 -c 'import mcap' fails (pip install mcap)"
+            );
+            totals.clear();
+            break;
+        };
+        let count = |t: &str| topics.iter().find(|(n, _)| n == t).map_or(0, |x| x.1);
+        assert!(
+            topics.iter().map(|t| t.1).sum::<u64>() > 0,
+            "{}: empty: {topics:?}",
+            part.display()
+        );
+        // Once the session is known, every part starts with it.
+        if session_seen {
+            assert_eq!(count("/session"), 1, "{}: {topics:?}", part.display());
+        }
+        session_seen |= count("/session") > 0;
+        for (t, n) in topics {
+            match totals.iter_mut().find(|x| x.0 == t) {
+                Some(x) => x.1 += n,
+                None => totals.push((t, n)),
+            }
+        }
+    }
+    if !totals.is_empty() {
+        let topics = totals;
+        let count = |t: &str| topics.iter().find(|(n, _)| n == t).map_or(0, |x| x.1);
+        assert!(count("/object") > 2000, "{topics:?}"); // 200 Hz over 14 s
+        assert_eq!(count("/object"), count("/tool"), "{topics:?}");
+        assert!(count("/adoption") > 10, "{topics:?}");
+        assert!(count("/remote") > 100, "{topics:?}");
+        for t in ["/session", "/presence", "/clock", "/status"] {
+            assert!(count(t) >= 1, "{t} missing: {topics:?}");
         }
     }
     let _ = std::fs::remove_dir_all(&out);

@@ -1,5 +1,5 @@
-//! A station's recording: what it believed and displayed, as an [MCAP](https://mcap.dev) file that
-//! Foxglove, the `mcap` CLI and the `mcap` Python package read.
+//! A station's recording: what it believed and displayed, as [MCAP](https://mcap.dev) files (one
+//! or more parts, see below) that Foxglove, the `mcap` CLI and the `mcap` Python package read.
 //!
 //! Every message is JSON (`message_encoding = "json"`, each channel with a `jsonschema` schema). Times
 //! inside messages (`t_ns`) are CLOCK_MONOTONIC ns of the recording station; the MCAP `log_time` is
@@ -7,7 +7,7 @@
 //!
 //! | topic       | rate                         | contents                                              |
 //! |-------------|------------------------------|-------------------------------------------------------|
-//! | `/session`  | once the session time is known | session, site, scenario, method, epoch, emulation   |
+//! | `/session`  | once the session time is known, again atop each later part | session, site, scenario, method, epoch, emulation |
 //! | `/object`   | scenario sample rate         | object pose and velocity as this site believes it     |
 //! | `/tool`     | scenario sample rate         | tool position, desired/measured force, force on object |
 //! | `/adoption` | each adoption                | sender, position jump, how far it was dead-reckoned  |
@@ -21,13 +21,28 @@
 //! Physics' trace records go in whole ([`Recorder::trace`]); each channel's `jsonschema` is derived
 //! from its message struct's fields.
 //!
-//! The file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps everything
-//! up to the last flush; [`read`] accepts such a file (no summary, no end magic).
+//! Each file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps
+//! everything up to the last flush; [`read`] accepts such a file (no summary, no end magic).
+//!
+//! # Parts
+//!
+//! A recording does not grow without bound: once its file holds [`Rotation::max_file_bytes`] or
+//! has been written for [`Rotation::max_file_duration`], the recorder finishes it and goes on in
+//! the next part, named after the first ([`part_path`]): `user1.mcap`, then `user1.1.mcap`,
+//! `user1.2.mcap`, … Beyond [`Rotation::keep_files`] parts the oldest is removed. Every part is a
+//! whole MCAP file that opens alone: its own header, schemas, channels and metadata (the station's,
+//! plus `part`, its number, and `started_unix_ns`, when the recording's first part was created,
+//! which tells one recording from another), and the `/session` message again at its top once the
+//! session is known. A sample's `/object` and `/tool` are never split between parts. Creating a
+//! recording removes the parts an earlier one left at the same path. [`read`] reads every part in
+//! order as one recording and refuses parts of different recordings; [`read_part`] reads one.
 
+use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
-use std::path::Path;
+use std::io::{BufWriter, Seek, Write};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 use coop_rt::msg::TraceRecord;
@@ -329,10 +344,130 @@ const TOPICS: [&str; 10] = [
     "/peer",
 ];
 
-/// Writes a recording.
-pub struct Recorder {
-    w: mcap::Writer<BufWriter<File>>,
+/// When a part of a recording is finished and the next begun, and how many parts are kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rotation {
+    /// A part that holds this many bytes is finished (`None`: no size bound).
+    pub max_file_bytes: Option<u64>,
+    /// A part written for this long is finished (`None`: no time bound).
+    pub max_file_duration: Option<Duration>,
+    /// Parts kept on disk, the oldest removed beyond them (0: all are kept).
+    pub keep_files: usize,
+}
+
+impl Rotation {
+    /// One file, however large it grows.
+    pub const NONE: Rotation = Rotation {
+        max_file_bytes: None,
+        max_file_duration: None,
+        keep_files: 0,
+    };
+}
+
+/// The file of part `n` of the recording whose first part is `first`: `first` itself for 0, else
+/// the number before the extension (`user1.mcap`, `user1.1.mcap`, `user1.2.mcap`, …; `rec`,
+/// `rec.1`, … without one).
+pub fn part_path(first: &Path, n: u32) -> PathBuf {
+    if n == 0 {
+        return first.to_owned();
+    }
+    let (stem, ext) = stem_and_ext(first);
+    first.with_file_name(match ext {
+        Some(e) => format!("{stem}.{n}.{e}"),
+        None => format!("{stem}.{n}"),
+    })
+}
+
+fn stem_and_ext(first: &Path) -> (String, Option<String>) {
+    let lossy = |s: &std::ffi::OsStr| s.to_string_lossy().into_owned();
+    match (first.file_stem(), first.extension()) {
+        (Some(s), Some(e)) => (lossy(s), Some(lossy(e))),
+        _ => (first.file_name().map(lossy).unwrap_or_default(), None),
+    }
+}
+
+/// The parts of the recording whose first part is `first` that are on disk, by number.
+fn parts_on_disk(first: &Path) -> std::io::Result<Vec<(u32, PathBuf)>> {
+    let (stem, ext) = stem_and_ext(first);
+    let dir = match first.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut parts = Vec::new();
+    if first.is_file() {
+        parts.push((0, first.to_owned()));
+    }
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(parts),
+        Err(e) => return Err(e),
+    };
+    for entry in entries {
+        let name = entry?.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let number = name
+            .strip_prefix(stem.as_str())
+            .and_then(|r| r.strip_prefix('.'));
+        let number = match &ext {
+            Some(e) => number.and_then(|r| r.strip_suffix(e.as_str())?.strip_suffix('.')),
+            None => number,
+        };
+        // Only the names `part_path` writes (no `user1.01.mcap`).
+        if let Some(n) = number
+            .and_then(|d| d.parse::<u32>().ok())
+            .filter(|&n| n > 0 && part_path(first, n).file_name() == Some(name.as_ref()))
+        {
+            parts.push((n, part_path(first, n)));
+        }
+    }
+    parts.sort();
+    Ok(parts)
+}
+
+/// The file being written, counting the bytes that go into it.
+struct Counted {
+    file: BufWriter<File>,
+    written: Rc<Cell<u64>>,
+}
+
+impl Write for Counted {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.written.set(self.written.get() + n as u64);
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for Counted {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.file.seek(pos)
+    }
+}
+
+/// One part being written.
+struct Part {
+    w: mcap::Writer<Counted>,
+    path: PathBuf,
+    number: u32,
     channels: [u16; TOPICS.len()],
+    written: Rc<Cell<u64>>,
+    started: Instant,
+    /// Messages written besides the repeated `/session`.
+    messages: u64,
+}
+
+/// Writes a recording, in parts as its [`Rotation`] says.
+pub struct Recorder {
+    part: Part,
+    first: PathBuf,
+    /// The station's metadata and `started_unix_ns` (each part adds its `part`).
+    metadata: BTreeMap<String, String>,
+    rotation: Rotation,
+    /// The `/session` message, once written: repeated at the top of every later part.
+    session: Option<SessionMsg>,
     seq: u32,
     wall_minus_mono: i128,
     last_flush: Instant,
@@ -340,7 +475,10 @@ pub struct Recorder {
 
 impl std::fmt::Debug for Recorder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Recorder").field("seq", &self.seq).finish()
+        f.debug_struct("Recorder")
+            .field("path", &self.part.path)
+            .field("seq", &self.seq)
+            .finish()
     }
 }
 
@@ -363,6 +501,28 @@ pub enum RecordingError {
         /// Why.
         error: mcap::McapError,
     },
+    /// A file that is not the next part of the recording being read.
+    #[error("{path}: {why}")]
+    NotThisRecording {
+        /// The file.
+        path: String,
+        /// How it differs.
+        why: String,
+    },
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> RecordingError + '_ {
+    move |error| RecordingError::Io {
+        path: path.display().to_string(),
+        error,
+    }
+}
+
+fn mcap_err(path: &Path) -> impl Fn(mcap::McapError) -> RecordingError + '_ {
+    move |error| RecordingError::Mcap {
+        path: path.display().to_string(),
+        error,
+    }
 }
 
 /// The `jsonschema` of a topic's messages.
@@ -382,58 +542,127 @@ fn schema_of(topic: &str) -> serde_json::Value {
     }
 }
 
-impl Recorder {
-    /// Creates (truncates) `path` and writes the header, schemas and channels.
-    ///
-    /// # Errors
-    /// The file cannot be created or written.
-    pub fn create(path: &Path, metadata: BTreeMap<String, String>) -> Result<Self, RecordingError> {
-        let p = path.display().to_string();
-        let mcap_err = |error| RecordingError::Mcap {
-            path: p.clone(),
-            error,
-        };
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|error| RecordingError::Io {
-                path: dir.display().to_string(),
-                error,
-            })?;
-        }
-        let file = File::create(path).map_err(|error| RecordingError::Io {
-            path: p.clone(),
-            error,
-        })?;
+impl Part {
+    /// Creates (truncates) part `number` at `path` and writes its header, metadata, schemas and
+    /// channels.
+    fn create(
+        path: PathBuf,
+        number: u32,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<Self, RecordingError> {
+        let file = File::create(&path).map_err(io_err(&path))?;
+        let written = Rc::new(Cell::new(0));
         let mut w = mcap::WriteOptions::new()
             .use_chunks(false)
             .profile("")
             .library(concat!("coop-haptics ", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::new(file))
-            .map_err(mcap_err)?;
+            .create(Counted {
+                file: BufWriter::new(file),
+                written: written.clone(),
+            })
+            .map_err(mcap_err(&path))?;
+        let mut metadata = metadata.clone();
+        metadata.insert("part".into(), number.to_string());
         w.write_metadata(&mcap::records::Metadata {
             name: "coop-haptics".into(),
             metadata,
         })
-        .map_err(mcap_err)?;
+        .map_err(mcap_err(&path))?;
         let mut channels = [0u16; TOPICS.len()];
         for (c, topic) in channels.iter_mut().zip(TOPICS) {
             let schema = w
                 .add_schema(topic, "jsonschema", schema_of(topic).to_string().as_bytes())
-                .map_err(mcap_err)?;
+                .map_err(mcap_err(&path))?;
             *c = w
                 .add_channel(schema, topic, "json", &BTreeMap::new())
-                .map_err(mcap_err)?;
+                .map_err(mcap_err(&path))?;
+        }
+        Ok(Self {
+            w,
+            path,
+            number,
+            channels,
+            written,
+            started: Instant::now(),
+            messages: 0,
+        })
+    }
+
+    /// Whether the part has reached a bound (a part takes at least one message).
+    fn full(&self, r: &Rotation) -> bool {
+        self.messages > 0
+            && (r.max_file_bytes.is_some_and(|b| self.written.get() >= b)
+                || r.max_file_duration
+                    .is_some_and(|d| self.started.elapsed() >= d))
+    }
+}
+
+impl Recorder {
+    /// Creates (truncates) `path`, the first part, and writes the header, metadata, schemas and
+    /// channels; removes the parts an earlier recording left at the same path.
+    ///
+    /// # Errors
+    /// The file cannot be created or written, or an earlier part cannot be removed.
+    pub fn create(
+        path: &Path,
+        mut metadata: BTreeMap<String, String>,
+        rotation: Rotation,
+    ) -> Result<Self, RecordingError> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        }
+        for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
+            if n > 0 {
+                std::fs::remove_file(&old).map_err(io_err(&old))?;
+            }
         }
         let wall = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as i128);
         let mono = i128::from(coop_rt::timer::monotonic_ns());
+        metadata.insert("started_unix_ns".into(), wall.to_string());
         Ok(Self {
-            w,
-            channels,
+            part: Part::create(path.to_owned(), 0, &metadata)?,
+            first: path.to_owned(),
+            metadata,
+            rotation,
+            session: None,
             seq: 0,
             wall_minus_mono: wall - mono,
             last_flush: Instant::now(),
         })
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.part.path
+    }
+
+    /// Before a message: when the part is full, finishes it, begins the next (the `/session`
+    /// message at its top) and removes the oldest part beyond the ones kept.
+    fn rotate_if_full(&mut self) -> Result<(), RecordingError> {
+        if !self.part.full(&self.rotation) {
+            return Ok(());
+        }
+        let number = self.part.number + 1;
+        let next = Part::create(part_path(&self.first, number), number, &self.metadata)?;
+        let mut done = std::mem::replace(&mut self.part, next);
+        done.w.finish().map_err(mcap_err(&done.path))?;
+        let keep = u32::try_from(self.rotation.keep_files).unwrap_or(u32::MAX);
+        if keep > 0 && number >= keep {
+            let oldest = part_path(&self.first, number - keep);
+            match std::fs::remove_file(&oldest) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(io_err(&oldest)(e));
+                }
+                _ => {}
+            }
+        }
+        if let Some(s) = self.session.clone() {
+            self.put(0, s.t_ns, &s)?;
+        }
+        self.part.messages = 0;
+        Ok(())
     }
 
     fn put<T: Serialize>(
@@ -441,31 +670,38 @@ impl Recorder {
         topic: usize,
         t_ns: u64,
         msg: &T,
-    ) -> Result<(), mcap::McapError> {
+    ) -> Result<(), RecordingError> {
         let data = serde_json::to_vec(msg).unwrap_or_default();
         self.seq = self.seq.wrapping_add(1);
         let log_time = u64::try_from(i128::from(t_ns) + self.wall_minus_mono).unwrap_or(0);
-        self.w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: self.channels[topic],
-                sequence: self.seq,
-                log_time,
-                publish_time: log_time,
-            },
-            &data,
-        )?;
+        let part = &mut self.part;
+        let err = mcap_err(&part.path);
+        part.w
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: part.channels[topic],
+                    sequence: self.seq,
+                    log_time,
+                    publish_time: log_time,
+                },
+                &data,
+            )
+            .map_err(&err)?;
+        part.messages += 1;
         if self.last_flush.elapsed() >= FLUSH_EVERY {
             self.last_flush = Instant::now();
-            self.w.flush()?;
+            part.w.flush().map_err(&err)?;
         }
         Ok(())
     }
 
-    /// `/session`.
+    /// `/session` (and again at the top of every later part).
     ///
     /// # Errors
     /// Writing failed.
-    pub fn session(&mut self, m: &SessionMsg) -> Result<(), mcap::McapError> {
+    pub fn session(&mut self, m: &SessionMsg) -> Result<(), RecordingError> {
+        self.rotate_if_full()?;
+        self.session = Some(m.clone());
         self.put(0, m.t_ns, m)
     }
     /// A record from physics' trace ring: `/adoption` for a [`TraceRecord::ADOPTION`], else
@@ -474,18 +710,19 @@ impl Recorder {
     ///
     /// # Errors
     /// Writing failed.
-    pub fn trace(&mut self, t: &TraceRecord) -> Result<(), mcap::McapError> {
+    pub fn trace(&mut self, t: &TraceRecord) -> Result<(), RecordingError> {
         if t.kind == TraceRecord::ADOPTION {
             self.adoption(&AdoptionMsg::from(t))
         } else {
             self.sample(&SampleMsg::from(t))
         }
     }
-    /// `/object` and `/tool`.
+    /// `/object` and `/tool`, in the same part.
     ///
     /// # Errors
     /// Writing failed.
-    fn sample(&mut self, m: &SampleMsg) -> Result<(), mcap::McapError> {
+    fn sample(&mut self, m: &SampleMsg) -> Result<(), RecordingError> {
+        self.rotate_if_full()?;
         self.put(
             1,
             m.t_ns,
@@ -510,62 +747,67 @@ impl Recorder {
             },
         )
     }
+    /// One message on `topic` (an index into [`TOPICS`]), in the current part or the next.
+    fn one<T: Serialize>(&mut self, topic: usize, t_ns: u64, m: &T) -> Result<(), RecordingError> {
+        self.rotate_if_full()?;
+        self.put(topic, t_ns, m)
+    }
     /// `/adoption`.
     ///
     /// # Errors
     /// Writing failed.
-    fn adoption(&mut self, m: &AdoptionMsg) -> Result<(), mcap::McapError> {
-        self.put(3, m.t_ns, m)
+    fn adoption(&mut self, m: &AdoptionMsg) -> Result<(), RecordingError> {
+        self.one(3, m.t_ns, m)
     }
     /// `/remote`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn remote(&mut self, m: &RemoteMsg) -> Result<(), mcap::McapError> {
-        self.put(4, m.t_ns, m)
+    pub fn remote(&mut self, m: &RemoteMsg) -> Result<(), RecordingError> {
+        self.one(4, m.t_ns, m)
     }
     /// `/presence`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn presence(&mut self, m: &PresenceMsg) -> Result<(), mcap::McapError> {
-        self.put(5, m.t_ns, m)
+    pub fn presence(&mut self, m: &PresenceMsg) -> Result<(), RecordingError> {
+        self.one(5, m.t_ns, m)
     }
     /// `/peer`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn peer(&mut self, m: &PeerMsg) -> Result<(), mcap::McapError> {
+    pub fn peer(&mut self, m: &PeerMsg) -> Result<(), RecordingError> {
         self.put(9, m.t_ns, m)
     }
     /// `/clock`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn clock(&mut self, m: &ClockMsg) -> Result<(), mcap::McapError> {
-        self.put(6, m.t_ns, m)
+    pub fn clock(&mut self, m: &ClockMsg) -> Result<(), RecordingError> {
+        self.one(6, m.t_ns, m)
     }
     /// `/status`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn status(&mut self, m: &StatusMsg) -> Result<(), mcap::McapError> {
-        self.put(7, m.t_ns, m)
+    pub fn status(&mut self, m: &StatusMsg) -> Result<(), RecordingError> {
+        self.one(7, m.t_ns, m)
     }
     /// `/published`.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn published(&mut self, m: &PublishedMsg) -> Result<(), mcap::McapError> {
-        self.put(8, m.t_ns, m)
+    pub fn published(&mut self, m: &PublishedMsg) -> Result<(), RecordingError> {
+        self.one(8, m.t_ns, m)
     }
 
-    /// Writes the summary and footer and closes the file.
+    /// Writes the current part's summary and footer and closes it.
     ///
     /// # Errors
     /// Writing failed.
-    pub fn finish(mut self) -> Result<(), mcap::McapError> {
-        self.w.finish()?;
+    pub fn finish(mut self) -> Result<(), RecordingError> {
+        self.part.w.finish().map_err(mcap_err(&self.part.path))?;
         Ok(())
     }
 }
@@ -591,32 +833,117 @@ pub struct Recording {
     pub clock: Vec<ClockMsg>,
     /// Final counters, if the station stopped cleanly.
     pub status: Option<StatusMsg>,
-    /// The file ended early (no footer): the station did not finish it.
+    /// A file ended early (no footer): the station did not finish it.
     pub truncated: bool,
+    /// The files read, in order (the parts on disk).
+    pub files: Vec<PathBuf>,
 }
 
-/// Reads a recording written by [`Recorder`], also one cut short by a crash.
+/// Reads the recording whose first part is `first`: every part on disk in order, as one
+/// recording (the oldest parts may have been removed; the first need not exist then). A part cut
+/// short by a crash is read up to the cut.
+///
+/// # Errors
+/// No part, a part that cannot be read, is not MCAP or has a message that is not what its channel
+/// says; a part of another recording (session, site or start differ, or its `part` is not its
+/// number); a part missing between two that are there.
+pub fn read(first: &Path) -> Result<Recording, RecordingError> {
+    let parts = parts_on_disk(first).map_err(io_err(first))?;
+    if parts.is_empty() {
+        // The error of the missing first file.
+        return read_part(first);
+    }
+    let mut r = Recording::default();
+    let mut seen: Option<(u32, PathBuf, BTreeMap<String, String>)> = None;
+    for (n, path) in parts {
+        let bytes = std::fs::read(&path).map_err(io_err(&path))?;
+        let meta = metadata_of(&bytes);
+        let refuse = |why: String| RecordingError::NotThisRecording {
+            path: path.display().to_string(),
+            why,
+        };
+        if let Some(p) = meta.get("part").filter(|p| **p != n.to_string()) {
+            return Err(refuse(format!(
+                "its metadata says part {p}, its name part {n}"
+            )));
+        }
+        if let Some((before, before_path, before_meta)) = &seen {
+            if n != before + 1 {
+                return Err(refuse(format!(
+                    "part {n} follows part {before} ({}): the parts between are missing",
+                    before_path.display()
+                )));
+            }
+            for key in ["session", "site", "started_unix_ns"] {
+                if meta.get(key) != before_meta.get(key) {
+                    return Err(refuse(format!(
+                        "a part of another recording than {}: {key} {:?}, not {:?}",
+                        before_path.display(),
+                        meta.get(key).map_or("(none)", String::as_str),
+                        before_meta.get(key).map_or("(none)", String::as_str),
+                    )));
+                }
+            }
+        }
+        let p = parse(&path, &bytes)?;
+        r.session = r.session.or(p.session);
+        r.samples.extend(p.samples);
+        r.adoptions.extend(p.adoptions);
+        r.remote.extend(p.remote);
+        r.published.extend(p.published);
+        r.presence.extend(p.presence);
+        r.clock.extend(p.clock);
+        r.status = p.status.or(r.status);
+        r.truncated |= p.truncated;
+        r.files.push(path.clone());
+        seen = Some((n, path, meta));
+    }
+    Ok(r)
+}
+
+/// Reads one file written by [`Recorder`] (one part of a recording), also one cut short by a crash.
 ///
 /// # Errors
 /// The file cannot be read, is not MCAP, or a message is not what its channel says.
-pub fn read(path: &Path) -> Result<Recording, RecordingError> {
-    let p = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| RecordingError::Io {
-        path: p.clone(),
-        error,
-    })?;
-    let mcap_err = |error| RecordingError::Mcap {
-        path: p.clone(),
-        error,
+pub fn read_part(path: &Path) -> Result<Recording, RecordingError> {
+    let bytes = std::fs::read(path).map_err(io_err(path))?;
+    parse(path, &bytes)
+}
+
+/// The metadata record of a part (empty when it has none).
+fn metadata_of(bytes: &[u8]) -> BTreeMap<String, String> {
+    let Ok(records) = mcap::read::LinearReader::new_with_options(
+        bytes,
+        mcap::read::Options::IgnoreEndMagic.into(),
+    ) else {
+        return BTreeMap::new();
     };
+    for record in records {
+        match record {
+            Ok(mcap::records::Record::Metadata(m)) if m.name == "coop-haptics" => {
+                return m.metadata
+            }
+            // Written before any schema, channel or message.
+            Ok(mcap::records::Record::Header(_) | mcap::records::Record::Metadata(_)) => {}
+            _ => break,
+        }
+    }
+    BTreeMap::new()
+}
+
+/// The messages of one part.
+fn parse(path: &Path, bytes: &[u8]) -> Result<Recording, RecordingError> {
     let bad = |what: String| RecordingError::Io {
-        path: p.clone(),
+        path: path.display().to_string(),
         error: std::io::Error::new(std::io::ErrorKind::InvalidData, what),
     };
     let stream =
-        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
-            .map_err(mcap_err)?;
-    let mut r = Recording::default();
+        mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .map_err(mcap_err(path))?;
+    let mut r = Recording {
+        files: vec![path.to_owned()],
+        ..Recording::default()
+    };
     let mut tools: Vec<ToolPart> = Vec::new();
     let mut objects: Vec<ObjectPart> = Vec::new();
     for m in stream {
@@ -645,7 +972,7 @@ pub fn read(path: &Path) -> Result<Recording, RecordingError> {
             _ => {}
         }
     }
-    r.truncated |= mcap::read::footer(&bytes).is_err();
+    r.truncated |= mcap::read::footer(bytes).is_err();
     // Object and tool parts of one sample are written back to back with the same time.
     let mut tools = tools.into_iter().peekable();
     for o in objects {
@@ -707,7 +1034,7 @@ mod tests {
             age_s: 0.2,
         };
         let by_trace = dir.join("trace.mcap");
-        let mut w = Recorder::create(&by_trace, BTreeMap::new()).expect("create");
+        let mut w = Recorder::create(&by_trace, BTreeMap::new(), Rotation::NONE).expect("create");
         w.trace(&t).expect("w");
         t.kind = TraceRecord::ADOPTION;
         t.t_ns = 43;
@@ -715,7 +1042,7 @@ mod tests {
         w.finish().expect("finish");
         // The same, copied field by field the way the network loop did before `trace`.
         let by_fields = dir.join("fields.mcap");
-        let mut w = Recorder::create(&by_fields, BTreeMap::new()).expect("create");
+        let mut w = Recorder::create(&by_fields, BTreeMap::new(), Rotation::NONE).expect("create");
         w.sample(&SampleMsg {
             t_ns: 42,
             pos: [0.1, 0.2, 0.3],
@@ -816,8 +1143,12 @@ mod tests {
     fn written_then_read_back_also_when_cut_short() {
         let dir = std::env::temp_dir().join(format!("coop-rec-{}", std::process::id()));
         let path = dir.join("a.mcap");
-        let mut w =
-            Recorder::create(&path, BTreeMap::from([("site".into(), "a".into())])).expect("create");
+        let mut w = Recorder::create(
+            &path,
+            BTreeMap::from([("site".into(), "a".into())]),
+            Rotation::NONE,
+        )
+        .expect("create");
         let session = SessionMsg {
             t_ns: 1,
             session: "s".into(),
@@ -864,6 +1195,280 @@ mod tests {
             "{}",
             r.samples.len()
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A fresh directory for one test.
+    fn scratch(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("coop-rec-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        dir
+    }
+
+    /// Writes the same input (the session, `n` samples with the station's other messages among
+    /// them, the final counters) to a recording at `path` bounded by `rotation`.
+    fn record(path: &Path, session: &str, n: u64, rotation: Rotation) {
+        let meta = BTreeMap::from([
+            ("session".into(), session.to_owned()),
+            ("site".into(), "a".into()),
+        ]);
+        let mut w = Recorder::create(path, meta, rotation).expect("create");
+        w.session(&SessionMsg {
+            t_ns: 1,
+            session: session.into(),
+            site: "a".into(),
+            epoch_ns: 5,
+            ..SessionMsg::default()
+        })
+        .expect("w");
+        for k in 0..n {
+            let t_ns = 10 + 10 * k;
+            w.sample(&SampleMsg {
+                t_ns,
+                pos: [k as f64, 0.0, 0.0],
+                rot: [1.0, 0.0, 0.0, 0.0],
+                touching: k % 2 == 0,
+                ..SampleMsg::default()
+            })
+            .expect("w");
+            if k % 7 == 0 {
+                w.adoption(&AdoptionMsg {
+                    t_ns,
+                    from: 1,
+                    jump_m: 0.01,
+                    age_s: 0.2,
+                })
+                .expect("w");
+                w.remote(&RemoteMsg {
+                    t_ns,
+                    seq: k,
+                    via: "live".into(),
+                    ..RemoteMsg::default()
+                })
+                .expect("w");
+            }
+            if k % 11 == 0 {
+                w.published(&PublishedMsg {
+                    t_ns,
+                    seq: k,
+                    state_ns: t_ns,
+                })
+                .expect("w");
+                w.clock(&ClockMsg {
+                    t_ns,
+                    site: 1,
+                    offset_ns: -3,
+                    rtt_ns: 100,
+                })
+                .expect("w");
+            }
+            if k == 3 {
+                w.presence(&PresenceMsg {
+                    t_ns,
+                    site: "b".into(),
+                    present: true,
+                })
+                .expect("w");
+            }
+        }
+        w.status(&StatusMsg {
+            t_ns: 10 * n + 20,
+            published: n,
+            ..StatusMsg::default()
+        })
+        .expect("w");
+        w.finish().expect("finish");
+    }
+
+    fn bytes_bound(max_file_bytes: u64, keep_files: usize) -> Rotation {
+        Rotation {
+            max_file_bytes: Some(max_file_bytes),
+            max_file_duration: None,
+            keep_files,
+        }
+    }
+
+    fn files_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .expect("dir")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn parts_are_named_after_the_first() {
+        let p = |s: &str, n| part_path(Path::new(s), n).display().to_string();
+        assert_eq!(p("out/user1.mcap", 0), "out/user1.mcap");
+        assert_eq!(p("out/user1.mcap", 1), "out/user1.1.mcap");
+        assert_eq!(p("out/user1.mcap", 12), "out/user1.12.mcap");
+        assert_eq!(p("a.b.mcap", 2), "a.b.2.mcap");
+        assert_eq!(p("rec", 3), "rec.3");
+    }
+
+    #[test]
+    fn a_bounded_recording_goes_on_in_parts_each_readable_alone_and_read_as_one() {
+        let dir = scratch("parts");
+        let (whole, parted) = (dir.join("whole.mcap"), dir.join("user1.mcap"));
+        record(&whole, "s", 300, Rotation::NONE);
+        let bound = 8 << 10;
+        record(&parted, "s", 300, bytes_bound(bound, 0));
+        let on_disk = parts_on_disk(&parted).expect("parts");
+        assert!(on_disk.len() >= 4, "{:?}", files_in(&dir));
+        assert_eq!(
+            on_disk.iter().map(|p| p.0).collect::<Vec<_>>(),
+            (0..on_disk.len() as u32).collect::<Vec<_>>()
+        );
+        let want = read_part(&whole).expect("whole");
+        assert!(!want.truncated && want.samples.len() == 300);
+        // Each part alone: a whole MCAP file with the session at its top, its number in its
+        // metadata, and about the bound's size (plus its summary).
+        let mut concatenated = Vec::new();
+        for (n, path) in &on_disk {
+            let alone = read_part(path).expect("a part reads alone");
+            assert!(!alone.truncated, "{}", path.display());
+            assert_eq!(alone.session, want.session, "{}", path.display());
+            assert!(!alone.samples.is_empty(), "{}", path.display());
+            let bytes = std::fs::read(path).expect("bytes");
+            let meta = metadata_of(&bytes);
+            assert_eq!(meta["part"], n.to_string());
+            assert_eq!(meta["session"], "s");
+            assert!(meta.contains_key("started_unix_ns"));
+            assert!(
+                bytes.len() < (bound as usize) + (8 << 10),
+                "{}",
+                bytes.len()
+            );
+            let m = messages(path);
+            assert_eq!(m[0].0, "/session", "{}", path.display());
+            concatenated.extend(m.into_iter().skip(usize::from(*n > 0)));
+        }
+        // Together: the same messages in the same order as the unbounded recording.
+        assert_eq!(concatenated, messages(&whole));
+        let got = read(&parted).expect("read the parts");
+        assert_eq!(
+            got.files,
+            on_disk.into_iter().map(|p| p.1).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            Recording {
+                files: want.files.clone(),
+                ..got
+            },
+            want
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_part_written_for_its_time_bound_is_finished() {
+        let dir = scratch("time");
+        let path = dir.join("t.mcap");
+        let rotation = Rotation {
+            max_file_bytes: None,
+            max_file_duration: Some(Duration::from_millis(20)),
+            keep_files: 0,
+        };
+        let mut w = Recorder::create(&path, BTreeMap::new(), rotation).expect("create");
+        for k in 0..3 {
+            w.published(&PublishedMsg {
+                t_ns: k,
+                seq: k,
+                state_ns: k,
+            })
+            .expect("w");
+            assert_eq!(w.path(), part_path(&path, k as u32));
+            std::thread::sleep(Duration::from_millis(25));
+        }
+        w.finish().expect("finish");
+        assert_eq!(files_in(&dir), ["t.1.mcap", "t.2.mcap", "t.mcap"]);
+        assert_eq!(read(&path).expect("read").published.len(), 3);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn beyond_the_parts_kept_the_oldest_are_removed_and_the_rest_still_read() {
+        let dir = scratch("keep");
+        let (whole, parted) = (dir.join("whole.mcap"), dir.join("user1.mcap"));
+        record(&whole, "s", 300, Rotation::NONE);
+        record(&parted, "s", 300, bytes_bound(8 << 10, 3));
+        let on_disk = parts_on_disk(&parted).expect("parts");
+        assert_eq!(on_disk.len(), 3, "{:?}", files_in(&dir));
+        assert!(on_disk[0].0 > 0 && !parted.exists(), "the first part went");
+        let want = read_part(&whole).expect("whole");
+        let got = read(&parted).expect("the kept parts read without the first");
+        assert_eq!(got.session, want.session, "each part repeats the session");
+        assert!(got.samples.len() < 300);
+        assert_eq!(got.samples[..], want.samples[300 - got.samples.len()..]);
+        assert_eq!(got.status, want.status);
+        // A new recording at the same path removes what the last one left.
+        record(&parted, "s", 5, Rotation::NONE);
+        assert_eq!(files_in(&dir), ["user1.mcap", "whole.mcap"]);
+        assert_eq!(read(&parted).expect("read").samples.len(), 5);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn parts_of_different_recordings_or_with_a_gap_are_refused() {
+        let dir = scratch("mix");
+        let a = dir.join("a").join("user1.mcap");
+        let b = dir.join("b").join("user1.mcap");
+        record(&a, "s1", 200, bytes_bound(8 << 10, 0));
+        record(&b, "s2", 200, bytes_bound(8 << 10, 0));
+        assert!(parts_on_disk(&a).expect("parts").len() >= 3);
+        let refused = |why: &str| {
+            let e = read(&a).expect_err(why).to_string();
+            assert!(e.contains(why), "{e}");
+            assert!(e.contains("user1.1.mcap"), "names the part: {e}");
+        };
+        // Another session's part 1 among ours.
+        std::fs::copy(part_path(&b, 1), part_path(&a, 1)).expect("copy");
+        refused("a part of another recording");
+        refused("session \"s2\", not \"s1\"");
+        // The same session, another run of it (written later).
+        record(&b, "s1", 200, bytes_bound(8 << 10, 0));
+        std::fs::copy(part_path(&b, 1), part_path(&a, 1)).expect("copy");
+        refused("started_unix_ns");
+        // Part 2 renamed as part 1.
+        std::fs::rename(part_path(&a, 2), part_path(&a, 1)).expect("rename");
+        refused("its metadata says part 2, its name part 1");
+        // A part missing in between.
+        std::fs::remove_file(part_path(&a, 1)).expect("remove");
+        let e = read(&a).expect_err("gap").to_string();
+        assert!(e.contains("part 3 follows part 0"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_part_cut_short_is_read_up_to_the_cut() {
+        let dir = scratch("cut-part");
+        let path = dir.join("user1.mcap");
+        record(&path, "s", 300, bytes_bound(8 << 10, 0));
+        let whole = read(&path).expect("read");
+        // A full part, as a crash mid-write leaves it.
+        let part = part_path(&path, 1);
+        let full = read_part(&part).expect("part 1").samples;
+        let bytes = std::fs::read(&part).expect("bytes");
+        std::fs::write(&part, &bytes[..bytes.len() / 2]).expect("cut");
+        let alone = read_part(&part).expect("a cut part still reads alone");
+        assert!(alone.truncated && alone.session.is_some());
+        assert!(
+            !alone.samples.is_empty() && alone.samples.len() < full.len(),
+            "{} of {}",
+            alone.samples.len(),
+            full.len()
+        );
+        assert_eq!(alone.samples[..], full[..alone.samples.len()]);
+        // With the others: everything but what was after the cut.
+        let r = read(&path).expect("a recording with a cut part still reads");
+        assert!(r.truncated);
+        assert_eq!(
+            r.samples.len() + full.len() - alone.samples.len(),
+            whole.samples.len()
+        );
+        assert_eq!(r.status, whole.status, "the last part is whole");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

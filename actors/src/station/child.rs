@@ -252,6 +252,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
         trace: Consumer::open(&names.trace, &opts).context("opening the trace ring")?,
         record: cfg.config.record.clone(),
+        record_rotation: cfg.config.record_rotation(),
         emulation: net.emulate.then(|| coop_transport::network::Emulation {
             link: sc.network.clone(),
             seed: sc.seed,

@@ -11,6 +11,7 @@ use coop_rt::sched::{Policy, Request};
 use coop_rt::shm::station::RingSlots;
 use coop_rt::shm::SegmentName;
 use coop_transport::network::{Mode, NetworkConfig};
+use coop_transport::recording::Rotation;
 use serde::{Deserialize, Serialize};
 
 use crate::scenario_file;
@@ -110,6 +111,13 @@ pub struct StationConfig {
     /// Record what this station believed and displayed to this MCAP file (relative to the config
     /// file's directory). Default: no recording.
     pub record: Option<PathBuf>,
+    /// The recording goes on in its next part (`user1.1.mcap`, `user1.2.mcap`, …) once a part holds
+    /// this many MiB…
+    pub record_max_file_mib: u64,
+    /// …or has been written for this long, s.
+    pub record_max_file_s: u64,
+    /// Parts kept, the oldest removed beyond them (0: keep all).
+    pub record_keep_files: u32,
 }
 
 impl Default for StationConfig {
@@ -128,6 +136,11 @@ impl Default for StationConfig {
             network: NetworkConfig::default(),
             start: StartMode::Now,
             record: None,
+            // A station records about 130 KB/s: a part holds about 8 minutes, the 24 parts (at
+            // most 1.5 GiB) about 3 hours.
+            record_max_file_mib: 64,
+            record_max_file_s: 600,
+            record_keep_files: 24,
         }
     }
 }
@@ -189,6 +202,34 @@ fn sched(
 }
 
 impl StationConfig {
+    /// The recording's bounds, as the recorder takes them.
+    pub fn record_rotation(&self) -> Rotation {
+        Rotation {
+            max_file_bytes: Some(self.record_max_file_mib << 20),
+            max_file_duration: Some(std::time::Duration::from_secs(self.record_max_file_s)),
+            keep_files: self.record_keep_files as usize,
+        }
+    }
+
+    /// Checks the recording's bounds.
+    fn check_record_bounds(&self) -> anyhow::Result<()> {
+        for (field, v, hi) in [
+            ("record_max_file_mib", self.record_max_file_mib, 65_536),
+            ("record_max_file_s", self.record_max_file_s, 86_400),
+        ] {
+            if !(1..=hi).contains(&v) {
+                bail!("{field} = {v}: must be from 1 to {hi}");
+            }
+        }
+        if self.record_keep_files == 1 {
+            bail!(
+                "record_keep_files = 1: must be 0 (keep all) or at least 2 (1 would remove each \
+                 part as soon as it is finished)"
+            );
+        }
+        Ok(())
+    }
+
     /// The configuration as a TOML file, the form [`StationConfig::load`] reads back (a launcher
     /// writes its stations' files with it; nothing spells the format out by hand).
     ///
@@ -296,6 +337,7 @@ impl StationConfig {
                 "network.mode = \"client\" needs network.connect: the zenohd routers to go through"
             );
         }
+        self.check_record_bounds()?;
         let mut config = self;
         let rebase = |p: &mut PathBuf| {
             if let Some(b) = base.filter(|_| p.is_relative()) {

@@ -54,6 +54,10 @@ enum Command {
         /// A separate station binary to run (default: this executable, as `session station`).
         #[arg(long)]
         station_bin: Option<PathBuf>,
+        /// Each station's recording goes on in its next part after this many seconds (the
+        /// station's `record_max_file_s`; default: the station's default).
+        #[arg(long, value_name = "S")]
+        record_max_file_s: Option<u64>,
     },
     /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
     /// the same payload (run from the repository root).
@@ -117,6 +121,7 @@ fn main() -> std::process::ExitCode {
             no_emulation,
             start_timeout_s,
             station_bin,
+            record_max_file_s,
         } => {
             if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
                 anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
@@ -135,6 +140,7 @@ fn main() -> std::process::ExitCode {
                 station_bin,
                 progress: !json,
                 stop,
+                record_max_file_s,
             };
             let (sc, rows, v) = coop_tools::session::run(&a)?;
             if json {

@@ -34,7 +34,7 @@ use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
 use crate::admit::Bounds;
-use crate::recording::{SessionMsg, StatusMsg};
+use crate::recording::{Rotation, SessionMsg, StatusMsg};
 
 pub mod clock;
 pub mod config;
@@ -81,8 +81,10 @@ pub struct NetworkArgs<'a> {
     pub remote: Producer<SiteReport>,
     /// Physics' trace records, for the recording.
     pub trace: Consumer<TraceRecord>,
-    /// Recording file, if any.
+    /// Recording file (its first part), if any.
     pub record: Option<PathBuf>,
+    /// When the recording goes on in its next part, and how many parts are kept.
+    pub record_rotation: Rotation,
     /// Receive-side emulation, if any.
     pub emulation: Option<Emulation>,
     /// What a received state may be ([`Bounds::from_scenario`]).
@@ -140,6 +142,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ("method".into(), a.method.clone()),
             ("emulation".into(), ctx.emulation.clone()),
         ]),
+        a.record_rotation,
     )?;
     ctx.ctl
         .network

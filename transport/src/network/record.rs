@@ -1,6 +1,7 @@
 //! The station's recording, from the network process: physics' trace ring drained into it, and
 //! what this process saw (states received and published, presence, clocks, the session, the final
-//! counters). A write that fails (a full disk) stops the recording, not the station.
+//! counters). The recorder rotates its parts as the station's [`Rotation`] says. A write that fails
+//! (a full disk) stops the recording, not the station.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -9,7 +10,7 @@ use coop_rt::msg::TraceRecord;
 use coop_rt::shm::Consumer;
 
 use super::NetworkError;
-use crate::recording::{Recorder, StatusMsg};
+use crate::recording::{Recorder, RecordingError, Rotation, StatusMsg};
 
 /// The recording being written, if any.
 pub(super) struct Recording {
@@ -19,13 +20,15 @@ pub(super) struct Recording {
 }
 
 impl Recording {
-    /// Creates the recording at `path` (none: nothing is recorded) with its `metadata`.
+    /// Creates the recording at `path` (none: nothing is recorded) with its `metadata`, in parts
+    /// bounded by `rotation`.
     pub(super) fn create(
         path: Option<&Path>,
         metadata: BTreeMap<String, String>,
+        rotation: Rotation,
     ) -> Result<Self, NetworkError> {
         let recorder = match path {
-            Some(p) => Some(Recorder::create(p, metadata)?),
+            Some(p) => Some(Recorder::create(p, metadata, rotation)?),
             None => None,
         };
         Ok(Self {
@@ -35,7 +38,7 @@ impl Recording {
     }
 
     /// Writes with `f`, remembering the first error.
-    pub(super) fn write(&mut self, f: impl FnOnce(&mut Recorder) -> Result<(), mcap::McapError>) {
+    pub(super) fn write(&mut self, f: impl FnOnce(&mut Recorder) -> Result<(), RecordingError>) {
         if let Some(r) = &mut self.recorder {
             if let Err(e) = f(r) {
                 self.err
