@@ -362,7 +362,8 @@ fn schema_of(topic: &str) -> serde_json::Value {
 }
 
 impl Recorder {
-    /// Creates (truncates) `path` and writes the header, schemas and channels.
+    /// Creates (truncates) `path` and writes the header, schemas and channels. Its directory must
+    /// exist: none is created (a mistyped path must not make directories, least of all as root).
     ///
     /// # Errors
     /// The file cannot be created or written.
@@ -372,12 +373,6 @@ impl Recorder {
             path: p.clone(),
             error,
         };
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|error| RecordingError::Io {
-                path: dir.display().to_string(),
-                error,
-            })?;
-        }
         let file = File::create(path).map_err(|error| RecordingError::Io {
             path: p.clone(),
             error,
@@ -659,6 +654,7 @@ mod tests {
     #[test]
     fn a_trace_record_is_written_as_the_sample_and_adoption_messages_are() {
         let dir = std::env::temp_dir().join(format!("coop-rec-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
         let mut t = TraceRecord {
             kind: TraceRecord::SAMPLE,
             t_ns: 42,
@@ -783,6 +779,7 @@ mod tests {
     #[test]
     fn written_then_read_back_also_when_cut_short() {
         let dir = std::env::temp_dir().join(format!("coop-rec-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
         let path = dir.join("a.mcap");
         let mut w =
             Recorder::create(&path, BTreeMap::from([("site".into(), "a".into())])).expect("create");
