@@ -90,6 +90,9 @@ pub struct ChildState {
     pid: u32,
     watch: Option<Watch>,
     last_beat: u64,
+    /// The heartbeat moved since this process started (the counter outlives a process: a
+    /// restarted child continues its predecessor's count).
+    beating: bool,
     last_change: Instant,
     started: Instant,
     hung: bool,
@@ -152,11 +155,13 @@ impl Actor for ChildProcess {
             myself.send_interval(Duration::from_millis(50), || ChildMsg::Tick);
         }
         let now = Instant::now();
+        let last_beat = watch.as_ref().map_or(0, |w| (w.heartbeat)());
         Ok(ChildState {
             spec,
             pid,
             watch,
-            last_beat: 0,
+            last_beat,
+            beating: false,
             last_change: now,
             started: now,
             hung: false,
@@ -199,12 +204,12 @@ impl Actor for ChildProcess {
                 if beat != st.last_beat {
                     st.last_beat = beat;
                     st.last_change = now;
+                    st.beating = true;
                 } else if !st.hung && !st.exited {
-                    let limit = if beat == 0 { w.startup } else { w.timeout };
-                    let since = if beat == 0 {
-                        st.started
+                    let (limit, since) = if st.beating {
+                        (w.timeout, st.last_change)
                     } else {
-                        st.last_change
+                        (w.startup, st.started)
                     };
                     if now.duration_since(since) > limit {
                         st.hung = true;

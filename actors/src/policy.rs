@@ -1,4 +1,15 @@
-//! When a child that exited is started again: a restart policy as data (dora's fields).
+//! When a child that exited is started again: a restart policy as data (dora's fields), per child.
+//!
+//! A station's children do not matter equally, and [`ChildPolicy`] says how much each does:
+//!
+//! - the servo and physics loops are [`ChildPolicy::Essential`]: they follow the station's
+//!   `[supervisor]` [`RestartPolicy`] — restarted after a failure (per `restart`), the delay
+//!   doubling from `backoff_initial_ms` up to `backoff_max_ms`, at most `max_restarts` times within
+//!   `restart_window_s`; one more failure, or an exit the policy does not restart, stops the station;
+//! - the network process is [`ChildPolicy::Degradable`]: the station goes on locally without it
+//!   (degraded, and saying so), and it is restarted after every exit, without limit, the delay
+//!   doubling from `backoff_initial_ms` with each failure since it last came up, capped at
+//!   `network_backoff_max_ms`. Its failures never stop the station.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -77,6 +88,47 @@ impl std::fmt::Display for RestartPolicy {
     }
 }
 
+/// A retry schedule without limit: the delay doubles with each consecutive failure, up to `max`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Backoff {
+    /// Delay after the first failure.
+    pub initial: Duration,
+    /// Longest delay.
+    pub max: Duration,
+}
+
+impl Backoff {
+    /// The delay after `failures` earlier consecutive failures.
+    pub fn delay(&self, failures: usize) -> Duration {
+        let doublings = u32::try_from(failures).unwrap_or(u32::MAX).min(20);
+        self.initial.saturating_mul(1 << doublings).min(self.max)
+    }
+}
+
+/// How the station depends on one child.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChildPolicy {
+    /// The station cannot go on without it: restarted per the policy; an exit the policy does not
+    /// (or no longer) restart stops the station.
+    Essential(RestartPolicy),
+    /// The station goes on without it, degraded: restarted after every exit, without limit, on
+    /// this schedule (reset once it comes up); its exits never stop the station.
+    Degradable(Backoff),
+}
+
+impl std::fmt::Display for ChildPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Essential(p) => p.fmt(f),
+            Self::Degradable(b) => write!(
+                f,
+                "restart always, without limit, backoff up to {} s; the station goes on without it",
+                b.max.as_secs_f64()
+            ),
+        }
+    }
+}
+
 /// What to do about one exit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Decision {
@@ -118,19 +170,40 @@ impl History {
         if self.restarts.len() >= policy.max_restarts as usize {
             return Decision::GiveUp;
         }
-        let doublings = u32::try_from(self.restarts.len())
-            .unwrap_or(u32::MAX)
-            .min(20);
-        let delay = policy
-            .backoff_initial
-            .saturating_mul(1 << doublings)
-            .min(policy.backoff_max);
+        let delay = Backoff {
+            initial: policy.backoff_initial,
+            max: policy.backoff_max,
+        }
+        .delay(self.restarts.len());
         self.restarts.push_back(now);
         Decision::RestartAfter(delay)
     }
     /// Restarts within the window so far.
     pub fn count(&self) -> usize {
         self.restarts.len()
+    }
+}
+
+/// A degradable child's failures since it last came up.
+#[derive(Debug, Clone, Default)]
+pub struct Retries {
+    since_up: usize,
+}
+
+impl Retries {
+    /// The delay before restarting after an exit, and one more failure counted.
+    pub fn next(&mut self, b: &Backoff) -> Duration {
+        let d = b.delay(self.since_up);
+        self.since_up += 1;
+        d
+    }
+    /// The child came up: the next failure starts the schedule again.
+    pub fn came_up(&mut self) {
+        self.since_up = 0;
+    }
+    /// Failures since it last came up.
+    pub fn count(&self) -> usize {
+        self.since_up
     }
 }
 
@@ -193,5 +266,22 @@ mod tests {
             last,
             Some(Decision::RestartAfter(Duration::from_millis(300)))
         );
+    }
+
+    #[test]
+    fn a_degradable_child_is_retried_without_limit_and_starts_over_once_up() {
+        let b = Backoff {
+            initial: Duration::from_millis(100),
+            max: Duration::from_millis(5000),
+        };
+        let mut r = Retries::default();
+        let delays: Vec<u128> = (0..10).map(|_| r.next(&b).as_millis()).collect();
+        assert_eq!(
+            delays,
+            [100, 200, 400, 800, 1600, 3200, 5000, 5000, 5000, 5000]
+        );
+        assert_eq!(r.count(), 10);
+        r.came_up();
+        assert_eq!(r.next(&b), Duration::from_millis(100));
     }
 }

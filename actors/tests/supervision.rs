@@ -1,13 +1,16 @@
 //! The supervisor with real processes (H10, H13): `false` fakes a child that crashes on every start,
-//! `sleep` a long-running one, and a heartbeat that never moves a hung one. No sleeps to make tests
+//! `sleep` a long-running one, a heartbeat that never moves a hung one, and `sh` one that fails
+//! until a file appears. No sleeps to make tests
 //! pass: each waits on the supervisor's status with a deadline.
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use coop_actors::child::{ChildSpec, Watch};
-use coop_actors::policy::{RestartMode, RestartPolicy};
-use coop_actors::supervisor::{End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg};
+use coop_actors::policy::{Backoff, ChildPolicy, RestartMode, RestartPolicy};
+use coop_actors::supervisor::{
+    ChildState, End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg,
+};
 use nix::sys::signal::Signal;
 use ractor::Actor;
 use tokio::sync::watch;
@@ -53,8 +56,11 @@ async fn wait_for(
 async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
     let (tx, mut rx) = watch::channel(Status::default());
     let args = SupervisorArgs {
-        children: vec![(spec("physics", "false", &[]), None)],
-        policy: policy(2),
+        children: vec![(
+            spec("physics", "false", &[]),
+            None,
+            ChildPolicy::Essential(policy(2)),
+        )],
         status: tx,
     };
     let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
@@ -81,8 +87,11 @@ async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
 async fn the_stop_ladder_ends_a_running_child_without_restart() {
     let (tx, mut rx) = watch::channel(Status::default());
     let args = SupervisorArgs {
-        children: vec![(spec("servo", "sleep", &["30"]), None)],
-        policy: policy(3),
+        children: vec![(
+            spec("servo", "sleep", &["30"]),
+            None,
+            ChildPolicy::Essential(policy(3)),
+        )],
         status: tx,
     };
     let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
@@ -109,8 +118,11 @@ async fn a_hung_child_is_killed_and_restarted() {
         startup: Duration::from_millis(200),
     };
     let args = SupervisorArgs {
-        children: vec![(spec("network", "sleep", &["30"]), Some(watch))],
-        policy: policy(1),
+        children: vec![(
+            spec("network", "sleep", &["30"]),
+            Some(watch),
+            ChildPolicy::Essential(policy(1)),
+        )],
         status: tx,
     };
     let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
@@ -130,4 +142,82 @@ async fn a_hung_child_is_killed_and_restarted() {
     }
     sup.stop(None);
     handle.await.expect("supervisor ends");
+}
+
+/// A degradable child (the network's policy) that fails on every start never ends the station: it
+/// is restarted without limit with a capped backoff, shows down and the station degraded, and once
+/// it comes up (here: `sh` runs long once a file exists, and its heartbeat moves) it shows up and
+/// the station is no longer degraded.
+#[tokio::test]
+async fn a_degradable_child_failing_every_start_degrades_the_station_until_it_comes_up() {
+    let flag = std::env::temp_dir().join(format!("coop-degradable-{}", std::process::id()));
+    let _ = std::fs::remove_file(&flag);
+    let beat = Arc::new(coop_rt::sync::AtomicU64::new(0));
+    let b = beat.clone();
+    let watch = Watch {
+        heartbeat: Arc::new(move || b.load(coop_rt::sync::Ordering::Relaxed)),
+        timeout: Duration::from_secs(30),
+        startup: Duration::from_secs(30),
+    };
+    let script = format!("test -e {} && exec sleep 30; exit 3", flag.display());
+    let (tx, mut rx) = watch::channel(Status::default());
+    let args = SupervisorArgs {
+        children: vec![
+            (
+                spec("servo", "sleep", &["30"]),
+                None,
+                ChildPolicy::Essential(policy(1)),
+            ),
+            (
+                spec("network", "sh", &["-c", &script]),
+                Some(watch),
+                ChildPolicy::Degradable(Backoff {
+                    initial: Duration::from_millis(5),
+                    max: Duration::from_millis(20),
+                }),
+            ),
+        ],
+        status: tx,
+    };
+    let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
+        .await
+        .expect("supervisor");
+    let s = wait_for(&mut rx, "many restarts, beyond any policy", |s| {
+        s.restarts[1] > 10
+    })
+    .await;
+    assert_eq!(s.end, None, "a degradable child never ends the station");
+    assert_eq!(s.degraded, vec!["network".to_owned()]);
+    assert_eq!(s.health[1].state, ChildState::Down);
+    assert!(s.health[1].down_since_ns.is_some());
+    let last = s.health[1].last_failure.clone().unwrap_or_default();
+    assert!(last.contains("exited with status 3"), "{last}");
+    assert_eq!(s.restarts[0], 0, "the essential child ran on");
+
+    // From now on a start runs long, and beats (as a network process does once its session is
+    // open).
+    std::fs::write(&flag, "").expect("flag");
+    let beating = tokio::spawn(async move {
+        loop {
+            beat.fetch_add(1, coop_rt::sync::Ordering::Relaxed);
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let s = wait_for(
+        &mut rx,
+        "the child up, the station no longer degraded",
+        |s| s.health[1].state == ChildState::Up,
+    )
+    .await;
+    assert!(s.degraded.is_empty(), "{s:?}");
+    assert_eq!(s.health[1].down_since_ns, None);
+    assert_eq!(s.end, None);
+    beating.abort();
+    sup.send_message(SupervisorMsg::BeginStop).expect("send");
+    sup.send_message(SupervisorMsg::SignalAll(Signal::SIGTERM))
+        .expect("send");
+    wait_for(&mut rx, "the children to end", |s| s.live == 0).await;
+    sup.stop(None);
+    handle.await.expect("supervisor ends");
+    let _ = std::fs::remove_file(&flag);
 }

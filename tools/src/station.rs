@@ -23,6 +23,16 @@ struct Args {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the station: servo, physics and network processes under a supervisor, until Ctrl-C/SIGTERM.
+    ///
+    /// The configuration is checked first (nothing starts if a value breaks a rule, or a listen
+    /// port is taken). Restarts are per child. The servo and physics follow the `[supervisor]`
+    /// fields: `restart` (never, on-failure, always), `backoff_initial_ms` doubling up to
+    /// `backoff_max_ms`, at most `max_restarts` within `restart_window_s`; beyond that the station
+    /// stops with an error naming the child and the policy. The network process is restarted after
+    /// every exit without limit, backing off up to `network_backoff_max_ms`; while it is down the
+    /// station runs on locally, degraded (said on stderr and by `station status`). A loop whose
+    /// heartbeat stands still `heartbeat_timeout_ms` (`startup_timeout_ms` after a start) is killed
+    /// as hung.
     Run {
         #[command(flatten)]
         child: ChildArgs,

@@ -1,6 +1,7 @@
 //! `station run` with real processes: it comes up, keeps going through killed children,
-//! stops on SIGTERM leaving nothing behind, its children die with it, and a live station's name is
-//! refused. Unique session names keep parallel tests apart; every wait has a deadline; nothing
+//! stops on SIGTERM leaving nothing behind, its children die with it, a live station's name is
+//! refused, a loop failing every start stops it, and a network that cannot come up leaves it running
+//! degraded until it can. Unique session names keep parallel tests apart; every wait has a deadline; nothing
 //! asserts on timing.
 
 use std::process::Command;
@@ -321,19 +322,61 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A child that fails on every start (here the network process: its listen port is taken) is
-/// restarted per policy, then the station stops with an error naming the child and the policy, and
-/// leaves nothing behind.
+/// A loop child that fails on every start is restarted per policy, then the station stops with an
+/// error naming the child and the policy, and leaves nothing behind. Here physics: once the station
+/// runs its configuration file is gone (children read it at every start), and physics is killed.
 #[test]
 fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
     let session = unique_session();
-    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
-    let port = taken.local_addr().expect("addr").port();
     let dir = std::env::temp_dir().join(format!("coop-crash-{session}"));
     let cfg = station_config(&dir, &session, "user1", |c| {
-        c.network.listen = vec![format!("tcp/127.0.0.1:{port}")];
         c.supervisor.max_restarts = 2;
         c.supervisor.backoff_initial_ms = 20;
+    });
+    let mut station = Reaped::spawn(
+        Command::new(STATION)
+            .arg("run")
+            .arg("--config")
+            .arg(&cfg)
+            .stderr(std::process::Stdio::piped()),
+    );
+    let ctl = control(&session);
+    let (_, physics) = running(&ctl);
+    std::fs::remove_file(&cfg).expect("remove the config");
+    kill(Pid::from_raw(physics as i32), Signal::SIGKILL).expect("SIGKILL physics");
+    let status = wait_until("the station to stop", LIMIT, || {
+        station.0.as_mut().and_then(|p| p.try_wait().ok().flatten())
+    });
+    let mut err = String::new();
+    if let Some(e) = station.0.as_mut().and_then(|p| p.stderr.as_mut()) {
+        use std::io::Read;
+        e.read_to_string(&mut err).expect("stderr");
+    }
+    assert!(!status.success(), "the station should fail: {err}");
+    assert!(err.contains("reading station config"), "{err}");
+    assert!(err.contains("child physics failed 3 times"), "{err}");
+    assert!(
+        err.contains("restart on-failure, at most 2 restarts"),
+        "{err}"
+    );
+    drop(ctl);
+    assert!(
+        shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A listen port that is taken is refused before anything starts, naming the field, the value and
+/// the file (it used to crash-loop the network process until the policy stopped the station).
+#[test]
+fn a_taken_listen_port_is_refused_before_start() {
+    let session = unique_session();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let port = taken.local_addr().expect("addr").port();
+    let dir = std::env::temp_dir().join(format!("coop-taken-{session}"));
+    let cfg = station_config(&dir, &session, "user1", |c| {
+        c.network.listen = vec![format!("tcp/127.0.0.1:{port}")];
     });
     let out = Command::new(STATION)
         .arg("run")
@@ -342,17 +385,130 @@ fn a_child_failing_every_start_stops_the_station_with_a_clear_error() {
         .output()
         .expect("run");
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "the station should fail: {err}");
-    assert!(err.contains("child network failed 3 times"), "{err}");
+    assert!(!out.status.success(), "accepted: {err}");
     assert!(
-        err.contains("restart on-failure, at most 2 restarts"),
+        err.contains(&format!(
+            "network.listen contains \"tcp/127.0.0.1:{port}\": cannot listen there now"
+        )) && err.contains(&cfg.display().to_string()),
         "{err}"
     );
     assert!(
-        shm_entries(&format!("coop_{session}_")).is_empty(),
-        "segments left behind"
+        !err.contains("running servo"),
+        "refused before anything started: {err}"
     );
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
     drop(taken);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The network cannot come up (client mode, its router not there yet: zenoh's open fails): the
+/// station runs on locally, degraded — servo and physics running, their cycles going on — while
+/// the network process is restarted; status and stderr say so. Once something a client can reach
+/// listens on that locator (a second station, a zenoh peer), the network comes up: heartbeat moving,
+/// locators shown, restarts no longer growing, and the stations see each other.
+#[test]
+fn a_network_that_cannot_come_up_degrades_the_station_until_it_can() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-degraded-{session}"));
+    let port = free_port();
+    let locator = format!("tcp/127.0.0.1:{port}");
+    let a_cfg = station_config(&dir, &session, "user1", |c| {
+        c.network.mode = coop_transport::network::Mode::Client;
+        c.network.connect = vec![locator.clone()];
+        c.supervisor.backoff_initial_ms = 20;
+        c.supervisor.network_backoff_max_ms = 200;
+    });
+    let a_err = dir.join("user1.err");
+    let a = Reaped::spawn(
+        Command::new(STATION)
+            .arg("run")
+            .arg("--config")
+            .arg(&a_cfg)
+            .stderr(std::fs::File::create(&a_err).expect("stderr file")),
+    );
+    let ctl = control(&session);
+    running(&ctl);
+    let net = ctl.child(Child::Network);
+    wait_until("the network restarted a few times", LIMIT, || {
+        (net.restarts.load(Ordering::Relaxed) >= 3).then_some(())
+    });
+    let sites = ["user1".to_owned(), "user2".to_owned()];
+    let read = || coop_actors::station::status::read(&session, "user1", &sites).expect("status");
+    let s0 = wait_until("status showing the station degraded", LIMIT, || {
+        Some(read()).filter(|s| s.degraded)
+    });
+    assert!(s0.running && s0.run_state == "running", "{s0}");
+    assert!(
+        s0.loops.servo.rate_hz > 0.0 && s0.loops.physics.rate_hz > 0.0,
+        "{s0}"
+    );
+    let n = &s0.children[2];
+    assert_eq!((n.name, n.health), ("network", "down"), "{s0}");
+    assert!(n.restarts >= 3 && n.down_s.is_some(), "{s0}");
+    assert!(
+        n.last_failure
+            .as_deref()
+            .is_some_and(|f| f.contains("network (pid")),
+        "{s0}"
+    );
+    assert_eq!(s0.children[0].health, "up", "{s0}");
+    let printed = s0.to_string();
+    assert!(
+        printed.contains("DEGRADED") && printed.contains("network down for"),
+        "{printed}"
+    );
+    let json = s0.to_json();
+    assert_eq!(json["degraded"], true);
+    assert_eq!(json["children"][2]["health"], "down");
+    let s1 = wait_until("servo and physics cycles going on", LIMIT, || {
+        Some(read()).filter(|s| {
+            s.loops.servo.cycles > s0.loops.servo.cycles + 100
+                && s.loops.physics.cycles > s0.loops.physics.cycles + 100
+        })
+    });
+    assert!(s1.degraded && s1.running, "{s1}");
+    assert_eq!(s1.children[0].restarts + s1.children[1].restarts, 0, "{s1}");
+
+    // Now a peer a client can connect to listens there.
+    let b_cfg = station_config(&dir, &session, "user2", |c| {
+        c.network.listen = vec![locator.clone()];
+    });
+    let b = start(&b_cfg);
+    let up = wait_until("the network up: healthy, locators shown", LIMIT, || {
+        let s = read();
+        (!s.degraded && s.children[2].health == "up" && !s.network.locators.is_empty()).then_some(s)
+    });
+    assert!(up.network.locators.contains(&locator), "{up}");
+    let restarts = net.restarts.load(Ordering::Relaxed);
+    let beat = net.heartbeat.load(Ordering::Relaxed);
+    wait_until("the stations to see each other", LIMIT, || {
+        (ctl.network.received.load(Ordering::Relaxed) > 20
+            && ctl.physics.received.load(Ordering::Relaxed) > 20)
+            .then_some(())
+    });
+    wait_until("the network's heartbeat moving", LIMIT, || {
+        (net.heartbeat.load(Ordering::Relaxed) > beat + 50).then_some(())
+    });
+    assert_eq!(
+        net.restarts.load(Ordering::Relaxed),
+        restarts,
+        "restarts stopped growing"
+    );
+    for s in [a, b] {
+        kill(Pid::from_raw(s.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+        let (status, _) = s.finish();
+        assert!(status.success(), "exit {status}");
+    }
+    let err = std::fs::read_to_string(&a_err).expect("stderr");
+    let entered = err.find("station user1: DEGRADED: the network process is down");
+    let left = err.find("station user1: no longer degraded: the network process is up again");
+    assert!(
+        entered.is_some() && left.is_some() && entered < left,
+        "one line entering, one leaving degraded mode:\n{err}"
+    );
+    assert_eq!(err.matches("DEGRADED").count(), 1, "{err}");
+    drop(ctl);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

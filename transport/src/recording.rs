@@ -599,7 +599,8 @@ impl Part {
 
 impl Recorder {
     /// Creates (truncates) `path`, the first part, and writes the header, metadata, schemas and
-    /// channels; removes the parts an earlier recording left at the same path.
+    /// channels; removes the parts an earlier recording left at the same path. Its directory must
+    /// exist: none is created (a mistyped path must not make directories, least of all as root).
     ///
     /// # Errors
     /// The file cannot be created or written, or an earlier part cannot be removed.
@@ -608,9 +609,6 @@ impl Recorder {
         mut metadata: BTreeMap<String, String>,
         rotation: Rotation,
     ) -> Result<Self, RecordingError> {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(io_err(dir))?;
-        }
         for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
             if n > 0 {
                 std::fs::remove_file(&old).map_err(io_err(&old))?;
@@ -1017,6 +1015,7 @@ mod tests {
     #[test]
     fn a_trace_record_is_written_as_the_sample_and_adoption_messages_are() {
         let dir = std::env::temp_dir().join(format!("coop-rec-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
         let mut t = TraceRecord {
             kind: TraceRecord::SAMPLE,
             t_ns: 42,
@@ -1142,6 +1141,7 @@ mod tests {
     #[test]
     fn written_then_read_back_also_when_cut_short() {
         let dir = std::env::temp_dir().join(format!("coop-rec-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
         let path = dir.join("a.mcap");
         let mut w = Recorder::create(
             &path,

@@ -10,7 +10,7 @@ use coop_model::scenario::{MethodName, Scenario};
 use coop_rt::sched::{Policy, Request};
 use coop_rt::shm::station::RingSlots;
 use coop_rt::shm::SegmentName;
-use coop_transport::network::{Mode, NetworkConfig};
+use coop_transport::network::{Locator, Mode, NetworkConfig};
 use coop_transport::recording::Rotation;
 use serde::{Deserialize, Serialize};
 
@@ -44,7 +44,9 @@ pub enum StartMode {
     Session,
 }
 
-/// The supervisor's policy.
+/// The supervisor's policy: `max_restarts` … `backoff_max_ms` are the servo's and physics'
+/// (a failure beyond them stops the station); the network process is retried without limit, its
+/// delay capped by `network_backoff_max_ms` (see [`crate::policy`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SupervisorSpec {
@@ -58,6 +60,9 @@ pub struct SupervisorSpec {
     pub backoff_initial_ms: u64,
     /// Longest restart delay, ms.
     pub backoff_max_ms: u64,
+    /// Longest restart delay of the network process, ms: it is restarted without limit (the
+    /// station goes on without it, degraded), the delay doubling from `backoff_initial_ms`.
+    pub network_backoff_max_ms: u64,
     /// A loop whose heartbeat stands still this long is hung and killed, ms.
     pub heartbeat_timeout_ms: u64,
     /// Time a child has to show its first heartbeat, ms.
@@ -72,6 +77,7 @@ impl Default for SupervisorSpec {
             restart_window_s: 10.0,
             backoff_initial_ms: 100,
             backoff_max_ms: 2000,
+            network_backoff_max_ms: 5000,
             heartbeat_timeout_ms: 500,
             startup_timeout_ms: 3000,
         }
@@ -172,8 +178,10 @@ pub struct Resolved {
     pub physics_sched: Request,
     /// CPUs for everything that is not the servo (physics, network, supervisor).
     pub housekeeping_cpus: Vec<usize>,
-    /// The supervisor's restart policy.
+    /// The supervisor's restart policy (of the servo and physics).
     pub policy: crate::policy::RestartPolicy,
+    /// The network process's retry schedule.
+    pub network_backoff: crate::policy::Backoff,
 }
 
 fn sched(
@@ -315,14 +323,7 @@ impl StationConfig {
                 bail!("{field} = {slots}: must be a power of two from 2 to 65536");
             }
         }
-        for (field, list) in [
-            ("network.listen", &self.network.listen),
-            ("network.connect", &self.network.connect),
-        ] {
-            if let Some(bad) = list.iter().find(|e| !e.contains('/') || e.len() > 256) {
-                bail!("{field} contains {bad:?}: a zenoh locator looks like tcp/127.0.0.1:7447");
-            }
-        }
+        network_rules(&self.network)?;
         if let Some(age) = self.network.max_state_age_ms {
             if !(10.0..=60_000.0).contains(&age) {
                 bail!("network.max_state_age_ms = {age}: must be from 10 to 60000 ms");
@@ -331,11 +332,6 @@ impl StationConfig {
         let lost = self.network.lost_after_reports;
         if !(2..=10_000).contains(&lost) {
             bail!("network.lost_after_reports = {lost}: must be from 2 to 10000 report periods");
-        }
-        if self.network.mode == Mode::Client && self.network.connect.is_empty() {
-            bail!(
-                "network.mode = \"client\" needs network.connect: the zenohd routers to go through"
-            );
         }
         self.check_record_bounds()?;
         let mut config = self;
@@ -346,6 +342,7 @@ impl StationConfig {
         };
         if let Some(r) = &mut config.record {
             rebase(r);
+            record_rules(r)?;
         }
         if let Some(t) = &mut config.network.tls {
             for (field, f) in [
@@ -357,11 +354,13 @@ impl StationConfig {
             ] {
                 if let Some(p) = f {
                     rebase(p);
+                    let shown = p.display().to_string();
+                    // Opened, not only looked at: zenoh reads it at every start of the network.
+                    if let Err(e) = std::fs::File::open(&*p) {
+                        bail!("network.tls.{field} = {shown:?}: cannot be read: {e}");
+                    }
                     if !p.is_file() {
-                        bail!(
-                            "network.tls.{field} = {:?}: no such file",
-                            p.display().to_string()
-                        );
+                        bail!("network.tls.{field} = {shown:?}: must be a regular file");
                     }
                 }
             }
@@ -397,6 +396,11 @@ impl StationConfig {
                 10,
             ),
             ("supervisor.startup_timeout_ms", sup.startup_timeout_ms, 10),
+            (
+                "supervisor.network_backoff_max_ms",
+                sup.network_backoff_max_ms,
+                sup.backoff_initial_ms,
+            ),
         ] {
             if !(lo..=600_000).contains(&v) {
                 bail!("{field} = {v}: must be from {lo} to 600000");
@@ -409,6 +413,10 @@ impl StationConfig {
             backoff_initial: std::time::Duration::from_millis(sup.backoff_initial_ms),
             backoff_max: std::time::Duration::from_millis(sup.backoff_max_ms),
         };
+        let network_backoff = crate::policy::Backoff {
+            initial: std::time::Duration::from_millis(sup.backoff_initial_ms),
+            max: std::time::Duration::from_millis(sup.network_backoff_max_ms),
+        };
         Ok(Resolved {
             config,
             scenario,
@@ -418,7 +426,164 @@ impl StationConfig {
             servo_sched,
             physics_sched,
             policy,
+            network_backoff,
         })
+    }
+}
+
+/// The `[network]` rules that need no look at the machine: every locator is a zenoh endpoint of a
+/// transport this build has; no port (but 0) is listened on twice; client mode has routers to go
+/// through; a `tls/` locator has the TLS files it needs named.
+fn network_rules(net: &NetworkConfig) -> anyhow::Result<()> {
+    let mut listening: Vec<(&String, Locator)> = Vec::new();
+    for (field, list) in [
+        ("network.listen", &net.listen),
+        ("network.connect", &net.connect),
+    ] {
+        for l in list {
+            if l.len() > 256 {
+                bail!("{field} contains {l:?}: a locator is at most 256 bytes");
+            }
+            let loc =
+                Locator::parse(l).map_err(|e| anyhow::anyhow!("{field} contains {l:?}: {e}"))?;
+            // Client mode does not listen (zenoh ignores `listen` there).
+            let listens = field == "network.listen" && net.mode == Mode::Peer;
+            if listens && loc.port != 0 {
+                if let Some((other, _)) = listening.iter().find(|(_, o)| o.overlaps(&loc)) {
+                    bail!(
+                        "{field} contains {other:?} and {l:?}: the same port twice (each port is listened on once)"
+                    );
+                }
+            }
+            if loc.protocol == "tls" && (listens || field == "network.connect") {
+                let t = net.tls.clone().unwrap_or_default();
+                let needs: Vec<(&str, bool)> = if listens {
+                    vec![
+                        ("listen_certificate", t.listen_certificate.is_some()),
+                        ("listen_private_key", t.listen_private_key.is_some()),
+                        (
+                            "root_ca_certificate (enable_mtls)",
+                            !t.enable_mtls || t.root_ca_certificate.is_some(),
+                        ),
+                    ]
+                } else {
+                    vec![
+                        ("root_ca_certificate", t.root_ca_certificate.is_some()),
+                        (
+                            "connect_certificate (enable_mtls)",
+                            !t.enable_mtls || t.connect_certificate.is_some(),
+                        ),
+                        (
+                            "connect_private_key (enable_mtls)",
+                            !t.enable_mtls || t.connect_private_key.is_some(),
+                        ),
+                    ]
+                };
+                let missing: Vec<&str> = needs
+                    .iter()
+                    .filter(|(_, ok)| !ok)
+                    .map(|(n, _)| *n)
+                    .collect();
+                if !missing.is_empty() {
+                    let table = if net.tls.is_none() {
+                        "a [network.tls] table with"
+                    } else {
+                        "[network.tls]"
+                    };
+                    bail!(
+                        "{field} contains {l:?}: a tls/ locator needs {table} {}",
+                        missing.join(" and ")
+                    );
+                }
+            }
+            if listens {
+                listening.push((l, loc));
+            }
+        }
+    }
+    if net.mode == Mode::Client && net.connect.is_empty() {
+        bail!("network.mode = \"client\" needs network.connect: the zenohd routers to go through");
+    }
+    Ok(())
+}
+
+/// The recording's rules: its directory exists and is writable (none is created), and the path
+/// is a regular file or not there yet (not a directory, a device or a pipe: `/dev/full` would take
+/// the recording and fail every write).
+fn record_rules(path: &Path) -> anyhow::Result<()> {
+    let shown = path.display().to_string();
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match std::fs::metadata(dir) {
+        Err(e) => bail!(
+            "record = {shown:?}: its directory {:?} cannot be used ({e}); it is not created, make it first",
+            dir.display().to_string()
+        ),
+        Ok(m) if !m.is_dir() => bail!(
+            "record = {shown:?}: {:?} is not a directory",
+            dir.display().to_string()
+        ),
+        Ok(_) => {}
+    }
+    if let Err(e) = nix::unistd::access(dir, nix::unistd::AccessFlags::W_OK) {
+        bail!(
+            "record = {shown:?}: its directory {:?} is not writable ({e})",
+            dir.display().to_string()
+        );
+    }
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => {
+            use std::os::unix::fs::FileTypeExt;
+            let t = m.file_type();
+            let what = if t.is_dir() {
+                "a directory"
+            } else if t.is_char_device() || t.is_block_device() {
+                "a device"
+            } else if t.is_fifo() {
+                "a pipe"
+            } else if t.is_socket() {
+                "a socket"
+            } else {
+                "not a file"
+            };
+            bail!("record = {shown:?}: must be a regular file (it is {what})");
+        }
+        Ok(_) => {
+            if let Err(e) = nix::unistd::access(path, nix::unistd::AccessFlags::W_OK) {
+                bail!("record = {shown:?}: is not writable ({e})");
+            }
+        }
+        Err(_) => {}
+    }
+    Ok(())
+}
+
+impl Resolved {
+    /// The rules that look at the machine as it is now, checked by `station run` before it creates
+    /// anything (not by every resolve: a child re-reads the configuration while its station's
+    /// network process holds the ports): every listen port that is not 0 is free.
+    ///
+    /// # Errors
+    /// A taken port (or an address of another machine), naming the field and the value.
+    pub fn check_listen_ports_free(&self) -> anyhow::Result<()> {
+        let net = &self.config.network;
+        if net.mode == Mode::Client {
+            return Ok(());
+        }
+        for l in &net.listen {
+            let loc = Locator::parse(l)
+                .map_err(|e| anyhow::anyhow!("network.listen contains {l:?}: {e}"))?;
+            if loc.port != 0 {
+                if let Err(e) = loc.bind_check() {
+                    bail!(
+                        "network.listen contains {l:?}: cannot listen there now ({e}); choose a free port, or 0 for one chosen at start"
+                    );
+                }
+            }
+        }
+        Ok(())
     }
 }
 
@@ -434,11 +599,70 @@ mod tests {
         assert_eq!((r.name.as_str(), r.site), ("user1", 0));
         assert_eq!(r.servo_sched.policy, Policy::Fifo);
         assert_eq!(r.scenario.name, "paper");
+        assert_eq!(r.network_backoff.max, std::time::Duration::from_secs(5));
+    }
+
+    #[test]
+    fn a_taken_listen_port_is_refused_before_start_and_a_free_one_passes() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = taken.local_addr().expect("addr").port();
+        let mut c = StationConfig::default();
+        c.network.listen = vec![format!("tcp/127.0.0.1:{port}")];
+        let r = c
+            .clone()
+            .resolve(None)
+            .expect("no look at the machine in resolve");
+        let err = r.check_listen_ports_free().expect_err("taken");
+        assert!(
+            format!("{err:#}").contains(&format!(
+                "network.listen contains \"tcp/127.0.0.1:{port}\": cannot listen there now"
+            )),
+            "{err:#}"
+        );
+        drop(taken);
+        r.check_listen_ports_free().expect("free now");
+        c.network.mode = Mode::Client;
+        c.network.connect = vec!["tcp/127.0.0.1:7447".into()];
+        let taken = std::net::TcpListener::bind(("127.0.0.1", port)).expect("bind again");
+        c.resolve(None)
+            .expect("valid")
+            .check_listen_ports_free()
+            .expect("a client does not listen");
+        drop(taken);
+    }
+
+    #[test]
+    fn a_recording_path_is_a_file_in_a_writable_directory_never_made() {
+        let dir = std::env::temp_dir().join(format!("coop-rec-rules-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let with = |p: &Path| StationConfig {
+            record: Some(p.to_owned()),
+            ..StationConfig::default()
+        };
+        with(&dir.join("a.mcap")).resolve(None).expect("a new file");
+        let err = with(&dir).resolve(None).expect_err("a directory");
+        assert!(
+            format!("{err:#}").contains("must be a regular file (it is a directory)"),
+            "{err:#}"
+        );
+        let missing = dir.join("not-made/a.mcap");
+        assert!(with(&missing).resolve(None).is_err());
+        assert!(
+            !dir.join("not-made").exists(),
+            "validation made a directory"
+        );
+        // Relative to the config file's directory.
+        std::fs::create_dir_all(dir.join("rec")).expect("dir");
+        let r = with(Path::new("rec/a.mcap"))
+            .resolve(Some(&dir))
+            .expect("relative");
+        assert_eq!(r.config.record, Some(dir.join("rec/a.mcap")));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
     fn each_rule_names_field_value_and_rule() {
-        let cases: [(&str, &str); 8] = [
+        let cases: [(&str, &str); 16] = [
             (
                 "[supervisor]\nrestart = \"sometimes\"",
                 "supervisor.restart = \"sometimes\"",
@@ -465,6 +689,38 @@ mod tests {
                 "rings.tool_slots = 100: must be a power of two",
             ),
             ("sesion = \"x\"", "unknown field `sesion`"),
+            (
+                "[network]\nlisten = [\"udp/127.0.0.1:0\"]",
+                "network.listen contains \"udp/127.0.0.1:0\": transport \"udp\" is not in this build",
+            ),
+            (
+                "[network]\nconnect = [\"tcp/127.0.0.1\"]",
+                "network.connect contains \"tcp/127.0.0.1\": a zenoh locator looks like",
+            ),
+            (
+                "[network]\nlisten = [\"tcp/0.0.0.0:7447\", \"tls/127.0.0.1:7447\"]",
+                "the same port twice",
+            ),
+            (
+                "[network]\nlisten = [\"tls/127.0.0.1:0\"]",
+                "a tls/ locator needs a [network.tls] table with listen_certificate and listen_private_key",
+            ),
+            (
+                "[network]\nconnect = [\"tls/127.0.0.1:7447\"]\n[network.tls]\nenable_mtls = true",
+                "needs [network.tls] root_ca_certificate and connect_certificate (enable_mtls) and",
+            ),
+            (
+                "record = \"/dev/full\"",
+                "record = \"/dev/full\": must be a regular file (it is a device)",
+            ),
+            (
+                "record = \"/nonexistent-coop-dir/a.mcap\"",
+                "its directory \"/nonexistent-coop-dir\" cannot be used",
+            ),
+            (
+                "[supervisor]\nbackoff_initial_ms = 100\nnetwork_backoff_max_ms = 50",
+                "supervisor.network_backoff_max_ms = 50: must be from 100",
+            ),
         ];
         for (text, needle) in cases {
             let err = toml::from_str::<StationConfig>(text)

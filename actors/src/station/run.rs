@@ -1,8 +1,12 @@
 //! `station run`: bring a station up in order, keep it going, and take it down leaving nothing.
 //!
 //! Up: clean stale segments a dead predecessor of this station left (refusing if one is alive),
-//! create the control block and rings, start the supervisor (which starts servo, physics and network
-//! as process-group leaders that die with it), then declare the station running.
+//! check its listen ports are free, create the control block and rings, start the supervisor (which
+//! starts servo, physics and network as process-group leaders that die with it), then declare the
+//! station running.
+//! Meanwhile: each child's restarts, health and last failure go to its slot of the control block
+//! (for `station status`); while the network process is down the station runs on locally, degraded,
+//! and says so on stderr when it enters and leaves that mode.
 //! Down, on SIGINT/SIGTERM, a duration, or a child the policy gave up on — the stop ladder:
 //! cooperative stop through the run state (the servo first ramps its force to zero) → [`STOP_GRACE`]
 //! → SIGTERM to each child's process group → [`TERM_GRACE`] → SIGKILL; then unlink every segment.
@@ -12,9 +16,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::child::{ChildSpec, Watch};
-use crate::supervisor::{End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg};
+use crate::policy::ChildPolicy;
+use crate::supervisor::{
+    ChildState, End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg,
+};
 use anyhow::{bail, Context};
-use coop_rt::shm::control::{Child, RunState};
+use coop_rt::shm::control::{Child, ControlBlock, Health, RunState};
 use coop_rt::shm::{self, SegmentName, SegmentStatus};
 use coop_rt::sync::Ordering;
 use nix::sys::signal::Signal;
@@ -44,11 +51,12 @@ pub struct RunOptions {
     pub exe_prefix: Vec<String>,
 }
 
-/// Runs the station until a signal, the duration, or a child the policy gave up on.
+/// Runs the station until a signal, the duration, or a servo or physics failure the policy gave up
+/// on (network failures never end it: it runs on degraded while the network is retried).
 ///
 /// # Errors
-/// A live station of the same name, segments that cannot be created, or a child the policy gave up
-/// on (the message names the child and the policy).
+/// A live station of the same name, a listen port that is taken, segments that cannot be created,
+/// or a child the policy gave up on (the message names the child and the policy).
 pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
     let session = &cfg.config.session;
     let prefix = SegmentName::station_prefix(session, &cfg.name)?;
@@ -71,6 +79,14 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
             live.status
         );
     }
+    cfg.check_listen_ports_free().with_context(|| {
+        format!(
+            "station config {}",
+            opts.config
+                .as_ref()
+                .map_or("(defaults)".into(), |p| p.display().to_string())
+        )
+    })?;
     let names = Names::of(session, &cfg.name)?;
     let segs = Arc::new(
         StationSegments::create(&names, &cfg.config.rings)
@@ -116,6 +132,55 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<C
     })
 }
 
+/// Writes each child's restarts, health and last failure to its slot of the control block.
+fn publish(ctl: &ControlBlock, status: &Status) {
+    for (i, c) in Child::ALL.into_iter().enumerate() {
+        let slot = ctl.child(c);
+        if let Some(n) = status.restarts.get(i) {
+            slot.restarts.store(u64::from(*n), Ordering::Relaxed);
+        }
+        let Some(h) = status.health.get(i) else {
+            continue;
+        };
+        if let Some(f) = &h.last_failure {
+            if *f != slot.last_failure() {
+                slot.set_last_failure(f);
+            }
+        }
+        slot.down_since_ns
+            .store(h.down_since_ns.unwrap_or(0), Ordering::Relaxed);
+        slot.set_health(match h.state {
+            ChildState::Starting => Health::Starting,
+            ChildState::Up => Health::Up,
+            ChildState::Down => Health::Down,
+        });
+    }
+}
+
+/// One line on stderr for each child entering or leaving degraded mode (the network going down or
+/// coming back).
+fn say_degraded(cfg: &Resolved, status: &Status, before: &[String]) {
+    let index = |name: &str| Child::ALL.iter().position(|c| c.name() == name);
+    for name in status.degraded.iter().filter(|n| !before.contains(n)) {
+        let last = index(name)
+            .and_then(|i| status.health.get(i)?.last_failure.clone())
+            .unwrap_or_default();
+        eprintln!(
+            "station {}: DEGRADED: the {name} process is down ({last}); servo and physics go on locally, the {name} is restarted with backoff (up to {} ms)",
+            cfg.name, cfg.config.supervisor.network_backoff_max_ms
+        );
+    }
+    for name in before.iter().filter(|n| !status.degraded.contains(n)) {
+        let restarts = index(name)
+            .and_then(|i| status.restarts.get(i).copied())
+            .unwrap_or(0);
+        eprintln!(
+            "station {}: no longer degraded: the {name} process is up again (restarts so far: {restarts})",
+            cfg.name
+        );
+    }
+}
+
 async fn supervise(
     cfg: &Resolved,
     opts: &RunOptions,
@@ -130,15 +195,29 @@ async fn supervise(
             startup: Duration::from_millis(sup_cfg.startup_timeout_ms),
         })
     };
+    // The servo and physics are the station; the network is what it shares, and the station goes
+    // on without it (see `crate::policy`).
+    let essential = ChildPolicy::Essential(cfg.policy);
     let children = vec![
-        (child_spec(cfg, opts, "servo")?, watch_of(Child::Servo)),
-        (child_spec(cfg, opts, "physics")?, watch_of(Child::Physics)),
-        (child_spec(cfg, opts, "network")?, watch_of(Child::Network)),
+        (
+            child_spec(cfg, opts, "servo")?,
+            watch_of(Child::Servo),
+            essential,
+        ),
+        (
+            child_spec(cfg, opts, "physics")?,
+            watch_of(Child::Physics),
+            essential,
+        ),
+        (
+            child_spec(cfg, opts, "network")?,
+            watch_of(Child::Network),
+            ChildPolicy::Degradable(cfg.network_backoff),
+        ),
     ];
     let (tx, mut rx) = watch::channel(Status::default());
     let args = SupervisorArgs {
         children,
-        policy: cfg.policy,
         status: tx,
     };
     let (sup, handle) = Actor::spawn(
@@ -165,6 +244,7 @@ async fn supervise(
         }
     };
     tokio::pin!(until);
+    let mut degraded: Vec<String> = Vec::new();
     let end = loop {
         tokio::select! {
             _ = sigint.recv() => break None,
@@ -172,8 +252,10 @@ async fn supervise(
             _ = &mut until => break None,
             changed = rx.changed() => {
                 let status = rx.borrow_and_update().clone();
-                for (c, n) in [Child::Servo, Child::Physics, Child::Network].into_iter().zip(&status.restarts) {
-                    segs.control.child(c).restarts.store(u64::from(*n), Ordering::Relaxed);
+                publish(&segs.control, &status);
+                if status.degraded != degraded && status.end.is_none() {
+                    say_degraded(cfg, &status, &degraded);
+                    degraded.clone_from(&status.degraded);
                 }
                 if changed.is_err() || status.end.is_some() {
                     break status.end;

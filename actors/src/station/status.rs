@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
-use coop_rt::shm::control::{Child, ControlBlock, CounterKey, Ring, RunState};
+use coop_rt::shm::control::{Child, ControlBlock, CounterKey, Health, Ring, RunState};
 use coop_rt::shm::station::Names;
 use coop_rt::shm::{BlockSegment, RingFill, RingOpenOptions, RingSegment};
 use coop_rt::stats::LoopSnapshot;
@@ -25,6 +25,9 @@ pub struct StationStatus {
     pub station: String,
     /// `starting`, `running`, `stopping` or `stopped`.
     pub run_state: String,
+    /// The network process is down: the station runs on locally (servo and physics), without the
+    /// other sites, while the network is restarted with backoff.
+    pub degraded: bool,
     /// One row per child process.
     pub children: Vec<ChildStatus>,
     /// The two real-time loops.
@@ -52,6 +55,12 @@ pub struct ChildStatus {
     pub heartbeat: u64,
     /// Restarts so far.
     pub restarts: u64,
+    /// `starting`, `up` or `down` (failed since it was last up; being restarted).
+    pub health: &'static str,
+    /// For how long it has been down, s (none: it is not down).
+    pub down_s: Option<f64>,
+    /// Why it last failed, as the supervisor saw it (none: it never failed).
+    pub last_failure: Option<String>,
     /// Scheduling policy in force.
     pub policy: &'static str,
     /// Priority in force.
@@ -339,11 +348,19 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
         .map(|&c| {
             let slot = ctl.child(c);
             let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
+            let health = slot.health();
+            let down_since = load(&slot.down_since_ns);
+            let last_failure = slot.last_failure();
             ChildStatus {
                 name: c.name(),
                 pid: load(&slot.pid),
                 heartbeat: load(&slot.heartbeat),
                 restarts: load(&slot.restarts),
+                health: health.name(),
+                down_s: (health == Health::Down && down_since > 0).then(|| {
+                    coop_rt::timer::monotonic_ns().saturating_sub(down_since) as f64 / 1e9
+                }),
+                last_failure: (!last_failure.is_empty()).then_some(last_failure),
                 policy: policy_name(load(&slot.policy)),
                 priority: load(&slot.priority),
                 cpus: cpus(load(&slot.cpus)),
@@ -355,6 +372,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
         session: session.to_owned(),
         station: station.to_owned(),
         run_state: format!("{run_state:?}").to_lowercase(),
+        degraded: ctl.child(Child::Network).health() == Health::Down,
         children,
         loops: Loops {
             servo: LoopStatus::of(&s1, rate(&s0, &s1)),
@@ -458,19 +476,36 @@ impl fmt::Display for StationStatus {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "station {} (session {}): {}",
-            self.station, self.session, self.run_state
+            "station {} (session {}): {}{}",
+            self.station,
+            self.session,
+            self.run_state,
+            if self.degraded {
+                ", DEGRADED: the network is down; servo and physics go on locally without the other sites"
+            } else {
+                ""
+            }
         )?;
         writeln!(
             f,
-            "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  cpus",
-            "child", "pid", "heartbeat", "restarts", "policy", "prio"
+            "{:<9}{:>8}{:>11}{:>10}  {:<9}{:<12}{:>5}  cpus",
+            "child", "pid", "heartbeat", "restarts", "health", "policy", "prio"
         )?;
         for c in &self.children {
             writeln!(
                 f,
-                "{:<9}{:>8}{:>11}{:>10}  {:<12}{:>5}  {}",
-                c.name, c.pid, c.heartbeat, c.restarts, c.policy, c.priority, c.cpus
+                "{:<9}{:>8}{:>11}{:>10}  {:<9}{:<12}{:>5}  {}",
+                c.name, c.pid, c.heartbeat, c.restarts, c.health, c.policy, c.priority, c.cpus
+            )?;
+        }
+        for c in self.children.iter().filter(|c| c.health == "down") {
+            writeln!(
+                f,
+                "  {} down for {} s after {} restarts; last failure: {}",
+                c.name,
+                c.down_s.map_or("?".into(), |d| format!("{d:.1}")),
+                c.restarts,
+                c.last_failure.as_deref().unwrap_or("?")
             )?;
         }
         writeln!(

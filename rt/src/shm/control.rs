@@ -1,5 +1,5 @@
 //! A station's control block: its run state, one slot per child process (pid, heartbeat, restarts,
-//! scheduling in force), and one group of live figures per process that writes them: the servo's,
+//! scheduling in force, health and last failure), and one group of live figures per process that writes them: the servo's,
 //! physics' and the network's. The supervisor creates it before spawning; each child writes its own
 //! slot and its own group; `station status` and `latency attach` read it. Nothing here ever blocks a
 //! loop: every field is a relaxed atomic with exactly one writer, named on its group.
@@ -215,8 +215,34 @@ impl CounterKey for Refused {
 pub const REFUSED_REASONS: usize = 9;
 const _: () = assert!(<Refused as CounterKey>::ALL.len() == REFUSED_REASONS);
 
-/// One child's slot: written by the child (heartbeat, scheduling) and by the supervisor (pid,
-/// restarts).
+/// How a child is, as the supervisor publishes it in [`ChildSlot::health`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u64)]
+pub enum Health {
+    /// Started for the first time, no heartbeat yet (also: a supervisor that never wrote it).
+    Starting = 0,
+    /// Its heartbeat moves.
+    Up = 1,
+    /// It failed since it was last up: waiting for its restart, or restarted and not beating yet.
+    Down = 2,
+}
+
+impl Health {
+    /// `starting`, `up` or `down`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Health::Starting => "starting",
+            Health::Up => "up",
+            Health::Down => "down",
+        }
+    }
+}
+
+/// Words of a child's last-failure text (256 bytes).
+pub const FAILURE_WORDS: usize = 32;
+
+/// One child's slot: written by the child (pid, heartbeat, scheduling) and by the supervisor
+/// (restarts, health, down since, last failure).
 #[derive(Debug)]
 #[repr(C)]
 pub struct ChildSlot {
@@ -232,6 +258,65 @@ pub struct ChildSlot {
     pub priority: AtomicU64,
     /// CPUs in force, as a bit mask.
     pub cpus: AtomicU64,
+    /// [`Health`] as u64.
+    pub health: AtomicU64,
+    /// When it went down, CLOCK_MONOTONIC ns (0: it is not down).
+    pub down_since_ns: AtomicU64,
+    /// Bytes of `last_failure` in use (written last, Release).
+    pub last_failure_len: AtomicU64,
+    /// Why it last failed (the supervisor's words), as text.
+    pub last_failure: [AtomicU64; FAILURE_WORDS],
+}
+
+impl ChildSlot {
+    /// The child's health (an unknown value reads as `Down`).
+    pub fn health(&self) -> Health {
+        match self.health.load(Ordering::Relaxed) {
+            0 => Health::Starting,
+            1 => Health::Up,
+            _ => Health::Down,
+        }
+    }
+    /// Sets the health (the supervisor).
+    pub fn set_health(&self, h: Health) {
+        self.health.store(h as u64, Ordering::Relaxed);
+    }
+    /// Writes the last-failure text (the supervisor), cut to 256 bytes.
+    pub fn set_last_failure(&self, text: &str) {
+        store_text(&self.last_failure_len, &self.last_failure, text);
+    }
+    /// The last-failure text (empty: none yet).
+    pub fn last_failure(&self) -> String {
+        load_text(&self.last_failure_len, &self.last_failure)
+    }
+}
+
+/// Writes `text` (cut to what `words` hold, on a character boundary) into `words`, publishing its
+/// length in `len` last.
+fn store_text(len: &AtomicU64, words: &[AtomicU64], text: &str) {
+    len.store(0, Ordering::Release);
+    let mut n = text.len().min(words.len() * 8);
+    while !text.is_char_boundary(n) {
+        n -= 1;
+    }
+    for (w, chunk) in words.iter().zip(text.as_bytes()[..n].chunks(8)) {
+        let mut b = [0u8; 8];
+        b[..chunk.len()].copy_from_slice(chunk);
+        w.store(u64::from_le_bytes(b), Ordering::Relaxed);
+    }
+    // SYNC: Release publishes the bytes; pairs with the Acquire in `load_text`.
+    len.store(n as u64, Ordering::Release);
+}
+
+/// Reads what [`store_text`] wrote (lossy UTF-8: a read during a write may mix two texts).
+fn load_text(len: &AtomicU64, words: &[AtomicU64]) -> String {
+    let n = (len.load(Ordering::Acquire) as usize).min(words.len() * 8);
+    let mut bytes: Vec<u8> = words
+        .iter()
+        .flat_map(|w| w.load(Ordering::Relaxed).to_le_bytes())
+        .collect();
+    bytes.truncate(n);
+    String::from_utf8_lossy(&bytes).into_owned()
 }
 
 /// What the servo process writes.
@@ -365,7 +450,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // Counters and the per-process groups, which are the same; Counters' PhantomData is zero-sized);
 // all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v6";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v7";
 }
 
 impl ControlBlock {

@@ -102,6 +102,81 @@ pub struct Tls {
     pub enable_mtls: bool,
 }
 
+/// The zenoh transports this build has (its `transport_*` features of zenoh): the protocols a
+/// locator may name.
+pub const TRANSPORTS: [&str; 2] = ["tcp", "tls"];
+
+/// A locator as the station uses it: `<protocol>/<host>:<port>[?<metadata>][#<config>]`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Locator {
+    /// One of [`TRANSPORTS`].
+    pub protocol: String,
+    /// Host name or address (IPv6 in brackets, as written).
+    pub host: String,
+    /// Port (0: a free one, chosen at start).
+    pub port: u16,
+}
+
+impl Locator {
+    /// Parses `l` as zenoh does (an endpoint) and checks it names a transport of this build and a
+    /// `host:port` address.
+    ///
+    /// # Errors
+    /// The rule it breaks, in words for a message that names the field and the value.
+    pub fn parse(l: &str) -> Result<Self, String> {
+        let form = "a zenoh locator looks like tcp/127.0.0.1:7447";
+        let e: zenoh::config::EndPoint = l.parse().map_err(|_| form.to_owned())?;
+        let protocol = e.protocol().as_str().to_owned();
+        if !TRANSPORTS.contains(&protocol.as_str()) {
+            return Err(format!(
+                "transport {protocol:?} is not in this build (it has {})",
+                TRANSPORTS.join(" and ")
+            ));
+        }
+        let address = e.address();
+        let (host, port) = address
+            .as_str()
+            .rsplit_once(':')
+            .filter(|(h, _)| !h.is_empty())
+            .ok_or_else(|| format!("{form} (the address is host:port)"))?;
+        let port = port
+            .parse()
+            .map_err(|_| format!("port {port:?} is not a number from 0 to 65535"))?;
+        Ok(Self {
+            protocol,
+            host: host.to_owned(),
+            port,
+        })
+    }
+
+    /// The host as a socket address, if it is an address (not a name).
+    pub fn ip(&self) -> Option<std::net::IpAddr> {
+        self.host
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .parse()
+            .ok()
+    }
+
+    /// Whether listening on both would take the same port: the same port, on the same host or
+    /// with either on every address.
+    pub fn overlaps(&self, other: &Self) -> bool {
+        self.port == other.port
+            && (self.host == other.host
+                || self.ip().is_some_and(|a| a.is_unspecified())
+                || other.ip().is_some_and(|a| a.is_unspecified()))
+    }
+
+    /// Binds the port now and lets it go: whether a listener could take it.
+    ///
+    /// # Errors
+    /// Why it cannot (taken, an address of another machine, a name that does not resolve).
+    pub fn bind_check(&self) -> std::io::Result<()> {
+        let host = self.host.trim_start_matches('[').trim_end_matches(']');
+        std::net::TcpListener::bind((host, self.port)).map(drop)
+    }
+}
+
 /// A zenoh configuration: the mode, explicit endpoints, no multicast scouting, timestamps on.
 ///
 /// # Errors
@@ -235,6 +310,41 @@ mod tests {
         );
         assert_eq!(NetworkConfig::default().mode, Mode::Peer);
         assert!(serde_json::from_str::<NetworkConfig>(r#"{"lisen": []}"#).is_err());
+    }
+
+    #[test]
+    fn locators_of_this_build_parse_and_others_are_refused() {
+        let l = Locator::parse("tcp/127.0.0.1:7447").expect("tcp");
+        assert_eq!(
+            (l.protocol.as_str(), l.host.as_str(), l.port),
+            ("tcp", "127.0.0.1", 7447)
+        );
+        let l = Locator::parse("tls/[::1]:0#iface=lo").expect("tls, v6, config");
+        assert_eq!((l.host.as_str(), l.port), ("[::1]", 0));
+        for (bad, why) in [
+            ("localhost", "looks like"),
+            ("tcp/", "looks like"),
+            ("tcp/127.0.0.1", "host:port"),
+            ("tcp/127.0.0.1:99999", "port \"99999\""),
+            (
+                "udp/127.0.0.1:7447",
+                "transport \"udp\" is not in this build",
+            ),
+            ("quic/127.0.0.1:7447", "transport \"quic\""),
+        ] {
+            let e = Locator::parse(bad).expect_err(bad);
+            assert!(e.contains(why), "{bad}: {e}");
+        }
+        let p = |l: &str| Locator::parse(l).expect("locator");
+        assert!(p("tcp/0.0.0.0:7447").overlaps(&p("tls/127.0.0.1:7447")));
+        assert!(p("tcp/localhost:7447").overlaps(&p("tcp/localhost:7447")));
+        assert!(!p("tcp/127.0.0.1:7447").overlaps(&p("tcp/127.0.0.2:7447")));
+        assert!(!p("tcp/127.0.0.1:7447").overlaps(&p("tcp/127.0.0.1:7448")));
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = taken.local_addr().expect("addr").port();
+        assert!(p(&format!("tcp/127.0.0.1:{port}")).bind_check().is_err());
+        drop(taken);
+        assert!(p("tcp/127.0.0.1:0").bind_check().is_ok());
     }
 
     #[test]

@@ -47,7 +47,7 @@ mod receive;
 mod record;
 
 pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
-pub use config::{concrete_listen, config, Mode, NetworkConfig, Tls};
+pub use config::{concrete_listen, config, Locator, Mode, NetworkConfig, Tls, TRANSPORTS};
 pub use emulate::Emulation;
 pub use epoch::EpochAnnouncer;
 pub use error::NetworkError;
