@@ -890,6 +890,7 @@ pub fn read(first: &Path) -> Result<Recording, RecordingError> {
         r.remote.extend(p.remote);
         r.published.extend(p.published);
         r.presence.extend(p.presence);
+        r.peers.extend(p.peers);
         r.clock.extend(p.clock);
         r.status = p.status.or(r.status);
         r.truncated |= p.truncated;

@@ -280,7 +280,7 @@ impl StationConfig {
     pub fn resolve(self, base: Option<&Path>) -> anyhow::Result<Resolved> {
         SegmentName::station_prefix(&self.session, "x")
             .map_err(|e| anyhow::anyhow!("session = {:?}: {e}", self.session))?;
-        let mut scenario = match &self.scenario {
+        let scenario = match &self.scenario {
             None => {
                 scenario_file::parse(DEFAULT_SCENARIO).context("the embedded paper scenario")?
             }
@@ -293,6 +293,17 @@ impl StationConfig {
                 scenario_file::load(&full)?
             }
         };
+        self.resolve_with(base, scenario)
+    }
+
+    /// Checks every value against `scenario`, the world this configuration names (already
+    /// loaded; relative paths in the configuration are relative to `base`).
+    ///
+    /// # Errors
+    /// As [`StationConfig::load`].
+    pub fn resolve_with(self, base: Option<&Path>, mut scenario: Scenario) -> anyhow::Result<Resolved> {
+        SegmentName::station_prefix(&self.session, "x")
+            .map_err(|e| anyhow::anyhow!("session = {:?}: {e}", self.session))?;
         if let Some(m) = self.method {
             scenario.method = m;
         }
