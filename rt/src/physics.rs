@@ -147,7 +147,7 @@ impl PhysicsLoop {
                     let adopted =
                         self.method
                             .receive(&self.world, &mut self.copy, from, &msg, now_s);
-                    if !self.copy.state.is_finite() {
+                    if !sane(&self.world, &self.copy) {
                         // Whatever arrived, the copy never becomes NaN or infinite: keep it.
                         self.copy = before;
                         self.nonfinite_kept += 1;
@@ -173,7 +173,7 @@ impl PhysicsLoop {
             &self.own,
             self.period_ns as f64 * 1e-9,
         );
-        if !self.copy.state.is_finite() {
+        if !sane(&self.world, &self.copy) {
             self.copy = before;
             self.nonfinite_kept += 1;
         }
@@ -274,6 +274,16 @@ impl PhysicsLoop {
     pub fn adoptions(&self) -> u64 {
         self.adoptions
     }
+}
+
+/// A copy physics may keep: every number finite, its energy too (a finite state can still hold
+/// an angular momentum whose next rotation step is NaN).
+fn sane(world: &World, copy: &ObjectCopy) -> bool {
+    copy.state.is_finite()
+        && copy
+            .state
+            .mechanical_energy(&world.mass, world.gravity)
+            .is_finite()
 }
 
 /// The first point of the grid `last + k * period` (k ≥ 1) after `now`.

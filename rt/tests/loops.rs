@@ -302,3 +302,39 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
     assert_eq!(ControlBlock::load_f64(&ctl.servo.command_n), 0.0);
     assert_eq!(ControlBlock::load_f64(&ctl.servo.scale), 0.0);
 }
+
+/// A report that passes every check a ring conversion makes (finite, unit quaternion) but whose
+/// adoption would make the copy non-finite (an angular momentum of 1e308: infinite energy, a NaN
+/// rotation one step later) is not adopted: the copy keeps its state, and it is counted.
+#[test]
+fn an_adoption_that_would_make_the_copy_non_finite_keeps_the_copy() {
+    let mut r = rig("nonfinite", false);
+    for k in 1..=100u64 {
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, None);
+    }
+    let before = r.physics.copy().state;
+    let mut absurd = SiteReport {
+        kind: 1,
+        t_ns: 100 * MS,
+        site: 1,
+        rot: [1.0, 0.0, 0.0, 0.0],
+        ..SiteReport::default()
+    };
+    absurd.pos = before.pos.into();
+    absurd.ang_mom = [0.0, 0.0, 1e308];
+    absurd.included = [-1.0; coop_model::MAX_SITES];
+    absurd.included[1] = 0.09; // newer contributions of site 1: the paper method adopts it
+    assert!(absurd.report().is_some(), "the ring conversion accepts it");
+    r.remote_in.push(absurd).expect("room");
+    for k in 101..=200u64 {
+        r.physics.step(k * MS);
+    }
+    assert_eq!(r.physics.nonfinite_kept, 1);
+    assert_eq!(r.physics.adoptions(), 0);
+    let after = r.physics.copy().state;
+    assert!(
+        after.is_finite() && (after.pos - before.pos).norm() < 1e-2,
+        "{after:?}"
+    );
+}

@@ -18,7 +18,6 @@
 //! implausible acceptance.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::bail;
@@ -31,6 +30,7 @@ use coop_model::scenario::Scenario;
 use coop_model::sim::{self, Mode};
 use coop_model::MAX_SITES;
 use coop_rt::msg::SiteReport;
+use coop_rt::sync::{AtomicU64, Ordering};
 use coop_transport::admit::{Bounds, Inbound};
 use coop_transport::wire;
 
@@ -93,13 +93,13 @@ pub fn main(a: &Args) -> anyhow::Result<()> {
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
     let progress = AtomicU64::new(0);
-    let done = AtomicBool::new(false);
+    let done = AtomicU64::new(0);
     let started = Instant::now();
     let out = std::thread::scope(|s| {
         // The watchdog: an input that takes longer than `hang_ms` is a hang.
         let watchdog = s.spawn(|| {
             let mut last = (0, Instant::now());
-            while !done.load(Ordering::Relaxed) {
+            while done.load(Ordering::Relaxed) == 0 {
                 std::thread::sleep(Duration::from_millis(50));
                 let n = progress.load(Ordering::Relaxed);
                 if n != last.0 {
@@ -115,7 +115,7 @@ pub fn main(a: &Args) -> anyhow::Result<()> {
             Target::Scenario => scenario_target(a, &progress),
             Target::Config => config_target(a, &progress),
         };
-        done.store(true, Ordering::Relaxed);
+        done.store(1, Ordering::Relaxed);
         (out, watchdog.join().ok().flatten())
     });
     std::panic::set_hook(default_hook);
@@ -137,7 +137,11 @@ pub fn main(a: &Args) -> anyhow::Result<()> {
         bail!("input {n} ran longer than {} ms (a hang)", a.hang_ms);
     }
     if out.panics > 0 {
-        bail!("{} inputs panicked (replay with --seed {})", out.panics, a.seed);
+        bail!(
+            "{} inputs panicked (replay with --seed {})",
+            out.panics,
+            a.seed
+        );
     }
     if let Some(first) = out.first_implausible {
         bail!(
@@ -149,12 +153,7 @@ pub fn main(a: &Args) -> anyhow::Result<()> {
 }
 
 /// Runs `f` on every input index, counting panics.
-fn each(
-    a: &Args,
-    progress: &AtomicU64,
-    out: &mut Outcome,
-    mut f: impl FnMut(u64, &mut Outcome),
-) {
+fn each(a: &Args, progress: &AtomicU64, out: &mut Outcome, mut f: impl FnMut(u64, &mut Outcome)) {
     for i in 0..a.inputs {
         if catch_unwind(AssertUnwindSafe(|| f(i, out))).is_err() {
             out.panics += 1;
@@ -273,7 +272,10 @@ fn wire_oracle(b: &Bounds, r: &SiteReport, now_ns: u64) -> Result<(), String> {
         return Err(format!("a non-finite field: {r:?}"));
     }
     if r.t_ns + b.max_age_ns < now_ns || r.t_ns > now_ns + b.future_ns {
-        return Err(format!("time {} outside the window at {now_ns}: {r:?}", r.t_ns));
+        return Err(format!(
+            "time {} outside the window at {now_ns}: {r:?}",
+            r.t_ns
+        ));
     }
     let state = r.kind == 1;
     if state && (norm(r.pos) > b.extent_m || norm(r.vel) > b.speed_m_per_s) {
@@ -330,7 +332,9 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
         }
         // Adopted and integrated by a paper copy, it must leave the copy finite and in the world.
         let Some((from, msg)) = rep.report() else {
-            return implausible(out, || format!("input {i}: accepted but not a report: {rep:?}"));
+            return implausible(out, || {
+                format!("input {i}: accepted but not a report: {rep:?}")
+            });
         };
         if !matches!(msg, Report::State { .. }) {
             return;
@@ -362,15 +366,31 @@ fn mutate_text(rng: &mut Rng, text: &str) -> String {
         match rng.next_u64() % 6 {
             0..=2 => {
                 // A value replaced by a hostile number.
-                let Some(line) = lines.get_mut(i) else { continue };
+                let Some(line) = lines.get_mut(i) else {
+                    continue;
+                };
                 let Some(eq) = line.find('=') else { continue };
                 let values = [
-                    "nan", "inf", "-inf", "0", "-0.0", "1e300", "-1e300", "1e-300", "1e6", "-1",
-                    "1e-9", "\"\"", "\"..\"", "[]", "true", "18446744073709551615",
+                    "nan",
+                    "inf",
+                    "-inf",
+                    "0",
+                    "-0.0",
+                    "1e300",
+                    "-1e300",
+                    "1e-300",
+                    "1e6",
+                    "-1",
+                    "1e-9",
+                    "\"\"",
+                    "\"..\"",
+                    "[]",
+                    "true",
+                    "18446744073709551615",
                 ];
                 let v = values[(rng.next_u64() as usize) % values.len()];
                 let tail = line[eq + 1..]
-                    .find(|c: char| c == ',' || c == '}')
+                    .find([',', '}'])
                     .map_or(String::new(), |k| line[eq + 1 + k..].to_owned());
                 let tail = if line.trim_start().starts_with('{') || line.contains("= [") {
                     tail
@@ -387,7 +407,9 @@ fn mutate_text(rng: &mut Rng, text: &str) -> String {
                 lines.insert(i, l);
             }
             _ => {
-                let Some(line) = lines.get_mut(i) else { continue };
+                let Some(line) = lines.get_mut(i) else {
+                    continue;
+                };
                 let mut b = std::mem::take(line).into_bytes();
                 if !b.is_empty() {
                     let k = (rng.next_u64() as usize) % b.len();
@@ -424,12 +446,16 @@ fn scenario_target(a: &Args, progress: &AtomicU64) -> Outcome {
         let extent = Bounds::from_scenario(&sc, None).extent_m;
         for mode in [Mode::Reference, Mode::Distributed(sc.method)] {
             let r = sim::run(&short, mode, &mut |_| {});
-            let bad = r.sites.iter().flat_map(|s| &s.obj_pos).find(|p| {
-                !(p.iter().all(|x| x.is_finite()) && p.norm() <= extent * 2.0)
-            });
+            let bad = r
+                .sites
+                .iter()
+                .flat_map(|s| &s.obj_pos)
+                .find(|p| !(p.iter().all(|x| x.is_finite()) && p.norm() <= extent * 2.0));
             if let Some(p) = bad {
                 let p = *p;
-                return implausible(out, || format!("input {i}: object at {p:?} in {mode:?}: {t}"));
+                return implausible(out, || {
+                    format!("input {i}: object at {p:?} in {mode:?}: {t}")
+                });
             }
         }
     });

@@ -230,7 +230,10 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
         let (x, y) = (status("user1")?, status("user2")?);
         (x.network.peers[1].lost && y.network.peers[0].lost).then_some((x, y))
     });
-    assert!(lost.0.running && lost.1.running, "the stations go on locally");
+    assert!(
+        lost.0.running && lost.1.running,
+        "the stations go on locally"
+    );
     std::thread::sleep(Duration::from_secs(5).saturating_sub(Duration::from_millis(500)));
     ip(&["-n", &ns.names[0], "link", "set", &link, "up"]).expect("link up");
     wait_until("each station to hear the other again", limit, || {
@@ -243,13 +246,18 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     // Servo and physics never stopped: no restart, and the loops kept counting.
     for (me, was) in [("user1", before.0), ("user2", before.1)] {
         let s = status(me).expect("status");
-        assert!(s.loops.physics.cycles > was + 5000, "{me} physics kept running");
+        assert!(
+            s.loops.physics.cycles > was + 5000,
+            "{me} physics kept running"
+        );
         for c in &s.children {
             assert_eq!(c.restarts, 0, "{me}: {} restarted", c.name);
         }
     }
     for s in [&mut sa, &mut sb] {
-        let st = s.wait_timeout(limit).expect("stopped at the end of its duration");
+        let st = s
+            .wait_timeout(limit)
+            .expect("stopped at the end of its duration");
         assert!(st.success(), "a station stopped cleanly: {st}");
     }
     let rec = |me: &str| {
@@ -284,7 +292,10 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     let (pa, pb) = (last(&ra), last(&rb));
     let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
     assert!(pa[0] > -0.01, "user1's second push moved the disk: {pa:?}");
-    assert!(apart < 0.005, "the copies ended {apart} m apart: {pa:?} vs {pb:?}");
+    assert!(
+        apart < 0.005,
+        "the copies ended {apart} m apart: {pa:?} vs {pb:?}"
+    );
     drop(ns);
     let _ = std::fs::remove_dir_all(&dir);
 }

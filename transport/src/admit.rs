@@ -534,7 +534,8 @@ mod tests {
             t_ns: now,
             ..sample()
         };
-        let cases: [(&str, fn(&mut SiteReport)); 6] = [
+        type Edit = fn(&mut SiteReport);
+        let cases: [(&str, Edit); 6] = [
             ("position", |r| r.pos = [11.0, 0.0, 0.0]),
             ("velocity", |r| r.vel = [1e3, 0.0, 0.0]),
             ("angular momentum", |r| r.ang_mom = [0.0, 0.0, 1e6]),

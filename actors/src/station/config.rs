@@ -301,7 +301,11 @@ impl StationConfig {
     ///
     /// # Errors
     /// As [`StationConfig::load`].
-    pub fn resolve_with(self, base: Option<&Path>, mut scenario: Scenario) -> anyhow::Result<Resolved> {
+    pub fn resolve_with(
+        self,
+        base: Option<&Path>,
+        mut scenario: Scenario,
+    ) -> anyhow::Result<Resolved> {
         SegmentName::station_prefix(&self.session, "x")
             .map_err(|e| anyhow::anyhow!("session = {:?}: {e}", self.session))?;
         if let Some(m) = self.method {
