@@ -178,6 +178,8 @@ pub struct NetworkStatus {
     pub rejoins: u64,
     /// Times a site's sequence was resynchronised.
     pub resyncs: u64,
+    /// States held until their sender's clock offset was known.
+    pub held_for_offset: u64,
     /// Every site of the session.
     pub peers: Vec<PeerStatus>,
     /// Station-to-station latency, µs (none before the first sample).
@@ -453,6 +455,7 @@ impl NetworkStatus {
             losses: load(&n.peer_losses),
             rejoins: load(&n.peer_rejoins),
             resyncs: load(&n.resyncs),
+            held_for_offset: load(&n.held_for_offset),
             peers,
             latency_us,
             epoch_ns: ctl.epoch(),
@@ -564,8 +567,8 @@ impl fmt::Display for StationStatus {
         )?;
         writeln!(
             f,
-            "peers: {} joins, {} leaves, {} losses, {} rejoins, {} resyncs",
-            n.joins, n.leaves, n.losses, n.rejoins, n.resyncs
+            "peers: {} joins, {} leaves, {} losses, {} rejoins, {} resyncs; {} states held for a clock offset",
+            n.joins, n.leaves, n.losses, n.rejoins, n.resyncs, n.held_for_offset
         )?;
         for p in n.peers.iter().filter(|p| p.site != self.station) {
             writeln!(

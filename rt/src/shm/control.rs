@@ -402,6 +402,9 @@ pub struct NetworkShared {
     pub peer_losses: AtomicU64,
     /// Times a lost site was heard again.
     pub peer_rejoins: AtomicU64,
+    /// States held because their sender's clock offset was not known yet (the newest of each
+    /// site is checked again once it is; the others are superseded).
+    pub held_for_offset: AtomicU64,
     /// Times a site's sequence was resynchronised after its genuine, newer states kept being
     /// refused as out of order (a forged or reset sequence number cannot silence a site).
     pub resyncs: AtomicU64,
@@ -450,7 +453,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // Counters and the per-process groups, which are the same; Counters' PhantomData is zero-sized);
 // all-zero and every bit pattern are valid.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v7";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v8";
 }
 
 impl ControlBlock {

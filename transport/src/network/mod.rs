@@ -289,6 +289,7 @@ impl Loop {
         let now = monotonic_ns();
         let (log, peers) = {
             let mut rx = lock(receiver);
+            rx.retry_waiting();
             rx.release_due(now);
             rx.check_lost(now);
             (

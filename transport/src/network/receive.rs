@@ -61,6 +61,17 @@ pub(super) struct Receiver<'a> {
     pub(super) log: Vec<RemoteMsg>,
     /// Sites lost and heard again since the loop last took them, for the recording.
     pub(super) peer_log: Vec<PeerMsg>,
+    /// Per site: its newest message that arrived before its clock offset was known.
+    waiting: Vec<Option<Waiting>>,
+    held: u64,
+}
+
+/// A message held until its sender's clock offset is known.
+struct Waiting {
+    key: String,
+    bytes: Vec<u8>,
+    zenoh_ts: Option<String>,
+    join: bool,
 }
 
 impl<'a> Receiver<'a> {
@@ -94,6 +105,20 @@ impl<'a> Receiver<'a> {
             resyncs: 0,
             log: Vec::new(),
             peer_log: Vec::new(),
+            waiting: (0..sites.len()).map(|_| None).collect(),
+            held: 0,
+        }
+    }
+
+    /// Checks again the held messages whose sender's clock offset is now known.
+    pub(super) fn retry_waiting(&mut self) {
+        let offsets = self.offsets();
+        for j in 0..self.waiting.len() {
+            if offsets[j].is_some() {
+                if let Some(w) = self.waiting[j].take() {
+                    self.on_bytes(&w.key, &w.bytes, w.zenoh_ts, w.join);
+                }
+            }
         }
     }
 
@@ -189,6 +214,7 @@ impl<'a> Receiver<'a> {
     pub(super) fn left(&mut self, j: usize) {
         self.inbound.forget(j);
         self.last_heard[j] = None;
+        self.waiting[j] = None;
         self.control.network.clock_rtt_ns[j].store(0, Ordering::Relaxed);
     }
 
@@ -204,6 +230,21 @@ impl<'a> Receiver<'a> {
         let offsets = self.offsets();
         let a = match self.inbound.check(keys::site_of(key), bytes, now, &offsets) {
             Ok(a) => a,
+            Err(Refusal::NoOffset { site }) => {
+                // Its time cannot be read yet: held (the newest of the site) until it can.
+                self.held += 1;
+                self.control
+                    .network
+                    .held_for_offset
+                    .store(self.held, Ordering::Relaxed);
+                self.waiting[site] = Some(Waiting {
+                    key: key.to_owned(),
+                    bytes: bytes.to_vec(),
+                    zenoh_ts,
+                    join,
+                });
+                return;
+            }
             Err(e) => return self.refuse(key, &e),
         };
         let (from, r, offset) = (a.site, a.report, a.offset_ns);
