@@ -539,6 +539,7 @@ pub fn run_from_recordings(
         energy: vec![EnergyAccount::default(); recs.len()],
         mech_energy: vec![(0.0, 0.0); recs.len()],
         messages,
+        rollback: vec![None; recs.len()],
     })
 }
 

@@ -76,11 +76,10 @@ pub enum Command {
 }
 
 fn parse_method(s: &str) -> Result<MethodName, String> {
-    match s {
-        "naive" => Ok(MethodName::Naive),
-        "paper" => Ok(MethodName::Paper),
-        _ => Err(format!("unknown method {s:?}: use naive or paper")),
-    }
+    MethodName::SIMULATED
+        .into_iter()
+        .find(|m| m.as_str() == s)
+        .ok_or_else(|| format!("unknown method {s:?}: use naive, paper or timewarp"))
 }
 
 /// Runs one mode with a progress bar on a terminal.
@@ -142,8 +141,9 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             let sc = scenario_file::load(&scenario)?;
             let reference = run_mode(&sc, Mode::Reference);
             let mut all = vec![metrics::compute(&sc, &reference, &reference)];
-            for method in MethodName::ALL {
+            for method in MethodName::SIMULATED {
                 let r = run_mode(&sc, Mode::Distributed(method));
+                print_rollbacks(&r);
                 let m = metrics::compute(&sc, &r, &reference);
                 if let Some(dir) = &out {
                     write_outputs(&dir.join(method.as_str()), &sc, &r, &reference, &m)?;
@@ -166,6 +166,24 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         } => crate::simbench::run(&scenario, json, quick)?,
     }
     Ok(())
+}
+
+/// One line per site of a method that rolls back.
+fn print_rollbacks(r: &RunResult) {
+    for (i, st) in r.rollback.iter().enumerate() {
+        if let Some(st) = st {
+            eprintln!(
+                "# {} site {i}: {} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched",
+                r.mode.name(),
+                st.rollbacks,
+                st.resimulated_ticks,
+                st.max_depth,
+                st.fallbacks,
+                st.hash_checks,
+                st.hash_mismatches
+            );
+        }
+    }
 }
 
 fn compare_json(sc: &Scenario, all: &[Metrics]) -> serde_json::Value {

@@ -1214,6 +1214,10 @@ mod tests {
             ("session".into(), session.to_owned()),
             ("site".into(), "a".into()),
         ]);
+        // The recorder creates no directory: the test makes it.
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).expect("dir");
+        }
         let mut w = Recorder::create(path, meta, rotation).expect("create");
         w.session(&SessionMsg {
             t_ns: 1,

@@ -311,6 +311,12 @@ impl StationConfig {
         if let Some(m) = self.method {
             scenario.method = m;
         }
+        if scenario.method == MethodName::Timewarp {
+            bail!(
+                "method = \"timewarp\" (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive or paper",
+                scenario.name
+            );
+        }
         let name = self
             .station
             .clone()

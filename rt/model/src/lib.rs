@@ -22,6 +22,7 @@ pub mod scenario;
 pub mod servo;
 pub mod shape;
 pub mod sim;
+pub mod timewarp;
 pub mod user;
 
 /// Sites a session can have: the one bound every fixed-size table (a report's inclusion times, the

@@ -104,6 +104,9 @@ impl ObjectCopy {
 
 /// What sites send each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
+// NB: a report moves by value on the real-time path, where nothing allocates: a timewarp
+// report's 3 KB are copied at the report rate instead of boxed.
+#[allow(clippy::large_enum_variant)]
 pub enum Report {
     /// `paper`: a state, the time it holds at, up to when each site's user's impulses are included
     /// in it, and the acceleration a receiver should extrapolate it with.
@@ -124,6 +127,8 @@ pub enum Report {
         /// The contact.
         force: ContactForce,
     },
+    /// `timewarp`: the sender's tool positions on the tick grid, and its confirmed frontier.
+    Tools(crate::timewarp::ToolReport),
 }
 
 /// A received state replaced the local one.
@@ -162,6 +167,15 @@ pub trait Consistency: std::fmt::Debug + Send {
     /// must fade out rather than freeze at its last value. Hearing from it again ends that.
     fn peer_lost(&mut self, from: usize, now_s: f64) {
         let _ = (from, now_s);
+    }
+    /// The own tool is at `tool_pos` (world, m) at the tick about to be stepped: methods that
+    /// compute every tool's contact themselves (`timewarp`) take it here.
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        let _ = tool_pos;
+    }
+    /// Rollback figures, for a method that rolls back.
+    fn timewarp_stats(&self) -> Option<crate::timewarp::Stats> {
+        None
     }
 }
 

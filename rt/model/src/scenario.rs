@@ -27,16 +27,22 @@ pub enum MethodName {
     /// Eq. 10/11: own force only, adopt newer states, dead-reckon.
     #[default]
     Paper,
+    /// Exchange the tools, roll back (deterministic physics on a common tick grid).
+    Timewarp,
 }
 
 impl MethodName {
-    /// Every method, in table order.
+    /// The methods real stations run, in table order.
     pub const ALL: [MethodName; 2] = [MethodName::Naive, MethodName::Paper];
+    /// Every method the simulator runs, in table order.
+    pub const SIMULATED: [MethodName; 3] =
+        [MethodName::Naive, MethodName::Paper, MethodName::Timewarp];
     /// Its name.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Naive => "naive",
             Self::Paper => "paper",
+            Self::Timewarp => "timewarp",
         }
     }
 }
@@ -803,6 +809,36 @@ impl Scenario {
     /// Site `i`'s arm.
     pub fn arm(&self, i: usize) -> ScaraParams {
         ScaraParams::paper(Vec3::from(self.site[i].device_base_m))
+    }
+
+    /// Site `i`'s `timewarp` method, starting from `copy`: the common tick is the physics step (every
+    /// site's must be the same), the horizon covers the largest delay and jitter, the slowest report
+    /// period and 100 ms.
+    pub fn timewarp(
+        &self,
+        i: usize,
+        copy: &crate::method::ObjectCopy,
+    ) -> crate::timewarp::TimeWarp {
+        let dt = 1.0 / self.site[i].physics_rate_hz;
+        let slowest = self
+            .site
+            .iter()
+            .map(|s| 1.0 / s.report_rate_hz)
+            .fold(0.0, f64::max);
+        let horizon_s = (self.network.delay_max_ms + self.network.jitter_ms) * 1e-3 + slowest + 0.1;
+        let mut radii = [0.0; MAX_SITES];
+        for (r, s) in radii.iter_mut().zip(&self.site) {
+            *r = s.tool_radius_m;
+        }
+        crate::timewarp::TimeWarp::new(
+            i,
+            self.site.len(),
+            dt,
+            self.contact,
+            radii,
+            (horizon_s / dt).ceil() as usize,
+            copy,
+        )
     }
 
     /// Site `i`'s hand.

@@ -102,6 +102,8 @@ pub struct RunResult {
     pub mech_energy: Vec<(f64, f64)>,
     /// Messages sent, delivered, lost.
     pub messages: (u64, u64, u64),
+    /// Per site, for a method that rolls back: its rollbacks, depth, fallbacks, hash checks.
+    pub rollback: Vec<Option<crate::timewarp::Stats>>,
 }
 
 /// A message in flight.
@@ -159,6 +161,9 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 Mode::Distributed(MethodName::Paper) | Mode::Reference => {
                     Box::new(Paper::new(scenario.dead_reckoning_order, i))
                 }
+                Mode::Distributed(MethodName::Timewarp) => {
+                    Box::new(scenario.timewarp(i, &ObjectCopy::new(start)))
+                }
             };
             Site {
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
@@ -209,6 +214,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         energy: Vec::new(),
         mech_energy: Vec::new(),
         messages: (0, 0, 0),
+        rollback: Vec::new(),
     };
     let e0 = start.mechanical_energy(&world.mass, world.gravity);
     let mut next_progress = 0u64;
@@ -278,6 +284,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             let s = &mut sites[i];
             if s.next_physics == t {
                 if !reference {
+                    s.method.own_tool(s.servo.arm.forward(&s.plant.q));
                     s.method
                         .physics_step(&world, &mut s.copy, &s.own, ns_to_s(s.period_physics));
                     s.copy.time_s = ns_to_s(t);
@@ -358,6 +365,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         result
             .mech_energy
             .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
+        result.rollback.push(s.method.timewarp_stats());
     }
     result
 }

@@ -1,0 +1,439 @@
+//! Method `timewarp`: exchange the users' *tools* (the causes), not the object's state (the
+//! effects), and roll back.
+//!
+//! Every site runs the same deterministic physics on a common tick grid. At each tick every user's
+//! tool acts on the copy through the same contact law (Eq. 7, with friction memory), computed from
+//! the tool's position at that tick, quantized to [`QUANTUM_M`] so every site uses the same bits: the
+//! own tool as measured, a remote one from its received trajectory, and beyond the last received
+//! tick a bounded extrapolation ([`EXTRAPOLATE_TICKS`]) and then a hold. A site reports the own
+//! tool's positions of the last [`WINDOW_TICKS`] ticks (so one lost report loses nothing).
+//!
+//! The copy's full state (body, momenta, environment friction memory, every tool's friction
+//! memory) is kept for every tick of the horizon. When a received position differs from what was
+//! predicted at a tick already simulated, the copy is restored to that tick and re-simulated to now
+//! with what is known ([`Stats::rollbacks`]). A position older than the horizon cannot be undone: it
+//! is counted ([`Stats::fallbacks`]) and the rollback starts at the oldest tick kept.
+//!
+//! Ticks whose inputs are known from every site are *confirmed*: their state is the same bits at
+//! every site. Each report carries the sender's confirmed frontier and a hash of its state there;
+//! a receiver that has confirmed the same tick compares ([`Stats::hash_checks`],
+//! [`Stats::hash_mismatches`]), so a divergence of confirmed state is never silent.
+//!
+//! Determinism: the forces are summed in site order whatever site computes them, every input is an
+//! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
+//! same platform gives the same bits; see the crate docs on transcendental functions).
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::method::{integrate, Adoption, Consistency, ObjectCopy, Report, World, MAX_SITES};
+
+/// The quantum of a tool position on the wire and in the physics, m (0.01 mm).
+pub const QUANTUM_M: f64 = 1e-5;
+/// Own tool positions in each report: the last this many ticks.
+pub const WINDOW_TICKS: usize = 256;
+/// A remote tool is extrapolated with its last velocity for at most this many ticks past its last
+/// known position, then held.
+pub const EXTRAPOLATE_TICKS: i64 = 20;
+
+/// A tool position on the tick grid, in quanta.
+pub type Quantized = [i32; 3];
+
+/// Where a tool is before anything is known of it: 10 km away, touching nothing.
+pub const UNKNOWN: Quantized = [1_000_000_000; 3];
+
+/// A received position and its tick.
+type Received = Option<(i64, Quantized)>;
+
+/// The fastest a tool moves in the physics, m/s: a prediction that jumps (a held position meeting
+/// the received one) must not kick the object through the contact's damping.
+pub const MAX_TOOL_SPEED_M_PER_S: f64 = 10.0;
+
+/// Quantizes a position (clamped to ±20 km, far outside any world).
+pub fn quantize(p: Vec3) -> Quantized {
+    let q = |x: f64| (x / QUANTUM_M).round().clamp(-2e9, 2e9) as i32;
+    [q(p.x), q(p.y), q(p.z)]
+}
+
+fn position(q: Quantized) -> Vec3 {
+    Vec3::new(
+        f64::from(q[0]) * QUANTUM_M,
+        f64::from(q[1]) * QUANTUM_M,
+        f64::from(q[2]) * QUANTUM_M,
+    )
+}
+
+/// What a timewarp site reports: its tool's recent positions, and its confirmed frontier's hash.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolReport {
+    /// The tick of `positions[0]`.
+    pub first_tick: i64,
+    /// How many of `positions` are filled.
+    pub count: usize,
+    /// Own tool positions, tick `first_tick + k` at `k`.
+    pub positions: [Quantized; WINDOW_TICKS],
+    /// The sender's confirmed frontier: the first tick whose inputs it does not all know.
+    pub confirmed_tick: i64,
+    /// The hash of its state at the start of that tick (0: none kept).
+    pub confirmed_hash: u64,
+}
+
+/// What the method did, for status, recordings and benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Stats {
+    /// Rollbacks (restores and re-simulations).
+    pub rollbacks: u64,
+    /// Ticks re-simulated in all.
+    pub resimulated_ticks: u64,
+    /// The deepest rollback, ticks.
+    pub max_depth: u64,
+    /// Received positions older than the horizon (could not be undone).
+    pub fallbacks: u64,
+    /// Confirmed-frontier hashes compared with the sender's.
+    pub hash_checks: u64,
+    /// ... that differed.
+    pub hash_mismatches: u64,
+}
+
+/// One tick's record: the state at its start, and the inputs used in it.
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    tick: i64,
+    copy: ObjectCopy,
+    contacts: [ToolContactState; MAX_SITES],
+    inputs: [Quantized; MAX_SITES],
+    /// Per site: whether `inputs` held a received (true) or predicted (false) position.
+    known: [bool; MAX_SITES],
+}
+
+/// The `timewarp` method of one site.
+#[derive(Debug, Clone)]
+pub struct TimeWarp {
+    me: usize,
+    sites: usize,
+    dt: f64,
+    contact: ContactParams,
+    radii: [f64; MAX_SITES],
+    /// Ring of slots, tick `t` at `t % len`.
+    slots: Box<[Slot]>,
+    /// The tick the copy is at the start of (the next to simulate).
+    now_tick: i64,
+    /// Per site: received positions with their ticks (ring like `slots`).
+    received: Box<[[Received; MAX_SITES]]>,
+    /// Per site: the newest tick whose position is known (-1: none).
+    known_until: [i64; MAX_SITES],
+    contacts: [ToolContactState; MAX_SITES],
+    /// The oldest tick a received position changed since the last rollback.
+    dirty_from: Option<i64>,
+    own: Quantized,
+    stats: Stats,
+}
+
+impl TimeWarp {
+    /// Site `me` of `sites`, stepping `dt` s, with the tool contact law and each site's tool
+    /// radius, keeping `horizon_ticks` of history; starting from `copy` at tick 0.
+    pub fn new(
+        me: usize,
+        sites: usize,
+        dt: f64,
+        contact: ContactParams,
+        radii: [f64; MAX_SITES],
+        horizon_ticks: usize,
+        copy: &ObjectCopy,
+    ) -> Self {
+        let len = horizon_ticks.max(WINDOW_TICKS) + 1;
+        let slot = Slot {
+            tick: i64::MIN,
+            copy: *copy,
+            contacts: [ToolContactState::default(); MAX_SITES],
+            inputs: [UNKNOWN; MAX_SITES],
+            known: [false; MAX_SITES],
+        };
+        Self {
+            me,
+            sites: sites.min(MAX_SITES),
+            dt,
+            contact,
+            radii,
+            slots: vec![slot; len].into_boxed_slice(),
+            now_tick: 0,
+            received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
+            known_until: [-1; MAX_SITES],
+            contacts: [ToolContactState::default(); MAX_SITES],
+            dirty_from: None,
+            own: [0; 3],
+            stats: Stats::default(),
+        }
+    }
+
+    /// What it did so far.
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// The horizon, ticks.
+    fn len(&self) -> i64 {
+        self.slots.len() as i64
+    }
+
+    fn idx(&self, tick: i64) -> usize {
+        tick.rem_euclid(self.len()) as usize
+    }
+
+    /// The first tick whose inputs are not all known.
+    pub fn confirmed_tick(&self) -> i64 {
+        (0..self.sites)
+            .map(|j| {
+                if j == self.me {
+                    self.now_tick
+                } else {
+                    self.known_until[j] + 1
+                }
+            })
+            .min()
+            .unwrap_or(self.now_tick)
+    }
+
+    /// The received position of site `j` at tick `t`, if it is kept.
+    fn received_at(&self, j: usize, t: i64) -> Option<Quantized> {
+        self.received[self.idx(t)][j]
+            .filter(|(tick, _)| *tick == t)
+            .map(|(_, q)| q)
+    }
+
+    /// The input of site `j` at tick `t`: received, or predicted from its last known positions.
+    fn input(&self, j: usize, t: i64) -> (Quantized, bool) {
+        if let Some(q) = self.received_at(j, t) {
+            return (q, true);
+        }
+        let last = self.known_until[j];
+        let Some(p) = self.received_at(j, last) else {
+            // Nothing known yet (or only what left the horizon): where it was last used.
+            let prev = &self.slots[self.idx(t - 1)];
+            let q = if prev.tick == t - 1 {
+                prev.inputs[j]
+            } else {
+                UNKNOWN
+            };
+            return (q, false);
+        };
+        let at = |t: i64| self.received_at(j, t);
+        let v = at(last - 1).map_or([0; 3], |p0| [p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]]);
+        let k = (t - last).clamp(0, EXTRAPOLATE_TICKS) as i32;
+        (
+            [
+                p[0].saturating_add(v[0].saturating_mul(k)),
+                p[1].saturating_add(v[1].saturating_mul(k)),
+                p[2].saturating_add(v[2].saturating_mul(k)),
+            ],
+            false,
+        )
+    }
+
+    /// Simulates tick `self.now_tick` on `copy` and keeps its record.
+    fn tick(&mut self, world: &World, copy: &mut ObjectCopy) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let t = self.now_tick;
+        let prev = self.slots[self.idx(t - 1)];
+        let mut slot = Slot {
+            tick: t,
+            copy: *copy,
+            contacts: self.contacts,
+            inputs: [[0; 3]; MAX_SITES],
+            known: [false; MAX_SITES],
+        };
+        let mut users = [ContactForce::default(); MAX_SITES];
+        for (j, user) in users.iter_mut().enumerate().take(self.sites) {
+            let (q, known) = if j == self.me {
+                (self.own_at(t), true)
+            } else {
+                self.input(j, t)
+            };
+            slot.inputs[j] = q;
+            slot.known[j] = known;
+            let p = position(q);
+            let v = if prev.tick == t - 1 && prev.inputs[j] != UNKNOWN && q != UNKNOWN {
+                let v = (p - position(prev.inputs[j])) / self.dt;
+                let speed = v.norm();
+                if speed > MAX_TOOL_SPEED_M_PER_S {
+                    v * (MAX_TOOL_SPEED_M_PER_S / speed)
+                } else {
+                    v
+                }
+            } else {
+                Vec3::zeros()
+            };
+            *user = tool_contact(
+                &self.contact,
+                &mut self.contacts[j],
+                &world.shape,
+                &copy.state,
+                &world.mass,
+                p,
+                v,
+                self.radii[j],
+            );
+        }
+        let i = self.idx(t);
+        self.slots[i] = slot;
+        // Summed in site order, the same at every site: all users count as "own" here.
+        integrate(world, copy, &users[..self.sites], self.sites, self.dt);
+        self.now_tick = t + 1;
+    }
+
+    /// The own tool's position at tick `t` (the current tick: as just measured).
+    fn own_at(&self, t: i64) -> Quantized {
+        if t == self.now_tick {
+            self.own
+        } else {
+            self.slots[self.idx(t)].inputs[self.me]
+        }
+    }
+
+    /// Restores the copy to tick `from` and simulates again to where it was.
+    fn rollback(&mut self, world: &World, copy: &mut ObjectCopy, from: i64) -> u64 {
+        let to = self.now_tick;
+        let oldest = (to - self.len() + 1).max(0);
+        let from = from.max(oldest);
+        if from >= to {
+            return 0;
+        }
+        let s = self.slots[self.idx(from)];
+        let own_now = self.own;
+        *copy = s.copy;
+        self.contacts = s.contacts;
+        self.now_tick = from;
+        while self.now_tick < to {
+            // The own positions of past ticks are the ones used then.
+            self.own = self.slots[self.idx(self.now_tick)].inputs[self.me];
+            self.tick(world, copy);
+        }
+        self.own = own_now;
+        let depth = (to - from) as u64;
+        self.stats.rollbacks += 1;
+        self.stats.resimulated_ticks += depth;
+        self.stats.max_depth = self.stats.max_depth.max(depth);
+        depth
+    }
+
+    /// FNV-1a of the state at the start of tick `t`, if it is still kept.
+    fn hash_at(&self, t: i64) -> Option<u64> {
+        let s = &self.slots[self.idx(t)];
+        (s.tick == t).then(|| hash_state(&s.copy.state))
+    }
+}
+
+/// FNV-1a 64 of a state's bits.
+pub fn hash_state(s: &BodyState) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let words = s
+        .pos
+        .iter()
+        .chain(s.vel.iter())
+        .chain(s.ang_mom.iter())
+        .chain(s.rot.coords.iter());
+    for w in words {
+        for b in w.to_bits().to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
+}
+
+impl Consistency for TimeWarp {
+    fn name(&self) -> &'static str {
+        "timewarp"
+    }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        self.own = quantize(tool_pos);
+    }
+    fn physics_step(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        _own: &ContactForce,
+        _dt: f64,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.tick(world, copy);
+    }
+    fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
+        let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
+        let first = (end - WINDOW_TICKS as i64).max(0);
+        let mut r = ToolReport {
+            first_tick: first,
+            count: (end - first) as usize,
+            positions: [[0; 3]; WINDOW_TICKS],
+            confirmed_tick: self.confirmed_tick(),
+            confirmed_hash: 0,
+        };
+        for (k, t) in (first..end).enumerate() {
+            r.positions[k] = self.slots[self.idx(t)].inputs[self.me];
+        }
+        r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
+        Report::Tools(r)
+    }
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        _now_s: f64,
+    ) -> Option<Adoption> {
+        let Report::Tools(r) = msg else {
+            return None;
+        };
+        if from >= self.sites || from == self.me {
+            return None;
+        }
+        let oldest = self.now_tick - self.len() + 1;
+        for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
+            let t = r.first_tick + k as i64;
+            if t <= self.known_until[from] {
+                continue;
+            }
+            if t < oldest {
+                self.stats.fallbacks += 1;
+                self.dirty_from = Some(self.dirty_from.map_or(oldest, |d| d.min(oldest)));
+                continue;
+            }
+            let i = self.idx(t);
+            self.received[i][from] = Some((t, q));
+            // Simulated with another (predicted) position: from there on it is re-simulated.
+            let s = &self.slots[i];
+            if t < self.now_tick && s.tick == t && s.inputs[from] != q {
+                self.dirty_from = Some(self.dirty_from.map_or(t, |d| d.min(t)));
+            }
+        }
+        let end = r.first_tick + r.count as i64 - 1;
+        self.known_until[from] = self.known_until[from].max(end);
+        // Ticks past the newest known are predicted again from it: if any was simulated with
+        // another prediction, they are re-simulated too (the rollback covers them).
+        let mut adoption = None;
+        if let Some(from_tick) = self.dirty_from.take() {
+            let before = copy.state;
+            if self.rollback(world, copy, from_tick) > 0 {
+                let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+                adoption = Some(Adoption {
+                    jump: before.pos - copy.state.pos,
+                    energy_j: e(&copy.state) - e(&before),
+                    age_s: (self.now_tick - from_tick) as f64 * self.dt,
+                });
+            }
+        }
+        // Confirmed state compared where both know it.
+        if r.confirmed_hash != 0 && r.confirmed_tick <= self.confirmed_tick() {
+            if let Some(h) = self.hash_at(r.confirmed_tick) {
+                self.stats.hash_checks += 1;
+                if h != r.confirmed_hash {
+                    self.stats.hash_mismatches += 1;
+                }
+            }
+        }
+        adoption
+    }
+    fn timewarp_stats(&self) -> Option<Stats> {
+        Some(self.stats)
+    }
+}
