@@ -408,8 +408,16 @@ impl Consistency for TimeWarp {
         }
         let end = r.first_tick + r.count as i64 - 1;
         self.known_until[from] = self.known_until[from].max(end);
-        // Ticks past the newest known are predicted again from it: if any was simulated with
-        // another prediction, they are re-simulated too (the rollback covers them).
+        // Ticks past the newest known are predicted again from it: one simulated with another
+        // prediction is re-simulated too, so the copy is always what the inputs known now give
+        // (and a re-simulation arrives at the same bits).
+        for t in (self.known_until[from] + 1).max(oldest)..self.now_tick {
+            let s = &self.slots[self.idx(t)];
+            if s.tick == t && s.inputs[from] != self.input(from, t).0 {
+                self.dirty_from = Some(self.dirty_from.map_or(t, |d| d.min(t)));
+                break;
+            }
+        }
         let mut adoption = None;
         if let Some(from_tick) = self.dirty_from.take() {
             let before = copy.state;
@@ -435,5 +443,104 @@ impl Consistency for TimeWarp {
     }
     fn timewarp_stats(&self) -> Option<Stats> {
         Some(self.stats)
+    }
+}
+
+impl TimeWarp {
+    /// GGPO's synctest: rolls the copy back `depth` ticks and re-simulates them with the same
+    /// inputs; whether it arrived at the same bits (state, friction memory) it had. Determinism is
+    /// what makes every site's confirmed state the same: this checks it on every tick it is run.
+    pub fn synctest(&mut self, world: &World, copy: &mut ObjectCopy, depth: i64) -> bool {
+        let (before, contacts) = (*copy, self.contacts);
+        let stats = self.stats;
+        self.rollback(world, copy, self.now_tick - depth);
+        copy.state == before.state && copy.env == before.env && self.contacts == contacts
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::BodyState;
+    use crate::scenario::Scenario;
+
+    fn paper_world() -> (Scenario, World) {
+        let mut sc = Scenario::default();
+        sc.object.start_m = [0.0, 0.0, 0.01];
+        sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+        sc.world.planes[0].offset_m = 0.0;
+        sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+        let w = sc.world();
+        (sc, w)
+    }
+
+    /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
+    /// depth up to 50 ticks, on every tick) always arrives at the same bits.
+    #[test]
+    fn a_forced_rollback_on_every_tick_gives_the_same_bits() {
+        let (sc, w) = paper_world();
+        let copy0 = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy0);
+        let mut copy = copy0;
+        let mut other = [0i32; 3];
+        for k in 0..1500i64 {
+            let s = k as f64 * 1e-3;
+            let squeeze = (s * 0.02).min(0.008);
+            let carry = (s - 0.8).max(0.0) * 0.05;
+            tw.own_tool(Vec3::new(-0.045 + squeeze, carry, 0.01));
+            // The other site's tool, received with a 30-tick delay in 10-tick batches.
+            if k % 10 == 0 && k >= 30 {
+                let mut r = ToolReport {
+                    first_tick: k - 40,
+                    count: 10,
+                    positions: [[0; 3]; WINDOW_TICKS],
+                    confirmed_tick: 0,
+                    confirmed_hash: 0,
+                };
+                for j in 0..10 {
+                    let t = (k - 40 + j) as f64 * 1e-3;
+                    other = quantize(Vec3::new(
+                        0.045 - (t * 0.02).min(0.008),
+                        (t - 0.8).max(0.0) * 0.05,
+                        0.01,
+                    ));
+                    r.positions[j as usize] = other;
+                }
+                if r.first_tick >= 0 {
+                    tw.receive(&w, &mut copy, 1, &Report::Tools(r), s);
+                }
+            }
+            tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+            let depth = 1 + k % 50;
+            assert!(tw.synctest(&w, &mut copy, depth), "tick {k}, depth {depth}");
+        }
+        assert!(
+            tw.stats().rollbacks > 10,
+            "the received tool caused rollbacks: {:?}",
+            tw.stats()
+        );
+        assert!(
+            copy.state.pos.y > 0.01,
+            "the squeezed disk was carried: {:?}",
+            copy.state.pos
+        );
+        let _ = other;
+    }
+
+    #[test]
+    fn positions_quantize_to_the_hundredth_of_a_millimetre() {
+        assert_eq!(
+            quantize(Vec3::new(0.012_345_6, -0.5, 0.0)),
+            [1235, -50_000, 0]
+        );
+        let p = position([1235, -50_000, 0]);
+        assert!((p - Vec3::new(0.01235, -0.5, 0.0)).norm() < 1e-15, "{p:?}");
+        assert_eq!(
+            quantize(p),
+            [1235, -50_000, 0],
+            "a quantized position quantizes to itself"
+        );
     }
 }
