@@ -1,5 +1,8 @@
 //! coop-actors: the station as a library, and its supervisor on ractor and tokio.
 //!
+//! [`router`] is `station router`: a zenoh router enforcing a session's access control, for
+//! sessions across machines.
+//!
 //! [`station`] is one site's processes: configuration, the children's entry points, `station run`
 //! with its stop ladder, and `station status`. The binaries in `coop-tools` are thin mains over it.
 //!
@@ -14,6 +17,7 @@
 
 pub mod child;
 pub mod policy;
+pub mod router;
 pub mod scenario_file;
 pub mod station;
 pub mod supervisor;

@@ -6,6 +6,7 @@
 //! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
 //! - [`session`]: a multi-site session of real stations, recorded and measured.
+//! - [`certs`]: a session's CA, certificates and access control (`session certs`).
 //! - [`fuzz`]: hostile input at volume (wire, scenario, station config), judged by oracles.
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
@@ -26,6 +27,7 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
     }
 }
 
+pub mod certs;
 pub mod cli;
 pub mod fuzz;
 pub mod latency;

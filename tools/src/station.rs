@@ -1,4 +1,5 @@
-//! The `station` command line: `station run|status|clean`, and the hidden loop processes the
+//! The `station` command line: `station run|status|clean`, `station router run|status` (a zenoh
+//! router for sessions across machines), and the hidden loop processes the
 //! supervisor spawns (`station servo|physics|network`). The `station` binary is this; the `session`
 //! binary carries it too (`session station ...`), so one executable can run a whole session.
 
@@ -64,6 +65,10 @@ enum Command {
         #[arg(long, requires = "session")]
         station: Option<String>,
     },
+    /// A zenoh router for sessions across machines: stations in client mode connect to it, and it
+    /// enforces the session's access control (`session certs`) on every link.
+    #[command(subcommand)]
+    Router(RouterCommand),
     /// The servo loop process (started by the supervisor).
     #[command(hide = true)]
     Servo(ChildArgs),
@@ -73,6 +78,35 @@ enum Command {
     /// The network process (started by the supervisor).
     #[command(hide = true)]
     Network(ChildArgs),
+}
+
+#[derive(Debug, Subcommand)]
+enum RouterCommand {
+    /// Run the router until Ctrl-C/SIGTERM. The configuration (TOML) names the router (its
+    /// certificate's common name), its `listen` and `connect` locators, `[tls]` (the session's
+    /// CA, its certificate and key, `enable_mtls`), `access_control` (the file `session certs`
+    /// writes), `status_file` and `status_every_ms` (default 500); it is checked before anything
+    /// starts.
+    Run {
+        /// Router configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Stop by itself after this many seconds.
+        #[arg(long, value_name = "S")]
+        duration_s: Option<f64>,
+    },
+    /// Show what a running router sees: the zenoh sessions linked to it (zid, client/peer/router,
+    /// links), the sites present, and the messages its access control refused (by kind, the
+    /// latest with who and which key). A TLS link refused at the handshake (no certificate of the
+    /// session's CA) never becomes a session and is not counted.
+    Status {
+        /// Router configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -186,6 +220,29 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
                 exe_prefix,
             };
             run::run(&resolve(&a)?, &opts)
+        }
+        Command::Router(RouterCommand::Run { config, duration_s }) => {
+            let r = coop_actors::router::RouterConfig::load(&config)?;
+            let duration = match duration_s {
+                Some(d) if d > 0.0 && d.is_finite() => Some(std::time::Duration::from_secs_f64(d)),
+                Some(d) => anyhow::bail!("--duration-s {d}: must be a positive number of seconds"),
+                None => None,
+            };
+            // Before zenoh's threads start: SIGINT/SIGTERM stop the router cleanly.
+            let stop = crate::cli::StopFlag::on_sigint_sigterm()?;
+            let s = coop_actors::router::run(&r, duration, &|| stop.is_raised())?;
+            eprintln!("{s}");
+            Ok(())
+        }
+        Command::Router(RouterCommand::Status { config, json }) => {
+            let r = coop_actors::router::RouterConfig::load(&config)?;
+            let s = coop_actors::router::read_status(&r)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s)?);
+            } else {
+                print!("{s}");
+            }
+            Ok(())
         }
         Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
         Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),

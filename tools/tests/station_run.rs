@@ -172,38 +172,37 @@ fn two_stations_by_hand_see_each_other() {
     two_stations("tcp", None);
 }
 
-/// The same over TLS, with a CA and a station certificate made for the test by `openssl`
-/// (skipped with a message where it is not installed).
+/// The same over TLS, with the session CA and the sites' certificates made by `session certs`
+/// (rcgen): each station listens with user1's certificate and connects with user2's (the two
+/// stations of this test share one `[network.tls]`).
 #[test]
 fn two_stations_see_each_other_over_tls() {
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-tls-{session}"));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let sh = |cmd: &str| {
-        Command::new("sh")
-            .arg("-c")
-            .arg(cmd)
-            .current_dir(&dir)
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    if !sh("command -v openssl") {
-        eprintln!("SKIPPED two_stations_see_each_other_over_tls: openssl is not installed");
-        return;
-    }
+    let made = Command::new(env!("CARGO_BIN_EXE_session"))
+        .args([
+            "certs",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/paper.toml"),
+            "--session",
+            &session,
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .expect("session certs");
     assert!(
-        sh("openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days 1 -subj '/CN=coop test CA' \
-            && openssl req -newkey rsa:2048 -nodes -keyout st.key -out st.csr -subj '/CN=localhost' \
-            && printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\n' > ext.cnf \
-            && openssl x509 -req -in st.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out st.pem -days 1 -extfile ext.cnf"),
-        "making the test certificates"
+        made.status.success(),
+        "making the test certificates: {}",
+        String::from_utf8_lossy(&made.stderr)
     );
     two_stations(
         "tls",
         Some(Tls {
             root_ca_certificate: Some(dir.join("ca.pem")),
-            listen_certificate: Some(dir.join("st.pem")),
-            listen_private_key: Some(dir.join("st.key")),
+            listen_certificate: Some(dir.join("user1.pem")),
+            listen_private_key: Some(dir.join("user1.key")),
+            connect_certificate: Some(dir.join("user2.pem")),
+            connect_private_key: Some(dir.join("user2.key")),
             ..Tls::default()
         }),
     );

@@ -11,6 +11,23 @@ pub fn all_states(session: &str, obj: u32) -> String {
     format!("coop/{session}/obj/{obj}/state/*")
 }
 
+/// The key a site's tool (its device's end effector) of object `obj`'s world goes on:
+/// `coop/<session>/obj/<obj>/tool/<site>`. Nothing publishes it yet; the access control reserves
+/// it for its site already.
+pub fn tool(session: &str, obj: u32, site: &str) -> String {
+    format!("coop/{session}/obj/{obj}/tool/{site}")
+}
+
+/// Every site's tool key of object `obj`.
+pub fn all_tools(session: &str, obj: u32) -> String {
+    format!("coop/{session}/obj/{obj}/tool/*")
+}
+
+/// Every key of `session`: `coop/<session>/**`.
+pub fn session_keys(session: &str) -> String {
+    format!("coop/{session}/**")
+}
+
 /// The queryable a site answers with its newest state of object `obj` (for late joiners).
 pub fn current(session: &str, obj: u32, site: &str) -> String {
     format!("coop/{session}/obj/{obj}/current/{site}")
@@ -24,6 +41,11 @@ pub fn all_current(session: &str, obj: u32) -> String {
 /// A site's liveliness token: present while its network process runs.
 pub fn presence(session: &str, site: &str) -> String {
     format!("coop/{session}/presence/{site}")
+}
+
+/// Every site's clock queryable.
+pub fn all_clocks(session: &str) -> String {
+    format!("coop/{session}/clock/*")
 }
 
 /// Every site's liveliness token.
@@ -56,6 +78,10 @@ mod tests {
         assert_eq!(super::presence("s1", "u"), "coop/s1/presence/u");
         assert_eq!(super::clock("s1", "u"), "coop/s1/clock/u");
         assert_eq!(super::epoch("s1"), "coop/s1/epoch");
+        assert_eq!(super::tool("s1", 0, "u"), "coop/s1/obj/0/tool/u");
+        assert_eq!(super::all_tools("s1", 0), "coop/s1/obj/0/tool/*");
+        assert_eq!(super::all_clocks("s1"), "coop/s1/clock/*");
+        assert_eq!(super::session_keys("s1"), "coop/s1/**");
         assert_eq!(super::site_of(&super::state("s", 0, "user2")), "user2");
     }
 }

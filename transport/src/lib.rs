@@ -4,6 +4,8 @@
 //! - [`wire`]: the one encode and the one decode of what stations send each other.
 //! - [`admit`]: what a receiver takes of a decoded report (its site, its time, its plausibility,
 //!   its sequence), every refusal typed and counted.
+//! - [`acl`]: who may say what in a session (zenoh's access control, by certificate name).
+//! - [`router`]: a zenoh router enforcing it, for sessions across machines, and its status.
 //! - [`recording`]: the station's MCAP recording, written and read.
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
@@ -13,8 +15,10 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod acl;
 pub mod admit;
 pub mod keys;
 pub mod network;
 pub mod recording;
+pub mod router;
 pub mod wire;

@@ -365,6 +365,13 @@ impl StationConfig {
             rebase(r);
             record_rules(r)?;
         }
+        if let Some(a) = &mut config.network.access_control {
+            rebase(a);
+            let shown = a.display().to_string();
+            if let Err(e) = std::fs::File::open(&*a) {
+                bail!("network.access_control = {shown:?}: cannot be read: {e}");
+            }
+        }
         if let Some(t) = &mut config.network.tls {
             for (field, f) in [
                 ("root_ca_certificate", &mut t.root_ca_certificate),
@@ -522,8 +529,69 @@ fn network_rules(net: &NetworkConfig) -> anyhow::Result<()> {
             }
         }
     }
+    own_certificate_rules(net)?;
     if net.mode == Mode::Client && net.connect.is_empty() {
         bail!("network.mode = \"client\" needs network.connect: the zenohd routers to go through");
+    }
+    Ok(())
+}
+
+/// A station given TLS presents its own certificate (common name = its site name: what the
+/// access control knows it by) in every direction it uses TLS, and access control needs mutual
+/// TLS (its rules name certificates).
+fn own_certificate_rules(net: &NetworkConfig) -> anyhow::Result<()> {
+    let Some(t) = &net.tls else {
+        if let Some(a) = &net.access_control {
+            bail!(
+                "network.access_control = {:?}: needs [network.tls] with enable_mtls = true (its rules name the certificates stations present)",
+                a.display().to_string()
+            );
+        }
+        return Ok(());
+    };
+    let tls = |l: &String| l.starts_with("tls/");
+    let connects = net.connect.iter().any(tls);
+    let listens = net.mode == Mode::Peer && net.listen.iter().any(tls);
+    for (uses, field, ok) in [
+        (
+            connects,
+            "connect_certificate",
+            t.connect_certificate.is_some(),
+        ),
+        (
+            connects,
+            "connect_private_key",
+            t.connect_private_key.is_some(),
+        ),
+        (
+            listens,
+            "listen_certificate",
+            t.listen_certificate.is_some(),
+        ),
+        (
+            listens,
+            "listen_private_key",
+            t.listen_private_key.is_some(),
+        ),
+    ] {
+        if uses && !ok {
+            let how = if field.starts_with("connect") {
+                "connects"
+            } else {
+                "listens"
+            };
+            bail!(
+                "network.tls.{field} is missing: a station that {how} over TLS presents its own certificate (common name = its site name; `session certs` makes one)"
+            );
+        }
+    }
+    if let Some(a) = &net.access_control {
+        if !t.enable_mtls {
+            bail!(
+                "network.access_control = {:?}: needs network.tls.enable_mtls = true (its rules name the certificates stations present)",
+                a.display().to_string()
+            );
+        }
     }
     Ok(())
 }
@@ -679,6 +747,26 @@ mod tests {
             .expect("relative");
         assert_eq!(r.config.record, Some(dir.join("rec/a.mcap")));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_station_given_tls_presents_its_own_certificate() {
+        for (text, needle) in [
+            (
+                "[network]\nmode = \"client\"\nconnect = [\"tls/192.0.2.1:7447\"]\n[network.tls]\nroot_ca_certificate = \"/dev/null\"",
+                "network.tls.connect_certificate is missing: a station that connects over TLS presents its own certificate",
+            ),
+            (
+                "[network]\nconnect = [\"tcp/127.0.0.1:7447\"]\naccess_control = \"/dev/null\"",
+                "network.access_control = \"/dev/null\": needs [network.tls] with enable_mtls = true",
+            ),
+        ] {
+            let err = toml::from_str::<StationConfig>(text)
+                .map_err(anyhow::Error::from)
+                .and_then(|c| c.resolve(None).map(drop))
+                .expect_err(text);
+            assert!(format!("{err:#}").contains(needle), "{text}: {err:#}");
+        }
     }
 
     #[test]

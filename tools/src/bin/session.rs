@@ -69,6 +69,32 @@ enum Command {
         #[arg(long)]
         station_bin: Option<PathBuf>,
     },
+    /// Make what a session across machines needs: a session CA, a certificate per site (common
+    /// name = the site's name), one for the launcher and one per router, and the access control
+    /// that follows from the scenario (acl.json5: each site may put only its own state and tool,
+    /// declare and answer only its own current, clock and presence; only the launcher puts the
+    /// epoch; everything else is denied). Keys are written owner-only.
+    Certs {
+        /// Scenario file (TOML): its sites.
+        scenario: PathBuf,
+        /// Output directory (made if absent).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Session name, as in the stations' configurations.
+        #[arg(long, default_value = "local")]
+        session: String,
+        /// A router's name (repeatable).
+        #[arg(long = "router", value_name = "NAME")]
+        routers: Vec<String>,
+        /// Addresses or host names NAME is reached at, added to its certificate (repeatable),
+        /// e.g. `r1=192.0.2.1,router.example.org`. Each certificate has its name, localhost,
+        /// 127.0.0.1 and ::1 already.
+        #[arg(long = "host", value_name = "NAME=ADDR[,ADDR]", value_parser = coop_tools::certs::parse_host)]
+        hosts: Vec<(String, Vec<String>)>,
+        /// Days the certificates are valid.
+        #[arg(long, default_value_t = 365)]
+        days: u32,
+    },
     /// The benchmark's echo process.
     #[command(hide = true)]
     BenchPong {
@@ -158,6 +184,34 @@ fn main() -> std::process::ExitCode {
             coop_tools::netbench::run(json, &station_bin_or_default(station_bin)?)
         }
         Command::BenchPong { listen } => coop_tools::netbench::pong(&listen),
+        Command::Certs {
+            scenario,
+            out,
+            session,
+            routers,
+            hosts,
+            days,
+        } => {
+            let sc = coop_actors::scenario_file::load(&scenario)?;
+            let mut by_name = std::collections::BTreeMap::<String, Vec<String>>::new();
+            for (n, a) in hosts {
+                by_name.entry(n).or_default().extend(a);
+            }
+            let w = coop_tools::certs::make(&coop_tools::certs::CertsArgs {
+                session,
+                sites: sc.site.iter().map(|s| s.name.clone()).collect(),
+                routers,
+                hosts: by_name,
+                days,
+                out,
+            })?;
+            println!("ca {}", w.ca.display());
+            for (n, (c, k)) in &w.certs {
+                println!("{n} {} {}", c.display(), k.display());
+            }
+            println!("acl {}", w.acl.display());
+            Ok(())
+        }
     })
 }
 

@@ -48,6 +48,10 @@ pub struct NetworkConfig {
     pub mode: Mode,
     /// TLS files, for `tls/` locators.
     pub tls: Option<Tls>,
+    /// Zenoh access control (its `access_control` object, JSON5, as `session certs` writes it)
+    /// enforced on this station's links: on a link to another station it refuses what that
+    /// station's certificate may not say. Needs mutual TLS (the rules name certificates).
+    pub access_control: Option<PathBuf>,
     /// Emulate the scenario's `[network]` link (delay, jitter, loss, seeded) on receive, so long
     /// delays can be run on one machine. Shown as EMULATED in status and recordings.
     pub emulate: bool,
@@ -77,6 +81,7 @@ impl Default for NetworkConfig {
             connect: Vec::new(),
             mode: Mode::Peer,
             tls: None,
+            access_control: None,
             emulate: false,
             max_state_age_ms: None,
             lost_after_reports: 10,
@@ -84,7 +89,9 @@ impl Default for NetworkConfig {
     }
 }
 
-/// TLS for `tls/<host>:<port>` locators: PEM files (zenoh's `transport/link/tls`).
+/// TLS for `tls/<host>:<port>` locators: PEM files (zenoh's `transport/link/tls`). The
+/// certificates are this side's own: a station's has its site name as common name, which is what
+/// the access control knows it by.
 #[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Tls {
@@ -231,6 +238,17 @@ pub fn config(endpoints: &NetworkConfig) -> Result<zenoh::Config, NetworkError> 
         set("listen/endpoints", &json(&endpoints.listen))?;
     }
     set("connect/endpoints", &json(&endpoints.connect))?;
+    if let Some(path) = &endpoints.access_control {
+        let text = std::fs::read_to_string(path).map_err(|e| NetworkError::AccessControl {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        c.insert_json5("access_control", &text)
+            .map_err(|e| NetworkError::AccessControl {
+                path: path.clone(),
+                reason: e.to_string(),
+            })?;
+    }
     Ok(c)
 }
 

@@ -21,6 +21,14 @@ pub enum NetworkError {
         /// Zenoh's reason.
         error: zenoh::Error,
     },
+    /// The access control file cannot be read, or zenoh does not take it.
+    #[error("access control {}: {reason}", path.display())]
+    AccessControl {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        reason: String,
+    },
     /// The recording could not be created.
     #[error("creating the recording: {0}")]
     Recording(#[from] RecordingError),

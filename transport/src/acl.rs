@@ -1,0 +1,257 @@
+//! Who may say what in a session: the zenoh access control (ACL) that follows from a scenario.
+//!
+//! Without it, anyone who reaches a session speaks for any site: a foreign client can put on
+//! `coop/<s>/obj/0/state/user2` or answer `clock/user2` queries, and the receive checks
+//! (`admit`) cannot tell it from user2. Zenoh's ACL decides per message and per link, by the
+//! common name of the certificate the other side presented (mutual TLS), so the rules here name
+//! certificates: a site's certificate has the site's name as its common name (`session certs`
+//! makes them).
+//!
+//! What it allows, everything else being denied (`default_permission = "deny"`):
+//!
+//! - site X, coming in: put only its own state and tool keys; declare (and answer) only its own
+//!   `current/X` and `clock/X` queryables; declare only its own presence token; subscribe to the
+//!   session's states, tools and epoch, query its current states, clocks and epoch, and watch its
+//!   presence tokens;
+//! - the launcher, coming in: the same watching, and put, declare and answer the epoch (nobody
+//!   else may);
+//! - a router of the session, coming in: anything on the session's keys (routers are trusted to
+//!   have applied these rules at their own edge);
+//! - going out, to any of them: anything on the session's keys (what goes out was let in).
+//!
+//! A router enforces it on every link. A station can load it too (`network.access_control`):
+//! on its links to other stations (peer to peer) it then refuses what a peer may not say; on its
+//! link to a router it can only check that the other side is a router of the session.
+
+use serde_json::{json, Value};
+
+use crate::keys;
+
+/// The common name of the launcher's certificate (the only one that may put the epoch).
+pub const LAUNCHER: &str = "launcher";
+
+/// Who takes part in a session, by certificate common name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Members<'a> {
+    /// Session name (the first component of every key).
+    pub session: &'a str,
+    /// The scenario's site names, in order (each site's certificate has its name).
+    pub sites: &'a [String],
+    /// The launcher's common name (usually [`LAUNCHER`]).
+    pub launcher: &'a str,
+    /// The routers' common names.
+    pub routers: &'a [String],
+}
+
+/// Zenoh message kinds, as its ACL spells them.
+const EVERY_MESSAGE: [&str; 9] = [
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "declare_queryable",
+    "reply",
+    "liveliness_token",
+    "declare_liveliness_subscriber",
+    "liveliness_query",
+];
+
+fn rule(id: &str, flow: &str, messages: &[&str], key_exprs: &[String]) -> Value {
+    json!({
+        "id": id,
+        "flows": [flow],
+        "permission": "allow",
+        "messages": messages,
+        "key_exprs": key_exprs,
+    })
+}
+
+/// The `access_control` object of a zenoh configuration (its JSON form, which is JSON5) that
+/// follows from `m`: see the module's documentation.
+pub fn session_acl(m: &Members<'_>) -> Value {
+    let s = m.session;
+    let mut rules = vec![
+        rule(
+            "watch-subscribe",
+            "ingress",
+            &["declare_subscriber"],
+            &[
+                keys::all_states(s, 0),
+                keys::all_tools(s, 0),
+                keys::epoch(s),
+            ],
+        ),
+        rule(
+            "watch-query",
+            "ingress",
+            &["query"],
+            &[keys::all_current(s, 0), keys::all_clocks(s), keys::epoch(s)],
+        ),
+        rule(
+            "watch-presence",
+            "ingress",
+            &["declare_liveliness_subscriber", "liveliness_query"],
+            &[keys::all_presence(s)],
+        ),
+        rule(
+            "launcher-epoch",
+            "ingress",
+            &["put", "declare_queryable", "reply"],
+            &[keys::epoch(s)],
+        ),
+        rule(
+            "router-anything",
+            "ingress",
+            &EVERY_MESSAGE,
+            &[keys::session_keys(s)],
+        ),
+        rule("out", "egress", &EVERY_MESSAGE, &[keys::session_keys(s)]),
+    ];
+    let watch = ["watch-subscribe", "watch-query", "watch-presence", "out"];
+    let mut subjects = vec![json!({"id": "launcher", "cert_common_names": [m.launcher]})];
+    let mut policies = vec![json!({
+        "id": "launcher",
+        "subjects": ["launcher"],
+        "rules": ["watch-subscribe", "watch-query", "watch-presence", "launcher-epoch", "out"],
+    })];
+    if !m.routers.is_empty() {
+        subjects.push(json!({"id": "routers", "cert_common_names": m.routers}));
+        policies.push(json!({
+            "id": "routers",
+            "subjects": ["routers"],
+            "rules": ["router-anything", "out"],
+        }));
+    }
+    for site in m.sites {
+        let own = |what: &str| format!("site-{site}-{what}");
+        rules.push(rule(
+            &own("puts"),
+            "ingress",
+            &["put"],
+            &[keys::state(s, 0, site), keys::tool(s, 0, site)],
+        ));
+        rules.push(rule(
+            &own("answers"),
+            "ingress",
+            &["declare_queryable", "reply"],
+            &[keys::current(s, 0, site), keys::clock(s, site)],
+        ));
+        rules.push(rule(
+            &own("presence"),
+            "ingress",
+            &["liveliness_token"],
+            &[keys::presence(s, site)],
+        ));
+        let mut mine: Vec<String> = watch.iter().map(|r| (*r).to_owned()).collect();
+        mine.extend([own("puts"), own("answers"), own("presence")]);
+        subjects.push(json!({"id": format!("site-{site}"), "cert_common_names": [site]}));
+        policies.push(json!({
+            "id": format!("site-{site}"),
+            "subjects": [format!("site-{site}")],
+            "rules": mine,
+        }));
+    }
+    json!({
+        "enabled": true,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn members() -> (Vec<String>, Vec<String>) {
+        (
+            vec!["user1".to_owned(), "user2".to_owned()],
+            vec!["r1".to_owned()],
+        )
+    }
+
+    #[test]
+    fn zenoh_accepts_the_acl_and_opens_a_session_enforcing_it() {
+        let (sites, routers) = members();
+        let acl = session_acl(&Members {
+            session: "s1",
+            sites: &sites,
+            launcher: LAUNCHER,
+            routers: &routers,
+        });
+        let mut c = zenoh::Config::default();
+        c.insert_json5("access_control", &acl.to_string())
+            .expect("zenoh's access_control schema");
+        c.insert_json5("listen/endpoints", "[]").expect("no listen");
+        c.insert_json5("scouting/multicast/enabled", "false")
+            .expect("no scouting");
+        // Zenoh checks the rules, subjects and policies (unique ids, known names) at open.
+        use zenoh::Wait;
+        let s = zenoh::open(c).wait().expect("zenoh takes the policy");
+        s.close().wait().expect("close");
+    }
+
+    #[test]
+    fn each_site_may_put_and_answer_only_its_own_keys() {
+        let (sites, routers) = members();
+        let acl = session_acl(&Members {
+            session: "s1",
+            sites: &sites,
+            launcher: LAUNCHER,
+            routers: &routers,
+        });
+        let rules = acl["rules"].as_array().expect("rules");
+        let rule = |id: &str| {
+            rules
+                .iter()
+                .find(|r| r["id"] == id)
+                .unwrap_or_else(|| panic!("rule {id}"))
+        };
+        assert_eq!(
+            rule("site-user2-puts")["key_exprs"],
+            json!(["coop/s1/obj/0/state/user2", "coop/s1/obj/0/tool/user2"])
+        );
+        assert_eq!(
+            rule("site-user2-answers")["key_exprs"],
+            json!(["coop/s1/obj/0/current/user2", "coop/s1/clock/user2"])
+        );
+        let policy = |id: &str| {
+            acl["policies"]
+                .as_array()
+                .expect("policies")
+                .iter()
+                .find(|p| p["id"] == id)
+                .unwrap_or_else(|| panic!("policy {id}"))
+                .clone()
+        };
+        let p2 = policy("site-user2");
+        let p2_rules: Vec<&str> = p2["rules"]
+            .as_array()
+            .expect("rules")
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        assert!(p2_rules.contains(&"site-user2-puts"));
+        assert!(
+            !p2_rules.iter().any(|r| r.contains("user1")),
+            "{p2_rules:?}"
+        );
+        assert!(
+            !p2_rules.contains(&"launcher-epoch"),
+            "only the launcher puts the epoch"
+        );
+        assert!(policy("launcher")["rules"]
+            .as_array()
+            .expect("rules")
+            .contains(&json!("launcher-epoch")));
+        assert_eq!(acl["default_permission"], "deny");
+        let subjects = acl["subjects"].as_array().expect("subjects");
+        assert!(subjects
+            .iter()
+            .any(|s| s["id"] == "site-user1" && s["cert_common_names"] == json!(["user1"])));
+        assert!(subjects
+            .iter()
+            .any(|s| s["id"] == "routers" && s["cert_common_names"] == json!(["r1"])));
+    }
+}
