@@ -194,7 +194,7 @@ fn compare_prints_one_table_and_json() {
         .expect("sim");
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for row in ["reference", "naive", "paper"] {
+    for row in ["reference", "naive", "paper", "timewarp"] {
         assert!(
             out.lines().any(|l| l.starts_with(row)),
             "{row} row missing:\n{out}"
@@ -206,6 +206,7 @@ fn compare_prints_one_table_and_json() {
         .output()
         .expect("sim");
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
-    assert_eq!(v["methods"].as_array().map(Vec::len), Some(3));
+    // The reference and every method the simulator runs.
+    assert_eq!(v["methods"].as_array().map(Vec::len), Some(4));
     assert!(v["methods"][1]["divergence_max_m"].as_f64().is_some());
 }
