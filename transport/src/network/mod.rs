@@ -34,7 +34,7 @@ use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
 use crate::admit::Bounds;
-use crate::recording::{Rotation, SessionMsg, StatusMsg};
+use crate::recording::{Rotation, Scene, SessionMsg, StatusMsg};
 
 pub mod clock;
 pub mod config;
@@ -91,6 +91,8 @@ pub struct NetworkArgs<'a> {
     pub bounds: Bounds,
     /// Per site: how long it may be silent before it is lost, ns.
     pub silence_ns: Vec<u64>,
+    /// What this site shows (object, tool, environment), for the recording's Foxglove channels.
+    pub scene: Scene,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -143,6 +145,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ("emulation".into(), ctx.emulation.clone()),
         ]),
         a.record_rotation,
+        a.scene,
     )?;
     ctx.ctl
         .network
@@ -304,6 +307,7 @@ impl Loop {
             self.recording.write(|w| w.peer(m));
         }
         self.recording.drain_trace(&mut self.trace);
+        self.recording.watch_servo(ctx.ctl, now);
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
         }

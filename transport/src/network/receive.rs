@@ -113,8 +113,8 @@ impl<'a> Receiver<'a> {
     /// Checks again the held messages whose sender's clock offset is now known.
     pub(super) fn retry_waiting(&mut self) {
         let offsets = self.offsets();
-        for j in 0..self.waiting.len() {
-            if offsets[j].is_some() {
+        for (j, offset) in offsets.iter().enumerate() {
+            if offset.is_some() {
                 if let Some(w) = self.waiting[j].take() {
                     self.on_bytes(&w.key, &w.bytes, w.zenoh_ts, w.join);
                 }
