@@ -29,6 +29,7 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 pub mod cli;
 pub mod fuzz;
 pub mod latency;
+pub mod live;
 pub mod netbench;
 pub mod plots;
 pub mod ringbench;

@@ -167,3 +167,97 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
     assert!(arrows > 0, "the users push the object: force arrows");
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `session run --live`: a Foxglove WebSocket client that is not ours (the `websockets` package,
+/// `foxglove.websocket.v1`) gets the channels advertised, subscribes, and receives every site's
+/// frames and scene while the session runs; the session ends as it would without a viewer.
+#[test]
+fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
+    use std::io::BufRead;
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["websockets", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let out = out_dir("live");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "paper", "--json", "--live", "127.0.0.1:0"])
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("session starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the launcher prints the live view's address");
+    assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
+    let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
+    // The client waits (up to 60 s) until it has seen every site; it connects before the stations
+    // are up, so what it sees is the session as it runs.
+    let client = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60"])
+        .args(&sites)
+        .output()
+        .expect("python3 runs");
+    let session = child.wait_with_output().expect("session ends");
+    let launcher_log = log.join().unwrap_or_default();
+    assert!(
+        client.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    assert!(session.status.success(), "session failed: {launcher_log}");
+    let v: Value = serde_json::from_slice(&client.stdout).expect("the client prints JSON");
+    assert_eq!(v["errors"], serde_json::json!([]), "{v}");
+    assert_eq!(
+        v["channels"],
+        serde_json::json!({
+            "/tf": "foxglove.FrameTransform",
+            "/scene": "foxglove.SceneUpdate",
+            "/log": "foxglove.Log",
+        }),
+        "advertised"
+    );
+    assert_eq!(v["complete"], true, "every site's frames and scene: {v}");
+    // One scene with every site: the environment and three entities per site.
+    assert_eq!(
+        v["max_scene_entities"].as_u64(),
+        Some(1 + 3 * sites.len() as u64),
+        "{v}"
+    );
+    assert!(
+        v["logs"][0]
+            .as_str()
+            .is_some_and(|l| l.contains("scenario three-users")),
+        "{v}"
+    );
+    // The session's own result is unaffected.
+    let result: Value = serde_json::from_slice(&session.stdout).expect("the session's JSON");
+    assert!(
+        result["methods"]["paper"]["real"]["divergence_final_m"].as_f64() < Some(0.005),
+        "{result}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -41,6 +41,16 @@ pub fn epoch(session: &str) -> String {
     format!("coop/{session}/epoch")
 }
 
+/// The key a site puts its newest sample (copy and tool) on for live viewers, at most ~60 Hz.
+pub fn live(session: &str, site: &str) -> String {
+    format!("coop/{session}/live/{site}")
+}
+
+/// Every site's live samples.
+pub fn all_live(session: &str) -> String {
+    format!("coop/{session}/live/*")
+}
+
 /// The last chunk of a key: the site name of a state, current, presence or clock key.
 pub fn site_of(key: &str) -> &str {
     key.rsplit('/').next().unwrap_or("")
@@ -56,6 +66,8 @@ mod tests {
         assert_eq!(super::presence("s1", "u"), "coop/s1/presence/u");
         assert_eq!(super::clock("s1", "u"), "coop/s1/clock/u");
         assert_eq!(super::epoch("s1"), "coop/s1/epoch");
+        assert_eq!(super::live("s1", "u"), "coop/s1/live/u");
+        assert_eq!(super::all_live("s1"), "coop/s1/live/*");
         assert_eq!(super::site_of(&super::state("s", 0, "user2")), "user2");
     }
 }
