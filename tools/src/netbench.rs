@@ -65,6 +65,7 @@ fn bench_session(
     let sc = coop_actors::scenario_file::load(&scenario)?;
     let dir = std::env::temp_dir().join(format!("coop-bench-{name}-{}", std::process::id()));
     let a = crate::session::RunArgs {
+        live: None,
         scenario,
         out: dir.clone(),
         methods: vec![MethodName::Paper],

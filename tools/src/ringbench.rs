@@ -113,7 +113,7 @@ impl Link for ShmLink {
                 Err(coop_rt::shm::PopError::Empty) => {
                     spins += 1;
                     // A dead peer would leave us spinning forever; checking reads /proc, so rarely.
-                    if spins % (1 << 24) == 0 && self.1.is_abandoned() {
+                    if spins.is_multiple_of(1 << 24) && self.1.is_abandoned() {
                         panic!("the other ringbench process died");
                     }
                     std::hint::spin_loop();

@@ -7,6 +7,9 @@
 //! MCAP recordings, and prints the metrics table of `sim compare` for the real run next to the
 //! simulator's figures for the same scenario, with the Fig. 9–12 plots per method.
 //!
+//! With `--live`, the launcher also serves every site's copy, tool and force to Foxglove while the
+//! session runs ([`crate::live`]).
+//!
 //! Stations die with the launcher (parent-death signal, then their own stop ladder), so an
 //! interrupted session leaves nothing behind.
 
@@ -54,6 +57,8 @@ pub struct RunArgs {
     pub stop: crate::cli::StopFlag,
     /// The stations' `record_max_file_s` (default: the station's own).
     pub record_max_file_s: Option<u64>,
+    /// Serve each session live to Foxglove while it runs (`--live`).
+    pub live: Option<Arc<crate::live::LiveView>>,
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
@@ -271,6 +276,11 @@ pub fn run_method(
         .wait()
         .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
     let epoch = network::EpochAnnouncer::declare(&z, session)?;
+    let _live = a
+        .live
+        .as_ref()
+        .map(|l| l.follow(&z, session, &sc))
+        .transpose()?;
 
     for st in stations
         .iter_mut()

@@ -9,7 +9,7 @@
 //!
 //! What it allows, everything else being denied (`default_permission = "deny"`):
 //!
-//! - site X, coming in: put only its own state and tool keys; declare (and answer) only its own
+//! - site X, coming in: put only its own state, tool and live-view keys; declare (and answer) only its own
 //!   `current/X` and `clock/X` queryables; declare only its own presence token; subscribe to the
 //!   session's states, tools and epoch, query its current states, clocks and epoch, and watch its
 //!   presence tokens;
@@ -78,6 +78,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &[
                 keys::all_states(s, 0),
                 keys::all_tools(s, 0),
+                keys::all_live(s),
                 keys::epoch(s),
             ],
         ),
@@ -128,7 +129,11 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &own("puts"),
             "ingress",
             &["put"],
-            &[keys::state(s, 0, site), keys::tool(s, 0, site)],
+            &[
+                keys::state(s, 0, site),
+                keys::tool(s, 0, site),
+                keys::live(s, site),
+            ],
         ));
         rules.push(rule(
             &own("answers"),

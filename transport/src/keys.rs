@@ -63,6 +63,16 @@ pub fn epoch(session: &str) -> String {
     format!("coop/{session}/epoch")
 }
 
+/// The key a site puts its newest sample (copy and tool) on for live viewers, at most ~60 Hz.
+pub fn live(session: &str, site: &str) -> String {
+    format!("coop/{session}/live/{site}")
+}
+
+/// Every site's live samples.
+pub fn all_live(session: &str) -> String {
+    format!("coop/{session}/live/*")
+}
+
 /// The last chunk of a key: the site name of a state, current, presence or clock key.
 pub fn site_of(key: &str) -> &str {
     key.rsplit('/').next().unwrap_or("")
@@ -82,6 +92,8 @@ mod tests {
         assert_eq!(super::all_tools("s1", 0), "coop/s1/obj/0/tool/*");
         assert_eq!(super::all_clocks("s1"), "coop/s1/clock/*");
         assert_eq!(super::session_keys("s1"), "coop/s1/**");
+        assert_eq!(super::live("s1", "u"), "coop/s1/live/u");
+        assert_eq!(super::all_live("s1"), "coop/s1/live/*");
         assert_eq!(super::site_of(&super::state("s", 0, "user2")), "user2");
     }
 }

@@ -21,6 +21,21 @@
 //! Physics' trace records go in whole ([`Recorder::trace`]); each channel's `jsonschema` is derived
 //! from its message struct's fields.
 //!
+//! A recording made with a [`Scene`] ([`Recorder::create_with_scene`], as the network process makes
+//! it) also has Foxglove's well-known channels (`message_encoding = "protobuf"`, each schema the
+//! `foxglove` crate's FileDescriptorSet, named `foxglove.<Type>`), so Foxglove and Lichtblick show
+//! it in their 3-D panel and log view without any setup (see [`scene`] for the frames and entities):
+//!
+//! | topic    | schema                    | rate                  | contents                        |
+//! |----------|---------------------------|-----------------------|---------------------------------|
+//! | `/tf`    | `foxglove.FrameTransform` | two per sample        | `world → object/<site>`, `world → tool/<site>` |
+//! | `/scene` | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`] of samples, and the first sample of each part | the object, tool, force arrow, environment |
+//! | `/log`   | `foxglove.Log`            | each station event    | started, joined/left, lost/rejoined, stale/fresh, stopping |
+//!
+//! The protobuf messages go through the same writer as the JSON ones (not the SDK's own MCAP
+//! sink), so they rotate, flush and survive a crash with them, and each part holds its own
+//! schemas.
+//!
 //! Each file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps
 //! everything up to the last flush; [`read`] accepts such a file (no summary, no end magic).
 //!
@@ -47,10 +62,17 @@ use std::time::{Duration, Instant};
 
 use coop_rt::msg::TraceRecord;
 use coop_rt::shm::control::REFUSED_REASONS;
+use foxglove::messages::{log::Level, FrameTransform, Log, SceneUpdate};
+use foxglove::Encode;
 use serde::{Deserialize, Serialize};
+
+pub mod scene;
+pub use scene::Scene;
 
 /// How often the writer pushes what it has to the file.
 pub const FLUSH_EVERY: Duration = Duration::from_millis(200);
+/// How often, in sample time, the whole `/scene` is written (the frames move it in between).
+pub const SCENE_EVERY: Duration = Duration::from_millis(50);
 
 /// A message type's JSON schema (each channel's `jsonschema`), derived from its fields' types by
 /// [`json_message!`], so it cannot disagree with what serde writes.
@@ -344,6 +366,19 @@ const TOPICS: [&str; 10] = [
     "/peer",
 ];
 
+/// Foxglove's well-known channels, after [`TOPICS`] (with a [`Scene`] only).
+const FOXGLOVE_TOPICS: [&str; 3] = ["/tf", "/scene", "/log"];
+
+/// The schema (from the `foxglove` crate) of a Foxglove channel.
+fn foxglove_schema(topic: &str) -> Option<foxglove::Schema> {
+    match topic {
+        "/tf" => FrameTransform::get_schema(),
+        "/scene" => SceneUpdate::get_schema(),
+        "/log" => Log::get_schema(),
+        _ => None,
+    }
+}
+
 /// When a part of a recording is finished and the next begun, and how many parts are kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Rotation {
@@ -453,6 +488,10 @@ struct Part {
     path: PathBuf,
     number: u32,
     channels: [u16; TOPICS.len()],
+    /// `/tf`, `/scene`, `/log`, when the recording has a scene.
+    foxglove: Option<[u16; FOXGLOVE_TOPICS.len()]>,
+    /// The sample time the whole scene was last written in this part at.
+    scene_ns: Option<u64>,
     written: Rc<Cell<u64>>,
     started: Instant,
     /// Messages written besides the repeated `/session`.
@@ -468,6 +507,8 @@ pub struct Recorder {
     rotation: Rotation,
     /// The `/session` message, once written: repeated at the top of every later part.
     session: Option<SessionMsg>,
+    /// What the site shows, for the Foxglove channels (none: JSON channels only).
+    scene: Option<Scene>,
     seq: u32,
     wall_minus_mono: i128,
     last_flush: Instant,
@@ -549,6 +590,7 @@ impl Part {
         path: PathBuf,
         number: u32,
         metadata: &BTreeMap<String, String>,
+        with_foxglove: bool,
     ) -> Result<Self, RecordingError> {
         let file = File::create(&path).map_err(io_err(&path))?;
         let written = Rc::new(Cell::new(0));
@@ -577,11 +619,31 @@ impl Part {
                 .add_channel(schema, topic, "json", &BTreeMap::new())
                 .map_err(mcap_err(&path))?;
         }
+        let foxglove = if with_foxglove {
+            let mut ids = [0u16; FOXGLOVE_TOPICS.len()];
+            for (c, topic) in ids.iter_mut().zip(FOXGLOVE_TOPICS) {
+                let s = foxglove_schema(topic).ok_or_else(|| RecordingError::Io {
+                    path: path.display().to_string(),
+                    error: std::io::Error::other(format!("{topic}: the SDK gives no schema")),
+                })?;
+                let schema = w
+                    .add_schema(&s.name, &s.encoding, &s.data)
+                    .map_err(mcap_err(&path))?;
+                *c = w
+                    .add_channel(schema, topic, "protobuf", &BTreeMap::new())
+                    .map_err(mcap_err(&path))?;
+            }
+            Some(ids)
+        } else {
+            None
+        };
         Ok(Self {
             w,
             path,
             number,
             channels,
+            foxglove,
+            scene_ns: None,
             written,
             started: Instant::now(),
             messages: 0,
@@ -606,8 +668,32 @@ impl Recorder {
     /// The file cannot be created or written, or an earlier part cannot be removed.
     pub fn create(
         path: &Path,
+        metadata: BTreeMap<String, String>,
+        rotation: Rotation,
+    ) -> Result<Self, RecordingError> {
+        Self::create_with(path, metadata, rotation, None)
+    }
+
+    /// As [`Recorder::create`], and with Foxglove's `/tf`, `/scene` and `/log` channels showing
+    /// `scene`: each sample's frames and scene, and a log line for each station event (the
+    /// session's start, joins and leaves, losses and rejoins, [`Recorder::event`]s, the end).
+    ///
+    /// # Errors
+    /// As [`Recorder::create`].
+    pub fn create_with_scene(
+        path: &Path,
+        metadata: BTreeMap<String, String>,
+        rotation: Rotation,
+        scene: Scene,
+    ) -> Result<Self, RecordingError> {
+        Self::create_with(path, metadata, rotation, Some(scene))
+    }
+
+    fn create_with(
+        path: &Path,
         mut metadata: BTreeMap<String, String>,
         rotation: Rotation,
+        scene: Option<Scene>,
     ) -> Result<Self, RecordingError> {
         for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
             if n > 0 {
@@ -620,11 +706,12 @@ impl Recorder {
         let mono = i128::from(coop_rt::timer::monotonic_ns());
         metadata.insert("started_unix_ns".into(), wall.to_string());
         Ok(Self {
-            part: Part::create(path.to_owned(), 0, &metadata)?,
+            part: Part::create(path.to_owned(), 0, &metadata, scene.is_some())?,
             first: path.to_owned(),
             metadata,
             rotation,
             session: None,
+            scene,
             seq: 0,
             wall_minus_mono: wall - mono,
             last_flush: Instant::now(),
@@ -643,7 +730,12 @@ impl Recorder {
             return Ok(());
         }
         let number = self.part.number + 1;
-        let next = Part::create(part_path(&self.first, number), number, &self.metadata)?;
+        let next = Part::create(
+            part_path(&self.first, number),
+            number,
+            &self.metadata,
+            self.scene.is_some(),
+        )?;
         let mut done = std::mem::replace(&mut self.part, next);
         done.w.finish().map_err(mcap_err(&done.path))?;
         let keep = u32::try_from(self.rotation.keep_files).unwrap_or(u32::MAX);
@@ -670,19 +762,51 @@ impl Recorder {
         msg: &T,
     ) -> Result<(), RecordingError> {
         let data = serde_json::to_vec(msg).unwrap_or_default();
+        self.put_bytes(self.part.channels[topic], t_ns, &data)
+    }
+
+    /// The wall clock (ns since the Unix epoch) of monotonic time `t_ns`.
+    fn wall_ns(&self, t_ns: u64) -> u64 {
+        u64::try_from(i128::from(t_ns) + self.wall_minus_mono).unwrap_or(0)
+    }
+
+    /// A protobuf message on Foxglove channel `topic` (an index into [`FOXGLOVE_TOPICS`]); nothing
+    /// without a scene.
+    fn put_foxglove<T: Encode>(
+        &mut self,
+        topic: usize,
+        t_ns: u64,
+        msg: &T,
+    ) -> Result<(), RecordingError> {
+        match self.part.foxglove {
+            Some(ids) => self.put_bytes(ids[topic], t_ns, &scene::encode(msg)),
+            None => Ok(()),
+        }
+    }
+
+    /// A `/log` line at `t_ns`, when the recording has a scene.
+    fn put_log(&mut self, t_ns: u64, level: Level, text: String) -> Result<(), RecordingError> {
+        let Some(scene) = &self.scene else {
+            return Ok(());
+        };
+        let m = scene.log(self.wall_ns(t_ns), level, text);
+        self.put_foxglove(2, t_ns, &m)
+    }
+
+    fn put_bytes(&mut self, channel_id: u16, t_ns: u64, data: &[u8]) -> Result<(), RecordingError> {
         self.seq = self.seq.wrapping_add(1);
-        let log_time = u64::try_from(i128::from(t_ns) + self.wall_minus_mono).unwrap_or(0);
+        let log_time = self.wall_ns(t_ns);
         let part = &mut self.part;
         let err = mcap_err(&part.path);
         part.w
             .write_to_known_channel(
                 &mcap::records::MessageHeader {
-                    channel_id: part.channels[topic],
+                    channel_id,
                     sequence: self.seq,
                     log_time,
                     publish_time: log_time,
                 },
-                &data,
+                data,
             )
             .map_err(&err)?;
         part.messages += 1;
@@ -700,7 +824,15 @@ impl Recorder {
     pub fn session(&mut self, m: &SessionMsg) -> Result<(), RecordingError> {
         self.rotate_if_full()?;
         self.session = Some(m.clone());
-        self.put(0, m.t_ns, m)
+        self.put(0, m.t_ns, m)?;
+        self.put_log(
+            m.t_ns,
+            Level::Info,
+            format!(
+                "station {} started in session {}: scenario {}, method {}, emulation {}",
+                m.site, m.session, m.scenario, m.method, m.emulation
+            ),
+        )
     }
     /// A record from physics' trace ring: `/adoption` for a [`TraceRecord::ADOPTION`], else
     /// `/object` and `/tool` (a [`TraceRecord::SAMPLE`]); the same messages as [`Recorder::adoption`]
@@ -715,7 +847,8 @@ impl Recorder {
             self.sample(&SampleMsg::from(t))
         }
     }
-    /// `/object` and `/tool`, in the same part.
+    /// `/object` and `/tool`, in the same part; with a scene, the sample's `/tf` frames and, every
+    /// [`SCENE_EVERY`] (and first in each part), its `/scene`.
     ///
     /// # Errors
     /// Writing failed.
@@ -743,7 +876,25 @@ impl Recorder {
                 f_object: m.f_object,
                 touching: m.touching,
             },
-        )
+        )?;
+        let Some(scene) = &self.scene else {
+            return Ok(());
+        };
+        let wall = self.wall_ns(m.t_ns);
+        let frames = scene.transforms(m, wall);
+        let due = self
+            .part
+            .scene_ns
+            .is_none_or(|t| m.t_ns.saturating_sub(t) >= SCENE_EVERY.as_nanos() as u64);
+        let update = due.then(|| scene.update(m, wall));
+        for f in &frames {
+            self.put_foxglove(0, m.t_ns, f)?;
+        }
+        if let Some(u) = update {
+            self.put_foxglove(1, m.t_ns, &u)?;
+            self.part.scene_ns = Some(m.t_ns);
+        }
+        Ok(())
     }
     /// One message on `topic` (an index into [`TOPICS`]), in the current part or the next.
     fn one<T: Serialize>(&mut self, topic: usize, t_ns: u64, m: &T) -> Result<(), RecordingError> {
@@ -769,14 +920,35 @@ impl Recorder {
     /// # Errors
     /// Writing failed.
     pub fn presence(&mut self, m: &PresenceMsg) -> Result<(), RecordingError> {
-        self.one(5, m.t_ns, m)
+        self.one(5, m.t_ns, m)?;
+        let what = if m.present { "joined" } else { "left" };
+        self.put_log(m.t_ns, Level::Info, format!("{} {what}", m.site))
     }
     /// `/peer`.
     ///
     /// # Errors
     /// Writing failed.
     pub fn peer(&mut self, m: &PeerMsg) -> Result<(), RecordingError> {
-        self.put(9, m.t_ns, m)
+        self.put(9, m.t_ns, m)?;
+        let (level, text) = match m.event.as_str() {
+            "lost" => (
+                Level::Warning,
+                format!("{} lost: silent for {:.3} s", m.site, m.silent_s),
+            ),
+            e => (
+                Level::Info,
+                format!("{} {e} after {:.3} s of silence", m.site, m.silent_s),
+            ),
+        };
+        self.put_log(m.t_ns, level, text)
+    }
+    /// A station event for `/log` only (nothing without a scene): `level` is Foxglove's.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn event(&mut self, t_ns: u64, level: Level, text: String) -> Result<(), RecordingError> {
+        self.rotate_if_full()?;
+        self.put_log(t_ns, level, text)
     }
     /// `/clock`.
     ///
@@ -790,7 +962,16 @@ impl Recorder {
     /// # Errors
     /// Writing failed.
     pub fn status(&mut self, m: &StatusMsg) -> Result<(), RecordingError> {
-        self.one(7, m.t_ns, m)
+        self.one(7, m.t_ns, m)?;
+        let refused: u64 = m.refused.iter().sum();
+        self.put_log(
+            m.t_ns,
+            Level::Info,
+            format!(
+                "station stopping: {} published, {} received, {refused} refused",
+                m.published, m.received
+            ),
+        )
     }
     /// `/published`.
     ///
@@ -1420,6 +1601,10 @@ mod tests {
         let dir = scratch("mix");
         let a = dir.join("a").join("user1.mcap");
         let b = dir.join("b").join("user1.mcap");
+        // The recorder makes no directory.
+        for d in ["a", "b"] {
+            std::fs::create_dir_all(dir.join(d)).expect("dir");
+        }
         record(&a, "s1", 200, bytes_bound(8 << 10, 0));
         record(&b, "s2", 200, bytes_bound(8 << 10, 0));
         assert!(parts_on_disk(&a).expect("parts").len() >= 3);
@@ -1474,6 +1659,151 @@ mod tests {
             whole.samples.len()
         );
         assert_eq!(r.status, whole.status, "the last part is whole");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn with_a_scene_every_part_holds_the_foxglove_channels_and_opens_alone() {
+        use foxglove::Decode;
+        let dir = scratch("foxglove");
+        let path = dir.join("b.mcap");
+        let scene = Scene {
+            site: "b".into(),
+            colour: scene::site_colour(1),
+            object: scene::Body::Box {
+                half: [0.02, 0.03, 0.04],
+            },
+            tool_radius_m: 0.005,
+            planes: vec![([0.0, 0.0, 1.0], 0.0)],
+        };
+        let meta = BTreeMap::from([("site".into(), "b".into())]);
+        let mut w = Recorder::create_with_scene(&path, meta, bytes_bound(64 << 10, 0), scene)
+            .expect("create");
+        let t0 = 1_000_000_000;
+        w.session(&SessionMsg {
+            t_ns: t0,
+            site: "b".into(),
+            ..SessionMsg::default()
+        })
+        .expect("w");
+        let n = 1000u64;
+        for i in 0..n {
+            let t_ns = t0 + i * 5_000_000; // 200 Hz
+            w.sample(&SampleMsg {
+                t_ns,
+                pos: [0.001 * i as f64, 0.0, 0.04],
+                rot: [1.0, 0.0, 0.0, 0.0],
+                tool_pos: [0.0, 0.0, 0.1],
+                f_object: [1.0, 0.0, 0.0],
+                ..SampleMsg::default()
+            })
+            .expect("w");
+            if i == 500 {
+                w.peer(&PeerMsg {
+                    t_ns,
+                    site: "a".into(),
+                    event: "lost".into(),
+                    silent_s: 0.5,
+                })
+                .expect("w");
+            }
+        }
+        w.status(&StatusMsg::default()).expect("w");
+        w.finish().expect("finish");
+        let r = read(&path).expect("read");
+        assert!(r.files.len() >= 3, "rotated: {:?}", r.files);
+        assert_eq!(r.samples.len() as u64, n, "the JSON channels are as before");
+        let (mut frames, mut logs) = (0u64, Vec::new());
+        let mut last_tf = 0u64;
+        for part in &r.files {
+            let bytes = std::fs::read(part).expect("read");
+            let summary = mcap::Summary::read(&bytes)
+                .expect("summary")
+                .expect("whole");
+            let schemas: Vec<(String, String)> = summary
+                .channels
+                .values()
+                .filter(|c| c.message_encoding == "protobuf")
+                .map(|c| {
+                    let s = c.schema.as_ref().expect("schema");
+                    (c.topic.clone(), s.name.clone())
+                })
+                .collect();
+            assert_eq!(
+                schemas.len(),
+                3,
+                "{}: the Foxglove channels in every part: {schemas:?}",
+                part.display()
+            );
+            let mut first_scene = None;
+            let mut first_tf = None;
+            for m in mcap::MessageStream::new(&bytes).expect("mcap") {
+                let m = m.expect("message");
+                let schema = m.channel.schema.as_ref().expect("schema");
+                match m.channel.topic.as_str() {
+                    "/tf" => {
+                        assert_eq!(schema.name, "foxglove.FrameTransform");
+                        assert_eq!(schema.encoding, "protobuf");
+                        assert!(!schema.data.is_empty(), "the FileDescriptorSet");
+                        let f = FrameTransform::decode(&m.data[..]).expect("decode");
+                        assert_eq!(f.parent_frame_id, "world");
+                        assert!(["object/b", "tool/b"].contains(&f.child_frame_id.as_str()));
+                        assert!(m.log_time >= last_tf, "/tf in time order");
+                        assert_eq!(
+                            f.timestamp.map(|t| t.total_nanos()),
+                            Some(m.log_time),
+                            "the frame's time is the message's"
+                        );
+                        last_tf = m.log_time;
+                        first_tf.get_or_insert(m.sequence);
+                        frames += 1;
+                    }
+                    "/scene" => {
+                        assert_eq!(schema.name, "foxglove.SceneUpdate");
+                        let u = SceneUpdate::decode(&m.data[..]).expect("decode");
+                        let ids: Vec<&str> = u.entities.iter().map(|e| e.id.as_str()).collect();
+                        assert_eq!(ids, ["environment", "object/b", "tool/b", "force/b"]);
+                        assert_eq!(
+                            u.entities[1].cubes[0].size.map(|v| (v.x, v.y, v.z)),
+                            Some((0.04, 0.06, 0.08))
+                        );
+                        first_scene.get_or_insert(m.sequence);
+                    }
+                    "/log" => {
+                        assert_eq!(schema.name, "foxglove.Log");
+                        logs.push(Log::decode(&m.data[..]).expect("decode"));
+                    }
+                    _ => {}
+                }
+            }
+            assert!(
+                first_scene.is_some() && first_scene < first_tf.map(|s| s + 3),
+                "{}: the part's scene comes with its first sample ({first_scene:?}, {first_tf:?})",
+                part.display()
+            );
+        }
+        assert_eq!(frames, 2 * n, "two frames per sample");
+        let texts: Vec<&str> = logs.iter().map(|l| l.message.as_str()).collect();
+        assert_eq!(texts.len(), 3, "{texts:?}");
+        assert!(texts[0].starts_with("station b started"), "{texts:?}");
+        assert!(texts[1].starts_with("a lost"), "{texts:?}");
+        assert_eq!(logs[1].level, Level::Warning as i32);
+        assert!(texts[2].starts_with("station stopping"), "{texts:?}");
+        assert!(logs.iter().all(|l| l.name == "b"));
+        // Cut short: the part still reads, our JSON and the Foxglove messages up to the cut.
+        let part = part_path(&path, 1);
+        let bytes = std::fs::read(&part).expect("bytes");
+        std::fs::write(&part, &bytes[..bytes.len() / 2]).expect("cut");
+        let alone = read_part(&part).expect("a cut part reads alone");
+        assert!(alone.truncated && !alone.samples.is_empty());
+        let cut = std::fs::read(&part).expect("bytes");
+        let tf =
+            mcap::MessageStream::new_with_options(&cut, mcap::read::Options::IgnoreEndMagic.into())
+                .expect("mcap")
+                .map_while(Result::ok)
+                .filter(|m| m.channel.topic == "/tf")
+                .count();
+        assert!(tf > 0, "frames before the cut");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -266,6 +266,8 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             .iter()
             .map(|s| net.silence_ns(s.report_rate_hz))
             .collect(),
+        scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
+            .with_context(|| format!("the scenario has no site {}", cfg.site))?,
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.

@@ -35,7 +35,7 @@ fn main() {
             Err(PopError::Empty) => {
                 idle += 1;
                 // is_abandoned reads /proc: ask only once the ring has been idle a while.
-                if limit.is_none() && idle % 256 == 0 && c.is_abandoned() {
+                if limit.is_none() && idle.is_multiple_of(256) && c.is_abandoned() {
                     // Everything pushed before the producer died is visible now: drain it.
                     abandoned = true;
                     continue;

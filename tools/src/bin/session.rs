@@ -58,6 +58,11 @@ enum Command {
         /// station's `record_max_file_s`; default: the station's default).
         #[arg(long, value_name = "S")]
         record_max_file_s: Option<u64>,
+        /// Serve the session live to Foxglove or Lichtblick (foxglove.websocket.v1) on ADDR, by
+        /// default 127.0.0.1:8765 (loopback); port 0 picks a free one. The address is printed.
+        #[arg(long, value_name = "ADDR", num_args = 0..=1,
+              default_missing_value = coop_tools::live::DEFAULT_ADDR)]
+        live: Option<String>,
     },
     /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
     /// the same payload (run from the repository root).
@@ -148,6 +153,7 @@ fn main() -> std::process::ExitCode {
             start_timeout_s,
             station_bin,
             record_max_file_s,
+            live,
         } => {
             if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
                 anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
@@ -167,6 +173,17 @@ fn main() -> std::process::ExitCode {
                 progress: !json,
                 stop,
                 record_max_file_s,
+                live: match live {
+                    Some(addr) => {
+                        let view = coop_tools::live::LiveView::start(&addr)?;
+                        eprintln!(
+                            "live view: {} (foxglove.websocket.v1: open it in Foxglove or Lichtblick)",
+                            view.url()
+                        );
+                        Some(std::sync::Arc::new(view))
+                    }
+                    None => None,
+                },
             };
             let (sc, rows, v) = coop_tools::session::run(&a)?;
             if json {

@@ -12,7 +12,7 @@
 //! - learns the session's time 0 from the launcher when the station waits for it ([`epoch`], which
 //!   also holds the launcher's side);
 //! - writes the station's MCAP recording (physics' trace ring, the states received, presence,
-//!   clocks, final counters).
+//!   clocks, final counters), and puts the newest sample for live viewers (`live`, ~60 Hz).
 //!
 //! It is not a real-time loop: zenoh's own threads and this process's loop run at normal priority,
 //! off the servo's CPU, and touch the rings (lock-free, non-blocking) only on the real-time side's
@@ -34,13 +34,14 @@ use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
 use crate::admit::Bounds;
-use crate::recording::{Rotation, SessionMsg, StatusMsg};
+use crate::recording::{Rotation, Scene, SessionMsg, StatusMsg};
 
 pub mod clock;
 pub mod config;
 pub mod emulate;
 pub mod epoch;
 mod error;
+mod live;
 mod presence;
 pub mod publish;
 mod receive;
@@ -51,8 +52,10 @@ pub use config::{concrete_listen, config, Locator, Mode, NetworkConfig, Tls, TRA
 pub use emulate::Emulation;
 pub use epoch::EpochAnnouncer;
 pub use error::NetworkError;
+pub use live::LIVE_EVERY_NS;
 pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_REPORT_NS};
 
+use live::Live;
 use presence::Presence;
 use publish::Publish;
 use receive::Receiver;
@@ -91,6 +94,8 @@ pub struct NetworkArgs<'a> {
     pub bounds: Bounds,
     /// Per site: how long it may be silent before it is lost, ns.
     pub silence_ns: Vec<u64>,
+    /// What this site shows (object, tool, environment), for the recording's Foxglove channels.
+    pub scene: Scene,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -143,6 +148,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ("emulation".into(), ctx.emulation.clone()),
         ]),
         a.record_rotation,
+        a.scene,
     )?;
     ctx.ctl
         .network
@@ -160,6 +166,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         a.silence_ns,
     ));
     let names = (a.scenario, a.method);
+    let live = Live::declare(&session, ctx.session_name, &site)?;
     let status = serve(
         &ctx,
         &session,
@@ -169,6 +176,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             reports: a.reports,
             trace: a.trace,
             recording,
+            live,
             names,
         },
     )?;
@@ -199,6 +207,8 @@ struct Loop {
     reports: Consumer<SiteReport>,
     trace: Consumer<TraceRecord>,
     recording: Recording,
+    /// The newest sample for live viewers.
+    live: Live,
     /// Scenario and method names, for the recording's session message.
     names: (String, String),
 }
@@ -303,7 +313,9 @@ impl Loop {
         for m in &peers {
             self.recording.write(|w| w.peer(m));
         }
-        self.recording.drain_trace(&mut self.trace);
+        let newest = self.recording.drain_trace(&mut self.trace);
+        self.live.offer(newest, now);
+        self.recording.watch_servo(ctx.ctl, now);
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
         }

@@ -1,0 +1,501 @@
+//! `session run --live`: the whole session seen while it runs — every site's copy of the object,
+//! its tool and its force in one 3-D scene — served to Foxglove or Lichtblick over the
+//! `foxglove.websocket.v1` protocol.
+//!
+//! The launcher subscribes to the stations' live key (`coop/<session>/live/<site>`: each network
+//! process puts its newest sample there at most every [`LIVE_EVERY_NS`], from the samples it
+//! already records), and a publishing thread wakes every [`PERIOD`] (about 60 Hz) and sends, for
+//! what arrived since its last turn, the frames `world → object/<site>` and `world → tool/<site>`
+//! on `/tf` and one `/scene` with every site's entities (the same messages as the recordings',
+//! [`Scene`]), and the session's events on `/log`. The stations' loops never wait for it: the live
+//! key is put at background priority and dropped under congestion; here each viewer has its own
+//! thread and a bounded queue, and a viewer too slow to take a frame loses it.
+//!
+//! The server is ours, small (the protocol's `serverInfo`, `advertise`, `subscribe`,
+//! `unsubscribe` and binary `messageData`, on `tungstenite`): the `foxglove` crate's server speaks
+//! its newer `foxglove.sdk.v1` subprotocol only, which Lichtblick and older Foxglove builds do not.
+//!
+//! Loopback by default ([`DEFAULT_ADDR`]); any address can be given, port 0 picks a free one.
+
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context as _;
+use base64::Engine as _;
+use coop_model::scenario::Scenario;
+use coop_rt::sync::{AtomicU64, Ordering};
+use coop_transport::keys;
+use coop_transport::network::LIVE_EVERY_NS;
+use coop_transport::recording::scene::{encode, timestamp};
+use coop_transport::recording::{SampleMsg, Scene};
+use foxglove::messages::{log::Level, FrameTransform, Log, SceneUpdate};
+use foxglove::Encode;
+use tungstenite::handshake::server::{ErrorResponse, Request, Response};
+use tungstenite::Message;
+use zenoh::Wait;
+
+/// The WebSocket subprotocol spoken.
+pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
+/// Frames a viewer may be behind before it loses the next ones.
+const QUEUE: usize = 256;
+/// How long a viewer's thread waits for the viewer's requests before sending what is queued.
+const CLIENT_POLL: Duration = Duration::from_millis(5);
+/// How often the listener looks for new viewers (and for its stop).
+const ACCEPT_POLL: Duration = Duration::from_millis(50);
+
+/// The channels advertised: id, topic, schema name, schema (a FileDescriptorSet).
+fn channels() -> [(u32, &'static str, foxglove::Schema); 3] {
+    let schema = |s: Option<foxglove::Schema>| {
+        s.unwrap_or_else(|| foxglove::Schema::new("", "", Vec::new()))
+    };
+    [
+        (1, "/tf", schema(FrameTransform::get_schema())),
+        (2, "/scene", schema(SceneUpdate::get_schema())),
+        (3, "/log", schema(Log::get_schema())),
+    ]
+}
+const TF: u32 = 1;
+const SCENE: u32 = 2;
+const LOG: u32 = 3;
+
+/// One message for every viewer: channel, wall time (ns), protobuf bytes.
+type Frame = Arc<(u32, u64, Vec<u8>)>;
+
+/// Where the live view listens unless told: loopback, Foxglove's usual port.
+pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
+/// How often the viewer gets the newest state: about 60 Hz.
+pub const PERIOD: Duration = Duration::from_nanos(16_666_667);
+
+/// What the publishing thread shows.
+#[derive(Default)]
+struct Shown {
+    /// The followed session and its sites' scenes.
+    session: String,
+    scenes: Vec<Scene>,
+    /// Per site, the newest sample not yet shown.
+    newest: Vec<Option<SampleMsg>>,
+    /// Per site, its last sample shown (the scene keeps every site seen so far).
+    shown: Vec<Option<SampleMsg>>,
+    /// Log lines to send.
+    logs: Vec<(Level, String)>,
+}
+
+/// The viewers' queues.
+type Viewers = Arc<Mutex<Vec<SyncSender<Frame>>>>;
+/// The `/log` frames so far (the newest [`LOG_KEPT`]), sent to each viewer when it subscribes:
+/// events that happened before it connected are not lost to it.
+type LogHistory = Arc<Mutex<Vec<Frame>>>;
+/// Log frames kept for late viewers.
+const LOG_KEPT: usize = 256;
+
+/// The live view: the WebSocket server and the thread that feeds it.
+pub struct LiveView {
+    addr: SocketAddr,
+    shown: Arc<Mutex<Shown>>,
+    stop: Arc<AtomicU64>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for LiveView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveView")
+            .field("addr", &self.addr)
+            .finish()
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn unix_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}
+
+/// Who follows a session: the subscription to its live key (undeclared when dropped).
+#[derive(Debug)]
+pub struct Following {
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl LiveView {
+    /// Starts the server on `addr` (`host:port`) and the publishing thread.
+    ///
+    /// # Errors
+    /// `addr` is not `host:port`, or the server cannot listen there.
+    pub fn start(addr: &str) -> anyhow::Result<Self> {
+        let want: SocketAddr = addr
+            .parse()
+            .with_context(|| format!("--live {addr}: not an address such as {DEFAULT_ADDR}"))?;
+        let listener =
+            TcpListener::bind(want).with_context(|| format!("--live {addr}: listening"))?;
+        let addr = listener.local_addr().context("the live view's address")?;
+        listener
+            .set_nonblocking(true)
+            .context("the live view's listener")?;
+        let shown: Arc<Mutex<Shown>> = Arc::default();
+        let stop = Arc::new(AtomicU64::new(0));
+        let viewers: Viewers = Arc::default();
+        let history: LogHistory = Arc::default();
+        let spawn = |name: &str, f: Box<dyn FnOnce() + Send>| {
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(f)
+                .with_context(|| format!("starting the live view's {name} thread"))
+        };
+        let threads = vec![
+            spawn("live-view", {
+                let (shown, stop) = (shown.clone(), stop.clone());
+                let (viewers, history) = (viewers.clone(), history.clone());
+                Box::new(move || publish(&viewers, &history, &shown, &stop))
+            })?,
+            spawn("live-accept", {
+                let (stop, viewers) = (stop.clone(), viewers.clone());
+                Box::new(move || accept(&listener, &viewers, &history, &stop))
+            })?,
+        ];
+        Ok(Self {
+            addr,
+            shown,
+            stop,
+            threads,
+        })
+    }
+
+    /// Where viewers connect: `ws://host:port`.
+    pub fn url(&self) -> String {
+        format!("ws://{}", self.addr)
+    }
+
+    /// Shows `session` (of scenario `sc`) from now on, through the launcher's zenoh session `z`,
+    /// until the returned [`Following`] is dropped.
+    ///
+    /// # Errors
+    /// The subscription cannot be declared.
+    pub fn follow(
+        &self,
+        z: &zenoh::Session,
+        session: &str,
+        sc: &Scenario,
+    ) -> anyhow::Result<Following> {
+        {
+            let mut s = lock(&self.shown);
+            s.session = session.to_owned();
+            s.scenes = (0..sc.site.len())
+                .filter_map(|i| Scene::from_scenario(sc, i))
+                .collect();
+            s.newest = vec![None; s.scenes.len()];
+            s.shown = vec![None; s.scenes.len()];
+            s.logs.push((
+                Level::Info,
+                format!(
+                    "session {session}: scenario {}, method {}, sites {}",
+                    sc.name,
+                    sc.method.as_str(),
+                    sc.site
+                        .iter()
+                        .map(|s| s.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+        let shown = self.shown.clone();
+        let name = session.to_owned();
+        let subscriber = z
+            .declare_subscriber(keys::all_live(session))
+            .callback(move |sample| {
+                let site = keys::site_of(sample.key_expr().as_str());
+                let Ok(m) = serde_json::from_slice::<SampleMsg>(&sample.payload().to_bytes())
+                else {
+                    return;
+                };
+                let mut s = lock(&shown);
+                // A sample of an earlier session still in flight is not this one's.
+                if s.session != name {
+                    return;
+                }
+                if let Some(i) = s.scenes.iter().position(|sc| sc.site == site) {
+                    if s.shown[i].is_none() && s.newest[i].is_none() {
+                        s.logs.push((Level::Info, format!("{site}: live")));
+                    }
+                    s.newest[i] = Some(m);
+                }
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribing to the live samples: {e}"))?;
+        Ok(Following {
+            _subscriber: subscriber,
+        })
+    }
+}
+
+/// The publishing thread: every [`PERIOD`], what arrived since the last turn.
+fn publish(
+    viewers: &Mutex<Vec<SyncSender<Frame>>>,
+    history: &Mutex<Vec<Frame>>,
+    shown: &Mutex<Shown>,
+    stop: &AtomicU64,
+) {
+    // The stations put at most every LIVE_EVERY_NS; faster turns would only repeat frames.
+    let period = PERIOD.max(Duration::from_nanos(LIVE_EVERY_NS));
+    let mut next = Instant::now() + period;
+    while stop.load(Ordering::Relaxed) == 0 {
+        let (frames, update, logs, now) = {
+            let mut s = lock(shown);
+            let now = unix_ns();
+            let mut frames = Vec::new();
+            let mut changed = false;
+            for i in 0..s.scenes.len() {
+                if let Some(m) = s.newest[i].take() {
+                    frames.extend(s.scenes[i].transforms(&m, now));
+                    s.shown[i] = Some(m);
+                    changed = true;
+                }
+            }
+            let update = changed.then(|| {
+                let mut entities = Vec::new();
+                if let Some(first) = s.scenes.first() {
+                    entities.push(first.environment(now));
+                }
+                for (scene, m) in s.scenes.iter().zip(&s.shown) {
+                    if let Some(m) = m {
+                        entities.extend(scene.entities(m, now));
+                    }
+                }
+                SceneUpdate {
+                    deletions: Vec::new(),
+                    entities,
+                }
+            });
+            let logs: Vec<Log> = std::mem::take(&mut s.logs)
+                .into_iter()
+                .map(|(level, message)| Log {
+                    timestamp: Some(timestamp(now)),
+                    level: level as i32,
+                    message,
+                    name: "session".into(),
+                    ..Log::default()
+                })
+                .collect();
+            (frames, update, logs, now)
+        };
+        // Encoding and sending happen outside the lock: the zenoh callback never waits for them.
+        let (frames, update, logs, now) = (frames, update, logs, now);
+        let mut out: Vec<Frame> = frames
+            .iter()
+            .map(|f| Arc::new((TF, now, encode(f))))
+            .collect();
+        out.extend(update.iter().map(|u| Arc::new((SCENE, now, encode(u)))));
+        let logs: Vec<Frame> = logs
+            .iter()
+            .map(|l| Arc::new((LOG, now, encode(l))))
+            .collect();
+        if !logs.is_empty() {
+            let mut h = lock(history);
+            h.extend(logs.iter().cloned());
+            let excess = h.len().saturating_sub(LOG_KEPT);
+            h.drain(..excess);
+        }
+        out.extend(logs);
+        if !out.is_empty() {
+            // A viewer that is gone is dropped; one that is behind loses these frames.
+            lock(viewers).retain(|q| {
+                out.iter()
+                    .all(|f| !matches!(q.try_send(f.clone()), Err(TrySendError::Disconnected(_))))
+            });
+        }
+        let now = Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+            next += period;
+        } else {
+            // Behind (a stalled machine): start again from now rather than bursting.
+            next = now + period;
+        }
+    }
+}
+
+impl Drop for LiveView {
+    fn drop(&mut self) {
+        self.stop.store(1, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The listener: a thread per viewer, until stopped.
+fn accept(listener: &TcpListener, viewers: &Viewers, history: &LogHistory, stop: &Arc<AtomicU64>) {
+    while stop.load(Ordering::Relaxed) == 0 {
+        match listener.accept() {
+            Ok((stream, peer)) => {
+                let (tx, rx) = sync_channel(QUEUE);
+                lock(viewers).push(tx);
+                let (stop, history) = (stop.clone(), history.clone());
+                let _ = std::thread::Builder::new()
+                    .name("live-viewer".into())
+                    .spawn(move || {
+                        if let Err(e) = serve(stream, &rx, &history, &stop) {
+                            eprintln!("live view: viewer {peer}: {e}");
+                        }
+                    });
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(ACCEPT_POLL);
+            }
+            Err(e) => {
+                eprintln!("live view: accepting a viewer: {e}");
+                std::thread::sleep(ACCEPT_POLL);
+            }
+        }
+    }
+}
+
+/// Whether a read or write error is only "nothing yet".
+fn would_block(e: &tungstenite::Error) -> bool {
+    matches!(e, tungstenite::Error::Io(io)
+        if matches!(io.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut))
+}
+
+/// One viewer: the handshake (which must offer [`SUBPROTOCOL`]), `serverInfo` and `advertise`,
+/// then its subscriptions and the frames of the channels it subscribed to, until it leaves.
+fn serve(
+    stream: TcpStream,
+    frames: &Receiver<Frame>,
+    history: &Mutex<Vec<Frame>>,
+    stop: &AtomicU64,
+) -> anyhow::Result<()> {
+    stream.set_nonblocking(false)?;
+    stream.set_nodelay(true)?;
+    stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+    // The handshake callback's error is tungstenite's own (an HTTP response) type.
+    #[allow(clippy::result_large_err)]
+    let check = |req: &Request, mut res: Response| -> Result<Response, ErrorResponse> {
+        let offered = req
+            .headers()
+            .get_all("sec-websocket-protocol")
+            .iter()
+            .filter_map(|h| h.to_str().ok())
+            .flat_map(|h| h.split(','))
+            .any(|p| p.trim() == SUBPROTOCOL);
+        if !offered {
+            let mut e = ErrorResponse::new(Some(format!("offer subprotocol {SUBPROTOCOL}")));
+            *e.status_mut() = tungstenite::http::StatusCode::BAD_REQUEST;
+            return Err(e);
+        }
+        res.headers_mut().insert(
+            "sec-websocket-protocol",
+            tungstenite::http::HeaderValue::from_static(SUBPROTOCOL),
+        );
+        Ok(res)
+    };
+    let mut ws =
+        tungstenite::accept_hdr(stream, check).map_err(|e| anyhow::anyhow!("handshake: {e}"))?;
+    ws.get_ref().set_read_timeout(Some(CLIENT_POLL))?;
+    ws.get_ref()
+        .set_write_timeout(Some(Duration::from_secs(2)))?;
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let advertised: Vec<serde_json::Value> = channels()
+        .iter()
+        .map(|(id, topic, s)| {
+            serde_json::json!({
+                "id": id, "topic": topic, "encoding": "protobuf",
+                "schemaName": s.name, "schemaEncoding": s.encoding, "schema": b64.encode(&s.data),
+            })
+        })
+        .collect();
+    for m in [
+        serde_json::json!({
+            "op": "serverInfo", "name": "coop-haptics session", "capabilities": [],
+            "supportedEncodings": [], "metadata": {}, "sessionId": format!("{}", std::process::id()),
+        }),
+        serde_json::json!({ "op": "advertise", "channels": advertised }),
+    ] {
+        ws.send(Message::text(m.to_string()))?;
+    }
+    // Subscription id per channel id.
+    let mut subs: Vec<(u32, u32)> = Vec::new();
+    let mut backlog: Vec<Frame> = Vec::new();
+    while stop.load(Ordering::Relaxed) == 0 {
+        match ws.read() {
+            Ok(Message::Text(t)) => {
+                let had_log = subs.iter().any(|(c, _)| *c == LOG);
+                on_request(&t, &mut subs);
+                if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
+                    backlog = lock(history).clone();
+                }
+            }
+            Ok(Message::Close(_)) => return Ok(()),
+            Ok(_) => {}
+            Err(e) if would_block(&e) => {}
+            Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
+                return Ok(())
+            }
+            Err(e) => return Err(e.into()),
+        }
+        let mut sent = false;
+        let queued = std::iter::from_fn(|| frames.try_recv().ok());
+        let mut pending: Vec<Frame> = std::mem::take(&mut backlog);
+        pending.extend(queued);
+        for f in pending {
+            let (channel, t_ns, data) = &*f;
+            if let Some(&(_, sub)) = subs.iter().find(|(c, _)| c == channel) {
+                let mut m = Vec::with_capacity(13 + data.len());
+                m.push(0x01); // messageData
+                m.extend_from_slice(&sub.to_le_bytes());
+                m.extend_from_slice(&t_ns.to_le_bytes());
+                m.extend_from_slice(data);
+                match ws.write(Message::binary(m)) {
+                    Ok(()) => sent = true,
+                    Err(e) if would_block(&e) => sent = true,
+                    Err(e) => return Err(e.into()),
+                }
+            }
+        }
+        if sent {
+            match ws.flush() {
+                Ok(()) => {}
+                Err(e) if would_block(&e) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+    let _ = ws.close(None);
+    Ok(())
+}
+
+/// A viewer's `subscribe` or `unsubscribe` (others are ignored, as the protocol allows).
+fn on_request(text: &str, subs: &mut Vec<(u32, u32)>) {
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(text) else {
+        return;
+    };
+    let as_u32 = |v: &serde_json::Value| v.as_u64().and_then(|n| u32::try_from(n).ok());
+    match v["op"].as_str() {
+        Some("subscribe") => {
+            for s in v["subscriptions"].as_array().into_iter().flatten() {
+                if let (Some(id), Some(channel)) = (as_u32(&s["id"]), as_u32(&s["channelId"])) {
+                    if channels().iter().any(|c| c.0 == channel) {
+                        subs.retain(|(c, _)| *c != channel);
+                        subs.push((channel, id));
+                    }
+                }
+            }
+        }
+        Some("unsubscribe") => {
+            let ids: Vec<u32> = v["subscriptionIds"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(as_u32)
+                .collect();
+            subs.retain(|(_, id)| !ids.contains(id));
+        }
+        _ => {}
+    }
+}

@@ -1,0 +1,263 @@
+//! A real session seen in Foxglove's terms, by readers that are not ours: its recordings' `/tf`,
+//! `/scene` and `/log` channels read with the `mcap` Python package and decoded with the protobuf
+//! FileDescriptorSet each file carries (the `protobuf` package).
+//!
+//! CI installs both packages and sets `COOP_REQUIRE_MCAP_PY=1` (see .ci/run): then a missing
+//! package fails the test instead of skipping the check.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+
+use serde_json::Value;
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn out_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coop-foxglove-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Python with `packages` importable, or `None` (skip) when one is missing and CI does not
+/// require them.
+fn python_with(packages: &[&str]) -> Option<()> {
+    let imports = packages.join(", ");
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(());
+    }
+    if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() {
+        panic!("python3 with {imports} is required (pip install {imports})");
+    }
+    eprintln!("SKIPPED the foreign-reader check: python3 -c 'import {imports}' fails");
+    None
+}
+
+/// The Foxglove summary of one site's recording (its parts, in order), as the fixture script
+/// reads it.
+fn foxglove_summary(parts: &[PathBuf]) -> Value {
+    let script = root().join("tools/tests/fixtures/foxglove_recording.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .args(parts)
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "{} failed: {}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("the script prints JSON")
+}
+
+#[test]
+fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let out = out_dir("recorded");
+    let run = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "paper", "--record-max-file-s", "4", "--json"])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("session runs");
+    assert!(
+        run.status.success(),
+        "session failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let o = &scenario.object;
+    let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
+    let mut arrows = 0;
+    for site in &scenario.site {
+        let first = out.join("paper").join(format!("{}.mcap", site.name));
+        let parts = coop_transport::recording::read(&first)
+            .expect("the recording reads")
+            .files;
+        assert!(parts.len() >= 2, "{}: rotated into parts", site.name);
+        let v = foxglove_summary(&parts);
+        assert_eq!(v["errors"], serde_json::json!([]), "{}", site.name);
+        // Every part alone has frames and a scene.
+        for p in v["parts"].as_array().expect("parts") {
+            for t in ["/tf", "/scene"] {
+                assert!(
+                    p["counts"][t].as_u64() > Some(0),
+                    "{}: {t} in {p}",
+                    site.name
+                );
+            }
+        }
+        // This site's copy and tool, and nothing else, at the sample rate (200 Hz, about 10 s).
+        let object = format!("object/{}", site.name);
+        let tool = format!("tool/{}", site.name);
+        let frames = v["frames"].as_object().expect("frames");
+        let names: Vec<&str> = frames.keys().map(String::as_str).collect();
+        let mut want = [format!("world>{object}"), format!("world>{tool}")];
+        want.sort();
+        assert_eq!(names, want, "{}", site.name);
+        for (f, n) in frames {
+            assert!(n.as_u64() > Some(1500), "{}: {f} {n}", site.name);
+        }
+        // The entities sit in `world` or in one of the frames, and have the scenario's sizes.
+        for e in v["entity_frames"].as_array().expect("entity frames") {
+            let frame = e[1].as_str().expect("frame");
+            assert!(
+                frame == "world" || frame == object || frame == tool,
+                "{}: entity {e} in an unknown frame",
+                site.name
+            );
+        }
+        let entities = &v["entities"];
+        assert_eq!(
+            entities[&object]["cylinder_size"],
+            serde_json::json!([d, d, h])
+        );
+        let r = 2.0 * site.tool_radius_m;
+        assert_eq!(entities[&tool]["sphere_size"], serde_json::json!([r, r, r]));
+        assert!(
+            entities["environment"]["cubes"].as_u64() > Some(0),
+            "the floor"
+        );
+        arrows += entities[format!("force/{}", site.name)]["arrows"]
+            .as_u64()
+            .unwrap_or(0);
+        // The station's events, in its name: its start and every other site joining.
+        let logs: Vec<&str> = v["logs"]
+            .as_array()
+            .expect("logs")
+            .iter()
+            .map(|l| {
+                assert_eq!(l["name"], site.name.as_str());
+                l["message"].as_str().expect("text")
+            })
+            .collect();
+        assert!(
+            logs.iter()
+                .any(|l| l.starts_with(&format!("station {} started", site.name))),
+            "{logs:?}"
+        );
+        assert!(
+            logs.iter().any(|l| l.starts_with("station stopping")),
+            "{logs:?}"
+        );
+        for other in scenario.site.iter().filter(|s| s.name != site.name) {
+            assert!(
+                logs.contains(&format!("{} joined", other.name).as_str()),
+                "{}: {logs:?}",
+                site.name
+            );
+        }
+    }
+    assert!(arrows > 0, "the users push the object: force arrows");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// `session run --live`: a Foxglove WebSocket client that is not ours (the `websockets` package,
+/// `foxglove.websocket.v1`) gets the channels advertised, subscribes, and receives every site's
+/// frames and scene while the session runs; the session ends as it would without a viewer.
+#[test]
+fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
+    use std::io::BufRead;
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["websockets", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let out = out_dir("live");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "paper", "--json", "--live", "127.0.0.1:0"])
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("session starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the launcher prints the live view's address");
+    assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
+    let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
+    // The client waits (up to 60 s) until it has seen every site; it connects before the stations
+    // are up, so what it sees is the session as it runs.
+    let client = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60"])
+        .args(&sites)
+        .output()
+        .expect("python3 runs");
+    let session = child.wait_with_output().expect("session ends");
+    let launcher_log = log.join().unwrap_or_default();
+    assert!(
+        client.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    assert!(session.status.success(), "session failed: {launcher_log}");
+    let v: Value = serde_json::from_slice(&client.stdout).expect("the client prints JSON");
+    assert_eq!(v["errors"], serde_json::json!([]), "{v}");
+    assert_eq!(
+        v["channels"],
+        serde_json::json!({
+            "/tf": "foxglove.FrameTransform",
+            "/scene": "foxglove.SceneUpdate",
+            "/log": "foxglove.Log",
+        }),
+        "advertised"
+    );
+    assert_eq!(v["complete"], true, "every site's frames and scene: {v}");
+    // One scene with every site: the environment and three entities per site.
+    assert_eq!(
+        v["max_scene_entities"].as_u64(),
+        Some(1 + 3 * sites.len() as u64),
+        "{v}"
+    );
+    assert!(
+        v["logs"][0]
+            .as_str()
+            .is_some_and(|l| l.contains("scenario three-users")),
+        "{v}"
+    );
+    // The session's own result is unaffected.
+    let result: Value = serde_json::from_slice(&session.stdout).expect("the session's JSON");
+    assert!(
+        result["methods"]["paper"]["real"]["divergence_final_m"].as_f64() < Some(0.005),
+        "{result}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
