@@ -185,3 +185,39 @@ pub fn paper_with_scripts(name: &str, duration_s: f64, user1: &str, user2: &str)
         1,
     )
 }
+
+/// Runs `ip` with `args`; `Err` with its message when it fails (network-namespace tests).
+///
+/// # Errors
+/// `ip` is missing or refuses (no root, no CAP_SYS_ADMIN, no iproute2).
+pub fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("ip {args:?}: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+/// Network namespaces a test made; deleted on drop, whatever happened (deleting a namespace
+/// deletes the veth ends inside it, and with them their peers).
+#[derive(Debug)]
+pub struct Namespaces {
+    /// Their names.
+    pub names: Vec<String>,
+}
+
+impl Drop for Namespaces {
+    fn drop(&mut self) {
+        for n in &self.names {
+            let _ = ip(&["netns", "delete", n]);
+        }
+    }
+}

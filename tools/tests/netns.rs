@@ -6,44 +6,13 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use coop_tests::{station_config, wait_until, Reaped, StationConfig};
-
-/// Runs `ip` with `args`; `Err` with its message when it fails.
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .map_err(|e| format!("ip {args:?}: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
-    }
-}
-
-/// The namespaces and the veth pair; removed on drop, whatever happened.
-struct Netns {
-    names: [String; 2],
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        for n in &self.names {
-            // Deleting a namespace deletes the veth end inside it, and with it its peer.
-            let _ = ip(&["netns", "delete", n]);
-        }
-    }
-}
+use coop_tests::{ip, station_config, wait_until, Namespaces, Reaped, StationConfig};
 
 /// Two namespaces `coopA<tag>`, `coopB<tag>` joined by veth `cva<tag>`–`cvb<tag>` (tests running at
 /// once use different tags).
-fn setup(tag: &str) -> Result<Netns, String> {
-    let ns = Netns {
-        names: [format!("coopA{tag}"), format!("coopB{tag}")],
+fn setup(tag: &str) -> Result<Namespaces, String> {
+    let ns = Namespaces {
+        names: vec![format!("coopA{tag}"), format!("coopB{tag}")],
     };
     let (a, b) = (ns.names[0].as_str(), ns.names[1].as_str());
     ip(&["netns", "add", a])?;

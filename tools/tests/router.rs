@@ -9,7 +9,7 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use coop_tests::{station_config, wait_until, Reaped, StationConfig};
+use coop_tests::{ip, station_config, wait_until, Namespaces, Reaped, StationConfig};
 use coop_transport::network::{Mode, Tls};
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
@@ -17,40 +17,11 @@ const SESSION_BIN: &str = env!("CARGO_BIN_EXE_session");
 const IMPOSTOR: &str = env!("CARGO_BIN_EXE_coop-impostor");
 const LIMIT: Duration = Duration::from_secs(60);
 
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .map_err(|e| format!("ip {args:?}: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
-    }
-}
-
-/// The three namespaces; removed (with their veth ends) on drop, whatever happened.
-struct Netns {
-    names: [String; 3],
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        for n in &self.names {
-            let _ = ip(&["netns", "delete", n]);
-        }
-    }
-}
-
 /// `coopR<tag>` (192.0.2.1 towards A, 192.0.2.5 towards B), `coopA<tag>` (192.0.2.2),
 /// `coopB<tag>` (192.0.2.6): two /30 links, no route between A and B.
-fn setup(tag: &str) -> Result<Netns, String> {
-    let ns = Netns {
-        names: [
+fn setup(tag: &str) -> Result<Namespaces, String> {
+    let ns = Namespaces {
+        names: vec![
             format!("coopR{tag}"),
             format!("coopA{tag}"),
             format!("coopB{tag}"),

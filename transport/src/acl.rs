@@ -215,7 +215,11 @@ mod tests {
         };
         assert_eq!(
             rule("site-user2-puts")["key_exprs"],
-            json!(["coop/s1/obj/0/state/user2", "coop/s1/obj/0/tool/user2"])
+            json!([
+                "coop/s1/obj/0/state/user2",
+                "coop/s1/obj/0/tool/user2",
+                "coop/s1/live/user2"
+            ])
         );
         assert_eq!(
             rule("site-user2-answers")["key_exprs"],
