@@ -200,11 +200,12 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         sc.site.len()
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
         "method",
         "div max",
         "div rms",
         "div after",
+        "co-div",
         "err ref",
         "force rms",
         "adopt step",
@@ -213,8 +214,8 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "adoptions"
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
-        "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", "mJ", ""
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
+        "", "mm", "mm", "contact mm", "max mm", "rms mm", "N", "max N", "mJ", "mJ", ""
     );
     for m in all {
         // The worst site; NaN (not measured, e.g. on real stations) if any site's is.
@@ -243,11 +244,12 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
+            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
             cell(m.divergence_after_contact_m * 1e3, 12, 3),
+            cell(m.co_contact_divergence_max_m * 1e3, 10, 2),
             worst(&|s| s.error_vs_reference_rms_m) * 1e3,
             worst(&|s| s.force_tracking_rms_n),
             cell(worst(&|s| s.max_adoption_force_step_n), 11, 3),
@@ -259,7 +261,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
     }
     let radius = sc.object.radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
+        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
         all.iter()
             .map(|m| format!("{:.2} s ({})", m.after_contact_from_s, m.method))
             .collect::<Vec<_>>()
