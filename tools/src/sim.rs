@@ -4,6 +4,8 @@
 //!   Fig. 9–12 style plots.
 //! - `sim compare SCENARIO`: every method on the same scenario next to the reference run, one table
 //!   (or `--json`).
+//! - `sim sweep SCENARIO`: every method × constant delay × seed, one row each (or `--json`), and
+//!   with `--out` a plot of phases passed and co-contact divergence against delay.
 //! - `sim bench`: cost of a physics step and a servo step, and the simulator's speed.
 
 use std::path::{Path, PathBuf};
@@ -61,6 +63,27 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
+    /// Run every method at each constant delay and seed; print one row per run.
+    Sweep {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// One-way delays, ms, comma-separated (constant; the scenario's jitter, none at 0).
+        #[arg(long, value_delimiter = ',', value_parser = parse_delay, allow_hyphen_values = true,
+              default_value = crate::sweep::DEFAULT_DELAYS_MS)]
+        delays_ms: Vec<f64>,
+        /// Seeds 1 to N (overriding the scenario's).
+        #[arg(long, default_value_t = 1, value_parser = parse_seeds)]
+        seeds: u64,
+        /// Methods, comma-separated (default: naive,paper,timewarp).
+        #[arg(long, value_delimiter = ',', value_parser = parse_method)]
+        methods: Vec<MethodName>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Also write sweep.json, sweep.png and sweep.svg into DIR.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
     /// Benchmark: physics step, servo step (ns) and simulator speed on a scenario.
     Bench {
         /// Scenario for the speed figure.
@@ -73,6 +96,25 @@ pub enum Command {
         #[arg(long)]
         quick: bool,
     },
+}
+
+fn parse_delay(s: &str) -> Result<f64, String> {
+    let d: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("delay {s:?} is not a number of ms"))?;
+    if !(d.is_finite() && d >= 0.0) {
+        return Err(format!("delay {s} ms: a delay cannot be negative"));
+    }
+    Ok(d)
+}
+
+fn parse_seeds(s: &str) -> Result<u64, String> {
+    match s.trim().parse::<u64>() {
+        Ok(0) => Err("0 seeds: at least 1 is needed (seeds run 1 to N)".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is not a whole number of seeds")),
+    }
 }
 
 fn parse_method(s: &str) -> Result<MethodName, String> {
@@ -158,6 +200,22 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             } else {
                 print_table(&sc, &all);
             }
+        }
+        Command::Sweep {
+            scenario,
+            delays_ms,
+            seeds,
+            methods,
+            json,
+            out,
+        } => {
+            let sc = scenario_file::load(&scenario)?;
+            let methods = if methods.is_empty() {
+                MethodName::SIMULATED.to_vec()
+            } else {
+                methods
+            };
+            crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
         }
         Command::Bench {
             scenario,
