@@ -190,3 +190,21 @@ fn force_steps_are_counted_per_servo_tick() {
         0.0
     );
 }
+
+/// The bench's eight-user scenario is valid and really has all eight users on the object at once,
+/// with timewarp's confirmed states agreeing.
+#[test]
+fn eight_user_bench_scenario_has_everyone_touching() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = scenario_at(&coop_tools::simbench::eight_users(&base), 150.0, 1).expect("valid");
+    assert_eq!(sc.site.len(), 8);
+    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+    let all = (0..r.t.len())
+        .filter(|&k| r.sites.iter().all(|s| s.touching[k]))
+        .count();
+    assert!(all > 100, "all eight touch at only {all} samples");
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    assert_eq!(m.hash_mismatches, 0);
+    assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+}
