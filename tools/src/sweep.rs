@@ -206,7 +206,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>10}{:>9}{:>7}{:>9}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
         "method",
         "delay",
         "seed",
@@ -223,7 +223,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>10}{:>9}{:>7}{:>9}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
         "",
         "ms",
         "",
@@ -241,17 +241,17 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{}{}{}{}{:>7}{}{:>9.1}{:>10}{:>6}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{:>9.1}{:>10}{:>6}",
             r.method,
             r.delay_ms,
             r.seed,
             format!("{}/{}", r.phases_passed, r.phases_total),
             cell(r.co_contact_divergence_max_m * 1e3, 10, 2),
-            cell(r.co_contact_divergence_rms_m * 1e3, 10, 2),
-            cell(r.error_vs_reference_rms_m * 1e3, 10, 2),
+            cell(r.co_contact_divergence_rms_m * 1e3, 9, 2),
+            cell(r.error_vs_reference_rms_m * 1e3, 12, 2),
             cell(r.max_force_step_n, 9, 3),
             r.force_steps_over_jnd,
-            cell(r.correction_energy_j * 1e3, 9, 2),
+            cell(r.correction_energy_j * 1e3, 12, 2),
             r.rollbacks_per_s,
             r.rollback_depth_p99_ticks,
             r.hash_mismatches
