@@ -5,6 +5,7 @@
 //! - [`ringbench`]: the shared-memory ring against rtrb between two cores.
 //! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
+//! - [`sweep`]: `sim sweep`, every method × delay × seed on one scenario.
 //! - [`session`]: a multi-site session of real stations, recorded and measured.
 //! - [`certs`]: a session's CA, certificates and access control (`session certs`).
 //! - [`fuzz`]: hostile input at volume (wire, scenario, station config), judged by oracles.
@@ -39,3 +40,4 @@ pub mod session;
 pub mod sim;
 pub mod simbench;
 pub mod station;
+pub mod sweep;

@@ -32,7 +32,16 @@ struct Series {
     label: String,
     color: RGBColor,
     dashed: bool,
+    /// A dot at every point (for sparse series, where a lone point draws no line).
+    markers: bool,
     points: Vec<(f64, f64)>,
+}
+
+/// The horizontal axis: its range and label.
+struct XAxis {
+    from: f64,
+    to: f64,
+    label: &'static str,
 }
 
 struct Panel {
@@ -56,7 +65,7 @@ fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     title: &str,
     panels: &[Panel],
-    t_end: f64,
+    x: &XAxis,
 ) -> anyhow::Result<()>
 where
     DB::ErrorType: 'static,
@@ -82,11 +91,11 @@ where
             .margin(8)
             .x_label_area_size(28)
             .y_label_area_size(64)
-            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .build_cartesian_2d(x.from..x.to, (lo - pad)..(hi + pad))
             .map_err(err)?;
         chart
             .configure_mesh()
-            .x_desc("time (s)")
+            .x_desc(x.label)
             .y_desc(p.y_label)
             .label_style(("sans-serif", 12))
             .light_line_style(WHITE.mix(0.0))
@@ -94,6 +103,16 @@ where
             .map_err(err)?;
         for s in &p.series {
             let style = ShapeStyle::from(&s.color).stroke_width(if s.dashed { 1 } else { 2 });
+            if s.markers {
+                let c = s.color;
+                chart
+                    .draw_series(
+                        s.points
+                            .iter()
+                            .map(|&p| Circle::new(p, 4, ShapeStyle::from(&c).filled())),
+                    )
+                    .map_err(err)?;
+            }
             let drawn = if s.dashed {
                 chart
                     .draw_series(DashedLineSeries::new(s.points.iter().copied(), 6, 4, style))
@@ -129,7 +148,7 @@ fn write_both(
     stem: &str,
     title: &str,
     panels: &[Panel],
-    t_end: f64,
+    x: &XAxis,
     size: (u32, u32),
 ) -> anyhow::Result<()> {
     let png = dir.join(format!("{stem}.png"));
@@ -138,14 +157,14 @@ fn write_both(
         BitMapBackend::new(&png, size).into_drawing_area(),
         title,
         panels,
-        t_end,
+        x,
     )
     .with_context(|| format!("plotting {}", png.display()))?;
     draw(
         SVGBackend::new(&svg, size).into_drawing_area(),
         title,
         panels,
-        t_end,
+        x,
     )
     .with_context(|| format!("plotting {}", svg.display()))?;
     Ok(())
@@ -162,7 +181,11 @@ pub fn figures(
     reference: &RunResult,
 ) -> anyhow::Result<()> {
     ensure_font()?;
-    let t_end = sc.duration_s;
+    let time_axis = &XAxis {
+        from: 0.0,
+        to: sc.duration_s,
+        label: "time (s)",
+    };
     let name = |i: usize| sc.site[i].name.clone();
     let series = |f: &dyn Fn(usize, usize) -> f64, dashed_ref: Option<&dyn Fn(usize) -> f64>| {
         let mut out: Vec<Series> = (0..r.sites.len())
@@ -170,6 +193,7 @@ pub fn figures(
                 label: name(i),
                 color: COLORS[i % COLORS.len()],
                 dashed: false,
+                markers: false,
                 points: r.t.iter().enumerate().map(|(k, &t)| (t, f(i, k))).collect(),
             })
             .collect();
@@ -178,6 +202,7 @@ pub fn figures(
                 label: "reference".into(),
                 color: BLACK,
                 dashed: true,
+                markers: false,
                 points: reference
                     .t
                     .iter()
@@ -220,7 +245,7 @@ pub fn figures(
             "scenario {}, method {method}: {}-direction (cf. paper Figs. 9-12)",
             sc.name, label
         );
-        write_both(dir, stem, &title, &panels, t_end, (1000, 1300))?;
+        write_both(dir, stem, &title, &panels, time_axis, (1000, 1300))?;
     }
     let div: Vec<(f64, f64)> =
         r.t.iter()
@@ -242,6 +267,7 @@ pub fn figures(
             label: method.into(),
             color: COLORS[1],
             dashed: false,
+            markers: false,
             points: div,
         }],
     }];
@@ -253,7 +279,71 @@ pub fn figures(
             sc.name
         ),
         &panels,
-        t_end,
+        time_axis,
         (1000, 400),
     )
+}
+
+/// One method's line in the sweep plot: (delay ms, mean phases passed) and (delay ms, mean
+/// co-contact divergence mm; delays where no user pair ever touched together are left out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepLine {
+    /// Method name.
+    pub label: String,
+    /// (delay ms, phases passed).
+    pub phases: Vec<(f64, f64)>,
+    /// (delay ms, co-contact divergence max, mm).
+    pub co_div_mm: Vec<(f64, f64)>,
+}
+
+/// Writes `sweep.png` and `sweep.svg` into `dir`: phases passed (of `phases_total`) and co-contact
+/// divergence against delay, one line per method.
+///
+/// # Errors
+/// The font is missing, or a file cannot be written.
+pub fn sweep(
+    dir: &Path,
+    title: &str,
+    phases_total: usize,
+    lines: &[SweepLine],
+) -> anyhow::Result<()> {
+    ensure_font()?;
+    let delays = lines
+        .iter()
+        .flat_map(|l| l.phases.iter().chain(&l.co_div_mm).map(|p| p.0));
+    let (lo, hi) = delays.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+        (a.min(d), b.max(d))
+    });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let x = XAxis {
+        from: lo,
+        to: if hi > lo { hi } else { lo + 1.0 },
+        label: "one-way delay (ms)",
+    };
+    let series = |f: &dyn Fn(&SweepLine) -> Vec<(f64, f64)>| -> Vec<Series> {
+        lines
+            .iter()
+            .enumerate()
+            .map(|(i, l)| Series {
+                label: l.label.clone(),
+                color: COLORS[i % COLORS.len()],
+                dashed: false,
+                markers: true,
+                points: f(l),
+            })
+            .collect()
+    };
+    let panels = [
+        Panel {
+            title: format!("task phases passed, of {phases_total} (all sites)"),
+            y_label: "phases",
+            series: series(&|l| l.phases.clone()),
+        },
+        Panel {
+            title: "largest distance between the copies while two or more users touch".into(),
+            y_label: "mm",
+            series: series(&|l| l.co_div_mm.clone()),
+        },
+    ];
+    write_both(dir, "sweep", title, &panels, &x, (1000, 800))
 }

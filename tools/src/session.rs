@@ -24,7 +24,7 @@ use coop_model::body::Vec3;
 use coop_model::method::EnergyAccount;
 use coop_model::metrics::{self, Metrics};
 use coop_model::scenario::{MethodName, Scenario};
-use coop_model::sim::{AdoptionEvent, Mode, RunResult, SiteTrace};
+use coop_model::sim::{AdoptionEvent, ForceSteps, Mode, RunResult, SiteTrace};
 use coop_transport::recording::{self, Recording};
 use coop_transport::{keys, network};
 use zenoh::Wait;
@@ -532,6 +532,7 @@ pub fn run_from_recordings(
                 jump_m: a.jump_m,
                 age_s: a.age_s,
                 force_step_n: 0.0,
+                energy_j: f64::NAN,
             });
         }
         if let Some(s) = r.status {
@@ -550,6 +551,7 @@ pub fn run_from_recordings(
         mech_energy: vec![(0.0, 0.0); recs.len()],
         messages,
         rollback: vec![None; recs.len()],
+        force_steps: vec![ForceSteps::default(); recs.len()],
     })
 }
 

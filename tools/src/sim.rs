@@ -4,6 +4,8 @@
 //!   Fig. 9–12 style plots.
 //! - `sim compare SCENARIO`: every method on the same scenario next to the reference run, one table
 //!   (or `--json`).
+//! - `sim sweep SCENARIO`: every method × constant delay × seed, one row each (or `--json`), and
+//!   with `--out` a plot of phases passed and co-contact divergence against delay.
 //! - `sim bench`: cost of a physics step and a servo step, and the simulator's speed.
 
 use std::path::{Path, PathBuf};
@@ -61,6 +63,27 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
+    /// Run every method at each constant delay and seed; print one row per run.
+    Sweep {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// One-way delays, ms, comma-separated (constant; the scenario's jitter, none at 0).
+        #[arg(long, value_delimiter = ',', value_parser = parse_delay, allow_hyphen_values = true,
+              default_value = crate::sweep::DEFAULT_DELAYS_MS)]
+        delays_ms: Vec<f64>,
+        /// Seeds 1 to N (overriding the scenario's).
+        #[arg(long, default_value_t = 1, value_parser = parse_seeds)]
+        seeds: u64,
+        /// Methods, comma-separated (default: naive,paper,timewarp).
+        #[arg(long, value_delimiter = ',', value_parser = parse_method)]
+        methods: Vec<MethodName>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Also write sweep.json, sweep.png and sweep.svg into DIR.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
     /// Benchmark: physics step, servo step (ns) and simulator speed on a scenario.
     Bench {
         /// Scenario for the speed figure.
@@ -73,6 +96,25 @@ pub enum Command {
         #[arg(long)]
         quick: bool,
     },
+}
+
+fn parse_delay(s: &str) -> Result<f64, String> {
+    let d: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("delay {s:?} is not a number of ms"))?;
+    if !(d.is_finite() && d >= 0.0) {
+        return Err(format!("delay {s} ms: a delay cannot be negative"));
+    }
+    Ok(d)
+}
+
+fn parse_seeds(s: &str) -> Result<u64, String> {
+    match s.trim().parse::<u64>() {
+        Ok(0) => Err("0 seeds: at least 1 is needed (seeds run 1 to N)".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is not a whole number of seeds")),
+    }
 }
 
 fn parse_method(s: &str) -> Result<MethodName, String> {
@@ -159,6 +201,22 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                 print_table(&sc, &all);
             }
         }
+        Command::Sweep {
+            scenario,
+            delays_ms,
+            seeds,
+            methods,
+            json,
+            out,
+        } => {
+            let sc = scenario_file::load(&scenario)?;
+            let methods = if methods.is_empty() {
+                MethodName::SIMULATED.to_vec()
+            } else {
+                methods
+            };
+            crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
+        }
         Command::Bench {
             scenario,
             json,
@@ -200,11 +258,12 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         sc.site.len()
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
         "method",
         "div max",
         "div rms",
         "div after",
+        "co-div",
         "err ref",
         "force rms",
         "adopt step",
@@ -213,8 +272,8 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "adoptions"
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
-        "", "mm", "mm", "contact mm", "rms mm", "N", "max N", "mJ", "mJ", ""
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
+        "", "mm", "mm", "contact mm", "max mm", "rms mm", "N", "max N", "mJ", "mJ", ""
     );
     for m in all {
         // The worst site; NaN (not measured, e.g. on real stations) if any site's is.
@@ -243,11 +302,12 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
+            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
             cell(m.divergence_after_contact_m * 1e3, 12, 3),
+            cell(m.co_contact_divergence_max_m * 1e3, 10, 2),
             worst(&|s| s.error_vs_reference_rms_m) * 1e3,
             worst(&|s| s.force_tracking_rms_n),
             cell(worst(&|s| s.max_adoption_force_step_n), 11, 3),
@@ -259,7 +319,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
     }
     let radius = sc.object.radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
+        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
         all.iter()
             .map(|m| format!("{:.2} s ({})", m.after_contact_from_s, m.method))
             .collect::<Vec<_>>()

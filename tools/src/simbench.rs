@@ -1,6 +1,13 @@
 //! `sim bench`: what one physics step and one servo step cost, and how fast the simulator runs a
 //! scenario, in one run. Each cost is the median of several timed batches (these machines are
 //! shared and noisy); the speed is simulated seconds per wall-clock second over whole runs.
+//!
+//! Timewarp's rollback cost, for 2 users (the scenario) and 8 (the scenario's world and object with
+//! eight users around it, [`eight_users`]): one 500-tick rollback with every tool touching, timed
+//! whole (median and p99) and per re-simulated tick; then, from a timewarp run at a constant 150 and
+//! 500 ms delay, the busiest site's re-simulated ticks per simulated second × that cost = the share
+//! of one core rollbacks take, and the p99 rollback (depth × cost per tick) against the 1 ms physics
+//! period.
 
 use std::hint::black_box;
 use std::path::Path;
@@ -8,16 +15,199 @@ use std::time::Instant;
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
-use coop_model::method::{Consistency, ObjectCopy, Paper};
-use coop_model::scenario::MethodName;
+use coop_model::method::{Consistency, ObjectCopy, Paper, Report};
+use coop_model::metrics;
+use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::sim::{self, Mode};
+use coop_model::timewarp::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
 
 use coop_actors::scenario_file;
 
-fn median(mut v: Vec<f64>) -> f64 {
+fn median(v: Vec<f64>) -> f64 {
+    quantile(v, 0.5)
+}
+
+/// The `q` quantile (nearest rank) of `v`, which is not empty.
+fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+/// The depth of the timed rollback, ticks.
+pub const ROLLBACK_TICKS: i64 = 500;
+
+/// `base`'s world, object and contact laws with eight users around the object: device bases on a
+/// 0.3 m circle about it, alternating `base`'s first two sites' rates; each user comes in from its
+/// side (one after the other, 0.1 s apart), presses 3 mm into the object, all carry it 3 cm in +y
+/// together and let go. No task phases.
+pub fn eight_users(base: &Scenario) -> Scenario {
+    let mut sc = base.clone();
+    sc.name = format!("{}-eight-users", base.name);
+    sc.duration_s = 6.0;
+    sc.phase.clear();
+    let c = Vec3::from(base.object.start_m);
+    let templates = [&base.site[0], &base.site[base.site.len().min(2) - 1]];
+    sc.site = (0..8)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 8.0;
+            let u = Vec3::new(a.cos(), a.sin(), 0.0);
+            let mut s = templates[k % 2].clone();
+            s.name = format!("user{}", k + 1);
+            let at = |p: Vec3| [p.x, p.y, p.z];
+            s.device_base_m = at(Vec3::new(c.x, c.y, 0.0) + u * 0.3);
+            s.elbow = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let away = c + u * 0.15;
+            let press = c + u * (base.object.radius_m + s.tool_radius_m - 0.003);
+            let carried = |p: Vec3| p + Vec3::new(0.0, 0.03, 0.0);
+            let key = |t_s: f64, p: Vec3| KeyframeSpec {
+                t_s,
+                target_m: at(p),
+            };
+            let arrive = 1.0 + 0.1 * k as f64;
+            s.script = vec![
+                key(0.0, away),
+                key(0.5, away),
+                key(arrive, press),
+                key(3.0, press),
+                key(4.0, carried(press)),
+                key(5.0, carried(press)),
+                key(5.5, carried(away)),
+            ];
+            s
+        })
+        .collect();
+    sc
+}
+
+/// What one 500-tick rollback with `sc`'s every tool touching the object costs at site 0: each
+/// rollback's time, ns (one per batch).
+fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> {
+    let world = sc.world();
+    let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
+    let n = sc.site.len();
+    // Every tool 1 mm into the object from its own side.
+    let touching = |j: usize| {
+        let a = std::f64::consts::TAU * j as f64 / n as f64;
+        let u = -Vec3::new(a.cos(), a.sin(), 0.0);
+        quantize(start.pos + u * (sc.object.radius_m + sc.site[j].tool_radius_m - 0.001))
+    };
+    let report = |first_tick: i64, count: usize, q: [i32; 3]| {
+        Report::Tools(ToolReport {
+            first_tick,
+            count,
+            positions: [q; WINDOW_TICKS],
+            confirmed_tick: 0,
+            confirmed_hash: 0,
+        })
+    };
+    let mut copy = ObjectCopy::new(start);
+    let mut tw = sc.timewarp(0, &copy);
+    let dt = 1.0 / sc.site[0].physics_rate_hz;
+    // Every other tool known at tick 0 only: predicted (held) there for the whole history.
+    for j in 1..n {
+        tw.receive(&world, &mut copy, j, &report(0, 1, touching(j)), 0.0);
+    }
+    let now = ROLLBACK_TICKS + 100;
+    for k in 0..now {
+        let q = touching(0);
+        tw.own_tool(Vec3::new(f64::from(q[0]), f64::from(q[1]), f64::from(q[2])) * QUANTUM_M);
+        tw.physics_step(&world, &mut copy, &ContactForce::default(), dt);
+        copy.time_s = k as f64 * dt;
+    }
+    let before = tw.timewarp_stats().unwrap_or_default();
+    // Site 1's tool was 0.01 mm further in from tick now − 500 on: re-simulate 500 ticks.
+    let mut moved = touching(1);
+    moved[0] -= 1;
+    let late = report(now - ROLLBACK_TICKS, WINDOW_TICKS, moved);
+    let mut times = Vec::with_capacity(batches);
+    for _ in 0..batches {
+        let (mut t, mut c) = (tw.clone(), copy);
+        let t0 = Instant::now();
+        t.receive(&world, &mut c, 1, black_box(&late), now as f64 * dt);
+        let ns = t0.elapsed().as_nanos() as f64;
+        let after = t.timewarp_stats().unwrap_or_default();
+        let depth = after.resimulated_ticks - before.resimulated_ticks;
+        if depth != ROLLBACK_TICKS as u64 {
+            anyhow::bail!(
+                "the timed rollback re-simulated {depth} ticks, not {ROLLBACK_TICKS}: the horizon of scenario {} is too short",
+                sc.name
+            );
+        }
+        black_box(&c);
+        times.push(ns);
+    }
+    Ok(times)
+}
+
+/// Rollback cost at one site count.
+#[derive(Debug, Clone, serde::Serialize)]
+struct RollbackCost {
+    users: usize,
+    rollback_500_ticks_median_ns: f64,
+    rollback_500_ticks_p99_ns: f64,
+    per_resimulated_tick_ns: f64,
+}
+
+/// Rollback load of a timewarp run at one delay.
+#[derive(Debug, Clone, serde::Serialize)]
+struct RollbackLoad {
+    users: usize,
+    delay_ms: f64,
+    rollbacks_per_s: f64,
+    resimulated_ticks_per_s: f64,
+    rollback_depth_p99_ticks: u64,
+    /// Re-simulation time per second of real time, busiest site, as a share of one core.
+    core_share: f64,
+    /// The p99 rollback's time (depth × cost per tick) plus one tick, ns.
+    p99_rollback_ns: f64,
+    fits_1ms_at_p99: bool,
+    hash_mismatches: u64,
+}
+
+fn rollback_figures(
+    sc: &Scenario,
+    quick: bool,
+) -> anyhow::Result<(Vec<RollbackCost>, Vec<RollbackLoad>)> {
+    let batches = if quick { 5 } else { 41 };
+    let eight = eight_users(sc);
+    let mut costs = Vec::new();
+    let mut loads = Vec::new();
+    for many in [sc, &eight] {
+        // The 500 ms scenario's horizon holds a 500-tick rollback.
+        let deep = crate::sweep::scenario_at(many, 500.0, many.seed)?;
+        let times = rollback_times_ns(&deep, batches)?;
+        let per_tick = median(times.clone()) / ROLLBACK_TICKS as f64;
+        costs.push(RollbackCost {
+            users: many.site.len(),
+            rollback_500_ticks_median_ns: median(times.clone()),
+            rollback_500_ticks_p99_ns: quantile(times, 0.99),
+            per_resimulated_tick_ns: per_tick,
+        });
+        for delay_ms in [150.0, 500.0] {
+            let mut at = crate::sweep::scenario_at(many, delay_ms, many.seed)?;
+            if quick {
+                at.duration_s = at.duration_s.min(3.0);
+            }
+            let r = sim::run(&at, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+            let reference = sim::run(&at, Mode::Reference, &mut |_| {});
+            let m = metrics::compute(&at, &r, &reference);
+            let p99_ns = (m.rollback_depth_p99_ticks as f64 + 1.0) * per_tick;
+            loads.push(RollbackLoad {
+                users: many.site.len(),
+                delay_ms,
+                rollbacks_per_s: m.rollbacks_per_s,
+                resimulated_ticks_per_s: m.resimulated_ticks_per_s,
+                rollback_depth_p99_ticks: m.rollback_depth_p99_ticks,
+                core_share: m.resimulated_ticks_per_s * per_tick * 1e-9,
+                p99_rollback_ns: p99_ns,
+                fits_1ms_at_p99: p99_ns <= 1e6,
+                hash_mismatches: m.hash_mismatches,
+            });
+        }
+    }
+    Ok((costs, loads))
 }
 
 /// Runs the benchmark and prints its figures.
@@ -112,13 +302,16 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         );
         speeds.push((mode.name(), s));
     }
+    let (costs, loads) = rollback_figures(&sc, quick)?;
     if json {
         let v = serde_json::json!({
             "scenario": sc.name,
             "physics_step_ns": physics_ns,
             "servo_step_ns": servo_ns,
             "realtime_factor": speeds.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
-            "goal": "physics step < 1000 ns; paper scenario >= 100x real time",
+            "rollback_cost": costs,
+            "rollback_load": loads,
+            "goal": "physics step < 1000 ns; paper scenario >= 100x real time; 8 users at 150 ms: p99 rollback inside the 1 ms physics period",
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
@@ -127,6 +320,31 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         println!("servo step (FK, contact, Eq. 12 PI):              {servo_ns:>8.0} ns");
         for (name, s) in &speeds {
             println!("simulator speed, {name:<9}: {s:>8.0}x real time   (goal >= 100x)");
+        }
+        println!(
+            "# timewarp rollback, every tool touching (site 0; median / p99 of {} rollbacks)",
+            if quick { 5 } else { 41 }
+        );
+        for c in &costs {
+            println!(
+                "{} users: one {ROLLBACK_TICKS}-tick rollback {:>9.0} / {:>9.0} ns, {:>6.0} ns per re-simulated tick",
+                c.users, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns
+            );
+        }
+        println!("# timewarp run at a constant delay (busiest site): re-simulation as a share of one core; p99 rollback = (p99 depth + 1) ticks x cost per tick (goal: 8 users at 150 ms <= 1 ms)");
+        for l in &loads {
+            println!(
+                "{} users, {:>3.0} ms: {:>6.1} rollbacks/s, {:>8.0} re-simulated ticks/s, depth p99 {:>4} ticks, {:>5.1} % of a core, p99 rollback {:>7.0} ns {}, {} hash mismatches",
+                l.users,
+                l.delay_ms,
+                l.rollbacks_per_s,
+                l.resimulated_ticks_per_s,
+                l.rollback_depth_p99_ticks,
+                l.core_share * 100.0,
+                l.p99_rollback_ns,
+                if l.fits_1ms_at_p99 { "(fits 1 ms)" } else { "(over 1 ms)" },
+                l.hash_mismatches
+            );
         }
     }
     Ok(())

@@ -206,7 +206,18 @@ fn compare_prints_one_table_and_json() {
         .output()
         .expect("sim");
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
-    // The reference and every method the simulator runs.
-    assert_eq!(v["methods"].as_array().map(Vec::len), Some(4));
+    // The reference and every simulated method (timewarp made it four).
+    assert_eq!(
+        v["methods"].as_array().map(Vec::len),
+        Some(1 + MethodName::SIMULATED.len())
+    );
     assert!(v["methods"][1]["divergence_max_m"].as_f64().is_some());
+    for m in v["methods"].as_array().expect("methods") {
+        let key = "co_contact_divergence_max_m";
+        assert!(m.get(key).is_some(), "{key} missing: {m}");
+    }
+    assert!(
+        out.lines().any(|l| l.contains("co-div")),
+        "co-contact column missing:\n{out}"
+    );
 }

@@ -14,6 +14,7 @@ pub mod body;
 pub mod contact;
 pub mod controller;
 pub mod device;
+pub mod histogram;
 pub mod link;
 pub mod method;
 pub mod metrics;

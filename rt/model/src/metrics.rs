@@ -16,6 +16,18 @@
 //!   site's copy. A passive method delivers no more than the others did (less what friction takes).
 //!   The reference run shows the integrator's own balance (≈ 0).
 //! - **Phases**: per site, whether each task phase of the scenario happened as that site saw it.
+//! - **Co-contact divergence**: the divergence over only the samples at which two or more users
+//!   touch the object (each site's `touching` flag: its own user on its own copy) — when the copies
+//!   disagreeing is felt as two users pulling at different objects. NaN if that never happens.
+//! - **Displayed-force steps**: per site, the largest change of the desired force F_h from one servo
+//!   tick to the next, and how many ticks changed it by more than the just-noticeable difference
+//!   ([`force_jnd_n`]), counted by the simulator at every servo tick. Contact onsets count too (the
+//!   reference run shows how many the task itself has).
+//! - **Correction energy**: per site, the energy its copy gained from corrections — the positive
+//!   part of each adoption's (paper) or rollback's (timewarp) change of mechanical energy, summed.
+//! - **Rollbacks**: per site, rollbacks and re-simulated ticks per simulated second; over all
+//!   sites, the 99th percentile of rollback depth (from [`crate::histogram::DepthHistogram`]) and
+//!   confirmed-state hash mismatches. 0 for methods that do not roll back.
 
 use crate::body::Vec3;
 use crate::scenario::Scenario;
@@ -23,6 +35,18 @@ use crate::sim::RunResult;
 
 #[cfg(feature = "serde")]
 use serde::Serialize;
+
+/// Weber fraction of force: a change of the displayed force by more than this fraction of the force
+/// is noticeable (about 7 % for forces at the hand; Jones, "Matching forces", 1989; Pang et al. 1991).
+pub const FORCE_JND_FRACTION: f64 = 0.07;
+/// Below this the fraction is meaningless (near zero force any step would count): a change smaller
+/// than 0.05 N is never counted, N.
+pub const FORCE_JND_FLOOR_N: f64 = 0.05;
+
+/// The just-noticeable change of a displayed force of `force_n` N: 7 % of it, at least 0.05 N.
+pub fn force_jnd_n(force_n: f64) -> f64 {
+    (FORCE_JND_FRACTION * force_n.abs()).max(FORCE_JND_FLOOR_N)
+}
 
 /// Per-site figures.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,6 +70,16 @@ pub struct SiteMetrics {
     pub others_work_j: f64,
     /// (phase name, happened at this site).
     pub phases: Vec<(String, bool)>,
+    /// Largest displayed-force change from one servo tick to the next, N (NaN: not measured).
+    pub max_force_step_n: f64,
+    /// Servo ticks whose displayed-force change exceeded the JND ([`force_jnd_n`]).
+    pub force_steps_over_jnd: u64,
+    /// Energy corrections gave this copy (positive parts summed), J (NaN: not known).
+    pub correction_energy_j: f64,
+    /// Rollbacks this site made.
+    pub rollbacks: u64,
+    /// Ticks this site re-simulated.
+    pub resimulated_ticks: u64,
 }
 
 /// A run's figures.
@@ -70,6 +104,33 @@ pub struct Metrics {
     pub after_contact_from_s: f64,
     /// Messages sent, delivered, lost.
     pub messages: (u64, u64, u64),
+    /// Largest inter-site divergence while two or more users touch the object, m (NaN: never).
+    pub co_contact_divergence_max_m: f64,
+    /// RMS inter-site divergence while two or more users touch the object, m (NaN: never).
+    pub co_contact_divergence_rms_m: f64,
+    /// Samples at which two or more users touch the object.
+    pub co_contact_samples: usize,
+    /// Task phases that happened, summed over sites.
+    pub phases_passed: usize,
+    /// Task phases to check, summed over sites.
+    pub phases_total: usize,
+    /// The largest displayed-force step of any site, N (NaN: not measured).
+    pub max_force_step_n: f64,
+    /// Displayed-force steps over the JND, all sites.
+    pub force_steps_over_jnd: u64,
+    /// Energy corrections gave the copies, all sites, J (NaN: not known).
+    pub correction_energy_j: f64,
+    /// Rollbacks per simulated second of the busiest site.
+    pub rollbacks_per_s: f64,
+    /// Re-simulated ticks per simulated second of the busiest site.
+    pub resimulated_ticks_per_s: f64,
+    /// 99th percentile of rollback depth over all sites' rollbacks, ticks (upper edge of its
+    /// histogram bin, at most the deepest; 0: none).
+    pub rollback_depth_p99_ticks: u64,
+    /// The deepest rollback of any site, ticks.
+    pub rollback_depth_max_ticks: u64,
+    /// Confirmed-state hash mismatches, all sites.
+    pub hash_mismatches: u64,
     /// Per site.
     pub sites: Vec<SiteMetrics>,
 }
@@ -82,6 +143,31 @@ fn divergence(r: &RunResult, k: usize) -> f64 {
         }
     }
     d
+}
+
+/// `x` if positive, else 0; NaN stays NaN (not known).
+fn positive_part(x: f64) -> f64 {
+    if x.is_nan() || x > 0.0 {
+        x
+    } else {
+        0.0
+    }
+}
+
+/// Sums, but NaN if any term is (unknown stays unknown).
+fn sum_known(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0, |a, x| a + x)
+}
+
+/// The largest, but NaN if any is.
+fn max_known(v: impl Iterator<Item = f64>) -> f64 {
+    v.fold(0.0, |a: f64, x| {
+        if a.is_nan() || x.is_nan() {
+            f64::NAN
+        } else {
+            a.max(x)
+        }
+    })
 }
 
 fn rms(v: impl Iterator<Item = f64>) -> f64 {
@@ -140,6 +226,8 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
             let adoptions: Vec<_> = run.adoptions.iter().filter(|a| a.site == i).collect();
             let e = run.energy[i];
             let (e0, e1) = run.mech_energy[i];
+            let steps = run.force_steps.get(i).copied().unwrap_or_default();
+            let tw = run.rollback.get(i).copied().flatten().unwrap_or_default();
             SiteMetrics {
                 name: scenario.site[i].name.clone(),
                 error_vs_reference_rms_m: rms(errs.clone()),
@@ -163,11 +251,61 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                     .iter()
                     .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
                     .collect(),
+                max_force_step_n: if steps.servo_ticks == 0 {
+                    f64::NAN
+                } else {
+                    steps.max_step_n
+                },
+                force_steps_over_jnd: steps.over_jnd,
+                correction_energy_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
+                rollbacks: tw.rollbacks,
+                resimulated_ticks: tw.resimulated_ticks,
             }
         })
         .collect();
+    let sites: Vec<SiteMetrics> = sites;
+    // Co-contact: two or more users touching (each site's flag is its own user's contact).
+    let co: Vec<usize> = (0..samples)
+        .filter(|&k| run.sites.iter().filter(|s| s.touching[k]).count() >= 2)
+        .collect();
+    let (co_max, co_rms) = if co.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (
+            co.iter().map(|&k| divs[k]).fold(0.0, f64::max),
+            rms(co.iter().map(|&k| divs[k])),
+        )
+    };
+    let mut depths = crate::histogram::DepthHistogram::default();
+    let mut depth_max = 0;
+    let mut mismatches = 0;
+    for st in run.rollback.iter().flatten() {
+        depths.merge(&st.depths);
+        depth_max = depth_max.max(st.max_depth);
+        mismatches += st.hash_mismatches;
+    }
+    let per_s = |x: u64| x as f64 / scenario.duration_s;
     Metrics {
         method: run.mode.name().to_owned(),
+        co_contact_divergence_max_m: co_max,
+        co_contact_divergence_rms_m: co_rms,
+        co_contact_samples: co.len(),
+        phases_passed: sites
+            .iter()
+            .map(|s| s.phases.iter().filter(|(_, ok)| *ok).count())
+            .sum(),
+        phases_total: sites.iter().map(|s| s.phases.len()).sum(),
+        max_force_step_n: max_known(sites.iter().map(|s| s.max_force_step_n)),
+        force_steps_over_jnd: sites.iter().map(|s| s.force_steps_over_jnd).sum(),
+        correction_energy_j: sum_known(sites.iter().map(|s| s.correction_energy_j)),
+        rollbacks_per_s: sites.iter().map(|s| per_s(s.rollbacks)).fold(0.0, f64::max),
+        resimulated_ticks_per_s: sites
+            .iter()
+            .map(|s| per_s(s.resimulated_ticks))
+            .fold(0.0, f64::max),
+        rollback_depth_p99_ticks: depths.quantile(0.99).map_or(0, |d| d.min(depth_max)),
+        rollback_depth_max_ticks: depth_max,
+        hash_mismatches: mismatches,
         divergence_max_m: divs.iter().copied().fold(0.0, f64::max),
         divergence_rms_m: rms(divs.iter().copied()),
         divergence_after_contact_m: after,

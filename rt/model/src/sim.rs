@@ -83,6 +83,33 @@ pub struct AdoptionEvent {
     pub age_s: f64,
     /// Change of the displayed force at the next servo tick, N.
     pub force_step_n: f64,
+    /// Mechanical energy the adoption gave the copy (negative: took), J; NaN if not known.
+    pub energy_j: f64,
+}
+
+/// One site's displayed-force steps, counted at every servo tick (the traces are sampled slower).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ForceSteps {
+    /// Servo ticks counted (0: not measured, e.g. a station's recording).
+    pub servo_ticks: u64,
+    /// The largest |ΔF_h| from one servo tick to the next, N.
+    pub max_step_n: f64,
+    /// Ticks whose step exceeded the just-noticeable difference
+    /// ([`crate::metrics::force_jnd_n`] of the force before the step).
+    pub over_jnd: u64,
+}
+
+impl ForceSteps {
+    /// Counts one servo tick's step from `before` to `after`, N.
+    pub fn record(&mut self, before: Vec3, after: Vec3) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let step = (after - before).norm();
+        self.servo_ticks += 1;
+        self.max_step_n = self.max_step_n.max(step);
+        if step > crate::metrics::force_jnd_n(before.norm()) {
+            self.over_jnd += 1;
+        }
+    }
 }
 
 /// Everything a run produced.
@@ -104,6 +131,8 @@ pub struct RunResult {
     pub messages: (u64, u64, u64),
     /// Per site, for a method that rolls back: its rollbacks, depth, fallbacks, hash checks.
     pub rollback: Vec<Option<crate::timewarp::Stats>>,
+    /// Per site: the displayed-force steps of every servo tick.
+    pub force_steps: Vec<ForceSteps>,
 }
 
 /// A message in flight.
@@ -134,6 +163,7 @@ struct Site {
     last_f_desired: Vec3,
     last_f_measured: Vec3,
     sensor_noise: f64,
+    force_steps: ForceSteps,
 }
 
 fn period_ns(rate_hz: f64) -> u64 {
@@ -185,6 +215,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 last_f_desired: Vec3::zeros(),
                 last_f_measured: Vec3::zeros(),
                 sensor_noise: spec.sensor_noise_n,
+                force_steps: ForceSteps::default(),
             }
         })
         .collect();
@@ -215,6 +246,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         mech_energy: Vec::new(),
         messages: (0, 0, 0),
         rollback: Vec::new(),
+        force_steps: Vec::new(),
     };
     let e0 = start.mechanical_energy(&world.mass, world.gravity);
     let mut next_progress = 0u64;
@@ -268,6 +300,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     jump_m: a.jump.norm(),
                     age_s: a.age_s,
                     force_step_n: 0.0,
+                    energy_j: a.energy_j,
                 });
             }
         }
@@ -314,6 +347,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 for k in s.pending_adoptions.drain(..) {
                     result.adoptions[k].force_step_n = step_n;
                 }
+                s.force_steps.record(s.last_f_desired, out.f_desired);
                 s.tau = out.tau;
                 s.own = out.contact;
                 s.last_f_desired = out.f_desired;
@@ -366,6 +400,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             .mech_energy
             .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
         result.rollback.push(s.method.timewarp_stats());
+        result.force_steps.push(s.force_steps);
     }
     result
 }

@@ -92,6 +92,8 @@ pub struct Stats {
     pub hash_checks: u64,
     /// ... that differed.
     pub hash_mismatches: u64,
+    /// Every rollback's depth, ticks (for percentiles).
+    pub depths: crate::histogram::DepthHistogram,
 }
 
 /// One tick's record: the state at its start, and the inputs used in it.
@@ -312,6 +314,7 @@ impl TimeWarp {
         self.stats.rollbacks += 1;
         self.stats.resimulated_ticks += depth;
         self.stats.max_depth = self.stats.max_depth.max(depth);
+        self.stats.depths.record(depth);
         depth
     }
 

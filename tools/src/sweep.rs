@@ -1,0 +1,356 @@
+//! `sim sweep`: every method × constant delay × seed on one scenario, one row each — how the methods
+//! hold up under delay during cooperative contact (tracker issue 12).
+//!
+//! At a delay `d` the network's delay is constant (`delay_min_ms = delay_max_ms = d`) with the
+//! scenario's jitter, or none at 0 ms; seeds run 1 to N, overriding the scenario's. The reference
+//! run has no network, so one per seed serves every method and delay. Runs are spread over the
+//! machine's cores, the rows always come out in the same order (method, delay, seed as given), and
+//! every run is deterministic, so the same command prints the same bytes.
+
+use std::path::Path;
+
+use anyhow::{bail, Context};
+use coop_model::metrics::{self, Metrics};
+use coop_model::scenario::{MethodName, Scenario};
+use coop_model::sim::{self, Mode, RunResult};
+use coop_rt::sync::{AtomicU64, Ordering};
+use serde::Serialize;
+
+/// The delays swept when none are given, ms.
+pub const DEFAULT_DELAYS_MS: &str = "0,25,50,100,150,200,300,500";
+
+/// One run's figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    /// Method name.
+    pub method: String,
+    /// Constant one-way delay, ms.
+    pub delay_ms: f64,
+    /// Seed.
+    pub seed: u64,
+    /// Task phases that happened, summed over sites.
+    pub phases_passed: usize,
+    /// Task phases checked, summed over sites.
+    pub phases_total: usize,
+    /// Largest divergence while two or more users touch, m (null: they never do).
+    pub co_contact_divergence_max_m: f64,
+    /// RMS divergence while two or more users touch, m (null: they never do).
+    pub co_contact_divergence_rms_m: f64,
+    /// RMS distance from the reference object, worst site, m.
+    pub error_vs_reference_rms_m: f64,
+    /// Largest displayed-force step per servo tick, any site, N.
+    pub max_force_step_n: f64,
+    /// Servo ticks whose displayed-force step exceeded the JND, all sites.
+    pub force_steps_over_jnd: u64,
+    /// Energy corrections gave the copies, all sites, J.
+    pub correction_energy_j: f64,
+    /// Rollbacks per simulated second, busiest site.
+    pub rollbacks_per_s: f64,
+    /// Re-simulated ticks per simulated second, busiest site.
+    pub resimulated_ticks_per_s: f64,
+    /// 99th percentile of rollback depth, all sites, ticks.
+    pub rollback_depth_p99_ticks: u64,
+    /// Confirmed-state hash mismatches, all sites.
+    pub hash_mismatches: u64,
+}
+
+impl Row {
+    fn new(delay_ms: f64, seed: u64, m: &Metrics) -> Self {
+        Self {
+            method: m.method.clone(),
+            delay_ms,
+            seed,
+            phases_passed: m.phases_passed,
+            phases_total: m.phases_total,
+            co_contact_divergence_max_m: m.co_contact_divergence_max_m,
+            co_contact_divergence_rms_m: m.co_contact_divergence_rms_m,
+            error_vs_reference_rms_m: m
+                .sites
+                .iter()
+                .map(|s| s.error_vs_reference_rms_m)
+                .fold(0.0, f64::max),
+            max_force_step_n: m.max_force_step_n,
+            force_steps_over_jnd: m.force_steps_over_jnd,
+            correction_energy_j: m.correction_energy_j,
+            rollbacks_per_s: m.rollbacks_per_s,
+            resimulated_ticks_per_s: m.resimulated_ticks_per_s,
+            rollback_depth_p99_ticks: m.rollback_depth_p99_ticks,
+            hash_mismatches: m.hash_mismatches,
+        }
+    }
+}
+
+/// `base` with a constant delay of `delay_ms` (the scenario's jitter, none at 0) and `seed`,
+/// checked.
+///
+/// # Errors
+/// The delay is negative or not a number, or makes the scenario invalid (e.g. above 10 s).
+pub fn scenario_at(base: &Scenario, delay_ms: f64, seed: u64) -> anyhow::Result<Scenario> {
+    if !(delay_ms.is_finite() && delay_ms >= 0.0) {
+        bail!("delay {delay_ms} ms: a delay must be a number of ms, 0 or more");
+    }
+    let mut sc = base.clone();
+    sc.seed = seed;
+    sc.network.delay_min_ms = delay_ms;
+    sc.network.delay_max_ms = delay_ms;
+    if delay_ms == 0.0 {
+        sc.network.jitter_ms = 0.0;
+    }
+    sc.validate()
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .with_context(|| format!("scenario {} at a delay of {delay_ms} ms", base.name))?;
+    Ok(sc)
+}
+
+/// `f` over `items` on up to every core; results in the order of `items`.
+pub fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(items.len())
+        .max(1);
+    let next = AtomicU64::new(0);
+    let mut out: Vec<Option<R>> = (0..items.len()).map(|_| None).collect();
+    std::thread::scope(|s| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, Ordering::Relaxed) as usize;
+                        let Some(item) = items.get(k) else { break };
+                        mine.push((k, f(item)));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        for w in workers {
+            match w.join() {
+                Ok(done) => {
+                    for (k, r) in done {
+                        out[k] = Some(r);
+                    }
+                }
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        }
+    });
+    out.into_iter()
+        .map(|r| r.expect("every item was taken by a worker"))
+        .collect()
+}
+
+/// Runs the grid: rows by method, then delay, then seed (1 to `seeds`).
+///
+/// # Errors
+/// A delay is negative or makes the scenario invalid; `seeds` is 0; no method or delay.
+pub fn sweep(
+    base: &Scenario,
+    delays_ms: &[f64],
+    seeds: u64,
+    methods: &[MethodName],
+) -> anyhow::Result<Vec<Row>> {
+    if seeds == 0 {
+        bail!("--seeds 0: at least one seed is needed");
+    }
+    if delays_ms.is_empty() {
+        bail!("--delays-ms: at least one delay is needed");
+    }
+    if methods.is_empty() {
+        bail!("--methods: at least one method is needed");
+    }
+    // Every scenario is checked before anything runs.
+    let mut jobs = Vec::new();
+    for &m in methods {
+        for &d in delays_ms {
+            for seed in 1..=seeds {
+                jobs.push((m, d, seed, scenario_at(base, d, seed)?));
+            }
+        }
+    }
+    let refs: Vec<(Scenario, RunResult)> = par_map(
+        &(1..=seeds).collect::<Vec<_>>(),
+        |&seed| -> (Scenario, RunResult) {
+            let mut sc = base.clone();
+            sc.seed = seed;
+            let r = sim::run(&sc, Mode::Reference, &mut |_| {});
+            (sc, r)
+        },
+    );
+    Ok(par_map(&jobs, |(m, d, seed, sc)| {
+        let r = sim::run(sc, Mode::Distributed(*m), &mut |_| {});
+        let reference = &refs[(*seed - 1) as usize].1;
+        Row::new(*d, *seed, &metrics::compute(sc, &r, reference))
+    }))
+}
+
+fn cell(v: f64, width: usize, prec: usize) -> String {
+    if v.is_nan() {
+        format!("{:>width$}", "-")
+    } else {
+        format!("{v:>width$.prec$}")
+    }
+}
+
+/// The rows as a table.
+pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "# sweep of scenario {} ({} s, {} sites): constant delay, jitter {} ms (none at 0), seeds 1..={seeds}",
+        sc.name,
+        sc.duration_s,
+        sc.site.len(),
+        sc.network.jitter_ms
+    );
+    let _ = writeln!(
+        out,
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
+        "method",
+        "delay",
+        "seed",
+        "phases",
+        "co-div",
+        "co-div",
+        "err ref",
+        "f step",
+        ">JND",
+        "E corr",
+        "rollback",
+        "depth",
+        "hash"
+    );
+    let _ = writeln!(
+        out,
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
+        "",
+        "ms",
+        "",
+        "",
+        "max mm",
+        "rms mm",
+        "rms mm",
+        "max N",
+        "steps",
+        "mJ",
+        "per s",
+        "p99 ticks",
+        "miss"
+    );
+    for r in rows {
+        let _ = writeln!(
+            out,
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{:>9.1}{:>10}{:>6}",
+            r.method,
+            r.delay_ms,
+            r.seed,
+            format!("{}/{}", r.phases_passed, r.phases_total),
+            cell(r.co_contact_divergence_max_m * 1e3, 10, 2),
+            cell(r.co_contact_divergence_rms_m * 1e3, 9, 2),
+            cell(r.error_vs_reference_rms_m * 1e3, 12, 2),
+            cell(r.max_force_step_n, 9, 3),
+            r.force_steps_over_jnd,
+            cell(r.correction_energy_j * 1e3, 12, 2),
+            r.rollbacks_per_s,
+            r.rollback_depth_p99_ticks,
+            r.hash_mismatches
+        );
+    }
+    let _ = writeln!(
+        out,
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); E corr = energy corrections gave the copies; rollback per s = busiest site; depth p99 = all sites' rollbacks",
+        metrics::FORCE_JND_FRACTION * 100.0,
+        metrics::FORCE_JND_FLOOR_N
+    );
+    out
+}
+
+/// Per method, the mean over seeds of phases passed and of co-contact divergence (mm) at each delay.
+pub fn per_method_means(rows: &[Row]) -> Vec<crate::plots::SweepLine> {
+    let mut methods: Vec<&str> = Vec::new();
+    for r in rows {
+        if !methods.contains(&r.method.as_str()) {
+            methods.push(&r.method);
+        }
+    }
+    methods
+        .into_iter()
+        .map(|m| {
+            let mut delays: Vec<f64> = Vec::new();
+            for r in rows.iter().filter(|r| r.method == m) {
+                if !delays.contains(&r.delay_ms) {
+                    delays.push(r.delay_ms);
+                }
+            }
+            delays.sort_by(f64::total_cmp);
+            let mean = |d: f64, f: &dyn Fn(&Row) -> f64| {
+                let v: Vec<f64> = rows
+                    .iter()
+                    .filter(|r| r.method == m && r.delay_ms == d)
+                    .map(f)
+                    .filter(|x| !x.is_nan())
+                    .collect();
+                (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+            };
+            crate::plots::SweepLine {
+                label: m.to_owned(),
+                phases: delays
+                    .iter()
+                    .filter_map(|&d| mean(d, &|r| r.phases_passed as f64).map(|y| (d, y)))
+                    .collect(),
+                co_div_mm: delays
+                    .iter()
+                    .filter_map(|&d| {
+                        mean(d, &|r| r.co_contact_divergence_max_m * 1e3).map(|y| (d, y))
+                    })
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
+/// Runs `sim sweep` and prints its table or JSON; with `out`, writes `sweep.json` and the plot.
+///
+/// # Errors
+/// As [`sweep`]; the output directory cannot be written.
+pub fn main(
+    base: &Scenario,
+    delays_ms: &[f64],
+    seeds: u64,
+    methods: &[MethodName],
+    json: bool,
+    out: Option<&Path>,
+) -> anyhow::Result<()> {
+    let rows = sweep(base, delays_ms, seeds, methods)?;
+    let doc = serde_json::json!({
+        "scenario": base.name,
+        "seeds": seeds,
+        "jitter_ms": base.network.jitter_ms,
+        "rows": rows,
+    });
+    if json {
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        print!("{}", table(base, seeds, &rows));
+    }
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let path = dir.join("sweep.json");
+        std::fs::write(&path, serde_json::to_string_pretty(&doc)? + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
+        let total = rows.first().map_or(0, |r| r.phases_total);
+        crate::plots::sweep(
+            dir,
+            &format!(
+                "scenario {}: phases and co-contact divergence against constant delay (mean over {seeds} seed{})",
+                base.name,
+                if seeds == 1 { "" } else { "s" }
+            ),
+            total,
+            &per_method_means(&rows),
+        )?;
+        eprintln!("# sweep.json, sweep.png and sweep.svg in {}", dir.display());
+    }
+    Ok(())
+}

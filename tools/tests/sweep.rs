@@ -1,0 +1,210 @@
+//! `sim sweep` as a user runs it (every method × delay present; timewarp does the paper's task at
+//! 0 and 150 ms with confirmed states agreeing, naive does not; bad arguments are refused with the
+//! reason), and the determinism the sweep rests on: two timewarp runs give the same bits.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use coop_actors::scenario_file;
+use coop_model::metrics;
+use coop_model::scenario::MethodName;
+use coop_model::sim::{self, Mode};
+use coop_tools::sweep::scenario_at;
+
+const SIM: &str = env!("CARGO_BIN_EXE_sim");
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
+    let o = Command::new(SIM)
+        .args([
+            "sweep",
+            "scenarios/paper.toml",
+            "--delays-ms",
+            "0,150",
+            "--seeds",
+            "1",
+            "--json",
+        ])
+        .current_dir(repo())
+        .output()
+        .expect("run sim");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let rows = v["rows"].as_array().expect("rows");
+    assert_eq!(rows.len(), MethodName::SIMULATED.len() * 2, "{v}");
+    for key in [
+        "method",
+        "delay_ms",
+        "seed",
+        "phases_passed",
+        "phases_total",
+        "co_contact_divergence_max_m",
+        "co_contact_divergence_rms_m",
+        "error_vs_reference_rms_m",
+        "max_force_step_n",
+        "force_steps_over_jnd",
+        "correction_energy_j",
+        "rollbacks_per_s",
+        "rollback_depth_p99_ticks",
+        "hash_mismatches",
+    ] {
+        for r in rows {
+            assert!(r.get(key).is_some(), "{key} missing in {r}");
+        }
+    }
+    let row = |method: &str, delay: f64| {
+        rows.iter()
+            .find(|r| r["method"] == method && r["delay_ms"].as_f64() == Some(delay))
+            .unwrap_or_else(|| panic!("no row for {method} at {delay} ms: {v}"))
+    };
+    for delay in [0.0, 150.0] {
+        for m in MethodName::SIMULATED {
+            let r = row(m.as_str(), delay);
+            assert_eq!(r["seed"], 1);
+            assert_eq!(r["phases_total"], 12, "{r}");
+        }
+        let tw = row("timewarp", delay);
+        assert_eq!(tw["phases_passed"], 12, "timewarp at {delay} ms: {tw}");
+        assert_eq!(tw["hash_mismatches"], 0, "timewarp at {delay} ms: {tw}");
+        assert!(
+            tw["rollbacks_per_s"].as_f64().expect("number") > 0.0,
+            "{tw}"
+        );
+        assert!(tw["rollback_depth_p99_ticks"].as_u64().expect("number") > 0);
+        // Both users hold the disk together: the copies' gap then is measured, and small.
+        let co = tw["co_contact_divergence_max_m"]
+            .as_f64()
+            .expect("measured");
+        assert!(
+            co < 0.02,
+            "timewarp co-contact divergence {co} m at {delay} ms"
+        );
+        let naive = row("naive", delay);
+        assert!(
+            naive["phases_passed"].as_u64().expect("number") < 12,
+            "naive at {delay} ms: {naive}"
+        );
+        assert_eq!(naive["rollbacks_per_s"], 0.0);
+    }
+    // Deeper rollbacks with more delay.
+    assert!(
+        row("timewarp", 150.0)["rollback_depth_p99_ticks"].as_u64()
+            > row("timewarp", 0.0)["rollback_depth_p99_ticks"].as_u64()
+    );
+}
+
+#[test]
+fn sweep_refuses_bad_arguments_with_the_reason() {
+    for (args, needle) in [
+        (
+            &["--methods", "naive,bogus"][..],
+            "unknown method \"bogus\"",
+        ),
+        (&["--delays-ms", "0,-5"][..], "cannot be negative"),
+        (&["--delays-ms", "abc"][..], "not a number"),
+        (&["--seeds", "0"][..], "at least 1"),
+        (&["--delays-ms", "20000"][..], "network.delay_min_ms"),
+    ] {
+        let o = Command::new(SIM)
+            .args(["sweep", "scenarios/paper.toml"])
+            .args(args)
+            .current_dir(repo())
+            .output()
+            .expect("run sim");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} accepted");
+        assert!(
+            err.contains(needle),
+            "{args:?}: stderr lacks {needle:?}:\n{err}"
+        );
+        assert!(o.stdout.is_empty(), "{args:?}: printed rows before failing");
+    }
+}
+
+/// H9 for the method that re-simulates: the same scenario and seed give the same `RunResult`, to
+/// the bit (the `Debug` form prints every float exactly, and tells -0 from 0), with rollbacks in it;
+/// another seed gives another.
+#[test]
+fn timewarp_runs_are_bit_identical() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = scenario_at(&base, 150.0, 3).expect("valid");
+    let mode = Mode::Distributed(MethodName::Timewarp);
+    let a = sim::run(&sc, mode, &mut |_| {});
+    let b = sim::run(&sc, mode, &mut |_| {});
+    let rolled: u64 = a.rollback.iter().flatten().map(|s| s.rollbacks).sum();
+    assert!(rolled > 0, "no rollbacks: nothing re-simulated to compare");
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    assert!(a == b);
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    assert_eq!(
+        format!("{:?}", metrics::compute(&sc, &a, &reference)),
+        format!("{:?}", metrics::compute(&sc, &b, &reference))
+    );
+    let other = scenario_at(&base, 150.0, 4).expect("valid");
+    let c = sim::run(&other, mode, &mut |_| {});
+    assert_ne!(format!("{a:?}"), format!("{c:?}"), "the seed must matter");
+}
+
+/// The force steps are counted at every servo tick, not at the trace's samples, and the figures the
+/// sweep reports come from them.
+#[test]
+fn force_steps_are_counted_per_servo_tick() {
+    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let r = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
+    for (i, (steps, site)) in r.force_steps.iter().zip(&sc.site).enumerate() {
+        let ticks = (sc.duration_s * site.servo_rate_hz).floor() as u64 + 1;
+        assert!(
+            steps.servo_ticks.abs_diff(ticks) <= 1,
+            "site {i}: {} servo ticks counted, {ticks} expected",
+            steps.servo_ticks
+        );
+        assert!(steps.over_jnd > 0 && steps.over_jnd < steps.servo_ticks);
+        assert!(steps.max_step_n >= metrics::force_jnd_n(0.0));
+    }
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    let worst = r
+        .force_steps
+        .iter()
+        .map(|s| s.max_step_n)
+        .fold(0.0, f64::max);
+    assert_eq!(m.max_force_step_n, worst);
+    assert_eq!(
+        m.force_steps_over_jnd,
+        r.force_steps.iter().map(|s| s.over_jnd).sum::<u64>()
+    );
+    // The reference holds the disk with both users for seconds: co-contact is measured there, and
+    // its copies are one object.
+    let rm = metrics::compute(&sc, &reference, &reference);
+    assert!(rm.co_contact_samples > 100, "{}", rm.co_contact_samples);
+    assert_eq!(rm.co_contact_divergence_max_m, 0.0);
+    // Paper's adoptions move energy into the copies; naive adopts nothing.
+    assert!(m.correction_energy_j > 0.0);
+    let naive = sim::run(&sc, Mode::Distributed(MethodName::Naive), &mut |_| {});
+    assert_eq!(
+        metrics::compute(&sc, &naive, &reference).correction_energy_j,
+        0.0
+    );
+}
+
+/// The bench's eight-user scenario is valid and really has all eight users on the object at once,
+/// with timewarp's confirmed states agreeing.
+#[test]
+fn eight_user_bench_scenario_has_everyone_touching() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = scenario_at(&coop_tools::simbench::eight_users(&base), 150.0, 1).expect("valid");
+    assert_eq!(sc.site.len(), 8);
+    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+    let all = (0..r.t.len())
+        .filter(|&k| r.sites.iter().all(|s| s.touching[k]))
+        .count();
+    assert!(all > 100, "all eight touch at only {all} samples");
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    assert_eq!(m.hash_mismatches, 0);
+    assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+}
