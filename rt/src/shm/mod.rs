@@ -16,6 +16,7 @@ pub mod ring;
 pub mod segment;
 #[cfg(not(loom))]
 pub mod station;
+#[cfg(not(loom))]
 pub mod stats;
 
 #[cfg(not(loom))]
