@@ -251,6 +251,8 @@ impl<'a> Receiver<'a> {
         if from == self.me {
             return; // our own, echoed back
         }
+        // A state held for its sender's clock offset is superseded by this newer one.
+        self.waiting[from] = None;
         if a.resync {
             self.resyncs += 1;
             self.control
