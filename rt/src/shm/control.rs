@@ -449,9 +449,9 @@ pub const RESUME_WORDS: usize = ObjectSample::WORDS;
 /// Words of the locator text (512 bytes).
 pub const LOCATOR_WORDS: usize = 64;
 
-// SAFETY: repr(C), made only of AtomicU64 (directly, in arrays, and in LoopStats, ChildSlot,
-// Counters and the per-process groups, which are the same; Counters' PhantomData is zero-sized);
-// all-zero and every bit pattern are valid.
+// Made only of AtomicU64 (directly, in arrays, in LoopStats, ChildSlot, Counters (its PhantomData is
+// zero-sized) and the per-process groups).
+// SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
     const TYPE_NAME: &'static str = "coop.ControlBlock.v8";
 }
