@@ -1,5 +1,5 @@
 //! `sim sweep`: every method × constant delay × seed on one scenario, one row each — how the methods
-//! hold up under delay during cooperative contact (tracker issue 12).
+//! hold up under delay during cooperative contact.
 //!
 //! At a delay `d` the network's delay is constant (`delay_min_ms = delay_max_ms = d`) with the
 //! scenario's jitter, or none at 0 ms; seeds run 1 to N, overriding the scenario's. The reference
