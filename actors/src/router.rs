@@ -16,6 +16,8 @@ use coop_transport::network::{Locator, Tls};
 use coop_transport::router::{self, Refusals, RouterEndpoints, RouterStatus};
 use serde::{Deserialize, Serialize};
 
+use crate::station::config::{readable, tls_files_readable};
+
 /// The router's configuration file (TOML).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,18 +108,7 @@ impl RouterConfig {
             }
         };
         if let Some(t) = &mut self.tls {
-            for (field, f) in [
-                ("root_ca_certificate", &mut t.root_ca_certificate),
-                ("listen_certificate", &mut t.listen_certificate),
-                ("listen_private_key", &mut t.listen_private_key),
-                ("connect_certificate", &mut t.connect_certificate),
-                ("connect_private_key", &mut t.connect_private_key),
-            ] {
-                if let Some(p) = f {
-                    rebase(p);
-                    readable(&format!("tls.{field}"), p)?;
-                }
-            }
+            tls_files_readable(t, base, "tls")?;
         }
         let t = self.tls.clone().unwrap_or_default();
         if tls_used {
@@ -174,17 +165,6 @@ impl RouterConfig {
             status_file,
         })
     }
-}
-
-fn readable(field: &str, p: &Path) -> anyhow::Result<()> {
-    let shown = p.display().to_string();
-    if let Err(e) = std::fs::File::open(p) {
-        bail!("{field} = {shown:?}: cannot be read: {e}");
-    }
-    if !p.is_file() {
-        bail!("{field} = {shown:?}: must be a regular file");
-    }
-    Ok(())
 }
 
 /// Writes `s` to `path` whole (a reader never sees half a file).

@@ -209,6 +209,42 @@ fn sched(
     Ok(req)
 }
 
+/// Rebases `t`'s files on `base` (relative paths are relative to the configuration file) and
+/// checks each one opens as a regular file (opened, not only looked at: zenoh reads them at every
+/// start of the network); `prefix` names the table in messages.
+///
+/// # Errors
+/// A file that cannot be read or is not a regular file, naming `<prefix>.<field>` and the path.
+pub(crate) fn tls_files_readable(
+    t: &mut coop_transport::network::Tls,
+    base: Option<&Path>,
+    prefix: &str,
+) -> anyhow::Result<()> {
+    for (field, f) in t.files_mut() {
+        let Some(p) = f else { continue };
+        if let Some(b) = base.filter(|_| p.is_relative()) {
+            *p = b.join(&*p);
+        }
+        readable(&format!("{prefix}.{field}"), p)?;
+    }
+    Ok(())
+}
+
+/// `field = path` opens and is a regular file.
+///
+/// # Errors
+/// It cannot be read, or it is a directory or a special file.
+pub(crate) fn readable(field: &str, p: &Path) -> anyhow::Result<()> {
+    let shown = p.display().to_string();
+    if let Err(e) = std::fs::File::open(p) {
+        bail!("{field} = {shown:?}: cannot be read: {e}");
+    }
+    if !p.is_file() {
+        bail!("{field} = {shown:?}: must be a regular file");
+    }
+    Ok(())
+}
+
 impl StationConfig {
     /// The recording's bounds, as the recorder takes them.
     pub fn record_rotation(&self) -> Rotation {
@@ -373,25 +409,7 @@ impl StationConfig {
             }
         }
         if let Some(t) = &mut config.network.tls {
-            for (field, f) in [
-                ("root_ca_certificate", &mut t.root_ca_certificate),
-                ("listen_certificate", &mut t.listen_certificate),
-                ("listen_private_key", &mut t.listen_private_key),
-                ("connect_certificate", &mut t.connect_certificate),
-                ("connect_private_key", &mut t.connect_private_key),
-            ] {
-                if let Some(p) = f {
-                    rebase(p);
-                    let shown = p.display().to_string();
-                    // Opened, not only looked at: zenoh reads it at every start of the network.
-                    if let Err(e) = std::fs::File::open(&*p) {
-                        bail!("network.tls.{field} = {shown:?}: cannot be read: {e}");
-                    }
-                    if !p.is_file() {
-                        bail!("network.tls.{field} = {shown:?}: must be a regular file");
-                    }
-                }
-            }
+            tls_files_readable(t, base, "network.tls")?;
         }
         let allowed = coop_rt::sched::allowed_cpus();
         let (first, last) = (

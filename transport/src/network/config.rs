@@ -109,6 +109,29 @@ pub struct Tls {
     pub enable_mtls: bool,
 }
 
+impl Tls {
+    /// Its files by zenoh's (and the configuration's) field names.
+    pub fn files(&self) -> [(&'static str, &Option<PathBuf>); 5] {
+        [
+            ("root_ca_certificate", &self.root_ca_certificate),
+            ("listen_certificate", &self.listen_certificate),
+            ("listen_private_key", &self.listen_private_key),
+            ("connect_certificate", &self.connect_certificate),
+            ("connect_private_key", &self.connect_private_key),
+        ]
+    }
+    /// The same, to rebase them.
+    pub fn files_mut(&mut self) -> [(&'static str, &mut Option<PathBuf>); 5] {
+        [
+            ("root_ca_certificate", &mut self.root_ca_certificate),
+            ("listen_certificate", &mut self.listen_certificate),
+            ("listen_private_key", &mut self.listen_private_key),
+            ("connect_certificate", &mut self.connect_certificate),
+            ("connect_private_key", &mut self.connect_private_key),
+        ]
+    }
+}
+
 /// The zenoh transports this build has (its `transport_*` features of zenoh): the protocols a
 /// locator may name.
 pub const TRANSPORTS: [&str; 2] = ["tcp", "tls"];
@@ -220,13 +243,7 @@ pub fn config(endpoints: &NetworkConfig) -> Result<zenoh::Config, NetworkError> 
     set("transport/link/rx/max_message_size", "65536")?;
     if let Some(t) = &endpoints.tls {
         let tls = "transport/link/tls";
-        for (key, v) in [
-            ("root_ca_certificate", &t.root_ca_certificate),
-            ("listen_certificate", &t.listen_certificate),
-            ("listen_private_key", &t.listen_private_key),
-            ("connect_certificate", &t.connect_certificate),
-            ("connect_private_key", &t.connect_private_key),
-        ] {
+        for (key, v) in t.files() {
             if let Some(path) = v {
                 let path = path.display().to_string();
                 set(&format!("{tls}/{key}"), &format!("{path:?}"))?;
