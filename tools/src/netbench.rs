@@ -77,6 +77,7 @@ fn bench_session(
         progress: false,
         stop: crate::cli::StopFlag::manual(),
         record_max_file_s: None,
+        attach: None,
     };
     let session = format!("b{}{}", std::process::id(), &name[..1]);
     let o = crate::session::run_method(&a, &sc, MethodName::Paper, &session)?;

@@ -10,6 +10,11 @@
 //! With `--live`, the launcher also serves every site's copy, tool and force to Foxglove while the
 //! session runs ([`crate::live`]).
 //!
+//! With `--attach` ([`attach`]), it drives stations it did not start, on other machines: it waits
+//! for their presence through a router or at given locators, announces time 0 in its own clock
+//! (each station translates it with its measured offset to the launcher's clock), and reads their
+//! recordings from paths.
+//!
 //! Stations die with the launcher (parent-death signal, then their own stop ladder), so an
 //! interrupted session leaves nothing behind.
 
@@ -28,6 +33,8 @@ use coop_model::sim::{AdoptionEvent, ForceSteps, Mode, RunResult, SiteTrace};
 use coop_transport::recording::{self, Recording};
 use coop_transport::{keys, network};
 use zenoh::Wait;
+
+pub mod attach;
 
 use coop_actors::scenario_file;
 use coop_actors::station::config::{StartMode, StationConfig};
@@ -59,6 +66,8 @@ pub struct RunArgs {
     pub record_max_file_s: Option<u64>,
     /// Serve each session live to Foxglove while it runs (`--live`).
     pub live: Option<Arc<crate::live::LiveView>>,
+    /// Drive stations already running instead of starting them (`--attach`).
+    pub attach: Option<attach::Attach>,
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
@@ -141,6 +150,8 @@ pub struct MethodOutcome {
     pub real: Metrics,
     /// Per station: its final network counters and loop statistics.
     pub stations: serde_json::Value,
+    /// The session's time 0 in the launcher's clock (CLOCK_MONOTONIC ns).
+    pub launcher_epoch_ns: u64,
 }
 
 /// The station configuration `session run` writes for one site: the defaults, with this session's
@@ -435,13 +446,46 @@ pub fn run_method(
         .iter()
         .map(|s| recording::read(&s.record).with_context(|| format!("station {}", s.site)))
         .collect::<anyhow::Result<_>>()?;
-    let real_run = run_from_recordings(&sc, &recordings, t0)?;
-    let reference_run = crate::sim::run_mode(&sc, Mode::Reference);
-    let sim_run = crate::sim::run_mode(&sc, Mode::Distributed(method));
-    let reference = metrics::compute(&sc, &reference_run, &reference_run);
-    let mut simulated = metrics::compute(&sc, &sim_run, &reference_run);
+    let sites: Vec<(String, PathBuf)> = stations
+        .iter()
+        .map(|s| (s.site.clone(), s.record.clone()))
+        .collect();
+    let mut o = outcome(
+        &sc,
+        method,
+        &dir,
+        &sites,
+        &recordings,
+        &vec![t0; n],
+        &statuses,
+    )?;
+    o.launcher_epoch_ns = t0;
+    Ok(o)
+}
+
+/// The figures of a session that ran: the stations' recordings (in the scenario's site order,
+/// with their paths in `sites`) on the scenario's grid from each one's time 0 (`epochs`, in its
+/// own clock), the simulator's runs of the same scenario, the metrics, `metrics.json` and the
+/// plots in `dir`, and per station what its recording says (with its live statistics when read).
+///
+/// # Errors
+/// A recording without samples; the plots or `metrics.json` cannot be written.
+fn outcome(
+    sc: &Scenario,
+    method: MethodName,
+    dir: &Path,
+    sites: &[(String, PathBuf)],
+    recordings: &[Recording],
+    epochs: &[u64],
+    statuses: &serde_json::Map<String, serde_json::Value>,
+) -> anyhow::Result<MethodOutcome> {
+    let real_run = run_from_recordings(sc, recordings, epochs)?;
+    let reference_run = crate::sim::run_mode(sc, Mode::Reference);
+    let sim_run = crate::sim::run_mode(sc, Mode::Distributed(method));
+    let reference = metrics::compute(sc, &reference_run, &reference_run);
+    let mut simulated = metrics::compute(sc, &sim_run, &reference_run);
     simulated.method = format!("{}-sim", method.as_str());
-    let mut real = metrics::compute(&sc, &real_run, &reference_run);
+    let mut real = metrics::compute(sc, &real_run, &reference_run);
     real.method = format!("{}-real", method.as_str());
     for s in &mut real.sites {
         // Not measured on real stations (the servo's adoption step and the energy account live in
@@ -450,29 +494,34 @@ pub fn run_method(
         s.energy_from_others_j = f64::NAN;
         s.others_work_j = f64::NAN;
     }
-    crate::plots::figures(&dir, &sc, &real_run, &reference_run)?;
+    crate::plots::figures(dir, sc, &real_run, &reference_run)?;
     std::fs::write(
         dir.join("metrics.json"),
         serde_json::to_string_pretty(&serde_json::json!({ "real": real, "simulated": simulated }))?
             + "\n",
     )?;
     let mut per_station = serde_json::Map::new();
-    for (st, rec) in stations.iter().zip(&recordings) {
+    for (((site, record), rec), &t0) in sites.iter().zip(recordings).zip(epochs) {
+        let since = |t_ns: u64| (t_ns as f64 - t0 as f64) * 1e-9;
         per_station.insert(
-            st.site.clone(),
+            site.clone(),
             serde_json::json!({
-                "recording": st.record.display().to_string(),
+                "recording": record.display().to_string(),
                 "recording_parts": rec.files.len(),
                 "final": rec.status,
-                "live": statuses.get(&st.site),
+                "live": statuses.get(site),
+                // The session's time 0 in this station's clock.
+                "epoch_ns": t0,
                 // When its network joined the session (its own presence seen).
-                "joined_s": rec.presence.iter().find(|p| p.site == st.site && p.present).map(|p| (p.t_ns as f64 - t0 as f64) * 1e-9),
-                "first_sample_s": rec.samples.first().map(|s| (s.t_ns as f64 - t0 as f64) * 1e-9),
-                "last_sample_s": rec.samples.last().map(|s| (s.t_ns as f64 - t0 as f64) * 1e-9),
+                "joined_s": rec.presence.iter().find(|p| &p.site == site && p.present).map(|p| since(p.t_ns)),
+                "first_sample_s": rec.samples.first().map(|s| since(s.t_ns)),
+                "last_sample_s": rec.samples.last().map(|s| since(s.t_ns)),
+                // When its tool first touched the object (its script's first contact).
+                "first_contact_s": rec.samples.iter().find(|s| s.touching).map(|s| since(s.t_ns)),
                 "final_object_m": rec.samples.last().map(|s| s.pos),
                 "first_adoption_jump_m": rec.adoptions.first().map(|a| a.jump_m),
                 "truncated": rec.truncated,
-                "first_adoption_s": rec.adoptions.first().map(|a| (a.t_ns as f64 - t0 as f64) * 1e-9),
+                "first_adoption_s": rec.adoptions.first().map(|a| since(a.t_ns)),
                 "join_states": rec.status.map(|s| s.join_states),
             }),
         );
@@ -482,27 +531,36 @@ pub fn run_method(
         simulated,
         real,
         stations: serde_json::Value::Object(per_station),
+        launcher_epoch_ns: 0,
     })
 }
 
 /// Turns the stations' recordings into the simulator's run layout: every site's trace on the
 /// scenario's sample grid from the session's time 0 (each value the newest recorded at or before
-/// the grid time), adoptions, and message counts.
+/// the grid time), adoptions, and message counts. `epochs` is time 0 per recording, in its
+/// station's clock (on one machine, one value; across machines each station's translation).
 ///
 /// # Errors
-/// A recording without samples.
+/// A recording without samples, or not one time 0 per recording.
 pub fn run_from_recordings(
     sc: &Scenario,
     recs: &[Recording],
-    epoch_ns: u64,
+    epochs: &[u64],
 ) -> anyhow::Result<RunResult> {
+    if epochs.len() != recs.len() {
+        bail!(
+            "{} recordings but {} times 0 (one per recording)",
+            recs.len(),
+            epochs.len()
+        );
+    }
     let rate = sc.sample_rate_hz;
     let samples = (sc.duration_s * rate).round() as usize + 1;
     let t: Vec<f64> = (0..samples).map(|k| k as f64 / rate).collect();
     let mut sites = Vec::new();
     let mut adoptions = Vec::new();
     let mut messages = (0u64, 0u64, 0u64);
-    for (i, r) in recs.iter().enumerate() {
+    for (i, (r, &epoch_ns)) in recs.iter().zip(epochs).enumerate() {
         if r.samples.is_empty() {
             bail!("the recording of site {} has no samples", sc.site[i].name);
         }
@@ -576,6 +634,38 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
             );
         }
     }
+    if let Some(at) = &a.attach {
+        if a.methods.len() != 1 {
+            bail!("--attach drives the stations' one session: give --method naive or --method paper, the method of their configurations");
+        }
+        if !a.late.is_empty() {
+            bail!(
+                "--late: with --attach the stations are started by hand (start one later yourself)"
+            );
+        }
+        if at.connect.is_empty() {
+            bail!(
+                "--attach: give --connect LOCATOR (a router's, or the stations' own with --peer)"
+            );
+        }
+        let Some(session) = &a.session else {
+            bail!("--attach: give --session NAME, the `session` of the stations' configurations");
+        };
+        let m = a.methods[0];
+        let o = attach::run_attached(a, at, &sc, m, session)
+            .with_context(|| format!("session {session} ({}, attached)", m.as_str()))?;
+        let rows = vec![o.reference.clone(), o.simulated.clone(), o.real.clone()];
+        let v = serde_json::json!({
+            "scenario": sc.name,
+            "out": a.out.display().to_string(),
+            "reference": o.reference,
+            "methods": { m.as_str(): {
+                "simulated": o.simulated, "real": o.real, "stations": o.stations,
+                "launcher_epoch_ns": o.launcher_epoch_ns,
+            } },
+        });
+        return Ok((sc, rows, v));
+    }
     if !a.station_bin.program.exists() {
         bail!(
             "station binary {} not found (build it: cargo build --release -p coop-tools)",
@@ -599,7 +689,10 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
         rows.push(o.real.clone());
         json.insert(
             m.as_str().to_owned(),
-            serde_json::json!({ "simulated": o.simulated, "real": o.real, "stations": o.stations }),
+            serde_json::json!({
+                "simulated": o.simulated, "real": o.real, "stations": o.stations,
+                "launcher_epoch_ns": o.launcher_epoch_ns,
+            }),
         );
     }
     let v = serde_json::json!({

@@ -13,8 +13,9 @@
 //!   `current/X` and `clock/X` queryables; declare only its own presence token; subscribe to the
 //!   session's states, tools and epoch, query its current states, clocks and epoch, and watch its
 //!   presence tokens;
-//! - the launcher, coming in: the same watching, and put, declare and answer the epoch (nobody
-//!   else may);
+//! - the launcher, coming in: the same watching, put, declare and answer the epoch, and declare
+//!   and answer its own clock, `clock/launcher` (nobody else may do either: stations translate the
+//!   epoch, which is in the launcher's clock, with their offset to that clock);
 //! - a router of the session, coming in: anything on the session's keys (routers are trusted to
 //!   have applied these rules at their own edge);
 //! - going out, to any of them: anything on the session's keys (what goes out was let in).
@@ -101,6 +102,12 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &[keys::epoch(s)],
         ),
         rule(
+            "launcher-clock",
+            "ingress",
+            &["declare_queryable", "reply"],
+            &[keys::clock(s, m.launcher)],
+        ),
+        rule(
             "router-anything",
             "ingress",
             &EVERY_MESSAGE,
@@ -113,7 +120,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
     let mut policies = vec![json!({
         "id": "launcher",
         "subjects": ["launcher"],
-        "rules": ["watch-subscribe", "watch-query", "watch-presence", "launcher-epoch", "out"],
+        "rules": ["watch-subscribe", "watch-query", "watch-presence", "launcher-epoch", "launcher-clock", "out"],
     })];
     if !m.routers.is_empty() {
         subjects.push(json!({"id": "routers", "cert_common_names": m.routers}));
@@ -250,10 +257,18 @@ mod tests {
             !p2_rules.contains(&"launcher-epoch"),
             "only the launcher puts the epoch"
         );
-        assert!(policy("launcher")["rules"]
-            .as_array()
-            .expect("rules")
-            .contains(&json!("launcher-epoch")));
+        let launcher = policy("launcher");
+        let launcher_rules = launcher["rules"].as_array().expect("rules");
+        assert!(launcher_rules.contains(&json!("launcher-epoch")));
+        assert!(launcher_rules.contains(&json!("launcher-clock")));
+        assert!(
+            !p2_rules.contains(&"launcher-clock"),
+            "only the launcher answers its clock"
+        );
+        assert_eq!(
+            rule("launcher-clock")["key_exprs"],
+            json!(["coop/s1/clock/launcher"])
+        );
         assert_eq!(acl["default_permission"], "deny");
         let subjects = acl["subjects"].as_array().expect("subjects");
         assert!(subjects

@@ -7,7 +7,9 @@
 //! Meanwhile: each child's restarts, health and last failure go to its slot of the control block
 //! (for `station status`); while the network process is down the station runs on locally, degraded,
 //! and says so on stderr when it enters and leaves that mode.
-//! Down, on SIGINT/SIGTERM, a duration, or a child the policy gave up on — the stop ladder:
+//! Down, on SIGINT/SIGTERM, a duration, the end of the session's scenario (for a station started by
+//! the session's time 0, [`SESSION_END_GRACE`] after it), or a child the policy gave up on — the
+//! stop ladder:
 //! cooperative stop through the run state (the servo first ramps its force to zero) → [`STOP_GRACE`]
 //! → SIGTERM to each child's process group → [`TERM_GRACE`] → SIGKILL; then unlink every segment.
 
@@ -39,6 +41,11 @@ pub const STOP_GRACE: Duration = Duration::from_secs(2);
 /// How long children get after SIGTERM before SIGKILL: they have no handler, so this only covers
 /// the kernel delivering it.
 pub const TERM_GRACE: Duration = Duration::from_secs(1);
+/// A station that waits for the session's time 0 (`start = "session"`) stops by itself this long
+/// after the scenario's end (time 0 + its duration): the users' scripts are over, and a launcher
+/// that did not start it (`session run --attach`, on another machine) cannot signal it. A
+/// launcher that did stops it before.
+pub const SESSION_END_GRACE: Duration = Duration::from_secs(2);
 
 /// What `station run` was asked.
 #[derive(Debug, Clone, Default)]
@@ -244,12 +251,27 @@ async fn supervise(
         }
     };
     tokio::pin!(until);
+    let session_end_ns = (cfg.config.start == super::config::StartMode::Session).then(|| {
+        ((cfg.scenario.duration_s * 1e9) as u64).saturating_add(SESSION_END_GRACE.as_nanos() as u64)
+    });
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
     let mut degraded: Vec<String> = Vec::new();
     let end = loop {
         tokio::select! {
             _ = sigint.recv() => break None,
             _ = sigterm.recv() => break None,
             _ = &mut until => break None,
+            _ = tick.tick() => {
+                let over = session_end_ns.zip(segs.control.epoch()).is_some_and(|(after, epoch)| {
+                    coop_rt::timer::monotonic_ns() >= epoch.saturating_add(after)
+                });
+                if over {
+                    break Some(End::Clean(format!(
+                        "the session's scenario is over ({} s from its time 0)",
+                        cfg.scenario.duration_s
+                    )));
+                }
+            }
             changed = rx.changed() => {
                 let status = rx.borrow_and_update().clone();
                 publish(&segs.control, &status);

@@ -63,6 +63,32 @@ enum Command {
         #[arg(long, value_name = "ADDR", num_args = 0..=1,
               default_missing_value = coop_tools::live::DEFAULT_ADDR)]
         live: Option<String>,
+        /// Drive stations already running (started by hand, with `start = "session"`, on this or
+        /// other machines) instead of starting them: wait for every site's presence through
+        /// --connect, announce time 0 in this launcher's clock (each station translates it with
+        /// its measured offset to it), and read their recordings from --recording/--recordings.
+        /// Needs --session and one --method, those of the stations' configurations.
+        #[arg(long)]
+        attach: bool,
+        /// With --attach: a zenoh locator to connect to (repeatable): a router's, e.g.
+        /// tls/192.0.2.1:7447, or with --peer a station's.
+        #[arg(long, value_name = "LOCATOR", requires = "attach")]
+        connect: Vec<String>,
+        /// With --attach: connect as a zenoh peer of the stations (default: a client of routers).
+        #[arg(long, requires = "attach")]
+        peer: bool,
+        /// With --attach: the directory `session certs` wrote; the launcher connects with mutual
+        /// TLS as `launcher` (DIR/ca.pem, DIR/launcher.pem, DIR/launcher.key).
+        #[arg(long, value_name = "DIR", requires = "attach")]
+        certs: Option<PathBuf>,
+        /// With --attach: where a site's recording is, as this machine sees it (its station's
+        /// `record`; repeatable).
+        #[arg(long, value_name = "SITE=PATH", value_parser = parse_recording, requires = "attach")]
+        recording: Vec<(String, PathBuf)>,
+        /// With --attach: the recordings of the sites not given by --recording are DIR/<site>.mcap
+        /// (a directory the stations write to that this machine sees).
+        #[arg(long, value_name = "DIR", requires = "attach")]
+        recordings: Option<PathBuf>,
     },
     /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
     /// the same payload (run from the repository root).
@@ -131,6 +157,14 @@ fn parse_late(s: &str) -> Result<(String, f64), String> {
     Ok((site.to_owned(), t))
 }
 
+fn parse_recording(s: &str) -> Result<(String, PathBuf), String> {
+    let (site, path) = s
+        .split_once('=')
+        .filter(|(n, p)| !n.is_empty() && !p.is_empty())
+        .ok_or_else(|| format!("{s:?}: expected SITE=PATH, e.g. user2=/shared/user2.mcap"))?;
+    Ok((site.to_owned(), PathBuf::from(path)))
+}
+
 fn main() -> std::process::ExitCode {
     // `session station ...` is the station command line: the launcher runs its stations (and they
     // their loop processes) from this one executable.
@@ -154,11 +188,38 @@ fn main() -> std::process::ExitCode {
             station_bin,
             record_max_file_s,
             live,
+            attach,
+            connect,
+            peer,
+            certs,
+            recording,
+            recordings,
         } => {
             if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
                 anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
             }
             let station_bin = station_bin_or_default(station_bin)?;
+            let attach = if attach {
+                let sc = coop_actors::scenario_file::load(&scenario)?;
+                Some(coop_tools::session::attach::Attach {
+                    connect,
+                    mode: if peer {
+                        coop_transport::network::Mode::Peer
+                    } else {
+                        coop_transport::network::Mode::Client
+                    },
+                    tls: certs
+                        .as_deref()
+                        .map(coop_tools::session::attach::Attach::tls_from_certs),
+                    recordings: coop_tools::session::attach::Attach::recordings_for(
+                        &sc,
+                        &recording,
+                        recordings.as_deref(),
+                    )?,
+                })
+            } else {
+                None
+            };
             // Before any thread (zenoh's) starts: SIGINT/SIGTERM stop the session cleanly.
             let stop = coop_tools::cli::StopFlag::on_sigint_sigterm()?;
             let a = coop_tools::session::RunArgs {
@@ -184,6 +245,7 @@ fn main() -> std::process::ExitCode {
                     }
                     None => None,
                 },
+                attach,
             };
             let (sc, rows, v) = coop_tools::session::run(&a)?;
             if json {

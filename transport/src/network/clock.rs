@@ -48,7 +48,8 @@ pub fn clock_estimate(t0: u64, remote: u64, t2: u64) -> (u64, i64) {
     (rtt, (remote as i128 - mid) as i64)
 }
 
-/// Answers queries for this site's clock.
+/// Answers queries for this site's clock (or, with `site` = [`crate::acl::LAUNCHER`], the
+/// launcher's).
 pub(super) fn serve(
     session: &Session,
     session_name: &str,
@@ -94,6 +95,20 @@ pub(super) struct Sampler<'a> {
     ctl: &'a ControlBlock,
     peers: Mutex<Vec<Peer>>,
     log: Mutex<Vec<ClockMsg>>,
+    /// The launcher's clock, sampled until the session's time 0 is taken (it is announced in the
+    /// launcher's clock: [`super::epoch`] translates it with this offset).
+    launcher: Mutex<Launcher>,
+}
+
+/// Exchanges with the launcher's clock before its offset is trusted: the shortest round trip of
+/// three is a fair estimate, and takes about 0.3 s at the fast pace.
+const LAUNCHER_SAMPLES: u32 = 3;
+
+/// The launcher's clock as sampled: the window, how many exchanges answered, when the next is due.
+#[derive(Debug, Default)]
+struct Launcher {
+    peer: Peer,
+    best: Option<(u64, i64)>,
 }
 
 impl<'a> Sampler<'a> {
@@ -113,7 +128,56 @@ impl<'a> Sampler<'a> {
             ctl,
             peers: Mutex::new(vec![Peer::default(); sites.len()]),
             log: Mutex::default(),
+            launcher: Mutex::default(),
         }
+    }
+
+    /// The launcher's clock offset (its clock − ours, ns) and the round trip it came with, once
+    /// [`LAUNCHER_SAMPLES`] exchanges answered.
+    pub(super) fn launcher_offset(&self) -> Option<(u64, i64)> {
+        lock(&self.launcher).best
+    }
+
+    /// One exchange with the launcher's clock if one is due, while the session's time 0 is not
+    /// taken (afterwards nothing needs it).
+    fn sample_launcher(&self) {
+        if self.ctl.epoch().is_some() {
+            return;
+        }
+        {
+            let l = lock(&self.launcher);
+            if l.peer.count > 0 && monotonic_ns() < l.peer.due_ns {
+                return;
+            }
+        }
+        let key = keys::clock(self.session_name, crate::acl::LAUNCHER);
+        let t0 = monotonic_ns();
+        let remote = self.ask(&key);
+        let t2 = monotonic_ns();
+        let mut l = lock(&self.launcher);
+        // Not answering yet (no launcher so far): look again at the fast pace.
+        l.peer.due_ns = t2 + CLOCK_EVERY.as_nanos() as u64 / 5;
+        let Some(remote) = remote else {
+            return;
+        };
+        let (rtt, offset) = clock_estimate(t0, remote, t2);
+        let best = l.peer.window.add(rtt.max(1), offset);
+        l.peer.count += 1;
+        if l.peer.count >= LAUNCHER_SAMPLES {
+            l.best = Some(best);
+        }
+    }
+
+    /// Queries a clock key; the first answer's time.
+    fn ask(&self, key: &str) -> Option<u64> {
+        self.session
+            .get(key)
+            .timeout(Duration::from_millis(200))
+            .wait()
+            .ok()
+            .and_then(|replies| replies.recv().ok())
+            .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()))
+            .and_then(|b| wire::decode_u64(&b).ok())
     }
 
     /// The estimates made since the last call, for the recording.
@@ -155,6 +219,7 @@ impl<'a> Sampler<'a> {
                     self.sample(j);
                 }
             }
+            self.sample_launcher();
             std::thread::sleep(LOOK_EVERY);
         }
     }
@@ -162,17 +227,8 @@ impl<'a> Sampler<'a> {
     /// One exchange with site `j`; its estimate goes to the control block.
     fn sample(&self, j: usize) {
         let t0 = monotonic_ns();
-        let reply = self
-            .session
-            .get(keys::clock(self.session_name, &self.sites[j]))
-            .timeout(Duration::from_millis(200))
-            .wait()
-            .ok()
-            .and_then(|replies| replies.recv().ok());
+        let remote = self.ask(&keys::clock(self.session_name, &self.sites[j]));
         let t2 = monotonic_ns();
-        let remote = reply
-            .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()))
-            .and_then(|b| wire::decode_u64(&b).ok());
         let mut peers = lock(&self.peers);
         let p = &mut peers[j];
         let Some(remote) = remote else {

@@ -9,8 +9,9 @@
 //! - declares a liveliness token (who is present) and watches everyone's (`presence`); answers
 //!   queries for its newest state (late joiners start from the session's state) and for its clock
 //!   (NTP-style offset and round trip per peer, [`clock`]);
-//! - learns the session's time 0 from the launcher when the station waits for it ([`epoch`], which
-//!   also holds the launcher's side);
+//! - learns the session's time 0 from the launcher when the station waits for it, translated from
+//!   the launcher's clock into its own with the launcher's measured clock offset ([`epoch`], which
+//!   also holds the launcher's side, and [`clock`]);
 //! - writes the station's MCAP recording (physics' trace ring, the states received, presence,
 //!   clocks, final counters), and puts the newest sample for live viewers (`live`, ~60 Hz).
 //!
@@ -50,7 +51,7 @@ mod record;
 pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
 pub use config::{concrete_listen, config, Locator, Mode, NetworkConfig, Tls, TRANSPORTS};
 pub use emulate::Emulation;
-pub use epoch::EpochAnnouncer;
+pub use epoch::{EpochAnnouncer, EPOCH_HOLD_LIMIT};
 pub use error::NetworkError;
 pub use live::LIVE_EVERY_NS;
 pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_REPORT_NS};
@@ -226,17 +227,17 @@ fn serve(
     // for longer than the session lives) and the receiver, so they are scoped.
     let stop = &AtomicU64::new(0);
     let clocks = &clock::Sampler::new(session, name, ctx.sites, ctx.me, ctx.ctl);
+    let epoch = &epoch::EpochListener::declare(session, name, site)?;
     std::thread::scope(|scope| {
         let mut presence = Presence::declare(session, name, site)?;
         receive::join_from_current(session, name, receiver, clocks);
         let states = receive::subscribe(session, name)?;
         publish.serve_current(session, name, site)?;
         let _clock = clock::serve(session, name, site)?;
-        let epoch = epoch::EpochListener::declare(session, name)?;
         // Every declaration is made before the threads start: an error returns before anything
         // would wait for `stop`.
         scope.spawn(move || receive::deliver(&states, receiver, stop));
-        scope.spawn(|| epoch::ask(session, name, ctx.ctl));
+        scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
         scope.spawn(move || clocks.run(stop));
 
         let slot = ctx.ctl.child(Child::Network);
@@ -245,7 +246,7 @@ fn serve(
         let mut session_recorded = false;
         loop {
             let now = lp.turn(ctx, publish, receiver, &mut presence, clocks);
-            epoch.poll(ctx.ctl);
+            epoch.poll(ctx.ctl, clocks.launcher_offset());
             if !session_recorded {
                 session_recorded = lp.record_session(ctx, now);
             }
