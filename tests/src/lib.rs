@@ -221,3 +221,37 @@ impl Drop for Namespaces {
         }
     }
 }
+
+/// Whether time namespaces are permitted here (`unshare --time`: root or CAP_SYS_ADMIN, Linux ≥
+/// 5.6); `Err` with `unshare`'s message when not.
+///
+/// # Errors
+/// `unshare` is missing or refuses.
+pub fn time_namespaces_work() -> Result<(), String> {
+    let out = Command::new("unshare")
+        .args(["--time", "--monotonic", "1", "--fork", "true"])
+        .output()
+        .map_err(|e| format!("unshare: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr).trim().to_owned())
+    }
+}
+
+/// The arguments that run a program (appended after them) in a new time namespace whose
+/// CLOCK_MONOTONIC is `shift_s` ahead, as another machine's clock is: `unshare --time --monotonic
+/// SHIFT --fork --kill-child=SIGTERM --` (the program gets SIGTERM when `unshare` dies).
+pub fn shifted_clock(shift_s: i64) -> Vec<String> {
+    [
+        "unshare",
+        "--time",
+        "--monotonic",
+        &shift_s.to_string(),
+        "--fork",
+        "--kill-child=SIGTERM",
+        "--",
+    ]
+    .map(str::to_owned)
+    .to_vec()
+}

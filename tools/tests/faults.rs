@@ -5,7 +5,10 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use coop_tests::{paper_with_scripts, station_config, unique_session, wait_until, Reaped};
+use coop_tests::{
+    paper_with_scripts, shifted_clock, station_config, time_namespaces_work, unique_session,
+    wait_until, Reaped,
+};
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
 const LIMIT: Duration = Duration::from_secs(60);
@@ -24,18 +27,6 @@ fn push_catch_and_rest(name: &str, duration_s: f64) -> String {
           { t_s = 1.0, target_m = [0.095, 0.0, 0.01] }, { t_s = 2.5, target_m = [0.095, 0.0, 0.01] }, \
           { t_s = 3.0, target_m = [0.04, 0.0, 0.01] }, { t_s = 3.4, target_m = [0.20, -0.10, 0.01] }]",
     )
-}
-
-fn time_namespaces_work() -> Result<(), String> {
-    let out = Command::new("unshare")
-        .args(["--time", "--monotonic", "1", "--fork", "true"])
-        .output()
-        .map_err(|e| format!("unshare: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(String::from_utf8_lossy(&out.stderr).trim().to_owned())
-    }
 }
 
 /// Two stations whose clocks differ by 1000 s: each measures the other's offset (within 1 ms),
@@ -89,8 +80,7 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
     // Station B lives 1000 s ahead.
     let mut b = Reaped::spawn(
         Command::new("unshare")
-            .args(["--time", "--monotonic", &SKEW_S.to_string()])
-            .args(["--fork", "--kill-child=SIGTERM", "--"])
+            .args(&shifted_clock(SKEW_S)[1..])
             .args(run(&cb))
             .stderr(Stdio::inherit()),
     );

@@ -1,16 +1,27 @@
-//! A session across three network namespaces: a router (`station router`) in one, a station in
+//! Sessions across three network namespaces: a router (`station router`) in one, a station in
 //! each of the two others, over mutual TLS with the certificates and the access control that
 //! `session certs` makes from the scenario. The stations reach each other only through the router
-//! (each namespace has a link to the router's, none between them, and nothing forwards). An
-//! impostor holding user2's certificate, and a client holding none, try their luck. The test
-//! creates and removes its namespaces and links, bounds every wait, and is skipped with a message
-//! where `ip netns` is not permitted.
+//! (each namespace has a link to the router's, none between them, and nothing forwards). In the
+//! first test an impostor holding user2's certificate, and a client holding none, try their luck;
+//! in the second `session run --attach` drives the two stations, started by hand, one of them in a
+//! time namespace 1000 s ahead. The tests take turns (each runs real stations in real time on a
+//! two-core machine), create and remove their namespaces and links, bound every wait, and are
+//! skipped with a message where `ip netns` (or a time namespace) is not permitted.
 
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use std::sync::Mutex;
 use std::time::Duration;
 
-use coop_tests::{ip, station_config, wait_until, Namespaces, Reaped, StationConfig};
+use coop_actors::station::config::StartMode;
+use coop_model::scenario::MethodName;
+use coop_tests::{
+    ip, paper_with_scripts, shifted_clock, shm_entries, station_config, time_namespaces_work,
+    wait_until, Namespaces, Reaped, StationConfig,
+};
 use coop_transport::network::{Mode, Tls};
+
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
 const SESSION_BIN: &str = env!("CARGO_BIN_EXE_session");
@@ -56,6 +67,9 @@ fn in_ns(ns: &str, program: &str) -> Command {
 
 #[test]
 fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let pid = std::process::id();
     let tag = format!("{pid}r");
     let ns = match setup(&tag) {
@@ -68,56 +82,12 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
     let dir = std::env::temp_dir().join(format!("coop-router-{pid}"));
     std::fs::create_dir_all(&dir).expect("dir");
     let session = format!("nr{pid}");
-    let certs = dir.join("certs");
-    let made = Command::new(SESSION_BIN)
-        .args([
-            "certs",
-            concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/paper.toml"),
-        ])
-        .arg("--out")
-        .arg(&certs)
-        .args([
-            "--session",
-            &session,
-            "--router",
-            "r1",
-            "--host",
-            "r1=192.0.2.1,192.0.2.5",
-        ])
-        .output()
-        .expect("session certs");
-    assert!(
-        made.status.success(),
-        "session certs: {}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    let certs = certs(&dir, &session);
     let pem = |n: &str| certs.join(format!("{n}.pem"));
     let key = |n: &str| certs.join(format!("{n}.key"));
     let acl = certs.join("acl.json5");
     let status_file = dir.join("r1.json");
-    let router_cfg = dir.join("r1.toml");
-    std::fs::write(
-        &router_cfg,
-        format!(
-            "name = \"r1\"\nlisten = [\"tls/192.0.2.1:7447\", \"tls/192.0.2.5:7447\"]\n\
-             access_control = {acl:?}\nstatus_file = {status_file:?}\n\
-             [tls]\nroot_ca_certificate = {ca:?}\nlisten_certificate = {c:?}\nlisten_private_key = {k:?}\nenable_mtls = true\n",
-            ca = certs.join("ca.pem"),
-            c = pem("r1"),
-            k = key("r1"),
-        ),
-    )
-    .expect("router config");
-    let mut router = Reaped::spawn(
-        in_ns(&ns.names[0], STATION)
-            .args(["router", "run", "--config"])
-            .arg(&router_cfg)
-            .stderr(Stdio::inherit()),
-    );
-    let resolved = coop_actors::router::RouterConfig::load(&router_cfg).expect("router config");
-    wait_until("the router's status", LIMIT, || {
-        coop_actors::router::read_status(&resolved).ok()
-    });
+    let (mut router, resolved) = router(&ns.names[0], &dir, &certs);
 
     let station = |me: &'static str, router_addr: &'static str| {
         let (cert, k, ca, acl) = (pem(me), key(me), certs.join("ca.pem"), acl.clone());
@@ -242,11 +212,8 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
     println!("{rs}");
     assert!(rs.sessions.len() >= 2, "both stations linked: {rs}");
 
-    for s in [&mut sa, &mut sb] {
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(s.pid() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
+    for s in [&sa, &sb] {
+        terminate(s);
     }
     for s in [&mut sa, &mut sb] {
         let st = s.wait_timeout(LIMIT).expect("station stopped");
@@ -261,13 +228,301 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
         "{:?}",
         rec.status
     );
-    let _ = nix::sys::signal::kill(
-        nix::unistd::Pid::from_raw(router.pid() as i32),
-        nix::sys::signal::Signal::SIGTERM,
-    );
+    terminate(&router);
     let st = router.wait_timeout(LIMIT).expect("router stopped");
     assert!(st.success(), "the router stopped cleanly: {st}");
     assert!(!status_file.exists(), "the router removed its status file");
+    drop(ns);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `session certs` for `session` into `dir/certs` (router r1 at both its addresses).
+fn certs(dir: &Path, session: &str) -> PathBuf {
+    let certs = dir.join("certs");
+    let made = Command::new(SESSION_BIN)
+        .args([
+            "certs",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/paper.toml"),
+        ])
+        .arg("--out")
+        .arg(&certs)
+        .args([
+            "--session",
+            session,
+            "--router",
+            "r1",
+            "--host",
+            "r1=192.0.2.1,192.0.2.5",
+        ])
+        .output()
+        .expect("session certs");
+    assert!(
+        made.status.success(),
+        "session certs: {}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    certs
+}
+
+/// Starts router r1 in `ns` listening on both its links, with the session's certificate and
+/// access control; returns it and its configuration once its status is written.
+fn router(ns: &str, dir: &Path, certs: &Path) -> (Reaped, coop_actors::router::ResolvedRouter) {
+    let cfg = dir.join("r1.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "name = \"r1\"\nlisten = [\"tls/192.0.2.1:7447\", \"tls/192.0.2.5:7447\"]\n\
+             access_control = {acl:?}\nstatus_file = {status:?}\n\
+             [tls]\nroot_ca_certificate = {ca:?}\nlisten_certificate = {c:?}\nlisten_private_key = {k:?}\nenable_mtls = true\n",
+            acl = certs.join("acl.json5"),
+            status = dir.join("r1.json"),
+            ca = certs.join("ca.pem"),
+            c = certs.join("r1.pem"),
+            k = certs.join("r1.key"),
+        ),
+    )
+    .expect("router config");
+    let r = Reaped::spawn(
+        in_ns(ns, STATION)
+            .args(["router", "run", "--config"])
+            .arg(&cfg)
+            .stderr(Stdio::inherit()),
+    );
+    let resolved = coop_actors::router::RouterConfig::load(&cfg).expect("router config");
+    wait_until("the router's status", LIMIT, || {
+        coop_actors::router::read_status(&resolved).ok()
+    });
+    (r, resolved)
+}
+
+fn terminate(r: &Reaped) {
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(r.pid() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+}
+
+/// The clocks differ by this much between the two stations (user2's is ahead).
+const ATTACH_SKEW_S: i64 = 1000;
+
+/// `push_catch` of `faults.rs`, shorter: user1 pushes the disk at 0.5–1.0 s and lets go, it slides
+/// into user2's waiting tool, user2 pushes it back at 2.5–3.0 s and goes away.
+fn push_and_catch() -> String {
+    paper_with_scripts(
+        "attach",
+        4.0,
+        "[{ t_s = 0.0, target_m = [-0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [-0.06, 0.0, 0.01] }, { t_s = 1.4, target_m = [-0.20, 0.0, 0.01] }]",
+        "[{ t_s = 0.0, target_m = [0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [0.095, 0.0, 0.01] }, { t_s = 2.5, target_m = [0.095, 0.0, 0.01] }, \
+          { t_s = 3.0, target_m = [0.04, 0.0, 0.01] }, { t_s = 3.4, target_m = [0.20, -0.10, 0.01] }]",
+    )
+}
+
+/// A recording's first contact (its tool touching the object), s after its own station's time 0
+/// as the station took it, and that time 0.
+fn first_contact(path: &Path) -> (f64, u64) {
+    let rec = coop_transport::recording::read(path).expect("recording");
+    let epoch = rec.session.as_ref().expect("the session started").epoch_ns;
+    let t = rec
+        .samples
+        .iter()
+        .find(|s| s.touching)
+        .unwrap_or_else(|| panic!("{}: the tool never touched the object", path.display()))
+        .t_ns;
+    ((t as f64 - epoch as f64) * 1e-9, epoch)
+}
+
+/// `session run --attach` drives two stations it did not start, each in its own network namespace
+/// and started by hand (user2's also in a time namespace 1000 s ahead), through the router over
+/// mutual TLS with the generated access control. The launcher names who is missing when nobody
+/// came; then it waits for both, announces time 0 in its own clock, each station translates it
+/// with its measured offset to the launcher, the scripts start together (each site's first
+/// contact, in the launcher's clock, within one of its report periods of the same scenario's
+/// single-machine `session run`), the stations stop by themselves at the end, and the launcher
+/// prints the table from their recordings. Nothing is left behind.
+///
+/// The baseline is a real single-machine run of the same scenario, not the simulator: the
+/// simulator models the scenario's emulated delay, and user2's first contact (the catch) depends
+/// on when user1's states arrive, so only a real run over a fast link compares like with like.
+#[test]
+fn session_run_attach_drives_stations_started_by_hand_whose_clocks_differ() {
+    let _turn = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Err(why) = time_namespaces_work() {
+        eprintln!("SKIPPED session_run_attach_drives_stations_started_by_hand_whose_clocks_differ: time namespaces are not permitted here ({why})");
+        return;
+    }
+    let pid = std::process::id();
+    let dir = std::env::temp_dir().join(format!("coop-attach-{pid}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scenario = dir.join("attach.toml");
+    std::fs::write(&scenario, push_and_catch()).expect("scenario");
+    let sc = coop_actors::scenario_file::load(&scenario).expect("scenario");
+    let period = |i: usize| 1.0 / sc.site[i].report_rate_hz;
+
+    // The baseline: the same scenario on one machine, loopback, no emulation.
+    let base_out = dir.join("baseline");
+    let base = Command::new(SESSION_BIN)
+        .arg("run")
+        .arg(&scenario)
+        .args(["--method", "paper", "--no-emulation", "--json", "--out"])
+        .arg(&base_out)
+        .output()
+        .expect("session run");
+    assert!(
+        base.status.success(),
+        "baseline session: {}",
+        String::from_utf8_lossy(&base.stderr)
+    );
+    let base_json: serde_json::Value = serde_json::from_slice(&base.stdout).expect("JSON");
+    let base_contact = |site: &str| {
+        base_json["methods"]["paper"]["stations"][site]["first_contact_s"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("baseline: {site} touched nothing: {base_json}"))
+    };
+    let baseline = [base_contact("user1"), base_contact("user2")];
+
+    let tag = format!("{pid}a");
+    let ns = match setup(&tag) {
+        Ok(ns) => ns,
+        Err(why) => {
+            eprintln!("SKIPPED session_run_attach_drives_stations_started_by_hand_whose_clocks_differ: ip netns is not permitted here ({why})");
+            return;
+        }
+    };
+    let session = format!("na{pid}");
+    let certs = certs(&dir, &session);
+    let (mut router, _resolved) = router(&ns.names[0], &dir, &certs);
+    let records = dir.join("records");
+    std::fs::create_dir_all(&records).expect("records dir");
+    let launcher = |out: &str, timeout_s: &str| {
+        let mut c = in_ns(&ns.names[0], SESSION_BIN);
+        c.arg("run")
+            .arg(&scenario)
+            .args(["--attach", "--session", &session, "--method", "paper"])
+            .args(["--connect", "tls/192.0.2.1:7447", "--certs"])
+            .arg(&certs)
+            .arg("--recordings")
+            .arg(&records)
+            .args(["--start-timeout-s", timeout_s, "--out"])
+            .arg(dir.join(out));
+        c
+    };
+
+    // Nobody came: the launcher says who is missing, and leaves.
+    let none = launcher("none", "2").output().expect("launcher");
+    let said = String::from_utf8_lossy(&none.stderr);
+    assert!(!none.status.success(), "{said}");
+    assert!(
+        said.contains("stations not present after 2s: user1, user2"),
+        "{said}"
+    );
+
+    let station = |me: &'static str, router_addr: &'static str| {
+        let (cert, k, ca, acl) = (
+            certs.join(format!("{me}.pem")),
+            certs.join(format!("{me}.key")),
+            certs.join("ca.pem"),
+            certs.join("acl.json5"),
+        );
+        let (record, scenario) = (records.join(format!("{me}.mcap")), scenario.clone());
+        move |c: &mut StationConfig| {
+            c.scenario = Some(scenario);
+            c.method = Some(MethodName::Paper);
+            c.start = StartMode::Session;
+            c.record = Some(record);
+            c.network.mode = Mode::Client;
+            c.network.connect = vec![format!("tls/{router_addr}:7447")];
+            c.network.access_control = Some(acl);
+            c.network.tls = Some(Tls {
+                root_ca_certificate: Some(ca),
+                connect_certificate: Some(cert),
+                connect_private_key: Some(k),
+                enable_mtls: true,
+                ..Tls::default()
+            });
+        }
+    };
+    let a = station_config(&dir, &session, "user1", station("user1", "192.0.2.1"));
+    let b = station_config(&dir, &session, "user2", station("user2", "192.0.2.5"));
+    // Started by hand, as on two machines: each in its namespace; user2's clock 1000 s ahead. The
+    // duration only bounds them should the launcher never come: they stop at the session's end.
+    let run = |cfg: &Path| {
+        vec![
+            STATION.to_owned(),
+            "run".into(),
+            "--duration-s".into(),
+            "120".into(),
+            "--config".into(),
+            cfg.display().to_string(),
+        ]
+    };
+    let mut sa = Reaped::spawn(
+        in_ns(&ns.names[1], STATION)
+            .args(&run(&a)[1..])
+            .stderr(Stdio::inherit()),
+    );
+    let skewed = shifted_clock(ATTACH_SKEW_S);
+    let mut sb = Reaped::spawn(
+        in_ns(&ns.names[2], &skewed[0])
+            .args(&skewed[1..])
+            .args(run(&b))
+            .stderr(Stdio::inherit()),
+    );
+
+    let out = launcher("attached", "60").output().expect("launcher");
+    let (said, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "session run --attach: {err}\n{said}");
+    println!("{said}");
+    // The table, as a session it started prints it.
+    for row in ["div max", "reference", "paper-sim", "paper-real"] {
+        assert!(said.contains(row), "no {row:?} in the table:\n{said}");
+    }
+    let t0: u64 = said
+        .split("time 0 in the launcher's clock: ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no time 0 line:\n{said}"));
+    for s in [&mut sa, &mut sb] {
+        let st = s
+            .wait_timeout(LIMIT)
+            .expect("the station stopped by itself at the session's end");
+        assert!(st.success(), "a station stopped cleanly: {st}");
+    }
+    // Each station's time 0 is the launcher's, in its own clock (user2's 1000 s ahead); each
+    // site's first contact, in the launcher's clock, is where the single-machine run has it.
+    let shift = [0i128, i128::from(ATTACH_SKEW_S) * 1_000_000_000];
+    for (i, site) in ["user1", "user2"].into_iter().enumerate() {
+        let (contact, epoch) = first_contact(&records.join(format!("{site}.mcap")));
+        let epoch_launcher = i128::from(epoch) - shift[i];
+        let start_error = (epoch_launcher - i128::from(t0)) as f64 * 1e-9;
+        let contact_launcher = contact + start_error;
+        println!(
+            "{site}: time 0 {start_error:+.6} s from the launcher's; first contact {contact_launcher:.4} s (single machine {:.4} s)",
+            baseline[i]
+        );
+        assert!(
+            (contact_launcher - baseline[i]).abs() <= period(i),
+            "{site}: first contact at {contact_launcher} s of the launcher's time 0, {} s on one machine: more than a report period ({} s) apart (its time 0 is {start_error} s off the launcher's)",
+            baseline[i],
+            period(i)
+        );
+    }
+
+    terminate(&router);
+    let st = router.wait_timeout(LIMIT).expect("router stopped");
+    assert!(st.success(), "the router stopped cleanly: {st}");
+    for site in ["user1", "user2"] {
+        let left = shm_entries(&format!("coop_{session}_{site}_"));
+        assert!(left.is_empty(), "{site} left segments: {left:?}");
+    }
     drop(ns);
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -252,6 +252,19 @@ fn main() -> std::process::ExitCode {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
                 coop_tools::sim::print_table(&sc, &rows);
+                if a.attach.is_some() {
+                    for (m, r) in v["methods"].as_object().into_iter().flatten() {
+                        let stations = r["stations"].as_object().into_iter().flatten();
+                        let theirs: Vec<String> = stations
+                            .map(|(site, s)| format!("{site} {}", s["epoch_ns"]))
+                            .collect();
+                        println!(
+                            "# {m}: time 0 in the launcher's clock: {} ns; in the stations' clocks: {} ns",
+                            r["launcher_epoch_ns"],
+                            theirs.join(", ")
+                        );
+                    }
+                }
                 println!(
                     "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
                     a.out.display()
