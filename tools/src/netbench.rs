@@ -9,6 +9,9 @@
 //! - **Bare zenoh**: this process publishes the same 289-byte payload (express, real-time
 //!   priority, drop on congestion), a child process (`session bench-pong`) echoes it; one way =
 //!   round trip / 2. Paced at 1 kHz like the states.
+//!
+//! `session bench-router` ([`router`]) sets the same station path through one zenoh router next to
+//! peer to peer and to the bare ping-pong through that router.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -21,6 +24,8 @@ use coop_transport::recording;
 use hdrhistogram::Histogram;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
+
+pub mod router;
 
 /// Figures of one path, µs.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
@@ -35,7 +40,7 @@ pub struct Figures {
     pub samples: u64,
 }
 
-fn figures(h: &Histogram<u64>) -> Figures {
+pub(crate) fn figures(h: &Histogram<u64>) -> Figures {
     let us = |ns: u64| ns as f64 / 1e3;
     Figures {
         p50_us: us(h.value_at_quantile(0.5)),
@@ -45,7 +50,7 @@ fn figures(h: &Histogram<u64>) -> Figures {
     }
 }
 
-fn histogram() -> Histogram<u64> {
+pub(crate) fn histogram() -> Histogram<u64> {
     Histogram::new_with_bounds(1, 60_000_000_000, 3).expect("valid bounds")
 }
 
@@ -61,7 +66,27 @@ fn bench_session(
     crate::session::MethodOutcome,
     PathBuf,
 )> {
-    let scenario = root.join(format!("scenarios/{name}.toml"));
+    bench_scenario(
+        &root.join(format!("scenarios/{name}.toml")),
+        name,
+        emulate,
+        station_bin,
+    )
+}
+
+/// Runs `scenario` (paper method) as a session on this machine (`name` tags its directory and
+/// session): as [`bench_session`].
+pub(crate) fn bench_scenario(
+    scenario: &Path,
+    name: &str,
+    emulate: bool,
+    station_bin: &crate::session::StationBin,
+) -> anyhow::Result<(
+    coop_model::scenario::Scenario,
+    crate::session::MethodOutcome,
+    PathBuf,
+)> {
+    let scenario = scenario.to_owned();
     let sc = coop_actors::scenario_file::load(&scenario)?;
     let dir = std::env::temp_dir().join(format!("coop-bench-{name}-{}", std::process::id()));
     let a = crate::session::RunArgs {
@@ -90,9 +115,25 @@ fn stations(
     station_bin: &crate::session::StationBin,
 ) -> anyhow::Result<Histogram<u64>> {
     let (sc, _, dir) = bench_session(root, "zero-delay", false, station_bin)?;
+    let paths: Vec<PathBuf> = sc
+        .site
+        .iter()
+        .map(|s| dir.join("paper").join(format!("{}.mcap", s.name)))
+        .collect();
+    let h = latencies(&paths);
+    let _ = std::fs::remove_dir_all(&dir);
+    h
+}
+
+/// Each state handed to physics in the recordings at `paths`: receive time minus send time, on
+/// this machine's one clock.
+///
+/// # Errors
+/// A recording cannot be read.
+pub(crate) fn latencies(paths: &[PathBuf]) -> anyhow::Result<Histogram<u64>> {
     let mut h = histogram();
-    for s in &sc.site {
-        let rec = recording::read(&dir.join("paper").join(format!("{}.mcap", s.name)))?;
+    for p in paths {
+        let rec = recording::read(p)?;
         // Same machine, one clock: take the clock-offset correction back out.
         for m in rec.remote.iter().filter(|m| m.via == "live") {
             let sent = i128::from(m.sent_ns) + i128::from(m.offset_ns);
@@ -100,7 +141,6 @@ fn stations(
             h.saturating_record(u64::try_from(lat).unwrap_or(0));
         }
     }
-    let _ = std::fs::remove_dir_all(&dir);
     Ok(h)
 }
 
@@ -115,13 +155,14 @@ type End = (
 fn end(
     listen: Vec<String>,
     connect: Vec<String>,
+    mode: network::Mode,
     out: &'static str,
     inp: &str,
 ) -> anyhow::Result<End> {
     let ep = NetworkConfig {
         listen,
         connect,
-        mode: network::Mode::Peer,
+        mode,
         tls: None,
         emulate: false,
         ..NetworkConfig::default()
@@ -141,17 +182,29 @@ fn end(
     Ok((z, publisher, sub))
 }
 
-/// The child: echoes every ping as a pong until stdin closes.
+/// The child: echoes every ping as a pong until stdin closes; a peer listening on `listen`, or
+/// with `via_router`, a client of the router there.
 ///
 /// # Errors
 /// Zenoh cannot be set up.
-pub fn pong(listen: &str) -> anyhow::Result<()> {
-    let (_z, publisher, sub) = end(
-        vec![listen.to_owned()],
-        vec![],
-        "coop/bench/pong",
-        "coop/bench/ping",
-    )?;
+pub fn pong(listen: &str, via_router: bool) -> anyhow::Result<()> {
+    let (_z, publisher, sub) = if via_router {
+        end(
+            vec![],
+            vec![listen.to_owned()],
+            network::Mode::Client,
+            "coop/bench/pong",
+            "coop/bench/ping",
+        )?
+    } else {
+        end(
+            vec![listen.to_owned()],
+            vec![],
+            network::Mode::Peer,
+            "coop/bench/pong",
+            "coop/bench/ping",
+        )?
+    };
     println!("ready");
     std::thread::spawn(|| {
         let mut s = String::new();
@@ -164,11 +217,16 @@ pub fn pong(listen: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Bare zenoh: one-way = ping-pong round trip / 2, between this process and a child.
-fn bare_zenoh(samples: u64) -> anyhow::Result<Histogram<u64>> {
-    let listen = network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0);
+/// Bare zenoh: one-way = ping-pong round trip / 2, between this process and a child, as peers, or
+/// with `router` both clients of the router at that locator.
+pub(crate) fn bare_zenoh(samples: u64, router: Option<&str>) -> anyhow::Result<Histogram<u64>> {
+    let listen = match router {
+        Some(r) => r.to_owned(),
+        None => network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0),
+    };
     let mut child = Command::new(std::env::current_exe()?)
         .args(["bench-pong", "--listen", &listen])
+        .args(router.map(|_| "--via-router"))
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .spawn()
@@ -182,7 +240,18 @@ fn bare_zenoh(samples: u64) -> anyhow::Result<Histogram<u64>> {
         let _ = child.kill();
         bail!("the pong process did not start: {line:?}");
     }
-    let (z, publisher, sub) = end(vec![], vec![listen], "coop/bench/ping", "coop/bench/pong")?;
+    let mode = if router.is_some() {
+        network::Mode::Client
+    } else {
+        network::Mode::Peer
+    };
+    let (z, publisher, sub) = end(
+        vec![],
+        vec![listen],
+        mode,
+        "coop/bench/ping",
+        "coop/bench/pong",
+    )?;
     let payload = coop_transport::wire::encode(&coop_rt::msg::SiteReport {
         kind: 1,
         rot: [1.0, 0.0, 0.0, 0.0],
@@ -267,7 +336,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         bail!("run from the repository root (scenarios/zero-delay.toml not found)");
     }
     let st = figures(&stations(&root, station_bin)?);
-    let bare = figures(&bare_zenoh(st.samples.clamp(1000, 20_000))?);
+    let bare = figures(&bare_zenoh(st.samples.clamp(1000, 20_000), None)?);
     let ratio = |a: f64, b: f64| a / b.max(1e-9);
     let (r50, r99) = (ratio(st.p50_us, bare.p50_us), ratio(st.p99_us, bare.p99_us));
     let four = four_stations(&root, station_bin)?;

@@ -126,12 +126,29 @@ enum Command {
         #[arg(long, default_value_t = 365)]
         days: u32,
     },
+    /// Benchmark: station-to-station state latency through one zenoh router (`station router`,
+    /// loopback) next to peer to peer and to a bare zenoh ping-pong through the same router, in
+    /// the same run (run from the repository root).
+    BenchRouter {
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+        /// 4 s sessions instead of 14 s (CI).
+        #[arg(long)]
+        quick: bool,
+        /// A separate station binary to run (default: this executable, as `session station`).
+        #[arg(long)]
+        station_bin: Option<PathBuf>,
+    },
     /// The benchmark's echo process.
     #[command(hide = true)]
     BenchPong {
-        /// Where to listen.
+        /// Where to listen (or with --via-router, the router to connect to).
         #[arg(long)]
         listen: String,
+        /// Connect to the router at --listen as a client.
+        #[arg(long)]
+        via_router: bool,
     },
 }
 
@@ -275,7 +292,14 @@ fn main() -> std::process::ExitCode {
         Command::Bench { json, station_bin } => {
             coop_tools::netbench::run(json, &station_bin_or_default(station_bin)?)
         }
-        Command::BenchPong { listen } => coop_tools::netbench::pong(&listen),
+        Command::BenchRouter {
+            json,
+            quick,
+            station_bin,
+        } => coop_tools::netbench::router::run(json, quick, &station_bin_or_default(station_bin)?),
+        Command::BenchPong { listen, via_router } => {
+            coop_tools::netbench::pong(&listen, via_router)
+        }
         Command::Certs {
             scenario,
             out,
