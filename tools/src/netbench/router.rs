@@ -12,6 +12,7 @@
 //!   --via-router`), both clients of the same router, ping-pong the same 289-byte payload with the
 //!   stations' publisher settings (express, real-time priority, drop on congestion), at 1 kHz; one
 //!   way = round trip / 2, each way through the router once. No station, ring or protocol of ours.
+//!   For scale, the same ping-pong peer to peer after it.
 //!
 //! Goal: stations through the router within 1.5× the bare router path (p50 and p99). Quick mode
 //! (`--quick`, CI) runs 4 s sessions (the scenario without its phases) instead of 14 s.
@@ -98,12 +99,14 @@ fn start_router(bin: &StationBin, dir: &Path) -> anyhow::Result<(Reaped, String)
         &cfg,
         format!("name = \"bench\"\nlisten = [{locator:?}]\nstatus_file = {status:?}\n"),
     )?;
+    let log = std::fs::File::create(dir.join("router.log"))?;
     let child = Command::new(&bin.program)
         .args(&bin.prefix)
         .args(["router", "run", "--config"])
         .arg(&cfg)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
         .spawn()
         .context("starting the router")?;
     let mut r = Reaped(child, "router");
@@ -220,27 +223,44 @@ pub fn run(json: bool, quick: bool, bin: &StationBin) -> anyhow::Result<()> {
         let _ = std::fs::remove_dir_all(&p2p_dir);
         let (mut router, locator) = start_router(bin, &dir)?;
         let routed = figures(&through_router(&scenario, &locator, bin, &dir)?);
-        let bare = figures(&bare_zenoh(
-            routed.samples.clamp(1000, 20_000),
-            Some(&locator),
-        )?);
+        let samples = routed
+            .samples
+            .clamp(1000, if quick { 3000 } else { 14_000 });
+        let bare = figures(&bare_zenoh(samples, Some(&locator))?);
         if !router.stop(Duration::from_secs(10)) {
             bail!("the router did not stop cleanly");
         }
-        Ok::<_, anyhow::Error>((p2p, routed, bare))
+        let bare_p2p = figures(&bare_zenoh(samples, None)?);
+        Ok::<_, anyhow::Error>(Paths {
+            p2p,
+            routed,
+            bare,
+            bare_p2p,
+        })
     })();
     let _ = std::fs::remove_dir_all(&dir);
-    let (p2p, routed, bare) = result?;
-    print(json, quick, p2p, routed, bare)
+    print(json, quick, &result?)
 }
 
-fn print(
-    json: bool,
-    quick: bool,
+/// The four paths' figures.
+struct Paths {
+    /// Stations peer to peer.
     p2p: Figures,
+    /// Stations through the router.
     routed: Figures,
+    /// Bare zenoh through the router.
     bare: Figures,
-) -> anyhow::Result<()> {
+    /// Bare zenoh peer to peer (for scale: what the router adds without any station).
+    bare_p2p: Figures,
+}
+
+fn print(json: bool, quick: bool, p: &Paths) -> anyhow::Result<()> {
+    let Paths {
+        p2p,
+        routed,
+        bare,
+        bare_p2p,
+    } = *p;
     let ratio = |a: f64, b: f64| a / b.max(1e-9);
     let vs_bare = (
         ratio(routed.p50_us, bare.p50_us),
@@ -259,6 +279,7 @@ fn print(
                 "stations_peer_to_peer": p2p,
                 "stations_through_router": routed,
                 "bare_zenoh_through_router": bare,
+                "bare_zenoh_peer_to_peer": bare_p2p,
                 "ratio_router_vs_bare": { "p50": vs_bare.0, "p99": vs_bare.1 },
                 "ratio_router_vs_peer_to_peer": { "p50": vs_p2p.0, "p99": vs_p2p.1 },
                 "goal_met": met,
@@ -278,6 +299,7 @@ fn print(
         ("stations peer to peer (physics A -> physics B)", p2p),
         ("stations through the router", routed),
         ("bare zenoh through the router (round trip / 2)", bare),
+        ("bare zenoh peer to peer (round trip / 2)", bare_p2p),
     ] {
         println!(
             "{:<50}{:>10.1}{:>10.1}{:>10.1}{:>10}",

@@ -175,7 +175,7 @@ impl EpochListener {
             }
             return;
         };
-        let local = (i128::from(heard) - i128::from(offset)).clamp(1, i128::from(u64::MAX)) as u64;
+        let local = translate(heard, offset);
         // SYNC: Release pairs with `ControlBlock::epoch`'s Acquire.
         if ctl
             .epoch_ns
@@ -200,6 +200,12 @@ impl EpochListener {
     }
 }
 
+/// Time 0 announced as `launcher_ns` in the launcher's clock, in ours: `offset_ns` is the
+/// launcher's clock minus ours (never 0, which means "not known" in the control block).
+pub fn translate(launcher_ns: u64, offset_ns: i64) -> u64 {
+    (i128::from(launcher_ns) - i128::from(offset_ns)).clamp(1, i128::from(u64::MAX)) as u64
+}
+
 /// Asks the launcher once for the epoch, unless it is known (run on a thread of its own: the
 /// answer may take up to the query's timeout).
 pub(super) fn ask(
@@ -222,5 +228,23 @@ pub(super) fn ask(
         if let Ok(s) = reply.result() {
             listener.hear(&s.payload().to_bytes());
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::translate;
+
+    #[test]
+    fn time_0_is_translated_into_the_stations_clock() {
+        // The launcher's clock is 1000 s behind ours (we live in a time namespace 1000 s ahead).
+        assert_eq!(
+            translate(5_000_000_000, -1_000_000_000_000),
+            1_005_000_000_000
+        );
+        // Ahead of ours by 2 ms.
+        assert_eq!(translate(5_000_000_000, 2_000_000), 4_998_000_000);
+        // Never 0 (unknown) or below.
+        assert_eq!(translate(1_000, 5_000), 1);
     }
 }
