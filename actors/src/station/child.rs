@@ -272,6 +272,13 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.
     keep_off_the_servo(cfg);
+    // Its loop sleeps until just after physics' next report is due (`next_wake`): under
+    // SCHED_OTHER the kernel may defer that wake by the thread's timer slack, 50 µs by default,
+    // which every state would wait on the way out. 1 ns (what SCHED_FIFO threads get) for this
+    // thread and those it starts (zenoh's inherit it).
+    if let Err(e) = nix::sys::prctl::set_timerslack(1) {
+        eprintln!("station network {}: timer slack stays at the default ({e})", cfg.name);
+    }
     coop_transport::network::run(args)?;
     Ok(())
 }
