@@ -22,10 +22,12 @@ use crate::{keys, wire};
 /// heartbeat at least this often.
 pub const POLL: Duration = Duration::from_millis(1);
 /// How long after physics' expected next report the loop looks for it (physics' wake latency and
-/// step), and how often it looks again while the report is late.
-pub const PUBLISH_LAG_NS: u64 = 40_000;
+/// step), and how often it looks again while the report is late. Every state waits at least this
+/// on its way out: 40 µs and 25 µs put stations at 2× a bare zenoh ping-pong's one way at p50
+/// (`session bench-router`); a release-build physics step under SCHED_FIFO is well under 20 µs.
+pub const PUBLISH_LAG_NS: u64 = 20_000;
 /// See [`PUBLISH_LAG_NS`].
-pub const RETRY_NS: u64 = 25_000;
+pub const RETRY_NS: u64 = 10_000;
 /// Past this lateness physics is taken to be stopped (restarting), and the loop polls at [`POLL`].
 pub const GIVE_UP_NS: u64 = 500_000;
 /// A report older than this when the network process gets to it is not published (ns).
@@ -143,7 +145,7 @@ mod tests {
         let ms = 1_000_000;
         // Nothing known yet: poll.
         assert_eq!(next_wake(0, 0, 10 * ms), 11 * ms);
-        // Last report at 10 ms, every 1 ms, now 10.5 ms: wake 40 µs after 11 ms.
+        // Last report at 10 ms, every 1 ms, now 10.5 ms: wake PUBLISH_LAG_NS after 11 ms.
         assert_eq!(
             next_wake(ms, 10 * ms, 10 * ms + ms / 2),
             11 * ms + PUBLISH_LAG_NS
