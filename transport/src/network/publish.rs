@@ -24,7 +24,8 @@ pub const POLL: Duration = Duration::from_millis(1);
 /// How long after physics' expected next report the loop looks for it (physics' wake latency and
 /// step), and how often it looks again while the report is late. Every state waits at least this
 /// on its way out: 40 µs and 25 µs put stations at 2× a bare zenoh ping-pong's one way at p50
-/// (`session bench-router`); a release-build physics step under SCHED_FIFO is well under 20 µs.
+/// (`session bench-router`), 20 µs and 10 µs 1.3–1.5×; a report later than this costs a few
+/// more turns of the loop, at most until [`GIVE_UP_NS`].
 pub const PUBLISH_LAG_NS: u64 = 20_000;
 /// See [`PUBLISH_LAG_NS`].
 pub const RETRY_NS: u64 = 10_000;
