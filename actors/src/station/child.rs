@@ -277,7 +277,10 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     // which every state would wait on the way out. 1 ns (what SCHED_FIFO threads get) for this
     // thread and those it starts (zenoh's inherit it).
     if let Err(e) = nix::sys::prctl::set_timerslack(1) {
-        eprintln!("station network {}: timer slack stays at the default ({e})", cfg.name);
+        eprintln!(
+            "station network {}: timer slack stays at the default ({e})",
+            cfg.name
+        );
     }
     coop_transport::network::run(args)?;
     Ok(())

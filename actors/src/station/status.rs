@@ -489,6 +489,12 @@ impl fmt::Display for StationStatus {
                 ""
             }
         )?;
+        if self.network.epoch_ns.is_none() {
+            writeln!(
+                f,
+                "start: waiting for the session's time 0 (the launcher's announcement, translated by its clock offset once measured: the users' scripts have not started)"
+            )?;
+        }
         writeln!(
             f,
             "{:<9}{:>8}{:>11}{:>10}  {:<9}{:<12}{:>5}  cpus",

@@ -100,9 +100,11 @@ pub(super) struct Sampler<'a> {
     launcher: Mutex<Launcher>,
 }
 
-/// Exchanges with the launcher's clock before its offset is trusted: the shortest round trip of
-/// three is a fair estimate, and takes about 0.3 s at the fast pace.
-const LAUNCHER_SAMPLES: u32 = 3;
+/// Exchanges with the launcher's clock made back to back (one per look, [`LOOK_EVERY`]) when it
+/// appears; then at the fast pace until time 0 is taken. The offset is the shortest round trip's
+/// of the window: one exchange already gives it (a station that joins a running session takes
+/// time 0 within milliseconds), a few more make it better before an announcement.
+const LAUNCHER_BURST: u32 = 3;
 
 /// The launcher's clock as sampled: the window, how many exchanges answered, when the next is due.
 #[derive(Debug, Default)]
@@ -133,39 +135,46 @@ impl<'a> Sampler<'a> {
     }
 
     /// The launcher's clock offset (its clock − ours, ns) and the round trip it came with, once
-    /// [`LAUNCHER_SAMPLES`] exchanges answered.
+    /// an exchange answered (see [`LAUNCHER_BURST`]).
     pub(super) fn launcher_offset(&self) -> Option<(u64, i64)> {
         lock(&self.launcher).best
     }
 
-    /// One exchange with the launcher's clock if one is due, while the session's time 0 is not
-    /// taken (afterwards nothing needs it).
-    fn sample_launcher(&self) {
-        if self.ctl.epoch().is_some() {
-            return;
+    /// The launcher's clock thread: samples it until the session's time 0 is taken (afterwards
+    /// nothing needs it) or `stop`. A thread of its own: an exchange may wait up to its timeout
+    /// for a launcher not there yet, and the peers' sampling must not wait with it.
+    pub(super) fn run_launcher(&self, stop: &AtomicU64) {
+        while stop.load(Ordering::Relaxed) == 0 && self.ctl.epoch().is_none() {
+            self.sample_launcher();
+            std::thread::sleep(LOOK_EVERY);
         }
-        {
-            let l = lock(&self.launcher);
-            if l.peer.count > 0 && monotonic_ns() < l.peer.due_ns {
-                return;
-            }
+    }
+
+    /// One exchange with the launcher's clock if one is due.
+    fn sample_launcher(&self) {
+        if monotonic_ns() < lock(&self.launcher).peer.due_ns {
+            return;
         }
         let key = keys::clock(self.session_name, crate::acl::LAUNCHER);
         let t0 = monotonic_ns();
         let remote = self.ask(&key);
         let t2 = monotonic_ns();
         let mut l = lock(&self.launcher);
-        // Not answering yet (no launcher so far): look again at the fast pace.
-        l.peer.due_ns = t2 + CLOCK_EVERY.as_nanos() as u64 / 5;
         let Some(remote) = remote else {
+            // No launcher (yet, or any more: the next may be another machine's, with another
+            // clock): start over, and look again at the fast pace.
+            *l = Launcher::default();
+            l.peer.due_ns = t2 + CLOCK_EVERY.as_nanos() as u64 / 5;
             return;
         };
         let (rtt, offset) = clock_estimate(t0, remote, t2);
-        let best = l.peer.window.add(rtt.max(1), offset);
+        l.best = Some(l.peer.window.add(rtt.max(1), offset));
         l.peer.count += 1;
-        if l.peer.count >= LAUNCHER_SAMPLES {
-            l.best = Some(best);
-        }
+        l.peer.due_ns = if l.peer.count < LAUNCHER_BURST {
+            t2
+        } else {
+            t2 + CLOCK_EVERY.as_nanos() as u64 / 5
+        };
     }
 
     /// Queries a clock key; the first answer's time.
@@ -219,7 +228,6 @@ impl<'a> Sampler<'a> {
                     self.sample(j);
                 }
             }
-            self.sample_launcher();
             std::thread::sleep(LOOK_EVERY);
         }
     }

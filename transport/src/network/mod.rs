@@ -20,7 +20,8 @@
 //! behalf.
 //!
 //! [`run`] wires the pieces: the session and its declarations, a delivery thread (received states),
-//! a clock thread, a one-off epoch query, and the loop (publish, release emulated states, record,
+//! a clock thread (the peers'), a launcher's clock thread (until time 0 is taken), a one-off epoch
+//! query, and the loop (publish, release emulated states, record,
 //! presence, heartbeat), until the control block's run state says stop.
 
 use std::collections::BTreeMap;
@@ -239,6 +240,7 @@ fn serve(
         scope.spawn(move || receive::deliver(&states, receiver, stop));
         scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
         scope.spawn(move || clocks.run(stop));
+        scope.spawn(move || clocks.run_launcher(stop));
 
         let slot = ctx.ctl.child(Child::Network);
         slot.pid
