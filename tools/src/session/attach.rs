@@ -35,8 +35,7 @@ use super::{lock, MethodOutcome, RunArgs};
 
 /// How far ahead of its announcement time 0 is: each station needs the announcement and its
 /// offset to the launcher's clock before it (they sample the launcher's clock from their start,
-/// one exchange gives it, a few back to back refine it), across a router and machines of their
-/// own.
+/// three exchanges back to back give it), across a router and machines of their own.
 pub const LEAD: Duration = Duration::from_secs(1);
 
 /// How long after the scenario's end the stations get to stop and finish their recordings (each

@@ -101,9 +101,10 @@ pub(super) struct Sampler<'a> {
 }
 
 /// Exchanges with the launcher's clock made back to back (one per look, [`LOOK_EVERY`]) when it
-/// appears; then at the fast pace until time 0 is taken. The offset is the shortest round trip's
-/// of the window: one exchange already gives it (a station that joins a running session takes
-/// time 0 within milliseconds), a few more make it better before an announcement.
+/// appears, before its offset is trusted; then at the fast pace until time 0 is taken. The offset
+/// is the shortest round trip's of the window: the first exchanges over a new link through a
+/// router took 50 ms and more, and one of them alone was 10 ms off, a report period at 90 Hz;
+/// three back to back take a few milliseconds more (a late joiner still takes time 0 at once).
 const LAUNCHER_BURST: u32 = 3;
 
 /// The launcher's clock as sampled: the window, how many exchanges answered, when the next is due.
@@ -135,7 +136,7 @@ impl<'a> Sampler<'a> {
     }
 
     /// The launcher's clock offset (its clock − ours, ns) and the round trip it came with, once
-    /// an exchange answered (see [`LAUNCHER_BURST`]).
+    /// [`LAUNCHER_BURST`] exchanges answered.
     pub(super) fn launcher_offset(&self) -> Option<(u64, i64)> {
         lock(&self.launcher).best
     }
@@ -168,8 +169,11 @@ impl<'a> Sampler<'a> {
             return;
         };
         let (rtt, offset) = clock_estimate(t0, remote, t2);
-        l.best = Some(l.peer.window.add(rtt.max(1), offset));
+        let best = l.peer.window.add(rtt.max(1), offset);
         l.peer.count += 1;
+        if l.peer.count >= LAUNCHER_BURST {
+            l.best = Some(best);
+        }
         l.peer.due_ns = if l.peer.count < LAUNCHER_BURST {
             t2
         } else {
