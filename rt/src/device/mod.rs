@@ -1,5 +1,14 @@
-//! Devices behind one trait: what the servo loop reads and writes each tick. The default is the
-//! model's simulated SCARA arm held by a scripted hand; real drivers implement the same trait.
+//! Devices: what the servo loop reads and writes each tick.
+//!
+//! [`cartesian`] is the interface every backend implements (the simulated SCARA arm, a replayed hand,
+//! vendor devices). The joint-space [`Device`] below is the simulated arm's own view, kept while the
+//! servo moves to the Cartesian interface.
+
+pub mod cartesian;
+
+pub use cartesian::{
+    CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,
+};
 
 use coop_model::body::Vec3;
 use coop_model::device::Plant;
