@@ -5,6 +5,8 @@
 //! servo moves to the Cartesian interface.
 
 pub mod cartesian;
+pub mod dhd;
+pub mod haply;
 
 pub use cartesian::{
     CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,
