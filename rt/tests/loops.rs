@@ -9,7 +9,8 @@ use coop_model::device::Plant;
 use coop_model::method::{ObjectCopy, Paper};
 use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
 use coop_model::servo::Servo;
-use coop_rt::device::SimDevice;
+use coop_rt::device::safety::{Guarded, SafetyLimits};
+use coop_rt::device::{Placement, SimScara};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::servo::ServoLoop;
@@ -31,7 +32,7 @@ type Segments = (
 
 /// One site pushing a disk on a table, all four rings real segments.
 struct Rig {
-    servo: ServoLoop<SimDevice>,
+    servo: ServoLoop<SimScara>,
     physics: PhysicsLoop,
     reports: coop_rt::shm::Consumer<SiteReport>,
     remote_in: Producer<SiteReport>,
@@ -84,14 +85,16 @@ fn rig(tag: &str, wall: bool) -> Rig {
     let trc = RingSegment::<TraceRecord>::create(&name("trc"), 4096).expect("trace ring");
     let world = sc.world();
     let script = sc.script(0);
-    let device = SimDevice::new(
+    let device = SimScara::new(
         Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+        sc.force_loop(0),
         script,
         0,
     );
     let servo = ServoLoop::new(
-        Servo::new(sc.servo_params(0), sc.arm(0)),
-        device,
+        Servo::new(sc.servo_params(0)),
+        Guarded::new(device, SafetyLimits::default(), 0),
+        Placement::IDENTITY,
         world,
         obj.consumer().expect("c"),
         tool.producer().expect("p"),
@@ -234,7 +237,7 @@ fn when_physics_stops_the_commanded_force_ramps_to_zero() {
                 "still commanding {f} N {} ms after physics stopped",
                 k - stopped
             );
-            assert_eq!(out.tau.norm(), 0.0, "torques too");
+            assert_eq!(r.servo.device().tau().norm(), 0.0, "torques too");
         }
     }
     let zero_at = zero_at.expect("reached zero");

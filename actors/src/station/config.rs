@@ -124,6 +124,8 @@ pub struct StationConfig {
     pub record_max_file_s: u64,
     /// Parts kept, the oldest removed beyond them (0: keep all).
     pub record_keep_files: u32,
+    /// The device: backend, placement in the world, loop owner, safety limits.
+    pub device: crate::station::device::DeviceSpec,
 }
 
 impl Default for StationConfig {
@@ -147,6 +149,7 @@ impl Default for StationConfig {
             record_max_file_mib: 64,
             record_max_file_s: 600,
             record_keep_files: 24,
+            device: crate::station::device::DeviceSpec::default(),
         }
     }
 }
@@ -182,6 +185,8 @@ pub struct Resolved {
     pub policy: crate::policy::RestartPolicy,
     /// The network process's retry schedule.
     pub network_backoff: crate::policy::Backoff,
+    /// The device, checked (and a replayed hand loaded).
+    pub device: crate::station::device::DeviceSetup,
 }
 
 fn sched(
@@ -411,6 +416,7 @@ impl StationConfig {
         if let Some(t) = &mut config.network.tls {
             tls_files_readable(t, base, "network.tls")?;
         }
+        let device = config.device.resolve(base)?;
         let allowed = coop_rt::sched::allowed_cpus();
         let (first, last) = (
             allowed.first().copied().unwrap_or(0),
@@ -473,6 +479,7 @@ impl StationConfig {
             physics_sched,
             policy,
             network_backoff,
+            device,
         })
     }
 }

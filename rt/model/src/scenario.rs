@@ -852,11 +852,15 @@ impl Scenario {
         ServoParams {
             tool_radius_m: s.tool_radius_m,
             contact: self.contact,
-            controller: s.controller,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
             max_adoption_step_n: s.max_adoption_step_n,
         }
+    }
+
+    /// Site `i`'s force loop: its arm's Eq. 12 PI controller.
+    pub fn force_loop(&self, i: usize) -> crate::device::ScaraForceLoop {
+        crate::device::ScaraForceLoop::new(self.arm(i), self.site[i].controller)
     }
 
     /// Site `i`'s script.

@@ -17,7 +17,7 @@
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
-use crate::device::Plant;
+use crate::device::{Plant, ScaraForceLoop};
 use crate::link::DueQueue;
 use crate::method::{integrate, Consistency, EnergyAccount, Naive, ObjectCopy, Paper, Report};
 use crate::rng::Rng;
@@ -148,6 +148,7 @@ struct Site {
     plant_ns: u64,
     script: Vec<Keyframe>,
     servo: Servo,
+    force_loop: ScaraForceLoop,
     tau: Vec3,
     own: ContactForce,
     copy: ObjectCopy,
@@ -199,7 +200,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
                 plant_ns: 0,
                 script,
-                servo: Servo::new(scenario.servo_params(i), arm),
+                servo: Servo::new(scenario.servo_params(i)),
+                force_loop: scenario.force_loop(i),
                 tau: Vec3::zeros(),
                 own: ContactForce::default(),
                 copy: ObjectCopy::new(start),
@@ -317,7 +319,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             let s = &mut sites[i];
             if s.next_physics == t {
                 if !reference {
-                    s.method.own_tool(s.servo.arm.forward(&s.plant.q));
+                    s.method.own_tool(s.force_loop.arm.forward(&s.plant.q));
                     s.method
                         .physics_step(&world, &mut s.copy, &s.own, ns_to_s(s.period_physics));
                     s.copy.time_s = ns_to_s(t);
@@ -328,13 +330,13 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
                 let f_measured = s.plant.grip_force + noise;
                 let copy = if reference { &shared } else { &s.copy };
+                let arm = &s.force_loop.arm;
                 let out = s.servo.step(
                     &ServoInput {
                         now_s: ns_to_s(t),
                         dt_s: ns_to_s(s.period_servo),
-                        q: s.plant.q,
-                        qd: s.plant.qd,
-                        f_measured,
+                        tool_pos: arm.forward(&s.plant.q),
+                        tool_vel: arm.jacobian(&s.plant.q) * s.plant.qd,
                         object: &copy.state,
                         object_time_s: copy.time_s,
                         adopted: !s.pending_adoptions.is_empty(),
@@ -348,7 +350,14 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     result.adoptions[k].force_step_n = step_n;
                 }
                 s.force_steps.record(s.last_f_desired, out.f_desired);
-                s.tau = out.tau;
+                let (_, tau) = s.force_loop.step(
+                    out.f_desired,
+                    out.scale,
+                    f_measured,
+                    &s.plant.q,
+                    ns_to_s(s.period_servo),
+                );
+                s.tau = tau;
                 s.own = out.contact;
                 s.last_f_desired = out.f_desired;
                 s.last_f_measured = f_measured;
@@ -376,7 +385,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 tr.obj_vel.push(copy.state.vel);
                 let q = copy.state.rot.quaternion();
                 tr.obj_rot.push([q.w, q.i, q.j, q.k]);
-                tr.tool_pos.push(s.servo.arm.forward(&s.plant.q));
+                tr.tool_pos.push(s.force_loop.arm.forward(&s.plant.q));
                 tr.f_desired.push(s.last_f_desired);
                 tr.f_measured.push(s.last_f_measured);
                 tr.touching.push(s.own.touching);
