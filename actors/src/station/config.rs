@@ -796,7 +796,47 @@ mod tests {
 
     #[test]
     fn each_rule_names_field_value_and_rule() {
-        let cases: [(&str, &str); 16] = [
+        let cases: [(&str, &str); 26] = [
+            (
+                "[device]\ndevice = \"phantom\"",
+                "unknown variant `phantom`, expected one of `sim`, `replay`, `haply`, `dhd`",
+            ),
+            (
+                "[device]\nloop = \"vendor\"",
+                "device.loop = \"vendor\": device \"sim\" cannot call the station from its own thread",
+            ),
+            (
+                "[device.safety]\nmax_force_n = 0",
+                "device.safety.max_force_n = 0: must be above 0 and at most 100 N",
+            ),
+            (
+                "[device.safety]\nwatchdog_ms = 0.5",
+                "device.safety.watchdog_ms = 0.5: must be from 1 and at most 10000 ms",
+            ),
+            (
+                "[device.safety]\nmax_velocity_m_s = nan",
+                "device.safety.max_velocity_m_s = NaN: must be above 0",
+            ),
+            (
+                "[device.placement]\nworkspace_scale = 0",
+                "device.placement.workspace_scale = 0: must be from 0.001 to 1000",
+            ),
+            (
+                "[device.placement]\ntranslation_m = [0.1, 0, 0]",
+                "must be the identity for device = \"sim\"",
+            ),
+            (
+                "[device]\ndevice = \"replay\"",
+                "device.replay.file is missing",
+            ),
+            (
+                "[device]\ndevice = \"replay\"\n[device.replay]\nfile = \"/nonexistent-coop/hand.csv\"",
+                "device.replay.file = \"/nonexistent-coop/hand.csv\": cannot be read",
+            ),
+            (
+                "[device]\ndevice = \"dhd\"",
+                "device.device = \"dhd\": backend not built in this branch",
+            ),
             (
                 "[supervisor]\nrestart = \"sometimes\"",
                 "supervisor.restart = \"sometimes\"",
