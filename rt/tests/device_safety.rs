@@ -70,7 +70,7 @@ impl CartesianDevice for Fake {
         &self.info
     }
     fn sample(&mut self, now_ns: u64) -> Result<Sample, DeviceFault> {
-        let b = *self.behaviour.lock().unwrap();
+        let b = *self.behaviour.lock().expect("lock");
         if b.fails_after_ns.is_some_and(|t| now_ns >= t) {
             return Err(DeviceFault::CallFailed {
                 call: "fakeGetPosition",
@@ -87,14 +87,14 @@ impl CartesianDevice for Fake {
         })
     }
     fn command(&mut self, now_ns: u64, cmd: Command) -> Result<(), DeviceFault> {
-        self.log.lock().unwrap().commands.push((now_ns, cmd));
+        self.log.lock().expect("lock").commands.push((now_ns, cmd));
         Ok(())
     }
     fn set_output_gain(&mut self, gain: f64) {
-        self.log.lock().unwrap().gains.push(gain);
+        self.log.lock().expect("lock").gains.push(gain);
     }
     fn close(&mut self) {
-        self.log.lock().unwrap().closed = true;
+        self.log.lock().expect("lock").closed = true;
     }
 }
 
@@ -115,7 +115,12 @@ fn tick<D: CartesianDevice>(g: &mut Guarded<D>, now: u64, f: Vec3) -> Vec3 {
 }
 
 fn last(log: &Arc<Mutex<Log>>) -> Command {
-    log.lock().unwrap().commands.last().expect("a command").1
+    log.lock()
+        .expect("lock")
+        .commands
+        .last()
+        .expect("a command")
+        .1
 }
 
 #[test]
@@ -209,15 +214,15 @@ fn a_hand_faster_than_the_velocity_limit_releases_the_device_until_slow_again() 
         tick(&mut g, k * MS, f);
     }
     assert_eq!(last(&log), Command::Force(f));
-    b.lock().unwrap().velocity = Vec3::new(0.0, 1.5, 0.0);
+    b.lock().expect("lock").velocity = Vec3::new(0.0, 1.5, 0.0);
     assert_eq!(tick(&mut g, 21 * MS, f), Vec3::zeros());
     assert_eq!(last(&log), Command::Release, "released");
-    assert_eq!(log.lock().unwrap().gains.last(), Some(&0.0));
+    assert_eq!(log.lock().expect("lock").gains.last(), Some(&0.0));
     assert_eq!(g.holding(), Some(Limit::Velocity));
     let trip = g.last_trip().expect("tripped");
     assert_eq!((trip.limit, trip.at_ns), (Limit::Velocity, 21 * MS));
     // Slow again: the force comes back through a fresh ramp-in, not at once.
-    b.lock().unwrap().velocity = Vec3::new(0.0, 0.5, 0.0);
+    b.lock().expect("lock").velocity = Vec3::new(0.0, 0.5, 0.0);
     let back = tick(&mut g, 22 * MS, f);
     assert!(
         back.norm() > 0.0 && back.norm() < f.norm() * 0.2,
@@ -269,7 +274,7 @@ fn a_sample_time_that_stands_still_past_the_watchdog_releases_the_device() {
     let (d, log, b) = fake(20.0);
     let mut g = Guarded::new(d, limits(), 0);
     let f = Vec3::new(1.0, 1.0, 0.0);
-    b.lock().unwrap().frozen_after_ns = Some(10 * MS);
+    b.lock().expect("lock").frozen_after_ns = Some(10 * MS);
     let mut released_at = None;
     for k in 1..=100 {
         tick(&mut g, k * MS, f);
@@ -291,7 +296,7 @@ fn a_device_fault_releases_the_device() {
     let f = Vec3::new(1.0, 0.0, 0.0);
     tick(&mut g, MS, f);
     assert_eq!(last(&log), Command::Force(f));
-    b.lock().unwrap().fails_after_ns = Some(2 * MS);
+    b.lock().expect("lock").fails_after_ns = Some(2 * MS);
     assert_eq!(
         g.sample(2 * MS),
         Err(DeviceFault::CallFailed {
@@ -321,7 +326,7 @@ fn a_stale_world_releases_and_close_and_drop_release_and_close() {
     tick(&mut g, 3 * MS, f);
     assert_eq!(last(&log), Command::Force(f), "fresh again");
     drop(g);
-    let l = log.lock().unwrap();
+    let l = log.lock().expect("lock");
     assert_eq!(
         l.commands.last().map(|c| c.1),
         Some(Command::Release),
