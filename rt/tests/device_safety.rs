@@ -337,16 +337,18 @@ fn a_stale_world_releases_and_close_and_drop_release_and_close() {
 
 #[test]
 fn the_simulated_arm_is_limp_after_its_guard_is_dropped_mid_push() {
-    let mut sc = Scenario::default();
-    sc.site = vec![coop_model::scenario::SiteSpec {
-        name: "a".into(),
-        device_base_m: [-0.3, -0.2, 0.0],
-        script: vec![coop_model::scenario::KeyframeSpec {
-            t_s: 0.0,
-            target_m: [-0.12, 0.0, 0.01],
+    let sc = Scenario {
+        site: vec![coop_model::scenario::SiteSpec {
+            name: "a".into(),
+            device_base_m: [-0.3, -0.2, 0.0],
+            script: vec![coop_model::scenario::KeyframeSpec {
+                t_s: 0.0,
+                target_m: [-0.12, 0.0, 0.01],
+            }],
+            ..Default::default()
         }],
-        ..Default::default()
-    }];
+        ..Scenario::default()
+    };
     let script = sc.script(0);
     let arm = SimScara::new(
         Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
