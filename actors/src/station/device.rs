@@ -347,6 +347,15 @@ pub fn open(
     now_ns: u64,
 ) -> anyhow::Result<StationDevice> {
     match setup.backend {
+        // The scenario's user is a recorded hand: it plays on this station too.
+        Backend::Sim if scenario.site[site].hand_trajectory.is_some() => {
+            let t = scenario.site[site]
+                .hand_trajectory
+                .clone()
+                .unwrap_or_default();
+            let what = scenario.site[site].hand_replay.clone().unwrap_or_default();
+            Ok(StationDevice::Replay(Replay::new(t, &what)))
+        }
         Backend::Sim => {
             let script = scenario.script(site);
             let plant = coop_model::device::Plant::at(
