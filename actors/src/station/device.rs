@@ -383,7 +383,11 @@ pub fn open(
 }
 
 /// What each backend built in finds, in [`Backend::ALL`] order.
-pub fn probe_all(scenario: &coop_model::scenario::Scenario, site: usize) -> Vec<ProbeReport> {
+pub fn probe_all(
+    setup: &DeviceSetup,
+    scenario: &coop_model::scenario::Scenario,
+    site: usize,
+) -> Vec<ProbeReport> {
     Backend::ALL
         .into_iter()
         .map(|b| match b {
@@ -409,12 +413,35 @@ pub fn probe_all(scenario: &coop_model::scenario::Scenario, site: usize) -> Vec<
                     devices: vec![coop_rt::device::CartesianDevice::info(&d).clone()],
                 }
             }
-            Backend::Replay => ProbeReport {
-                backend: b.name(),
-                built_in: true,
-                status: "always available: plays [device.replay] file (an MCAP recording or a CSV t_s,x,y,z)".into(),
-                devices: Vec::new(),
-            },
+            Backend::Replay => {
+                // The configuration's recorded hand, or the scenario's for this site.
+                let hand = setup.replay.as_ref().map(|t| ("device.replay.file", t)).or(
+                    scenario.site[site]
+                        .hand_trajectory
+                        .as_ref()
+                        .map(|t| ("the scenario's hand_replay", t)),
+                );
+                ProbeReport {
+                    backend: b.name(),
+                    built_in: true,
+                    status: match hand {
+                        Some((what, t)) => format!(
+                            "{what}: {} samples from {:.3} s to {:.3} s",
+                            t.len(),
+                            t.first().0,
+                            t.end_s()
+                        ),
+                        None => "always available: plays [device.replay] file (a station's MCAP recording or a CSV t_s,x,y,z)".into(),
+                    },
+                    devices: hand
+                        .map(|(what, t)| {
+                            coop_rt::device::CartesianDevice::info(&Replay::new(t.clone(), what))
+                                .clone()
+                        })
+                        .into_iter()
+                        .collect(),
+                }
+            }
             Backend::Haply | Backend::Dhd => ProbeReport {
                 backend: b.name(),
                 built_in: false,
