@@ -25,6 +25,7 @@ use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
 use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
 use coop_rt::device::safety::{Guarded, SafetyLimits};
 use coop_rt::device::{CartesianDevice, SimScara};
+use coop_rt::sched::{self, Policy, Request};
 use coop_rt::timer::{monotonic_ns, PeriodicTimer};
 use hdrhistogram::Histogram;
 
@@ -52,6 +53,11 @@ pub struct Args {
     /// The stand-in service script.
     #[arg(long, value_name = "FILE", default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../rt/tests/fixtures/haply_service.py"))]
     pub mock: PathBuf,
+    /// SCHED_FIFO priority of the servo thread, as a station's servo runs (0: SCHED_OTHER). Falls back
+    /// to SCHED_OTHER, saying so, without the privilege.
+    #[arg(long, value_name = "PRIO", default_value_t = 80,
+          value_parser = clap::value_parser!(i32).range(0..=99))]
+    pub fifo_priority: i32,
     /// A short run (1 s per phase, 1 round) to check the benchmark works.
     #[arg(long)]
     pub quick: bool,
@@ -201,6 +207,27 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let period = Duration::from_micros(args.period_us);
     let ticks = (seconds * 1e6 / args.period_us as f64) as u64;
     let (_mock, port) = start_mock(&args.mock)?;
+    // The servo's scheduling, after the stand-in started (it must not inherit it). The Haply bridge
+    // thread, started from this thread, drops back to SCHED_OTHER itself.
+    let policy = if args.fifo_priority > 0 {
+        let req = Request {
+            policy: Policy::Fifo,
+            priority: args.fifo_priority,
+            cpus: None,
+            prefault_stack_bytes: 256 * 1024,
+        };
+        match sched::apply_to_current_thread(&req) {
+            Ok((in_force, warnings)) => {
+                for w in warnings {
+                    eprintln!("devbench: {w}");
+                }
+                format!("{in_force:?}")
+            }
+            Err(e) => bail!("--fifo-priority {}: {e}", args.fifo_priority),
+        }
+    } else {
+        "SCHED_OTHER".to_owned()
+    };
     let cfg = HaplyConfig {
         url: format!("ws://127.0.0.1:{port}"),
         rate_hz: args.bridge_rate_hz,
@@ -242,6 +269,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             "{}",
             serde_json::json!({
                 "period_us": args.period_us, "seconds_per_phase": seconds, "rounds": rounds,
+                "servo_thread": policy,
                 "sim": side(&sim_fig), "haply": side(&haply_fig),
                 "p999_ratio_haply_over_sim": ratio,
                 "roundtrip": { "count": rtt.len(), "p50_us": q(&rtt, 0.5), "p99_us": q(&rtt, 0.99) },
@@ -252,6 +280,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             "devbench: servo period {} µs, {rounds} round(s) of {seconds} s per backend, Haply bridge at {} Hz",
             args.period_us, args.bridge_rate_hz
         );
+        println!("servo thread: {policy}");
         println!("backend  ticks    overruns  wake p50 µs  p99 µs   p99.9 µs  max µs");
         for (name, f) in [("sim", &sim_fig), ("haply", &haply_fig)] {
             println!(

@@ -14,7 +14,7 @@
 //! A failed call is reported as [`DeviceFault::CallFailed`] with the SDK's error number, and the
 //! backend releases the force at once (the safety layer releases too).
 //!
-//! `unsafe` is confined to this file's [`ffi`] section: calling into a C library loaded at run time
+//! `unsafe` is confined to this file's `ffi` section: calling into a C library loaded at run time
 //! cannot be checked by the compiler, so each call states why it is sound.
 #![allow(unsafe_code)]
 

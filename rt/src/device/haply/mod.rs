@@ -3,7 +3,7 @@
 //!
 //! The servo never touches the socket. [`HaplyDevice::open`] connects, reads the service's snapshot,
 //! picks the Inverse3 (by `device_id`, or the only one), and starts a bridge thread that owns the
-//! socket ([`bridge`]); [`HaplyDevice::sample`](CartesianDevice::sample) and
+//! socket (`bridge.rs`); [`HaplyDevice::sample`](CartesianDevice::sample) and
 //! [`command`](CartesianDevice::command) only pop a lock-free ring and write a seqlock slot.
 //!
 //! Why not the `haply` crate: its `HaplyDevice` shares state behind `Arc<tokio::sync::Mutex<_>>`
