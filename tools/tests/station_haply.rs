@@ -6,14 +6,13 @@
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 use std::sync::Arc;
 use std::time::Duration;
 
 use coop_rt::device::safety::Limit;
 use coop_rt::shm::control::{ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
-use coop_rt::sync::Ordering;
+use coop_rt::sync::{AtomicU64, Ordering};
 use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
@@ -57,8 +56,8 @@ fn service() -> Option<(Reaped, u16, Arc<AtomicU64>)> {
                     .map(|x| x.parse::<f64>().unwrap_or(0.0).powi(2))
                     .sum::<f64>()
                     .sqrt();
-                if n > f64::from_bits(m.load(AtomicOrdering::Relaxed)) {
-                    m.store(n.to_bits(), AtomicOrdering::Relaxed);
+                if n > f64::from_bits(m.load(Ordering::Relaxed)) {
+                    m.store(n.to_bits(), Ordering::Relaxed);
                 }
             }
         }
@@ -106,9 +105,9 @@ fn a_station_drives_a_haply_device_and_releases_it_when_the_service_vanishes() {
         (ctl.run_state() == RunState::Running).then_some(())
     });
     wait_until("the device displaying the contact", LIMIT, || {
-        (f64::from_bits(most.load(AtomicOrdering::Relaxed)) > 0.5).then_some(())
+        (f64::from_bits(most.load(Ordering::Relaxed)) > 0.5).then_some(())
     });
-    let shown = f64::from_bits(most.load(AtomicOrdering::Relaxed));
+    let shown = f64::from_bits(most.load(Ordering::Relaxed));
     // The mock's Inverse3 reports 3 N as its maximum (HaplyConfig's default).
     assert!(
         shown <= 3.0 + 1e-9,
