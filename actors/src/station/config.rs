@@ -796,7 +796,19 @@ mod tests {
 
     #[test]
     fn each_rule_names_field_value_and_rule() {
-        let cases: [(&str, &str); 26] = [
+        let cases: [(&str, &str); 29] = [
+            (
+                "[device]\ndevice = \"haply\"\n[device.haply]\nurl = \"http://localhost:10001\"",
+                "device.haply.url = \"http://localhost:10001\": must be a ws://host:port URL",
+            ),
+            (
+                "[device]\ndevice = \"haply\"\n[device.haply]\nrate = 5",
+                "device.haply: unknown field `rate`",
+            ),
+            (
+                "[device.haply]\nurl = \"ws://localhost:10001\"",
+                "device.haply: a table for backend \"haply\", but device = \"sim\"",
+            ),
             (
                 "[device]\ndevice = \"phantom\"",
                 "unknown variant `phantom`, expected one of `sim`, `replay`, `haply`, `dhd`",
@@ -834,8 +846,8 @@ mod tests {
                 "device.replay.file = \"/nonexistent-coop/hand.csv\": cannot be read",
             ),
             (
-                "[device]\ndevice = \"dhd\"",
-                "device.device = \"dhd\": backend not built in this branch",
+                "[device]\ndevice = \"dhd\"\n[device.dhd]\nwatchdog_ms = 40",
+                "device.dhd.watchdog_ms = 40: must be 0 (off) or in 0.125..=31.875 ms",
             ),
             (
                 "[supervisor]\nrestart = \"sometimes\"",

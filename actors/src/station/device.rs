@@ -21,6 +21,12 @@
 //!
 //! [device.replay]         # device = "replay"
 //! file = "user1.mcap"     # a station's recording (its tool positions), or a CSV t_s,x,y,z
+//!
+//! [device.haply]          # device = "haply": `coop_rt::device::haply::HaplyConfig`
+//! url = "ws://localhost:10001"
+//!
+//! [device.dhd]            # device = "dhd": `coop_rt::device::dhd::DhdConfig`
+//! library = "/opt/forcedimension/lib/libdhd.so"
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -29,6 +35,8 @@ use anyhow::{bail, Context};
 use coop_model::body::Vec3;
 use coop_model::replay::Trajectory;
 use coop_rt::device::cartesian::{DeviceInfo, ProbeReport};
+use coop_rt::device::dhd::{DhdConfig, DhdDevice};
+use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
 use coop_rt::device::replay::Replay;
 use coop_rt::device::safety::SafetyLimits;
 use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
@@ -150,12 +158,11 @@ pub struct DeviceSpec {
     /// The recorded hand, for `device = "replay"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub replay: Option<ReplaySpec>,
-    /// The Haply backend's table (`device = "haply"`): taken by the Haply backend where this
-    /// build has it.
+    /// The Haply backend's table (`device = "haply"`), read as
+    /// [`coop_rt::device::haply::HaplyConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub haply: Option<toml::Table>,
-    /// The DHD backend's table (`device = "dhd"`): taken by the DHD backend where this build has
-    /// it.
+    /// The DHD backend's table (`device = "dhd"`), read as [`coop_rt::device::dhd::DhdConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dhd: Option<toml::Table>,
 }
@@ -171,10 +178,25 @@ pub struct DeviceSetup {
     pub limits: SafetyLimits,
     /// The recorded hand, for `replay`.
     pub replay: Option<Trajectory>,
+    /// The Haply table (its defaults when absent).
+    pub haply: HaplyConfig,
+    /// The DHD table (its defaults when absent).
+    pub dhd: DhdConfig,
 }
 
-/// Why a backend is not in this build, in one place for the config and `station devices`.
-const NOT_BUILT: &str = "backend not built in this branch";
+/// A backend's table (`[device.<name>]`) as its config type: unknown fields and wrong types are
+/// refused naming `device.<name>.<field>`.
+fn backend_table<T: serde::de::DeserializeOwned + Default>(
+    name: &str,
+    table: Option<&toml::Table>,
+) -> anyhow::Result<T> {
+    match table {
+        None => Ok(T::default()),
+        Some(t) => toml::Value::Table(t.clone())
+            .try_into()
+            .map_err(|e| anyhow::anyhow!("device.{name}: {}", e.to_string().trim_end())),
+    }
+}
 
 impl DeviceSpec {
     /// Checks every value (the messages name `device.<field>`, the value and the rule; the caller
@@ -264,6 +286,18 @@ impl DeviceSpec {
                 );
             }
         }
+        let haply: HaplyConfig = backend_table("haply", self.haply.as_ref())?;
+        haply
+            .validate()
+            .map_err(|e| anyhow::anyhow!("device.haply.{e}"))?;
+        let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
+        dhd.validate()
+            .map_err(|e| anyhow::anyhow!("device.dhd.{e}"))?;
+        if let Some(lib) = &mut dhd.library {
+            if let Some(b) = base.filter(|_| lib.is_relative() && lib.components().count() > 1) {
+                *lib = b.join(&*lib);
+            }
+        }
         let replay = match backend {
             Backend::Sim => {
                 if !placement.is_identity() {
@@ -285,15 +319,15 @@ impl DeviceSpec {
                     format!("device.replay.file = {:?}", spec.file.display().to_string())
                 })?)
             }
-            Backend::Haply | Backend::Dhd => {
-                bail!("device.device = {:?}: {NOT_BUILT}", backend.name())
-            }
+            Backend::Haply | Backend::Dhd => None,
         };
         Ok(DeviceSetup {
             backend,
             placement,
             limits,
             replay,
+            haply,
+            dhd,
         })
     }
 }
@@ -339,7 +373,8 @@ pub fn load_trajectory(path: &Path) -> anyhow::Result<Trajectory> {
 /// Opens the configured backend for station site `site` at `now_ns` (the servo process).
 ///
 /// # Errors
-/// A backend this build does not have (the config refuses it first).
+/// A vendor device that does not open (service unreachable, library missing, no device), naming
+/// the config field to look at.
 pub fn open(
     setup: &DeviceSetup,
     scenario: &coop_model::scenario::Scenario,
@@ -378,7 +413,12 @@ pub fn open(
                 .context("device = \"replay\" without a trajectory")?;
             Ok(StationDevice::Replay(Replay::new(t, "device.replay.file")))
         }
-        Backend::Haply | Backend::Dhd => bail!("device = {:?}: {NOT_BUILT}", setup.backend.name()),
+        Backend::Haply => Ok(StationDevice::Other(Box::new(
+            HaplyDevice::open(&setup.haply).map_err(anyhow::Error::from)?,
+        ))),
+        Backend::Dhd => Ok(StationDevice::Other(Box::new(
+            DhdDevice::open(&setup.dhd).map_err(anyhow::Error::from)?,
+        ))),
     }
 }
 
@@ -442,12 +482,8 @@ pub fn probe_all(
                         .collect(),
                 }
             }
-            Backend::Haply | Backend::Dhd => ProbeReport {
-                backend: b.name(),
-                built_in: false,
-                status: format!("not built in ({NOT_BUILT})"),
-                devices: Vec::new(),
-            },
+            Backend::Haply => coop_rt::device::haply::probe(&setup.haply),
+            Backend::Dhd => coop_rt::device::dhd::probe(&setup.dhd),
         })
         .collect()
 }
