@@ -6,13 +6,16 @@
 //!   force, falling back loudly when a privilege is missing.
 //! - [`timer`]: a periodic timer on absolute CLOCK_MONOTONIC deadlines with overrun counting.
 //! - [`stats`]: live loop statistics another process reads without disturbing the loop.
-//! - [`msg`], [`device`], [`servo`], [`physics`]: the station's ring messages and the bodies of its
-//!   servo and physics loops over the model (the processes around them come with the station).
+//! - [`device`]: the Cartesian device interface, its backends built in (the simulated SCARA arm, a
+//!   replayed hand), the device-to-world placement and the safety contract every backend runs under.
+//! - [`msg`], [`servo`], [`physics`]: the station's ring messages and the bodies of its servo and
+//!   physics loops over the model (the processes around them come with the station).
 //!
 //! Real-time contract: after construction, `Producer::push`, `Consumer::pop`/`pop_newest`,
-//! `PeriodicTimer::wait` and `LoopStats::record` do not allocate, lock or log, and make no system call
-//! but the timer's `clock_nanosleep` (`rt/tests/alloc_free.rs` checks the allocation part). Everything
-//! else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
+//! `PeriodicTimer::wait`, `LoopStats::record` and the device layer's `sample`/`display` (with the
+//! backends built in) do not allocate, lock or log, and make no system call but the timer's
+//! `clock_nanosleep` (`rt/tests/alloc_free.rs` and `rt/tests/loops.rs` check the allocation part).
+//! Everything else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
 //!
 //! `unsafe` lives only in [`shm`] and [`sched`] (H2); every block says why it is sound.
 #![deny(unsafe_code)]

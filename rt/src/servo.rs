@@ -1,22 +1,49 @@
-//! The servo loop's body: read the device, take the newest object state from physics, run the
-//! model's servo step (Eq. 5–7, 12, stale ramp, bounded adoption step), write the torques, send the
-//! tool sample to physics, publish statistics. The periodic timer and scheduling around it belong to
-//! the station's servo process.
+//! The servo loop's body, in Cartesian space: sample the device (through the safety layer), place
+//! the tool in the world, take the newest object state from physics, run the model's servo step
+//! (contact Eq. 7, displayed force Eq. 6, stale ramp, bounded adoption step), command the force in
+//! the device's frame (through the safety layer, which releases on a stale world or a stop), send
+//! the tool sample to physics, publish statistics. The periodic timer and scheduling around it
+//! belong to the station's servo process.
 
-use coop_model::body::BodyState;
+use coop_model::body::{BodyState, Vec3};
+use coop_model::contact::ContactForce;
 use coop_model::method::World;
-use coop_model::servo::{Servo, ServoInput, ServoOutput};
+use coop_model::servo::{Servo, ServoInput};
 
-use crate::device::Device;
+use crate::device::safety::{Guarded, Trip};
+use crate::device::{CartesianDevice, Placement};
 use crate::msg::{ObjectSample, ToolSample};
 use crate::shm::control::{ControlBlock, Ring, RunState};
 use crate::shm::{Consumer, Producer};
 
+/// What one servo tick did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoTick {
+    /// Desired force at the hand F_h (after the stale ramp and the adoption blend), world, N.
+    pub f_desired: Vec3,
+    /// The force commanded to the device after the safety layer, world, N (zero when released).
+    pub f_command: Vec3,
+    /// The force the device senses on the hand, world, N (zero without a sensor).
+    pub f_measured: Vec3,
+    /// The tool's contact on the object (force on the object), for physics.
+    pub contact: ContactForce,
+    /// Tool position, world.
+    pub tool_pos: Vec3,
+    /// Tool velocity, world.
+    pub tool_vel: Vec3,
+    /// Display scale: 1 fresh, 0 stale.
+    pub scale: f64,
+}
+
 /// Everything one servo loop owns.
 #[derive(Debug)]
-pub struct ServoLoop<D> {
+pub struct ServoLoop<D: CartesianDevice> {
     servo: Servo,
-    device: D,
+    device: Guarded<D>,
+    placement: Placement,
+    /// The last good sample's tool position and velocity (world) and sensed force (device frame):
+    /// kept through a faulty sample, while the device is released.
+    last_tool: (Vec3, Vec3, Vec3),
     world: World,
     objects: Consumer<ObjectSample>,
     tools: Producer<ToolSample>,
@@ -31,12 +58,13 @@ pub struct ServoLoop<D> {
     last_roundtrip_tool_ns: u64,
 }
 
-impl<D: Device> ServoLoop<D> {
-    /// A servo loop over `device`, reading object states from `objects`, sending tool samples on
-    /// `tools`.
+impl<D: CartesianDevice> ServoLoop<D> {
+    /// A servo loop over `device` placed in the world by `placement`, reading object states from
+    /// `objects`, sending tool samples on `tools`.
     pub fn new(
         servo: Servo,
-        device: D,
+        device: Guarded<D>,
+        placement: Placement,
         world: World,
         objects: Consumer<ObjectSample>,
         tools: Producer<ToolSample>,
@@ -45,6 +73,8 @@ impl<D: Device> ServoLoop<D> {
         Self {
             servo,
             device,
+            placement,
+            last_tool: (Vec3::new(1e3, 1e3, 1e3), Vec3::zeros(), Vec3::zeros()),
             world,
             objects,
             tools,
@@ -59,14 +89,24 @@ impl<D: Device> ServoLoop<D> {
         }
     }
 
-    /// The device.
+    /// The device (setup only: the tick goes through the safety layer).
     pub fn device_mut(&mut self) -> &mut D {
+        self.device.device_mut()
+    }
+
+    /// The device under its safety layer.
+    pub fn guarded(&self) -> &Guarded<D> {
+        &self.device
+    }
+
+    /// The device under its safety layer, mutably.
+    pub fn guarded_mut(&mut self) -> &mut Guarded<D> {
         &mut self.device
     }
 
     /// One tick at `now_ns`. While the station is stopping (per `control`), the displayed force and the
     /// command ramp to zero as for a stale world; [`ServoLoop::is_limp`] says when they got there.
-    pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoOutput {
+    pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoTick {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let mut adopted = false;
         if let Ok(n) = self.objects.pop_newest() {
@@ -88,7 +128,14 @@ impl<D: Device> ServoLoop<D> {
                 self.latest = Some((state, n.value.t_ns, n.value.adoptions));
             }
         }
-        let reading = self.device.read(now_ns);
+        if let Ok(s) = self.device.sample(now_ns) {
+            self.last_tool = (
+                self.placement.position_to_world(s.position_m),
+                self.placement.velocity_to_world(s.velocity_m_s),
+                s.force_sensed_n.unwrap_or_default(),
+            );
+        }
+        let (tool_pos, tool_vel, f_sensed) = self.last_tool;
         let dt = (now_ns.saturating_sub(self.last_ns)).max(1) as f64 * 1e-9;
         self.last_ns = now_ns;
         // No state yet: the world is stale from the start (the display stays at zero).
@@ -103,9 +150,8 @@ impl<D: Device> ServoLoop<D> {
             &ServoInput {
                 now_s: now_ns as f64 * 1e-9,
                 dt_s: dt,
-                q: reading.q,
-                qd: reading.qd,
-                f_measured: reading.f_measured,
+                tool_pos,
+                tool_vel,
                 object: &object,
                 object_time_s: t_ns as f64 * 1e-9,
                 adopted,
@@ -114,7 +160,15 @@ impl<D: Device> ServoLoop<D> {
             &self.world.shape,
             &self.world.mass,
         );
-        self.device.write(out.tau);
+        let f_device = self.placement.force_to_device(out.f_desired);
+        let f_command = self.device.display(now_ns, f_device, out.scale);
+        // Back to the world for the record (the identity placement computes nothing).
+        let (f_command, f_measured) = if self.placement.is_identity() {
+            (f_command, f_sensed)
+        } else {
+            let p = &self.placement;
+            (p.force_to_world(f_command), p.force_to_world(f_sensed))
+        };
         self.seq += 1;
         let a = |v: coop_model::body::Vec3| [v.x, v.y, v.z];
         let sample = ToolSample {
@@ -127,8 +181,8 @@ impl<D: Device> ServoLoop<D> {
             depth: out.contact.depth,
             touching: u64::from(out.contact.touching),
             f_desired: a(out.f_desired),
-            f_measured: a(reading.f_measured),
-            f_command: a(out.f_command),
+            f_measured: a(f_measured),
+            f_command: a(f_command),
         };
         if self.tools.push(sample).is_err() {
             self.dropped += 1;
@@ -150,7 +204,7 @@ impl<D: Device> ServoLoop<D> {
                     .store(0, crate::sync::Ordering::Relaxed);
             }
         }
-        if stale && !self.stale_limp_recorded && out.f_command.norm() == 0.0 {
+        if stale && !self.stale_limp_recorded && f_command.norm() == 0.0 {
             self.stale_limp_recorded = true;
             if let Some(c) = control {
                 c.servo
@@ -159,11 +213,27 @@ impl<D: Device> ServoLoop<D> {
             }
         }
         if let Some(c) = control {
-            ControlBlock::store_f64(&c.servo.command_n, out.f_command.norm());
+            ControlBlock::store_f64(&c.servo.command_n, f_command.norm());
             ControlBlock::store_f64(&c.servo.scale, out.scale);
+            if let Some(t) = self.device.last_trip() {
+                publish_trip(c, t);
+            }
         }
         self.limp = out.scale == 0.0;
-        out
+        ServoTick {
+            f_desired: out.f_desired,
+            f_command,
+            f_measured,
+            contact: out.contact,
+            tool_pos,
+            tool_vel,
+            scale: out.scale,
+        }
+    }
+
+    /// Releases and closes the device (the station stopped or the servo exits).
+    pub fn close(&mut self, now_ns: u64) {
+        self.device.close(now_ns);
     }
 
     /// Whether the last tick displayed and commanded nothing (scale 0): safe to exit on a stop.
@@ -173,6 +243,18 @@ impl<D: Device> ServoLoop<D> {
 
     /// The device.
     pub fn device(&self) -> &D {
-        &self.device
+        self.device.device()
+    }
+}
+
+/// Publishes the safety layer's last trip in the control block's servo group.
+pub fn publish_trip(c: &ControlBlock, t: Trip) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    use crate::sync::Ordering::Relaxed;
+    let s = &c.servo;
+    if s.safety_at_ns.load(Relaxed) != t.at_ns || s.safety_limit.load(Relaxed) != t.limit.code() {
+        s.safety_limit.store(t.limit.code(), Relaxed);
+        s.safety_at_ns.store(t.at_ns, Relaxed);
+        s.safety_episodes.store(t.episodes, Relaxed);
     }
 }

@@ -7,9 +7,12 @@
 use coop_model::body::{BodyState, Vec3};
 use coop_model::device::Plant;
 use coop_model::method::{ObjectCopy, Paper};
+use coop_model::replay::Trajectory;
 use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
 use coop_model::servo::Servo;
-use coop_rt::device::SimDevice;
+use coop_rt::device::replay::Replay;
+use coop_rt::device::safety::{Guarded, Limit, SafetyLimits};
+use coop_rt::device::{CartesianDevice, Placement, SimScara, StationDevice};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::servo::ServoLoop;
@@ -30,8 +33,8 @@ type Segments = (
 );
 
 /// One site pushing a disk on a table, all four rings real segments.
-struct Rig {
-    servo: ServoLoop<SimDevice>,
+struct Rig<D: CartesianDevice = SimScara> {
+    servo: ServoLoop<D>,
     physics: PhysicsLoop,
     reports: coop_rt::shm::Consumer<SiteReport>,
     remote_in: Producer<SiteReport>,
@@ -43,6 +46,23 @@ struct Rig {
 
 /// With `wall`, a wall at x = 4.5 cm stops the disk so the user can press it against the wall.
 fn rig(tag: &str, wall: bool) -> Rig {
+    rig_with(tag, wall, |sc| {
+        let script = sc.script(0);
+        SimScara::new(
+            Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+            sc.force_loop(0),
+            script,
+            0,
+        )
+    })
+}
+
+/// The rig with the device `make` builds for its scenario.
+fn rig_with<D: CartesianDevice>(
+    tag: &str,
+    wall: bool,
+    make: impl FnOnce(&Scenario) -> D,
+) -> Rig<D> {
     let mut sc = Scenario::default();
     sc.object.start_m = [0.0, 0.0, 0.0099];
     sc.world.planes[0].normal = [0.0, 0.0, 1.0];
@@ -83,15 +103,11 @@ fn rig(tag: &str, wall: bool) -> Rig {
     let rem = RingSegment::<SiteReport>::create(&name("rem"), 64).expect("remote ring");
     let trc = RingSegment::<TraceRecord>::create(&name("trc"), 4096).expect("trace ring");
     let world = sc.world();
-    let script = sc.script(0);
-    let device = SimDevice::new(
-        Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
-        script,
-        0,
-    );
+    let device = make(&sc);
     let servo = ServoLoop::new(
-        Servo::new(sc.servo_params(0), sc.arm(0)),
-        device,
+        Servo::new(sc.servo_params(0)),
+        Guarded::new(device, SafetyLimits::default(), 0),
+        Placement::IDENTITY,
         world,
         obj.consumer().expect("c"),
         tool.producer().expect("p"),
@@ -234,7 +250,7 @@ fn when_physics_stops_the_commanded_force_ramps_to_zero() {
                 "still commanding {f} N {} ms after physics stopped",
                 k - stopped
             );
-            assert_eq!(out.tau.norm(), 0.0, "torques too");
+            assert_eq!(r.servo.device().tau().norm(), 0.0, "torques too");
         }
     }
     let zero_at = zero_at.expect("reached zero");
@@ -261,6 +277,81 @@ fn loop_steps_allocate_nothing() {
         }
     });
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
+}
+
+/// The servo step through the station's device type with each backend built in (the simulated
+/// arm, a replayed hand pressing the disk against the wall far harder than the limits allow, so the
+/// force clamp and the impulse limit act), under the safety layer, allocates nothing.
+#[test]
+fn servo_steps_with_each_backend_under_the_safety_layer_allocate_nothing() {
+    let sim = rig_with("allocsim", true, |sc| {
+        let script = sc.script(0);
+        StationDevice::Sim(SimScara::new(
+            Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+            sc.force_loop(0),
+            script,
+            0,
+        ))
+    });
+    let replay = rig_with("allocrep", true, |sc| {
+        // The script's path, ending 2 cm further into the disk held by the wall.
+        let script = sc.script(0);
+        let end = script.len() - 1;
+        let t = Trajectory::new(script.iter().enumerate().map(|(i, k)| {
+            let deeper = if i == end {
+                Vec3::new(0.02, 0.0, 0.0)
+            } else {
+                Vec3::zeros()
+            };
+            (k.t_s, k.target + deeper)
+        }))
+        .expect("a trajectory");
+        let mut d = Replay::new(t, "the script's keyframes");
+        d.start_at(0);
+        StationDevice::Replay(d)
+    });
+    for (what, mut r) in [("sim", sim), ("replay", replay)] {
+        for k in 1..=10u64 {
+            r.physics.step(k * MS);
+            r.servo.step(k * MS, None);
+        }
+        let mut most = 0.0f64;
+        let n = allocations_during(|| {
+            for k in 11..=3000u64 {
+                r.physics.step(k * MS);
+                most = most.max(r.servo.step(k * MS, None).f_command.norm());
+                while r.reports.pop().is_ok() {}
+            }
+        });
+        assert_eq!(n, 0, "{what}: servo/physics loop steps allocated {n} times");
+        assert!(
+            most > 0.3,
+            "{what}: the device was commanded a force ({most} N)"
+        );
+        if what == "replay" {
+            let trip = r.servo.guarded().last_trip().expect("a limit acted");
+            assert!(
+                matches!(trip.limit, Limit::MaxForce | Limit::Impulse),
+                "the replayed hand pressing hard trips the force limits: {trip:?}"
+            );
+            // The servo publishes the trip for `station status`.
+            use coop_rt::shm::control::ControlBlock;
+            use coop_rt::shm::BlockSegment;
+            let name = SegmentName::new(&format!("lp{}trip", std::process::id()), "a", "ctl")
+                .expect("name");
+            let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
+            r.physics.step(3001 * MS);
+            r.servo.step(3001 * MS, Some(&ctl));
+            let load = |a: &coop_rt::sync::AtomicU64| a.load(coop_rt::sync::Ordering::Relaxed);
+            let now = r.servo.guarded().last_trip().expect("still acting");
+            assert_eq!(
+                Limit::from_code(load(&ctl.servo.safety_limit)),
+                Some(now.limit)
+            );
+            assert_eq!(load(&ctl.servo.safety_at_ns), now.at_ns);
+            assert!(load(&ctl.servo.safety_episodes) >= 1);
+        }
+    }
 }
 
 /// A cooperative stop (run state Stopping) ramps the commanded force to zero within the ramp time

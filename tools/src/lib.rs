@@ -30,6 +30,7 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 
 pub mod certs;
 pub mod cli;
+pub mod devbench;
 pub mod fuzz;
 pub mod latency;
 pub mod live;

@@ -246,7 +246,8 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
 
     // Servo: kinematics, contact, Eq. 12 controller on site 0's device, tool touching the object.
     let arm = sc.arm(0);
-    let mut servo = Servo::new(sc.servo_params(0), arm);
+    let mut servo = Servo::new(sc.servo_params(0));
+    let mut force_loop = sc.force_loop(0);
     let q = arm
         .inverse(
             start.pos - Vec3::new(sc.object.radius_m + 0.004, 0.0, 0.0),
@@ -261,13 +262,13 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             .map(|_| {
                 let t0 = Instant::now();
                 for k in 0..per_batch {
+                    let q = black_box(q);
                     let out = servo.step(
                         &ServoInput {
                             now_s: k as f64 * dt,
                             dt_s: dt,
-                            q: black_box(q),
-                            qd: Vec3::zeros(),
-                            f_measured: Vec3::new(0.1, 0.0, 0.0),
+                            tool_pos: arm.forward(&q),
+                            tool_vel: arm.jacobian(&q) * Vec3::zeros(),
                             object: &start,
                             object_time_s: k as f64 * dt,
                             adopted: false,
@@ -276,6 +277,8 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                         &world.shape,
                         &world.mass,
                     );
+                    let f_m = Vec3::new(0.1, 0.0, 0.0);
+                    black_box(force_loop.step(out.f_desired, out.scale, f_m, &q, dt));
                     black_box(out);
                 }
                 t0.elapsed().as_nanos() as f64 / per_batch as f64

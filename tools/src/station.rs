@@ -1,4 +1,4 @@
-//! The `station` command line: `station run|status|clean`, `station router run|status` (a zenoh
+//! The `station` command line: `station run|status|devices|clean`, `station router run|status` (a zenoh
 //! router for sessions across machines), and the hidden loop processes the
 //! supervisor spawns (`station servo|physics|network`). The `station` binary is this; the `session`
 //! binary carries it too (`session station ...`), so one executable can run a whole session.
@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 
-use coop_actors::station::{child, config::StationConfig, run, status};
+use coop_actors::station::{child, config::StationConfig, device, run, status};
 
 /// Command line of `station`.
 #[derive(Debug, Parser)]
@@ -50,6 +50,17 @@ enum Command {
         #[arg(long)]
         session: Option<String>,
         /// Station configuration to take the defaults from.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the device backends built in and what each finds (library present, service
+    /// reachable, devices and their info), marking the one the configuration selects.
+    Devices {
+        /// Station configuration (its scenario places the simulated arm; its `[device]` table
+        /// selects a backend).
         #[arg(long)]
         config: Option<PathBuf>,
         /// Print JSON.
@@ -140,6 +151,15 @@ fn resolve(a: &ChildArgs) -> anyhow::Result<coop_actors::station::config::Resolv
     Ok(r)
 }
 
+/// `v`, or JSON null where it is infinite (a replayed hand bounds nothing).
+fn finite_or_null(v: f64) -> serde_json::Value {
+    if v.is_finite() {
+        serde_json::json!(v)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
 /// Runs the station command line `args` (the first is the program name). `exe_prefix` are the
 /// arguments that come before the subcommand when this executable re-runs itself (empty for the
 /// `station` binary, `["station"]` inside `session`).
@@ -177,6 +197,46 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
                 println!("{v}");
+            }
+            Ok(())
+        }
+        Command::Devices { config, json } => {
+            let r = StationConfig::load(config.as_deref())?;
+            let selected = r.device.backend.name();
+            let reports = device::probe_all(&r.device, &r.scenario, r.site);
+            if json {
+                let v: Vec<serde_json::Value> = reports
+                    .iter()
+                    .map(|p| {
+                        serde_json::json!({
+                            "backend": p.backend,
+                            "built_in": p.built_in,
+                            "selected": p.backend == selected,
+                            "status": p.status,
+                            "devices": p.devices.iter().map(|i| serde_json::json!({
+                                "model": i.model,
+                                "serial": i.serial,
+                                "dof": i.dof,
+                                "max_force_n": finite_or_null(i.max_force_n),
+                                "max_stiffness_n_per_m": finite_or_null(i.max_stiffness_n_per_m),
+                                "max_damping_ns_per_m": finite_or_null(i.max_damping_ns_per_m),
+                                "workspace_radius_m": finite_or_null(i.workspace_radius_m),
+                                "native_rate_hz": finite_or_null(i.native_rate_hz),
+                                "senses_force": i.senses_force,
+                            })).collect::<Vec<_>>(),
+                        })
+                    })
+                    .collect();
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                for p in &reports {
+                    let mark = if p.backend == selected { "*" } else { " " };
+                    println!("{mark} {:<7} {}", p.backend, p.status);
+                    for i in &p.devices {
+                        println!("          {}", device::info_line(i));
+                    }
+                }
+                println!("# * the configuration's device");
             }
             Ok(())
         }

@@ -547,3 +547,70 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
     let (status, _) = station.finish();
     assert!(status.success(), "exit {status}");
 }
+
+/// A device safety limit that acts on a real station is named by `station status`, with when it
+/// acted: here the force clamp, set below what the user pressing a disk against a wall asks for.
+#[test]
+fn station_status_names_the_device_limit_that_acted_last() {
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-limit-{session}"));
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::write(
+        dir.join("press.toml"),
+        "name = \"press\"\nduration_s = 600.0\n\
+         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
+         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
+         planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\
+         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
+         script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
+    )
+    .expect("scenario");
+    let cfg = station_config(&dir, &session, "user1", |c| {
+        c.scenario = Some("press.toml".into());
+        c.device.safety.max_force_n = 0.2;
+    });
+    let station = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    wait_until("the force clamp to act", LIMIT, || {
+        (ctl.servo.safety_limit.load(Ordering::Relaxed) != 0).then_some(())
+    });
+    let out = Command::new(STATION)
+        .args(["status", "--json", "--config"])
+        .arg(&cfg)
+        .output()
+        .expect("status");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let s = &v["servo"]["safety"];
+    assert_eq!(s["limit"], "max_force_n", "{v}");
+    assert_eq!(s["releases"], false);
+    assert!(
+        s["at_ns"].as_u64() > Some(0) && s["ago_s"].as_f64() >= Some(0.0),
+        "{s}"
+    );
+    assert!(
+        ControlBlock::load_f64(&ctl.servo.command_n) <= 0.2 + 1e-9,
+        "the command stays within the clamp"
+    );
+    let text = Command::new(STATION)
+        .args(["status", "--config"])
+        .arg(&cfg)
+        .output()
+        .expect("status");
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(
+        text.contains("safety: limit max_force_n clamped last"),
+        "{text}"
+    );
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -10,11 +10,11 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use coop_model::body::{BodyState, Vec3};
-use coop_model::device::Plant;
 use coop_model::method::{Consistency, Naive, ObjectCopy, Paper};
 use coop_model::scenario::MethodName;
 use coop_model::servo::Servo;
-use coop_rt::device::SimDevice;
+use coop_rt::device::safety::{clamp_contact, Guarded};
+use coop_rt::device::CartesianDevice;
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::run::run_periodic;
 use coop_rt::sched::{self, Request};
@@ -122,18 +122,37 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let objects = Consumer::open(&names.object, &opts).context("opening the object ring")?;
     let tools = Producer::open(&names.tool, &opts).context("opening the tool ring")?;
     let (sc, i) = (&cfg.scenario, cfg.site);
-    let script = sc.script(i);
     let start = monotonic_ns();
-    let plant = Plant::at(sc.arm(i), sc.hand(i), script[0].target, sc.site[i].elbow);
-    // The script runs on the session's clock: a restarted servo picks it up where it is, and a
-    // station waiting for its session holds the first pose until the session starts.
-    let mut device = SimDevice::waiting(plant, script, start);
+    // A script or a recording runs on the session's clock: a restarted servo picks it up where it
+    // is, and a station waiting for its session holds the first pose until the session starts.
+    let mut device = crate::station::device::open(&cfg.device, sc, i, start)?;
     if let Some(epoch) = ctl.epoch() {
         device.start_at(epoch);
     }
+    let dev = &cfg.device;
+    // The contact renders no stiffer nor more damped than the device can (CHAI3D's scaling).
+    let mut params = sc.servo_params(i);
+    let (contact, clamped) = clamp_contact(params.contact, device.info(), dev.placement.scale());
+    if contact != params.contact {
+        eprintln!(
+            "station servo {}: contact stiffness {:.0} N/m, damping {:.1} N·s/m clamped to the device's {:.0} N/m, {:.1} N·s/m (at workspace scale {})",
+            cfg.name,
+            params.contact.stiffness_n_per_m,
+            params.contact.damping_n_s_per_m,
+            contact.stiffness_n_per_m,
+            contact.damping_n_s_per_m,
+            dev.placement.scale()
+        );
+    }
+    params.contact = contact;
+    let mut guarded = Guarded::new(device, dev.limits, start);
+    for l in clamped.into_iter().flatten() {
+        guarded.record(l, start);
+    }
     let mut servo = ServoLoop::new(
-        Servo::new(sc.servo_params(i), sc.arm(i)),
-        device,
+        Servo::new(params),
+        guarded,
+        dev.placement,
         sc.world(),
         objects,
         tools,
@@ -147,7 +166,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         period(sc.site[i].servo_rate_hz),
         &in_force,
         |now| {
-            if servo.device_mut().start().is_none() {
+            if servo.device().waits_for_start() {
                 if let Some(epoch) = ctl.epoch() {
                     servo.device_mut().start_at(epoch);
                 }
@@ -160,6 +179,8 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             }
         },
     );
+    // Stopped: release and close the device (dropping it would too, also on an error path).
+    servo.close(monotonic_ns());
     Ok(())
 }
 

@@ -124,6 +124,8 @@ pub struct StationConfig {
     pub record_max_file_s: u64,
     /// Parts kept, the oldest removed beyond them (0: keep all).
     pub record_keep_files: u32,
+    /// The device: backend, placement in the world, loop owner, safety limits.
+    pub device: crate::station::device::DeviceSpec,
 }
 
 impl Default for StationConfig {
@@ -147,6 +149,7 @@ impl Default for StationConfig {
             record_max_file_mib: 64,
             record_max_file_s: 600,
             record_keep_files: 24,
+            device: crate::station::device::DeviceSpec::default(),
         }
     }
 }
@@ -182,6 +185,8 @@ pub struct Resolved {
     pub policy: crate::policy::RestartPolicy,
     /// The network process's retry schedule.
     pub network_backoff: crate::policy::Backoff,
+    /// The device, checked (and a replayed hand loaded).
+    pub device: crate::station::device::DeviceSetup,
 }
 
 fn sched(
@@ -411,6 +416,7 @@ impl StationConfig {
         if let Some(t) = &mut config.network.tls {
             tls_files_readable(t, base, "network.tls")?;
         }
+        let device = config.device.resolve(base)?;
         let allowed = coop_rt::sched::allowed_cpus();
         let (first, last) = (
             allowed.first().copied().unwrap_or(0),
@@ -473,6 +479,7 @@ impl StationConfig {
             physics_sched,
             policy,
             network_backoff,
+            device,
         })
     }
 }
@@ -789,7 +796,59 @@ mod tests {
 
     #[test]
     fn each_rule_names_field_value_and_rule() {
-        let cases: [(&str, &str); 16] = [
+        let cases: [(&str, &str); 29] = [
+            (
+                "[device]\ndevice = \"haply\"\n[device.haply]\nurl = \"http://localhost:10001\"",
+                "device.haply.url = \"http://localhost:10001\": must be a ws://host:port URL",
+            ),
+            (
+                "[device]\ndevice = \"haply\"\n[device.haply]\nrate = 5",
+                "device.haply: unknown field `rate`",
+            ),
+            (
+                "[device.haply]\nurl = \"ws://localhost:10001\"",
+                "device.haply: a table for backend \"haply\", but device = \"sim\"",
+            ),
+            (
+                "[device]\ndevice = \"phantom\"",
+                "unknown variant `phantom`, expected one of `sim`, `replay`, `haply`, `dhd`",
+            ),
+            (
+                "[device]\nloop = \"vendor\"",
+                "device.loop = \"vendor\": device \"sim\" cannot call the station from its own thread",
+            ),
+            (
+                "[device.safety]\nmax_force_n = 0",
+                "device.safety.max_force_n = 0: must be above 0 and at most 100 N",
+            ),
+            (
+                "[device.safety]\nwatchdog_ms = 0.5",
+                "device.safety.watchdog_ms = 0.5: must be from 1 and at most 10000 ms",
+            ),
+            (
+                "[device.safety]\nmax_velocity_m_s = nan",
+                "device.safety.max_velocity_m_s = NaN: must be above 0",
+            ),
+            (
+                "[device.placement]\nworkspace_scale = 0",
+                "device.placement.workspace_scale = 0: must be from 0.001 to 1000",
+            ),
+            (
+                "[device.placement]\ntranslation_m = [0.1, 0, 0]",
+                "must be the identity for device = \"sim\"",
+            ),
+            (
+                "[device]\ndevice = \"replay\"",
+                "device.replay.file is missing",
+            ),
+            (
+                "[device]\ndevice = \"replay\"\n[device.replay]\nfile = \"/nonexistent-coop/hand.csv\"",
+                "device.replay.file = \"/nonexistent-coop/hand.csv\": cannot be read",
+            ),
+            (
+                "[device]\ndevice = \"dhd\"\n[device.dhd]\nwatchdog_ms = 40",
+                "device.dhd.watchdog_ms = 40: must be 0 (off) or in 0.125..=31.875 ms",
+            ),
             (
                 "[supervisor]\nrestart = \"sometimes\"",
                 "supervisor.restart = \"sometimes\"",

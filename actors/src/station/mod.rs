@@ -4,6 +4,8 @@
 //!
 //! - [`config`]: the station's configuration, validated (field, value, rule, file), and written
 //!   back as TOML for the stations a launcher starts;
+//! - [`device`]: the `[device]` table (backend, placement, loop owner, safety limits), opening the
+//!   backend in the servo process, and what each backend finds (`station devices`);
 //! - [`child`]: the entry points of the servo, physics and network processes;
 //! - [`run`]: `station run`, the supervisor bringing the children up and the stop ladder taking them
 //!   down, leaving nothing behind;
@@ -12,5 +14,6 @@
 
 pub mod child;
 pub mod config;
+pub mod device;
 pub mod run;
 pub mod status;

@@ -236,6 +236,23 @@ pub struct ServoStatus {
     pub command_n: f64,
     /// The display scale: 1 fresh, 0 stale.
     pub display_scale: f64,
+    /// The device safety limit that acted last, if any.
+    pub safety: Option<SafetyStatus>,
+}
+
+/// The device safety limit that acted last (see `coop_rt::device::safety`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SafetyStatus {
+    /// Its name, as in `[device.safety]` (`max_force_n`, `watchdog_ms`, …).
+    pub limit: &'static str,
+    /// Whether it releases the device (velocity, watchdog, fault) rather than clamping a value.
+    pub releases: bool,
+    /// When it acted last, CLOCK_MONOTONIC ns.
+    pub at_ns: u64,
+    /// How long ago, s.
+    pub ago_s: f64,
+    /// Episodes of any limit acting so far.
+    pub episodes: u64,
 }
 
 fn policy_name(n: u64) -> &'static str {
@@ -401,6 +418,19 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
         servo: ServoStatus {
             command_n: ControlBlock::load_f64(&ctl.servo.command_n),
             display_scale: ControlBlock::load_f64(&ctl.servo.scale),
+            safety: coop_rt::device::safety::Limit::from_code(
+                ctl.servo.safety_limit.load(Ordering::Relaxed),
+            )
+            .map(|l| {
+                let at_ns = ctl.servo.safety_at_ns.load(Ordering::Relaxed);
+                SafetyStatus {
+                    limit: l.name(),
+                    releases: l.releases(),
+                    at_ns,
+                    ago_s: coop_rt::timer::monotonic_ns().saturating_sub(at_ns) as f64 / 1e9,
+                    episodes: ctl.servo.safety_episodes.load(Ordering::Relaxed),
+                }
+            }),
         },
         running: run_state == RunState::Running,
     })
@@ -609,6 +639,22 @@ impl fmt::Display for StationStatus {
             f,
             "servo: commanding {:.2} N, display scale {:.2}",
             self.servo.command_n, self.servo.display_scale
-        )
+        )?;
+        match &self.servo.safety {
+            None => write!(f, "\nsafety: no device limit has acted"),
+            Some(s) => write!(
+                f,
+                "\nsafety: limit {} {} last {:.3} s ago (at {} ns; {} episodes of any limit)",
+                s.limit,
+                if s.releases {
+                    "released the device"
+                } else {
+                    "clamped"
+                },
+                s.ago_s,
+                s.at_ns,
+                s.episodes
+            ),
+        }
     }
 }

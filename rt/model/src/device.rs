@@ -11,6 +11,7 @@
 use nalgebra::Matrix3;
 
 use crate::body::Vec3;
+use crate::controller::{ControllerParams, PiForceController};
 
 /// Parameters of the SCARA arm.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -119,6 +120,44 @@ impl ScaraParams {
 
     fn friction(&self, qd: &Vec3) -> Vec3 {
         Vec3::from_fn(|j, _| self.viscous[j] * qd[j] + self.coulomb[j] * (qd[j] / 1e-3).tanh())
+    }
+}
+
+/// The SCARA arm's own force loop: it senses the force at its handle, so it takes the force to
+/// display and drives its joint torques itself with the paper's Eq. 12 PI controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScaraForceLoop {
+    /// The arm.
+    pub arm: ScaraParams,
+    /// The controller's gains and limits.
+    pub params: ControllerParams,
+    controller: PiForceController,
+}
+
+impl ScaraForceLoop {
+    /// The loop of `arm` with `params`, at rest.
+    pub fn new(arm: ScaraParams, params: ControllerParams) -> Self {
+        Self {
+            arm,
+            params,
+            controller: PiForceController::default(),
+        }
+    }
+
+    /// One control step of `dt` seconds towards the desired handle force `f_h` (world, N), with the
+    /// sensed force `f_m` and the joints at `q`; `gain` (0..=1) is the share of the output applied
+    /// (the servo's stale ramp: a fading world leaves the arm limp, not force-controlled to zero; at
+    /// 0 the integral is forgotten). Returns (commanded handle force, joint torques clamped to the
+    /// motors' limits).
+    pub fn step(&mut self, f_h: Vec3, gain: f64, f_m: Vec3, q: &Vec3, dt: f64) -> (Vec3, Vec3) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if gain == 0.0 {
+            self.controller.reset_integral();
+        }
+        let j = self.arm.jacobian(q);
+        let (f_command, tau) = self.controller.step(&self.params, f_h, f_m, &j, dt);
+        let (f_command, tau) = (f_command * gain, tau * gain);
+        (f_command, self.arm.clamp_torque(tau))
     }
 }
 

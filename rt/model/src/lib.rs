@@ -18,6 +18,7 @@ pub mod histogram;
 pub mod link;
 pub mod method;
 pub mod metrics;
+pub mod replay;
 pub mod rng;
 pub mod scenario;
 pub mod servo;

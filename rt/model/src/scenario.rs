@@ -204,6 +204,15 @@ pub struct SiteSpec {
     pub controller: ControllerParams,
     /// The user's script: keyframes (time, hand target).
     pub script: Vec<KeyframeSpec>,
+    /// A recorded hand instead of the scripted one: a station's MCAP recording (its tool
+    /// positions, timed from its session's start) or a CSV `t_s,x,y,z`, relative to the scenario
+    /// file. The tool then follows the recording by position (the arm and the script only place
+    /// the device at rest; it senses no force).
+    pub hand_replay: Option<String>,
+    /// The recorded hand, loaded from `hand_replay` by the scenario file's reader (the model does
+    /// no I/O).
+    #[cfg_attr(feature = "serde", serde(skip))]
+    pub hand_trajectory: Option<crate::replay::Trajectory>,
 }
 
 /// A script keyframe.
@@ -320,6 +329,8 @@ impl Default for SiteSpec {
             hand: HandParams::default(),
             controller: ControllerParams::default(),
             script: Vec::new(),
+            hand_replay: None,
+            hand_trajectory: None,
         }
     }
 }
@@ -645,6 +656,15 @@ impl Scenario {
             if s.script.is_empty() {
                 return Err(err(at("script"), "[]", "needs at least one keyframe"));
             }
+            if let Some(file) = &s.hand_replay {
+                if s.hand_trajectory.is_none() {
+                    return Err(err(
+                        at("hand_replay"),
+                        file,
+                        "was not loaded: read the scenario from its file",
+                    ));
+                }
+            }
             let arm = self.arm(i);
             for (k, f) in s.script.iter().enumerate() {
                 in_closed(&at(&format!("script[{k}].t_s")), f.t_s, 0.0, 3600.0)?;
@@ -852,11 +872,15 @@ impl Scenario {
         ServoParams {
             tool_radius_m: s.tool_radius_m,
             contact: self.contact,
-            controller: s.controller,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
             max_adoption_step_n: s.max_adoption_step_n,
         }
+    }
+
+    /// Site `i`'s force loop: its arm's Eq. 12 PI controller.
+    pub fn force_loop(&self, i: usize) -> crate::device::ScaraForceLoop {
+        crate::device::ScaraForceLoop::new(self.arm(i), self.site[i].controller)
     }
 
     /// Site `i`'s script.

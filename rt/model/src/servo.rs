@@ -1,6 +1,10 @@
-//! One servo tick, as the station's servo loop and the simulator both run it: read the device,
-//! kinematics (Eq. 5), contact with the newest object state (Eq. 7), the displayed force (Eq. 6), the
-//! PI controller (Eq. 12), limits; and two safety rules:
+//! One servo tick in Cartesian space, as the station's servo loop and the simulator both run it: from
+//! the tool's position and velocity in the world (the device's sample through the station's
+//! placement; for the SCARA arm, Eq. 5), the contact with the newest object state (Eq. 7) and the
+//! force to display at the hand (Eq. 6); and two safety rules. The device then displays that force:
+//! the simulated SCARA arm through its own Eq. 12 PI loop ([`crate::device::ScaraForceLoop`]), a
+//! vendor device open-loop.
+//!
 //!
 //! - **Stale world.** If the newest object state is older than the stale limit (physics or network
 //!   stopped), or the station is stopping, the displayed force ramps linearly to zero over the ramp time and stays there until
@@ -15,8 +19,6 @@
 
 use crate::body::{BodyState, MassProps, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
-use crate::controller::{ControllerParams, PiForceController};
-use crate::device::ScaraParams;
 use crate::shape::Shape;
 
 /// Servo parameters.
@@ -26,8 +28,6 @@ pub struct ServoParams {
     pub tool_radius_m: f64,
     /// Tool–object contact law.
     pub contact: ContactParams,
-    /// Force controller.
-    pub controller: ControllerParams,
     /// Object states older than this are stale, s.
     pub stale_limit_s: f64,
     /// Time to ramp the displayed force to zero (and back), s.
@@ -43,12 +43,10 @@ pub struct ServoInput<'a> {
     pub now_s: f64,
     /// Tick length, s.
     pub dt_s: f64,
-    /// Joint positions.
-    pub q: Vec3,
-    /// Joint velocities.
-    pub qd: Vec3,
-    /// Force sensor: force the device applies to the hand, N.
-    pub f_measured: Vec3,
+    /// Tool position, world, m.
+    pub tool_pos: Vec3,
+    /// Tool velocity, world, m/s.
+    pub tool_vel: Vec3,
     /// Newest object state.
     pub object: &'a BodyState,
     /// Its time, s.
@@ -62,19 +60,15 @@ pub struct ServoInput<'a> {
 /// What a servo tick produces.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoOutput {
-    /// Joint torques to apply (clamped).
-    pub tau: Vec3,
-    /// Desired force at the hand F_h (after the stale ramp), N.
+    /// Desired force at the hand F_h (after the stale ramp and the adoption blend), world, N.
     pub f_desired: Vec3,
-    /// Commanded handle force after the controller's limits, N.
-    pub f_command: Vec3,
     /// The tool's contact on the object (force on the object), for physics.
     pub contact: ContactForce,
     /// Tool position, world.
     pub tool_pos: Vec3,
     /// Tool velocity, world.
     pub tool_vel: Vec3,
-    /// Display scale: 1 fresh, 0 stale.
+    /// Display scale: 1 fresh, 0 stale (a device with its own force loop scales its output by it).
     pub scale: f64,
 }
 
@@ -83,23 +77,18 @@ pub struct ServoOutput {
 pub struct Servo {
     /// Parameters.
     pub params: ServoParams,
-    /// The arm.
-    pub arm: ScaraParams,
     contact: ToolContactState,
-    controller: PiForceController,
     scale: f64,
     blend: Vec3,
     last_display: Vec3,
 }
 
 impl Servo {
-    /// A servo for `arm`.
-    pub fn new(params: ServoParams, arm: ScaraParams) -> Self {
+    /// A servo with `params`.
+    pub fn new(params: ServoParams) -> Self {
         Self {
             params,
-            arm,
             contact: ToolContactState::default(),
-            controller: PiForceController::default(),
             scale: 1.0,
             blend: Vec3::zeros(),
             last_display: Vec3::zeros(),
@@ -110,9 +99,7 @@ impl Servo {
     pub fn step(&mut self, inp: &ServoInput<'_>, shape: &Shape, mass: &MassProps) -> ServoOutput {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let p = &self.params;
-        let j = self.arm.jacobian(&inp.q);
-        let tool_pos = self.arm.forward(&inp.q);
-        let tool_vel = j * inp.qd;
+        let (tool_pos, tool_vel) = (inp.tool_pos, inp.tool_vel);
         let contact = tool_contact(
             &p.contact,
             &mut self.contact,
@@ -131,9 +118,6 @@ impl Servo {
         } else {
             (self.scale + rate).min(1.0)
         };
-        if self.scale == 0.0 {
-            self.controller.reset_integral();
-        }
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
         let f_true = -contact.force * self.scale;
         // Bounded adoption step, in force space.
@@ -148,15 +132,8 @@ impl Servo {
         };
         let f_desired = f_true + self.blend;
         self.last_display = f_desired;
-        let (f_command, tau) =
-            self.controller
-                .step(&p.controller, f_desired, inp.f_measured, &j, inp.dt_s);
-        // The command itself ramps too: a stale world leaves the device limp, not force-controlled.
-        let (f_command, tau) = (f_command * self.scale, tau * self.scale);
         ServoOutput {
-            tau: self.arm.clamp_torque(tau),
             f_desired,
-            f_command,
             contact,
             tool_pos,
             tool_vel,

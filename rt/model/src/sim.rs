@@ -1,6 +1,7 @@
 //! The deterministic multi-site simulator.
 //!
-//! N sites, each with its own plant (SCARA arm + scripted hand), servo, physics and report timers at
+//! N sites, each with its own plant (SCARA arm + scripted hand, or a recorded hand driving the tool by
+//! position), servo, physics and report timers at
 //! their own rates, and its own copy of the object kept by a consistency method; a virtual network
 //! between every ordered pair of sites with delay (swinging between a minimum and a maximum), jitter,
 //! loss and the reordering jitter causes, all drawn from seeded generators.
@@ -17,7 +18,7 @@
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
-use crate::device::Plant;
+use crate::device::{Plant, ScaraForceLoop};
 use crate::link::DueQueue;
 use crate::method::{integrate, Consistency, EnergyAccount, Naive, ObjectCopy, Paper, Report};
 use crate::rng::Rng;
@@ -148,6 +149,9 @@ struct Site {
     plant_ns: u64,
     script: Vec<Keyframe>,
     servo: Servo,
+    force_loop: ScaraForceLoop,
+    /// A recorded hand driving the tool by position, instead of the plant.
+    replay: Option<crate::replay::Trajectory>,
     tau: Vec3,
     own: ContactForce,
     copy: ObjectCopy,
@@ -164,6 +168,16 @@ struct Site {
     last_f_measured: Vec3,
     sensor_noise: f64,
     force_steps: ForceSteps,
+}
+
+impl Site {
+    /// The tool's position at `t_ns`: the arm's handle, or the recorded hand.
+    fn tool_pos(&self, t_ns: u64) -> Vec3 {
+        match &self.replay {
+            Some(r) => r.at(ns_to_s(t_ns)).0,
+            None => self.force_loop.arm.forward(&self.plant.q),
+        }
+    }
 }
 
 fn period_ns(rate_hz: f64) -> u64 {
@@ -199,7 +213,9 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
                 plant_ns: 0,
                 script,
-                servo: Servo::new(scenario.servo_params(i), arm),
+                servo: Servo::new(scenario.servo_params(i)),
+                force_loop: scenario.force_loop(i),
+                replay: spec.hand_trajectory.clone(),
                 tau: Vec3::zeros(),
                 own: ContactForce::default(),
                 copy: ObjectCopy::new(start),
@@ -275,7 +291,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         }
         // Plants up to now.
         for s in &mut sites {
-            while s.plant_ns < t {
+            while s.replay.is_none() && s.plant_ns < t {
                 let step = (t - s.plant_ns).min(PLANT_STEP_NS);
                 let mid = ns_to_s(s.plant_ns + step);
                 let (target, target_vel) = target_at(&s.script, mid);
@@ -317,7 +333,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             let s = &mut sites[i];
             if s.next_physics == t {
                 if !reference {
-                    s.method.own_tool(s.servo.arm.forward(&s.plant.q));
+                    s.method.own_tool(s.tool_pos(t));
                     s.method
                         .physics_step(&world, &mut s.copy, &s.own, ns_to_s(s.period_physics));
                     s.copy.time_s = ns_to_s(t);
@@ -325,16 +341,30 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 s.next_physics += s.period_physics;
             }
             if s.next_servo == t {
-                let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
-                let f_measured = s.plant.grip_force + noise;
+                // A recorded hand has no force sensor.
+                let f_measured = if s.replay.is_some() {
+                    Vec3::zeros()
+                } else {
+                    let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
+                    s.plant.grip_force + noise
+                };
                 let copy = if reference { &shared } else { &s.copy };
+                let (tool_pos, tool_vel) = match &s.replay {
+                    Some(r) => r.at(ns_to_s(t)),
+                    None => {
+                        let arm = &s.force_loop.arm;
+                        (
+                            arm.forward(&s.plant.q),
+                            arm.jacobian(&s.plant.q) * s.plant.qd,
+                        )
+                    }
+                };
                 let out = s.servo.step(
                     &ServoInput {
                         now_s: ns_to_s(t),
                         dt_s: ns_to_s(s.period_servo),
-                        q: s.plant.q,
-                        qd: s.plant.qd,
-                        f_measured,
+                        tool_pos,
+                        tool_vel,
                         object: &copy.state,
                         object_time_s: copy.time_s,
                         adopted: !s.pending_adoptions.is_empty(),
@@ -348,7 +378,15 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     result.adoptions[k].force_step_n = step_n;
                 }
                 s.force_steps.record(s.last_f_desired, out.f_desired);
-                s.tau = out.tau;
+                // The arm's own force loop (a recorded hand displays nothing).
+                let (_, tau) = s.force_loop.step(
+                    out.f_desired,
+                    out.scale,
+                    f_measured,
+                    &s.plant.q,
+                    ns_to_s(s.period_servo),
+                );
+                s.tau = tau;
                 s.own = out.contact;
                 s.last_f_desired = out.f_desired;
                 s.last_f_measured = f_measured;
@@ -376,7 +414,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 tr.obj_vel.push(copy.state.vel);
                 let q = copy.state.rot.quaternion();
                 tr.obj_rot.push([q.w, q.i, q.j, q.k]);
-                tr.tool_pos.push(s.servo.arm.forward(&s.plant.q));
+                tr.tool_pos.push(s.tool_pos(t));
                 tr.f_desired.push(s.last_f_desired);
                 tr.f_measured.push(s.last_f_measured);
                 tr.touching.push(s.own.touching);

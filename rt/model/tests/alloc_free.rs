@@ -4,7 +4,7 @@
 
 use coop_model::body::{BodyState, MassProps, Vec3};
 use coop_model::contact::{ContactForce, ContactParams, Plane, MAX_PLANES};
-use coop_model::device::ScaraParams;
+use coop_model::device::{ScaraForceLoop, ScaraParams};
 use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, World, MAX_SITES};
 use coop_model::servo::{Servo, ServoInput, ServoParams};
 use coop_model::shape::Shape;
@@ -62,12 +62,12 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
     let params = ServoParams {
         tool_radius_m: 0.005,
         contact: contact(),
-        controller: Default::default(),
         stale_limit_s: 0.1,
         stale_ramp_s: 0.05,
         max_adoption_step_n: 0.5,
     };
-    let mut servo = Servo::new(params, arm);
+    let mut servo = Servo::new(params);
+    let mut force_loop = ScaraForceLoop::new(arm, Default::default());
     let q = arm
         .inverse(Vec3::new(-0.044, 0.0, 0.01), 1.0)
         .expect("reachable");
@@ -82,9 +82,8 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
                 &ServoInput {
                     now_s: now,
                     dt_s: 1e-3,
-                    q,
-                    qd: Vec3::zeros(),
-                    f_measured: Vec3::zeros(),
+                    tool_pos: arm.forward(&q),
+                    tool_vel: arm.jacobian(&q) * Vec3::zeros(),
                     object: &a.state,
                     object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
                     adopted: k % 7 == 0,
@@ -93,6 +92,7 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
                 &w.shape,
                 &w.mass,
             );
+            force_loop.step(out.f_desired, out.scale, Vec3::zeros(), &q, 1e-3);
             let own: ContactForce = out.contact;
             paper.physics_step(&w, &mut a, &own, 1e-3);
             naive.physics_step(&w, &mut b, &own, 1e-3);

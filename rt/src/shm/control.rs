@@ -335,6 +335,12 @@ pub struct ServoShared {
     pub stale_state_ns: AtomicU64,
     /// ... and when its command first reached zero in that episode, ns (0: not yet).
     pub stale_limp_ns: AtomicU64,
+    /// The device safety limit that acted last (`device::safety::Limit::code`, 0: none yet).
+    pub safety_limit: AtomicU64,
+    /// ... when it acted last, ns.
+    pub safety_at_ns: AtomicU64,
+    /// Episodes of any limit acting so far.
+    pub safety_episodes: AtomicU64,
     /// Round trips measured: from a tool sample to the object state computed with it arriving back
     /// (servo → physics → servo).
     pub roundtrip_count: AtomicU64,

@@ -1,0 +1,507 @@
+//! The station's `[device]` table: which backend the servo drives, where the device sits in the
+//! world, who owns its loop, and the safety contract's limits; and opening that backend in the
+//! servo process. `station devices` lists what each backend finds ([`probe_all`]).
+//!
+//! ```toml
+//! [device]
+//! device = "sim"          # sim | replay | haply | dhd
+//! loop = "station"        # station: our servo loop calls the device; vendor: its thread calls us
+//!
+//! [device.placement]      # world = translation_m + rotation · (workspace_scale · device)
+//! translation_m = [0.0, 0.0, 0.0]
+//! rotation_rpy_deg = [0.0, 0.0, 0.0]   # roll about x, pitch about y, yaw about z (fixed axes)
+//! workspace_scale = 1.0   # world metres per device metre
+//!
+//! [device.safety]
+//! ramp_in_ms = 500.0
+//! max_force_n = 10.0      # the device's own maximum applies too
+//! max_velocity_m_s = 2.0
+//! max_force_step_n = 2.0  # per servo tick
+//! watchdog_ms = 50.0
+//!
+//! [device.replay]         # device = "replay"
+//! file = "user1.mcap"     # a station's recording (its tool positions), or a CSV t_s,x,y,z
+//!
+//! [device.haply]          # device = "haply": `coop_rt::device::haply::HaplyConfig`
+//! url = "ws://localhost:10001"
+//!
+//! [device.dhd]            # device = "dhd": `coop_rt::device::dhd::DhdConfig`
+//! library = "/opt/forcedimension/lib/libdhd.so"
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use coop_model::body::Vec3;
+use coop_model::replay::Trajectory;
+use coop_rt::device::cartesian::{DeviceInfo, ProbeReport};
+use coop_rt::device::dhd::{DhdConfig, DhdDevice};
+use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
+use coop_rt::device::replay::Replay;
+use coop_rt::device::safety::SafetyLimits;
+use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
+use nalgebra::UnitQuaternion;
+use serde::{Deserialize, Serialize};
+
+/// `device = "…"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendName {
+    /// The simulated SCARA arm and scripted hand.
+    #[default]
+    Sim,
+    /// A recorded hand.
+    Replay,
+    /// Haply Inverse3.
+    Haply,
+    /// Force Dimension / Novint Falcon (DHD SDK).
+    Dhd,
+}
+
+impl BackendName {
+    /// The rt backend.
+    pub fn backend(self) -> Backend {
+        match self {
+            BackendName::Sim => Backend::Sim,
+            BackendName::Replay => Backend::Replay,
+            BackendName::Haply => Backend::Haply,
+            BackendName::Dhd => Backend::Dhd,
+        }
+    }
+}
+
+/// `loop = "…"`: who runs the device's loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum LoopOwner {
+    /// Our servo loop samples and commands the device at the scenario's servo rate.
+    #[default]
+    Station,
+    /// The vendor's thread calls us at its own rate (no backend here supports it yet).
+    Vendor,
+}
+
+/// `[device.placement]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlacementSpec {
+    /// The device frame's origin in the world, m.
+    pub translation_m: [f64; 3],
+    /// The device frame's rotation: roll about x, pitch about y, yaw about z (fixed axes, applied
+    /// in that order), degrees.
+    pub rotation_rpy_deg: [f64; 3],
+    /// World metres per device metre.
+    pub workspace_scale: f64,
+}
+
+impl Default for PlacementSpec {
+    fn default() -> Self {
+        Self {
+            translation_m: [0.0; 3],
+            rotation_rpy_deg: [0.0; 3],
+            workspace_scale: 1.0,
+        }
+    }
+}
+
+/// `[device.safety]`: the safety contract's limits (see `coop_rt::device::safety`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SafetySpec {
+    /// Force ramp-in on enable, ms (0: none).
+    pub ramp_in_ms: f64,
+    /// Largest force, N (the device's own maximum applies too).
+    pub max_force_n: f64,
+    /// Hand speed above which the force is released, m/s.
+    pub max_velocity_m_s: f64,
+    /// Largest change of the force per servo tick, N.
+    pub max_force_step_n: f64,
+    /// No fresh sample for this long releases the device, ms.
+    pub watchdog_ms: f64,
+}
+
+impl Default for SafetySpec {
+    fn default() -> Self {
+        let d = SafetyLimits::default();
+        Self {
+            ramp_in_ms: d.ramp_in_s * 1e3,
+            max_force_n: d.max_force_n,
+            max_velocity_m_s: d.max_velocity_m_s,
+            max_force_step_n: d.max_force_step_n,
+            watchdog_ms: d.watchdog_s * 1e3,
+        }
+    }
+}
+
+/// `[device.replay]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ReplaySpec {
+    /// A station's MCAP recording (its `/tool` positions, timed from its session's start) or a CSV
+    /// `t_s,x,y,z` (relative to the config file's directory).
+    pub file: PathBuf,
+}
+
+/// `[device]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct DeviceSpec {
+    /// The backend.
+    pub device: BackendName,
+    /// Who runs the device's loop.
+    #[serde(rename = "loop")]
+    pub loop_owner: LoopOwner,
+    /// Where the device sits in the world.
+    pub placement: PlacementSpec,
+    /// The safety contract's limits.
+    pub safety: SafetySpec,
+    /// The recorded hand, for `device = "replay"`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replay: Option<ReplaySpec>,
+    /// The Haply backend's table (`device = "haply"`), read as
+    /// [`coop_rt::device::haply::HaplyConfig`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub haply: Option<toml::Table>,
+    /// The DHD backend's table (`device = "dhd"`), read as [`coop_rt::device::dhd::DhdConfig`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dhd: Option<toml::Table>,
+}
+
+/// A `[device]` table checked and its files loaded.
+#[derive(Debug, Clone)]
+pub struct DeviceSetup {
+    /// The backend.
+    pub backend: Backend,
+    /// Device to world.
+    pub placement: Placement,
+    /// The safety contract.
+    pub limits: SafetyLimits,
+    /// The recorded hand, for `replay`.
+    pub replay: Option<Trajectory>,
+    /// The Haply table (its defaults when absent).
+    pub haply: HaplyConfig,
+    /// The DHD table (its defaults when absent).
+    pub dhd: DhdConfig,
+}
+
+/// A backend's table (`[device.<name>]`) as its config type: unknown fields and wrong types are
+/// refused naming `device.<name>.<field>`.
+fn backend_table<T: serde::de::DeserializeOwned + Default>(
+    name: &str,
+    table: Option<&toml::Table>,
+) -> anyhow::Result<T> {
+    match table {
+        None => Ok(T::default()),
+        Some(t) => toml::Value::Table(t.clone())
+            .try_into()
+            .map_err(|e| anyhow::anyhow!("device.{name}: {}", e.to_string().trim_end())),
+    }
+}
+
+impl DeviceSpec {
+    /// Checks every value (the messages name `device.<field>`, the value and the rule; the caller
+    /// adds the file) and loads the replay file (relative to `base`).
+    ///
+    /// # Errors
+    /// A value that breaks a rule, a backend not built in, a replay file that does not load.
+    pub fn resolve(&mut self, base: Option<&Path>) -> anyhow::Result<DeviceSetup> {
+        let backend = self.device.backend();
+        if self.loop_owner == LoopOwner::Vendor {
+            bail!(
+                "device.loop = \"vendor\": device {:?} cannot call the station from its own thread in this build; use loop = \"station\"",
+                backend.name()
+            );
+        }
+        let p = &self.placement;
+        for (k, v) in p.translation_m.iter().enumerate() {
+            if !(v.is_finite() && v.abs() <= 100.0) {
+                bail!(
+                    "device.placement.translation_m[{k}] = {v}: must be finite and within ±100 m"
+                );
+            }
+        }
+        for (k, v) in p.rotation_rpy_deg.iter().enumerate() {
+            if !(v.is_finite() && v.abs() <= 360.0) {
+                bail!("device.placement.rotation_rpy_deg[{k}] = {v}: must be within ±360°");
+            }
+        }
+        if !(p.workspace_scale.is_finite() && (1e-3..=1e3).contains(&p.workspace_scale)) {
+            bail!(
+                "device.placement.workspace_scale = {}: must be from 0.001 to 1000 (world metres per device metre)",
+                p.workspace_scale
+            );
+        }
+        let [r, pi, y] = p.rotation_rpy_deg.map(f64::to_radians);
+        let placement = Placement::new(
+            Vec3::from(p.translation_m),
+            UnitQuaternion::from_euler_angles(r, pi, y),
+            p.workspace_scale,
+        );
+        let s = &self.safety;
+        // (field, value, lowest, whether the lowest itself is allowed, highest, unit)
+        for (field, v, lo, lo_ok, hi, unit) in [
+            ("ramp_in_ms", s.ramp_in_ms, 0.0, true, 10_000.0, "ms"),
+            ("max_force_n", s.max_force_n, 0.0, false, 100.0, "N"),
+            (
+                "max_velocity_m_s",
+                s.max_velocity_m_s,
+                0.0,
+                false,
+                20.0,
+                "m/s",
+            ),
+            (
+                "max_force_step_n",
+                s.max_force_step_n,
+                0.0,
+                false,
+                100.0,
+                "N",
+            ),
+            ("watchdog_ms", s.watchdog_ms, 1.0, true, 10_000.0, "ms"),
+        ] {
+            let above = if lo_ok { v >= lo } else { v > lo };
+            if !(v.is_finite() && above && v <= hi) {
+                let from = if lo_ok { "from" } else { "above" };
+                bail!("device.safety.{field} = {v}: must be {from} {lo} and at most {hi} {unit}");
+            }
+        }
+        let limits = SafetyLimits {
+            ramp_in_s: s.ramp_in_ms / 1e3,
+            max_force_n: s.max_force_n,
+            max_velocity_m_s: s.max_velocity_m_s,
+            max_force_step_n: s.max_force_step_n,
+            watchdog_s: s.watchdog_ms / 1e3,
+        };
+        // A table for a backend not selected is a mistake worth saying.
+        for (name, present) in [
+            ("replay", self.replay.is_some()),
+            ("haply", self.haply.is_some()),
+            ("dhd", self.dhd.is_some()),
+        ] {
+            if present && name != backend.name() {
+                bail!(
+                    "device.{name}: a table for backend {name:?}, but device = {:?}",
+                    backend.name()
+                );
+            }
+        }
+        let haply: HaplyConfig = backend_table("haply", self.haply.as_ref())?;
+        haply
+            .validate()
+            .map_err(|e| anyhow::anyhow!("device.haply.{e}"))?;
+        let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
+        dhd.validate()
+            .map_err(|e| anyhow::anyhow!("device.dhd.{e}"))?;
+        if let Some(lib) = &mut dhd.library {
+            if let Some(b) = base.filter(|_| lib.is_relative() && lib.components().count() > 1) {
+                *lib = b.join(&*lib);
+            }
+        }
+        let replay = match backend {
+            Backend::Sim => {
+                if !placement.is_identity() {
+                    bail!(
+                        "device.placement = {:?}: must be the identity for device = \"sim\" (the simulated arm's base and its user's script are in world coordinates)",
+                        self.placement
+                    );
+                }
+                None
+            }
+            Backend::Replay => {
+                let Some(spec) = &mut self.replay else {
+                    bail!("device.replay.file is missing: device = \"replay\" plays a recorded hand from a file");
+                };
+                if let Some(b) = base.filter(|_| spec.file.is_relative()) {
+                    spec.file = b.join(&spec.file);
+                }
+                Some(load_trajectory(&spec.file).with_context(|| {
+                    format!("device.replay.file = {:?}", spec.file.display().to_string())
+                })?)
+            }
+            Backend::Haply | Backend::Dhd => None,
+        };
+        Ok(DeviceSetup {
+            backend,
+            placement,
+            limits,
+            replay,
+            haply,
+            dhd,
+        })
+    }
+}
+
+/// A recorded hand from `path`: a CSV `t_s,x,y,z` (by its `.csv` extension), else a station's MCAP
+/// recording, whose `/tool` positions are timed from its session's start (its epoch).
+///
+/// # Errors
+/// The file cannot be read or parsed, has no samples, or a recording without a session start.
+pub fn load_trajectory(path: &Path) -> anyhow::Result<Trajectory> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+    {
+        let text = std::fs::read_to_string(path).context("cannot be read")?;
+        return Ok(Trajectory::parse_csv(&text)?);
+    }
+    let rec = coop_transport::recording::read(path)?;
+    let Some(session) = &rec.session else {
+        bail!("the recording has no /session message: its session never started, so its samples have no time 0");
+    };
+    let epoch = session.epoch_ns;
+    let mut last: Option<u64> = None;
+    let samples: Vec<(f64, Vec3)> = rec
+        .samples
+        .iter()
+        .filter(|s| {
+            // One sample per time (a restarted physics may repeat the last one).
+            let keep = last.is_none_or(|l| s.t_ns > l);
+            if keep {
+                last = Some(s.t_ns);
+            }
+            keep
+        })
+        .map(|s| {
+            let t = (s.t_ns as f64 - epoch as f64) * 1e-9;
+            (t, Vec3::from(s.tool_pos))
+        })
+        .collect();
+    Ok(Trajectory::new(samples)?)
+}
+
+/// Opens the configured backend for station site `site` at `now_ns` (the servo process).
+///
+/// # Errors
+/// A vendor device that does not open (service unreachable, library missing, no device), naming
+/// the config field to look at.
+pub fn open(
+    setup: &DeviceSetup,
+    scenario: &coop_model::scenario::Scenario,
+    site: usize,
+    now_ns: u64,
+) -> anyhow::Result<StationDevice> {
+    match setup.backend {
+        // The scenario's user is a recorded hand: it plays on this station too.
+        Backend::Sim if scenario.site[site].hand_trajectory.is_some() => {
+            let t = scenario.site[site]
+                .hand_trajectory
+                .clone()
+                .unwrap_or_default();
+            let what = scenario.site[site].hand_replay.clone().unwrap_or_default();
+            Ok(StationDevice::Replay(Replay::new(t, &what)))
+        }
+        Backend::Sim => {
+            let script = scenario.script(site);
+            let plant = coop_model::device::Plant::at(
+                scenario.arm(site),
+                scenario.hand(site),
+                script[0].target,
+                scenario.site[site].elbow,
+            );
+            Ok(StationDevice::Sim(SimScara::waiting(
+                plant,
+                scenario.force_loop(site),
+                script,
+                now_ns,
+            )))
+        }
+        Backend::Replay => {
+            let t = setup
+                .replay
+                .clone()
+                .context("device = \"replay\" without a trajectory")?;
+            Ok(StationDevice::Replay(Replay::new(t, "device.replay.file")))
+        }
+        Backend::Haply => Ok(StationDevice::Other(Box::new(
+            HaplyDevice::open(&setup.haply).map_err(anyhow::Error::from)?,
+        ))),
+        Backend::Dhd => Ok(StationDevice::Other(Box::new(
+            DhdDevice::open(&setup.dhd).map_err(anyhow::Error::from)?,
+        ))),
+    }
+}
+
+/// What each backend built in finds, in [`Backend::ALL`] order.
+pub fn probe_all(
+    setup: &DeviceSetup,
+    scenario: &coop_model::scenario::Scenario,
+    site: usize,
+) -> Vec<ProbeReport> {
+    Backend::ALL
+        .into_iter()
+        .map(|b| match b {
+            Backend::Sim => {
+                let d = SimScara::waiting(
+                    coop_model::device::Plant::at(
+                        scenario.arm(site),
+                        scenario.hand(site),
+                        scenario.script(site)[0].target,
+                        scenario.site[site].elbow,
+                    ),
+                    scenario.force_loop(site),
+                    scenario.script(site),
+                    0,
+                );
+                ProbeReport {
+                    backend: b.name(),
+                    built_in: true,
+                    status: format!(
+                        "always available: the simulated arm of site {:?}",
+                        scenario.site[site].name
+                    ),
+                    devices: vec![coop_rt::device::CartesianDevice::info(&d).clone()],
+                }
+            }
+            Backend::Replay => {
+                // The configuration's recorded hand, or the scenario's for this site.
+                let hand = setup.replay.as_ref().map(|t| ("device.replay.file", t)).or(
+                    scenario.site[site]
+                        .hand_trajectory
+                        .as_ref()
+                        .map(|t| ("the scenario's hand_replay", t)),
+                );
+                ProbeReport {
+                    backend: b.name(),
+                    built_in: true,
+                    status: match hand {
+                        Some((what, t)) => format!(
+                            "{what}: {} samples from {:.3} s to {:.3} s",
+                            t.len(),
+                            t.first().0,
+                            t.end_s()
+                        ),
+                        None => "always available: plays [device.replay] file (a station's MCAP recording or a CSV t_s,x,y,z)".into(),
+                    },
+                    devices: hand
+                        .map(|(what, t)| {
+                            coop_rt::device::CartesianDevice::info(&Replay::new(t.clone(), what))
+                                .clone()
+                        })
+                        .into_iter()
+                        .collect(),
+                }
+            }
+            Backend::Haply => coop_rt::device::haply::probe(&setup.haply),
+            Backend::Dhd => coop_rt::device::dhd::probe(&setup.dhd),
+        })
+        .collect()
+}
+
+/// A device's info as one line.
+pub fn info_line(i: &DeviceInfo) -> String {
+    format!(
+        "{} ({} DOF{}), max {:.1} N, {:.0} N/m, {:.1} N·s/m, workspace radius {:.3} m, {:.0} Hz{}",
+        i.model,
+        i.dof,
+        i.serial
+            .as_ref()
+            .map_or(String::new(), |s| format!(", serial {s}")),
+        i.max_force_n,
+        i.max_stiffness_n_per_m,
+        i.max_damping_ns_per_m,
+        i.workspace_radius_m,
+        i.native_rate_hz,
+        if i.senses_force { ", senses force" } else { "" }
+    )
+}

@@ -1,0 +1,110 @@
+//! The device a station's servo drives: one of the backends, chosen by its config.
+
+use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
+use super::replay::Replay;
+use super::scara::SimScara;
+
+/// The backends a station config can select (`[device] device = "…"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// The simulated SCARA arm and scripted hand.
+    Sim,
+    /// A recorded hand.
+    Replay,
+    /// Haply Inverse3 through the Haply Inverse Service.
+    Haply,
+    /// Force Dimension (and Novint Falcon) through the DHD SDK.
+    Dhd,
+}
+
+impl Backend {
+    /// Every backend.
+    pub const ALL: [Backend; 4] = [Backend::Sim, Backend::Replay, Backend::Haply, Backend::Dhd];
+
+    /// Its name in the config.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Sim => "sim",
+            Backend::Replay => "replay",
+            Backend::Haply => "haply",
+            Backend::Dhd => "dhd",
+        }
+    }
+}
+
+/// A station's device.
+// One per servo process, held for its whole run: the size difference costs nothing, a box would
+// cost an indirection each tick.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug)]
+pub enum StationDevice {
+    /// The simulated arm.
+    Sim(SimScara),
+    /// A recorded hand.
+    Replay(Replay),
+    /// A vendor backend.
+    Other(Box<dyn CartesianDeviceDebug>),
+}
+
+/// A [`CartesianDevice`] that can be printed (every backend derives `Debug`).
+pub trait CartesianDeviceDebug: CartesianDevice + std::fmt::Debug {}
+impl<T: CartesianDevice + std::fmt::Debug> CartesianDeviceDebug for T {}
+
+impl StationDevice {
+    /// Sets the session's time 0 for a device that plays a script or a recording.
+    pub fn start_at(&mut self, start_ns: u64) {
+        match self {
+            StationDevice::Sim(d) => d.start_at(start_ns),
+            StationDevice::Replay(d) => d.start_at(start_ns),
+            StationDevice::Other(_) => {}
+        }
+    }
+
+    /// Whether the device still waits for the session's time 0 (only scripted and replayed hands
+    /// do).
+    pub fn waits_for_start(&self) -> bool {
+        match self {
+            StationDevice::Sim(d) => d.start().is_none(),
+            StationDevice::Replay(d) => d.start().is_none(),
+            StationDevice::Other(_) => false,
+        }
+    }
+}
+
+impl CartesianDevice for StationDevice {
+    fn info(&self) -> &DeviceInfo {
+        match self {
+            StationDevice::Sim(d) => d.info(),
+            StationDevice::Replay(d) => d.info(),
+            StationDevice::Other(d) => d.info(),
+        }
+    }
+    fn sample(&mut self, now_ns: u64) -> Result<Sample, DeviceFault> {
+        match self {
+            StationDevice::Sim(d) => d.sample(now_ns),
+            StationDevice::Replay(d) => d.sample(now_ns),
+            StationDevice::Other(d) => d.sample(now_ns),
+        }
+    }
+    fn command(&mut self, now_ns: u64, cmd: Command) -> Result<(), DeviceFault> {
+        match self {
+            StationDevice::Sim(d) => d.command(now_ns, cmd),
+            StationDevice::Replay(d) => d.command(now_ns, cmd),
+            StationDevice::Other(d) => d.command(now_ns, cmd),
+        }
+    }
+    fn set_output_gain(&mut self, gain: f64) {
+        match self {
+            StationDevice::Sim(d) => d.set_output_gain(gain),
+            StationDevice::Replay(d) => d.set_output_gain(gain),
+            StationDevice::Other(d) => d.set_output_gain(gain),
+        }
+    }
+    fn close(&mut self) {
+        match self {
+            StationDevice::Sim(d) => d.close(),
+            StationDevice::Replay(d) => d.close(),
+            StationDevice::Other(d) => d.close(),
+        }
+    }
+}

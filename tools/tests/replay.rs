@@ -1,0 +1,176 @@
+//! Recorded hands played back: a user's tool trajectory taken from one run drives that user's tool
+//! by position in the next, in the simulator (`sim run` on a scenario whose site names a CSV) and on
+//! real stations (`session run` on a scenario whose site names an earlier session's MCAP
+//! recording). Each replayed tool trajectory must match the recorded one.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use coop_actors::scenario_file;
+use coop_actors::station::device::load_trajectory;
+use coop_model::body::Vec3;
+use coop_model::replay::Trajectory;
+use coop_model::scenario::MethodName;
+use coop_model::sim::{self, Mode};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("coop-replay-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// The paper's scenario with `hand_replay = file` on its first site (user1), as TOML text.
+fn paper_with_replay(file: &str) -> String {
+    let text = std::fs::read_to_string(repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let mut v: toml::Table = toml::from_str(&text).expect("toml");
+    let sites = v
+        .get_mut("site")
+        .and_then(toml::Value::as_array_mut)
+        .expect("sites");
+    let user1 = sites[0].as_table_mut().expect("a site table");
+    assert_eq!(
+        user1.get("name").and_then(toml::Value::as_str),
+        Some("user1")
+    );
+    user1.insert("hand_replay".into(), toml::Value::String(file.into()));
+    toml::to_string(&v).expect("toml out")
+}
+
+/// Tool positions of `site` in a `sim run` trace.csv: (t, position).
+fn trace_tool(csv: &str, site: usize) -> Vec<(f64, Vec3)> {
+    csv.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let c: Vec<f64> = l
+                .split(',')
+                .map(|x| x.parse().unwrap_or(f64::NAN))
+                .collect();
+            (c[1] as usize == site).then(|| (c[0], Vec3::new(c[5], c[6], c[7])))
+        })
+        .collect()
+}
+
+#[test]
+fn a_hand_recorded_in_one_simulator_run_replays_in_the_next() {
+    let dir = tempdir("sim");
+    let paper = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let first = sim::run(&paper, Mode::Distributed(MethodName::Paper), &mut |_| {});
+    let recorded = Trajectory::new(
+        first
+            .t
+            .iter()
+            .copied()
+            .zip(first.sites[0].tool_pos.iter().copied()),
+    )
+    .expect("the first run's user1 trajectory");
+    std::fs::write(dir.join("user1.csv"), recorded.to_csv()).expect("write csv");
+    // Relative to the scenario file.
+    std::fs::write(dir.join("replay.toml"), paper_with_replay("user1.csv")).expect("scenario");
+    let out = dir.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(dir.join("replay.toml"))
+        .args(["--method", "paper", "--out"])
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        o.status.success(),
+        "sim failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("trace.csv")).expect("trace.csv");
+    let replayed = trace_tool(&csv, 0);
+    assert_eq!(replayed.len(), first.t.len(), "one row per sample");
+    let mut worst = 0.0f64;
+    let mut travel = 0.0;
+    for (k, (t, p)) in replayed.iter().enumerate() {
+        assert!((t - first.t[k]).abs() < 1e-6, "sample times line up");
+        worst = worst.max((p - first.sites[0].tool_pos[k]).norm());
+        if k > 0 {
+            travel += (p - replayed[k - 1].1).norm();
+        }
+    }
+    assert!(travel > 0.1, "the replayed hand moved ({travel} m)");
+    eprintln!("replayed in the simulator: travel {travel:.3} m, worst error {worst:e} m");
+    // At the sample times the replay is the recording (the trace prints 9 decimals).
+    assert!(
+        worst < 1e-6,
+        "replayed tool off the recorded one by {worst} m"
+    );
+    // The other user still feels the disk the replayed hand pushes.
+    let user2 = trace_tool(&csv, 1);
+    assert_eq!(user2.len(), replayed.len());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn session(scenario: &Path, out: &Path) {
+    let o = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(repo())
+        .arg("run")
+        .arg(scenario)
+        .args(["--method", "paper", "--no-emulation", "--json", "--out"])
+        .arg(out)
+        .output()
+        .expect("session runs");
+    assert!(
+        o.status.success(),
+        "session failed: {}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// One session on real stations records user1's hand; a second session replays that recording as
+/// user1's hand (its station plays it through the replay device under the safety layer) while
+/// user2 runs its script. The second run's recorded tool follows the first's.
+#[test]
+fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
+    let dir = tempdir("session");
+    let first = dir.join("first");
+    session(&repo().join("scenarios/paper.toml"), &first);
+    let recording = first.join("paper/user1.mcap");
+    let recorded = load_trajectory(&recording).expect("the first session's user1 hand");
+    std::fs::write(
+        dir.join("replay.toml"),
+        paper_with_replay(&recording.display().to_string()),
+    )
+    .expect("scenario");
+    let second = dir.join("second");
+    session(&dir.join("replay.toml"), &second);
+    let replayed = load_trajectory(&second.join("paper/user1.mcap")).expect("second user1");
+    // Compare over the session (both are timed from their session's start).
+    let (mut errors, mut travel, mut last) = (Vec::new(), 0.0, None::<Vec3>);
+    let end = recorded.end_s().min(replayed.end_s());
+    let mut t = 0.0;
+    while t <= end {
+        let (a, b) = (recorded.at(t).0, replayed.at(t).0);
+        errors.push((a - b).norm());
+        if let Some(l) = last {
+            travel += (b - l).norm();
+        }
+        last = Some(b);
+        t += 0.01;
+    }
+    assert!(errors.len() > 500, "the sessions overlap ({end} s)");
+    assert!(travel > 0.1, "the replayed hand moved ({travel} m)");
+    errors.sort_by(f64::total_cmp);
+    let (median, worst) = (errors[errors.len() / 2], errors[errors.len() - 1]);
+    eprintln!(
+        "replayed on a station: {} points over {end:.1} s, travel {travel:.3} m, error median {:.3} mm, worst {:.3} mm",
+        errors.len(),
+        median * 1e3,
+        worst * 1e3
+    );
+    // A station's trace samples the newest tool sample physics has: up to a servo period old.
+    assert!(
+        median < 1e-3 && worst < 5e-3,
+        "replayed tool off the recorded one: median {median} m, worst {worst} m"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
