@@ -7,7 +7,9 @@
 //! - [`timer`]: a periodic timer on absolute CLOCK_MONOTONIC deadlines with overrun counting.
 //! - [`stats`]: live loop statistics another process reads without disturbing the loop.
 //! - [`device`]: the Cartesian device interface, its backends built in (the simulated SCARA arm, a
-//!   replayed hand), the device-to-world placement and the safety contract every backend runs under.
+//!   replayed hand, the Haply Inverse3 through its service, Force Dimension/Falcon through the DHD
+//!   SDK loaded at run time), the device-to-world placement and the safety contract every backend
+//!   runs under.
 //! - [`msg`], [`servo`], [`physics`]: the station's ring messages and the bodies of its servo and
 //!   physics loops over the model (the processes around them come with the station).
 //!
@@ -17,7 +19,8 @@
 //! `clock_nanosleep` (`rt/tests/alloc_free.rs` and `rt/tests/loops.rs` check the allocation part).
 //! Everything else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
 //!
-//! `unsafe` lives only in [`shm`] and [`sched`] (H2); every block says why it is sound.
+//! `unsafe` lives only in [`shm`], [`sched`] (H2) and `device::dhd` (calls into the DHD SDK, a C
+//! library loaded at run time: nothing else can reach it); every block says why it is sound.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 

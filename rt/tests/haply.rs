@@ -115,7 +115,8 @@ fn the_service_vanishing_reports_disconnected_and_a_return_starts_at_zero_force(
     assert!(!dev.stats().connected());
 
     // The service comes back on the same port: the bridge reconnects and sends zero force until the
-    // servo commands again, though its last command before the loss was a force.
+    // servo commands again (the refused command above left a release in the slot; the bridge also
+    // ignores whatever the slot held at the reconnection, a force included: see bridge.rs).
     let Some(svc2) = Service::start(&["--port", &port]) else {
         return;
     };
