@@ -7,6 +7,10 @@
 //! MCAP recordings, and prints the metrics table of `sim compare` for the real run next to the
 //! simulator's figures for the same scenario, with the Fig. 9–12 plots per method.
 //!
+//! Next to the stations' recordings it writes `session.mcap`: every site's copy, tool and forces
+//! on the scenario's grid, the divergence, and the simulator's reference copy, in one file as
+//! `sim run` writes it for a simulated run ([`coop_transport::recording::session`]).
+//!
 //! With `--live`, the launcher also serves every site's copy, tool and force to Foxglove while the
 //! session runs ([`crate::live`]).
 //!
@@ -337,6 +341,11 @@ pub fn run_method(
     }
     // Time 0 a little ahead, so every station has it before it matters.
     let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
+    // Time 0 on the wall clock, for the session file's log times (next to the recordings').
+    let t0_unix_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+        .saturating_add(t0.saturating_sub(coop_rt::timer::monotonic_ns()));
     epoch.announce(t0)?;
 
     // Overruns from here on are the session's (startup, with every station's processes and zenoh
@@ -451,6 +460,21 @@ pub fn run_method(
         s.others_work_j = f64::NAN;
     }
     crate::plots::figures(&dir, &sc, &real_run, &reference_run)?;
+    let session_file = dir.join("session.mcap");
+    recording::session::write(
+        &session_file,
+        BTreeMap::from([
+            ("session".into(), session.to_owned()),
+            ("scenario".into(), sc.name.clone()),
+            ("method".into(), method.as_str().to_owned()),
+        ]),
+        &sc,
+        &real_run,
+        Some(&reference_run),
+        recording::session::Source::Stations,
+        t0_unix_ns,
+    )
+    .with_context(|| format!("writing {}", session_file.display()))?;
     std::fs::write(
         dir.join("metrics.json"),
         serde_json::to_string_pretty(&serde_json::json!({ "real": real, "simulated": simulated }))?

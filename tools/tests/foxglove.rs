@@ -261,3 +261,107 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `sim run --out` writes `session.mcap`: read by the same foreign reader as a station's
+/// recording, it holds every site's frames, entities and JSON channels and the reference copy as
+/// its own frame, entity and colour, with times increasing and frame ids that are all declared.
+#[test]
+fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_terms() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let out = out_dir("sim");
+    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "paper", "--out"])
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        run.status.success(),
+        "sim failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v = foxglove_summary(&[out.join("session.mcap")]);
+    assert_eq!(v["errors"], serde_json::json!([]), "{}", v["errors"]);
+    let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
+    let mut sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
+    // Every site's copy and tool and the reference copy, one frame each per sample, in `world`.
+    let mut want: Vec<String> = sites
+        .iter()
+        .flat_map(|s| [format!("world>object/{s}"), format!("world>tool/{s}")])
+        .chain(["world>object/reference".to_owned()])
+        .collect();
+    want.sort();
+    let frames = v["frames"].as_object().expect("frames");
+    assert_eq!(frames.keys().cloned().collect::<Vec<_>>(), want);
+    for (f, n) in frames {
+        assert_eq!(n.as_u64(), Some(samples), "{f}");
+    }
+    // Each entity sits in `world` or in a frame the file transforms.
+    let declared: Vec<&str> = frames
+        .keys()
+        .map(|k| k.split_once('>').expect("parent>child").1)
+        .collect();
+    for e in v["entity_frames"].as_array().expect("entity frames") {
+        let frame = e[1].as_str().expect("frame");
+        assert!(
+            frame == "world" || declared.contains(&frame),
+            "entity {e} in a frame no /tf declares"
+        );
+    }
+    // The reference copy: its own entity, the object's real size, its own (grey) colour.
+    let o = &scenario.object;
+    let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
+    let entities = &v["entities"];
+    assert_eq!(
+        entities["object/reference"]["cylinder_size"],
+        serde_json::json!([d, d, h])
+    );
+    let grey = entities["object/reference"]["colour"].clone();
+    for s in &sites {
+        assert_eq!(
+            entities[format!("object/{s}")]["cylinder_size"],
+            serde_json::json!([d, d, h])
+        );
+        assert_ne!(entities[format!("object/{s}")]["colour"], grey, "{s}");
+        assert!(
+            entities[format!("tool/{s}")]["sphere_size"].is_array(),
+            "{s}"
+        );
+    }
+    assert!(
+        entities["environment"]["cubes"].as_u64() > Some(0),
+        "the floor"
+    );
+    // The JSON channels: every site (and the reference's /object) at every sample.
+    let per_site = |topic: &str| -> Vec<(String, u64)> {
+        v["json"][topic]
+            .as_object()
+            .unwrap_or_else(|| panic!("{topic} in {}", v["json"]))
+            .iter()
+            .map(|(k, n)| (k.clone(), n.as_u64().unwrap_or(0)))
+            .collect()
+    };
+    sites.sort_unstable();
+    let count = |names: &[&str]| -> Vec<(String, u64)> {
+        names.iter().map(|s| ((*s).to_owned(), samples)).collect()
+    };
+    assert_eq!(per_site("/tool"), count(&sites));
+    let mut with_reference = sites.clone();
+    with_reference.push("reference");
+    with_reference.sort_unstable();
+    assert_eq!(per_site("/object"), count(&with_reference));
+    assert_eq!(per_site("/divergence"), count(&[""]));
+    let logs = v["logs"].as_array().expect("logs");
+    assert!(
+        logs[0]["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("scenario three-users") && m.contains("simulated")),
+        "{logs:?}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
