@@ -32,7 +32,6 @@ pub mod certs;
 pub mod cli;
 pub mod fuzz;
 pub mod latency;
-pub mod live;
 pub mod netbench;
 pub mod plots;
 pub mod ringbench;

@@ -12,7 +12,7 @@
 //! `sim run` writes it for a simulated run ([`coop_transport::recording::session`]).
 //!
 //! With `--live`, the launcher also serves every site's copy, tool and force to Foxglove while the
-//! session runs ([`crate::live`]).
+//! session runs ([`coop_transport::live_view`]).
 //!
 //! Stations die with the launcher (parent-death signal, then their own stop ladder), so an
 //! interrupted session leaves nothing behind.
@@ -62,7 +62,7 @@ pub struct RunArgs {
     /// The stations' `record_max_file_s` (default: the station's own).
     pub record_max_file_s: Option<u64>,
     /// Serve each session live to Foxglove while it runs (`--live`).
-    pub live: Option<Arc<crate::live::LiveView>>,
+    pub live: Option<Arc<coop_transport::live_view::LiveView>>,
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.

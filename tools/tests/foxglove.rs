@@ -365,3 +365,101 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `station run --live`: the station serves its own live view (from its network process); a
+/// Foxglove WebSocket client that is not ours subscribes and receives the station's frames, scene
+/// and events while it runs, and the station stops cleanly with its recording whole.
+#[test]
+fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
+    use std::io::BufRead;
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["websockets", "google.protobuf"]).is_none() {
+        return;
+    }
+    let session = coop_tests::unique_session();
+    let dir = out_dir("station-live");
+    let record = dir.join("user1.mcap");
+    let cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
+        c.record = Some(record.clone());
+    });
+    let mut station = coop_tests::Reaped::spawn(
+        Command::new(env!("CARGO_BIN_EXE_station"))
+            .arg("run")
+            .arg("--config")
+            .arg(&cfg)
+            .args(["--live", "127.0.0.1:0", "--duration-s", "120"])
+            .stderr(std::process::Stdio::piped()),
+    );
+    let stderr = station
+        .0
+        .as_mut()
+        .and_then(|c| c.stderr.take())
+        .expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .expect("the network process prints the live view's address");
+    assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
+    let client = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60", "user1"])
+        .output()
+        .expect("python3 runs");
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(station.pid() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+    let status = station.wait_timeout(std::time::Duration::from_secs(30));
+    drop(station);
+    let station_log = log.join().unwrap_or_default();
+    assert!(
+        client.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "the station did not stop cleanly ({status:?}): {station_log}"
+    );
+    let v: Value = serde_json::from_slice(&client.stdout).expect("the client prints JSON");
+    assert_eq!(v["errors"], serde_json::json!([]), "{v}");
+    assert_eq!(
+        v["channels"],
+        serde_json::json!({
+            "/tf": "foxglove.FrameTransform",
+            "/scene": "foxglove.SceneUpdate",
+            "/log": "foxglove.Log",
+        }),
+        "advertised"
+    );
+    assert_eq!(v["complete"], true, "the station's frames and scene: {v}");
+    assert_eq!(
+        v["tf_children"],
+        serde_json::json!(["object/user1", "tool/user1"]),
+        "{v}"
+    );
+    assert_eq!(v["max_scene_entities"].as_u64(), Some(4), "{v}");
+    assert!(
+        v["logs"][0]
+            .as_str()
+            .is_some_and(|l| l.starts_with(&format!("station user1 of session {session}"))),
+        "{v}"
+    );
+    let rec = coop_transport::recording::read(&record).expect("the recording reads");
+    assert!(!rec.truncated && !rec.samples.is_empty() && rec.status.is_some());
+    let _ = std::fs::remove_dir_all(&dir);
+}
