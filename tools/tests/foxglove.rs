@@ -165,6 +165,10 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
         }
     }
     assert!(arrows > 0, "the users push the object: force arrows");
+    // The real session's session file opens with the shipped layout too.
+    let session_file = foxglove_summary(&[out.join("paper").join("session.mcap")]);
+    assert_eq!(session_file["errors"], serde_json::json!([]));
+    assert!(check_layout(&session_file) > 0);
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -462,4 +466,172 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
     let rec = coop_transport::recording::read(&record).expect("the recording reads");
     assert!(!rec.truncated && !rec.samples.is_empty() && rec.status.is_some());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The shipped layout (`docs/foxglove-layout.json`).
+fn layout() -> Value {
+    let path = root().join("docs/foxglove-layout.json");
+    serde_json::from_str(&std::fs::read_to_string(&path).expect("the layout")).expect("JSON")
+}
+
+/// The panel ids a layout tree (a panel id, or `{first, second, direction}`) places.
+fn placed(tree: &Value, out: &mut Vec<String>) {
+    match tree {
+        Value::String(id) => out.push(id.clone()),
+        Value::Object(o) => {
+            assert!(
+                ["row", "column"].contains(&o["direction"].as_str().unwrap_or("")),
+                "a split has a direction: {tree}"
+            );
+            placed(&o["first"], out);
+            placed(&o["second"], out);
+        }
+        other => panic!("not a layout tree: {other}"),
+    }
+}
+
+/// Checks message path `value` (`/topic{field=="x"}.a[0]`) against a file's summary: its topic is a
+/// JSON channel of the file, the filter's field is a field and its value is one the file has, and
+/// every field and index is in the channel's schema, ending at a number.
+fn check_path(value: &str, v: &Value) -> Result<(), String> {
+    let end = value.find(['{', '.', '[']).unwrap_or(value.len());
+    let (topic, mut rest) = value.split_at(end);
+    let root_schema = &v["json_schemas"][topic];
+    if !root_schema.is_object() {
+        return Err(format!("{value}: no JSON channel {topic} in the file"));
+    }
+    if let Some(r) = rest.strip_prefix('{') {
+        let (filter, after) = r
+            .split_once('}')
+            .ok_or_else(|| format!("{value}: unclosed filter"))?;
+        let (field, wanted) = filter
+            .split_once("==")
+            .ok_or_else(|| format!("{value}: filter {filter} is not field==value"))?;
+        if !root_schema["properties"][field].is_object() {
+            return Err(format!("{value}: {topic} has no field {field}"));
+        }
+        let wanted = wanted.trim_matches('"');
+        if !v["json"][topic][wanted].is_u64() {
+            return Err(format!(
+                "{value}: no {topic} message with {field} {wanted:?}"
+            ));
+        }
+        rest = after;
+    }
+    let mut schema = root_schema;
+    while !rest.is_empty() {
+        if let Some(r) = rest.strip_prefix('.') {
+            let end = r.find(['.', '[']).unwrap_or(r.len());
+            let (name, after) = r.split_at(end);
+            schema = &schema["properties"][name];
+            if !schema.is_object() {
+                return Err(format!("{value}: no field {name}"));
+            }
+            rest = after;
+        } else if let Some(r) = rest.strip_prefix('[') {
+            let (index, after) = r
+                .split_once(']')
+                .ok_or_else(|| format!("{value}: unclosed index"))?;
+            let i: u64 = index
+                .parse()
+                .map_err(|_| format!("{value}: index {index}"))?;
+            if schema["type"] != "array" || schema["maxItems"].as_u64().is_some_and(|n| i >= n) {
+                return Err(format!("{value}: [{i}] indexes no array item ({schema})"));
+            }
+            schema = &schema["items"];
+            rest = after;
+        } else {
+            return Err(format!("{value}: cannot read {rest}"));
+        }
+    }
+    if schema["type"] != "number" {
+        return Err(format!("{value}: plots {schema}, not a number"));
+    }
+    Ok(())
+}
+
+/// Every panel of the shipped layout is placed and configured, and every topic and message path it
+/// refers to is in the file `v` summarises (a session file); returns the paths checked.
+fn check_layout(v: &Value) -> usize {
+    let l = layout();
+    let config = l["configById"].as_object().expect("configById");
+    let mut ids = Vec::new();
+    placed(&l["layout"], &mut ids);
+    for tabs in config.values().filter_map(|c| c["tabs"].as_array()) {
+        for t in tabs {
+            placed(&t["layout"], &mut ids);
+        }
+    }
+    ids.sort();
+    let mut configured: Vec<String> = config.keys().cloned().collect();
+    configured.sort();
+    assert_eq!(ids, configured, "every panel placed once and configured");
+    let types: Vec<&str> = ids
+        .iter()
+        .map(|id| id.split('!').next().unwrap_or(""))
+        .collect();
+    for t in ["3D", "Plot", "RosOut", "Tab"] {
+        assert!(types.contains(&t), "a {t} panel: {types:?}");
+    }
+    let counts = &v["parts"][0]["counts"];
+    let mut checked = 0;
+    let mut errors = Vec::new();
+    for (id, c) in config {
+        for topic in c["topics"].as_object().into_iter().flat_map(|t| t.keys()) {
+            if counts[topic].as_u64().unwrap_or(0) == 0 {
+                errors.push(format!("{id}: no {topic} messages"));
+            }
+        }
+        if let Some(topic) = c["topicToRender"].as_str() {
+            if counts[topic].as_u64().unwrap_or(0) == 0 {
+                errors.push(format!("{id}: no {topic} messages"));
+            }
+        }
+        for p in c["paths"].as_array().into_iter().flatten() {
+            checked += 1;
+            if let Err(e) = check_path(p["value"].as_str().expect("a path value"), v) {
+                errors.push(format!("{id}: {e}"));
+            }
+        }
+    }
+    assert!(errors.is_empty(), "{errors:#?}");
+    checked
+}
+
+/// The layout shipped in `docs/` names only topics and message paths a simulated run's session
+/// file has, so it cannot rot when a channel or field is renamed.
+#[test]
+fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let out = out_dir("layout");
+    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(root().join("scenarios/paper.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v = foxglove_summary(&[out.join("session.mcap")]);
+    assert!(check_layout(&v) >= 20, "the plots' paths were checked");
+    // The check itself fails on a path the file does not have.
+    assert!(check_path("/tool{site==\"user1\"}.f_desired[0]", &v).is_ok());
+    for bad in [
+        "/tools{site==\"user1\"}.f_desired[0]",
+        "/tool{site==\"nobody\"}.f_desired[0]",
+        "/tool{sight==\"user1\"}.f_desired[0]",
+        "/tool{site==\"user1\"}.f_wished[0]",
+        "/tool{site==\"user1\"}.f_desired[3]",
+        "/tool{site==\"user1\"}.f_desired",
+        "/tool.site",
+    ] {
+        assert!(check_path(bad, &v).is_err(), "{bad} passed");
+    }
+    let _ = std::fs::remove_dir_all(&out);
 }
