@@ -618,18 +618,21 @@ fn schema_of(topic: &str) -> serde_json::Value {
 impl Part {
     /// Creates (truncates) part `number` at `path` and writes its header, metadata, schemas and
     /// channels: the JSON channels `json` (each with [`schema_of`] its topic; ids in that order),
-    /// then, `with_foxglove`, the [`FOXGLOVE_TOPICS`].
+    /// then, `with_foxglove`, the [`FOXGLOVE_TOPICS`]. A station's parts are written `!chunked`
+    /// (every message reaches the file at the next flush: crash-safe); a file written at once
+    /// (a session file) in chunks, with their indexes, which some readers (Rerun) need.
     fn create(
         path: PathBuf,
         number: u32,
         metadata: &BTreeMap<String, String>,
         json: &[&str],
         with_foxglove: bool,
+        chunked: bool,
     ) -> Result<Self, RecordingError> {
         let file = File::create(&path).map_err(io_err(&path))?;
         let written = Rc::new(Cell::new(0));
         let mut w = mcap::WriteOptions::new()
-            .use_chunks(false)
+            .use_chunks(chunked)
             .profile("")
             .library(concat!("coop-haptics ", env!("CARGO_PKG_VERSION")))
             .create(Counted {
@@ -770,7 +773,14 @@ impl Recorder {
             .or_else(|| metadata.get("site").cloned())
             .unwrap_or_default();
         Ok(Self {
-            part: Part::create(path.to_owned(), 0, &metadata, &TOPICS, scene.is_some())?,
+            part: Part::create(
+                path.to_owned(),
+                0,
+                &metadata,
+                &TOPICS,
+                scene.is_some(),
+                false,
+            )?,
             first: path.to_owned(),
             metadata,
             rotation,
@@ -801,6 +811,7 @@ impl Recorder {
             &self.metadata,
             &TOPICS,
             self.scene.is_some(),
+            false,
         )?;
         let mut done = std::mem::replace(&mut self.part, next);
         done.w.finish().map_err(mcap_err(&done.path))?;

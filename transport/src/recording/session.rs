@@ -16,7 +16,9 @@
 //! | `/scene`      | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`](super::SCENE_EVERY): every site's entities and the reference copy ([`REFERENCE_COLOUR`](super::scene::REFERENCE_COLOUR)) |
 //! | `/log`        | `foxglove.Log`            | the session's start (scenario, method, sites)       |
 //!
-//! The frames, entities and colours are the recordings' own ([`Scene`]); one file, no parts.
+//! The frames, entities and colours are the recordings' own ([`Scene`]); one file, no parts,
+//! written in (uncompressed) chunks with their indexes: it is written at once, not by a station
+//! that may crash, and Rerun's MCAP loader reads chunked files only.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -168,7 +170,7 @@ pub fn write(
     metadata.insert("source".into(), source.as_str().into());
     metadata.insert("started_unix_ns".into(), epoch_unix_ns.to_string());
     let mut w = Writer {
-        part: Part::create(path.to_owned(), 0, &metadata, &TOPICS, true)?,
+        part: Part::create(path.to_owned(), 0, &metadata, &TOPICS, true, true)?,
         seq: 0,
         epoch_unix_ns,
     };
