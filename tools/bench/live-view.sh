@@ -38,6 +38,7 @@ trap cleanup EXIT
 cpu=1; [ "$(nproc)" -gt 1 ] || cpu=0
 
 echo "# live viewer and Foxglove channels vs none: scenarios/paper.toml, servo SCHED_FIFO 80 on CPU $cpu, physics SCHED_FIFO 70 on CPU 0, mlockall, recording on, ${duration} s each"
+echo "# load average before: $(cut -d' ' -f1-3 /proc/loadavg) (anything else running on these cores shows in every row)"
 for run in none viewer no-foxglove; do
   [ -n "${KEEP_WORK:-}" ] && date +"%T $run" >&2
   session="lv$$${run%%-*}"
@@ -80,6 +81,7 @@ TOML
   if [ -n "$viewer_pid" ]; then wait "$viewer_pid"; viewer_pid=; fi
 done
 
+echo "# load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
 python3 - "$work" <<'PY'
 import glob, json, os, sys
 from mcap.reader import make_reader

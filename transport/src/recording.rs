@@ -22,7 +22,7 @@
 //! from its message struct's fields.
 //!
 //! A recording made with a [`Scene`] ([`Recorder::create_with_scene`], as the network process makes
-//! it) also has Foxglove's well-known channels (`message_encoding = "protobuf"`, each schema the
+//! it unless the station's `record_foxglove` is off) also has Foxglove's well-known channels (`message_encoding = "protobuf"`, each schema the
 //! `foxglove` crate's FileDescriptorSet, named `foxglove.<Type>`), so Foxglove and Lichtblick show
 //! it in their 3-D panel and log view without any setup (see [`scene`] for the frames and entities):
 //!
@@ -35,6 +35,9 @@
 //! The protobuf messages go through the same writer as the JSON ones (not the SDK's own MCAP
 //! sink), so they rotate, flush and survive a crash with them, and each part holds its own
 //! schemas.
+//!
+//! A run's whole session in one file, as `sim run` and `session run` write it next to their plots,
+//! is [`session`]'s.
 //!
 //! Each file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps
 //! everything up to the last flush; [`read`] accepts such a file (no summary, no end magic).

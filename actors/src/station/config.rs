@@ -148,8 +148,8 @@ impl Default for StationConfig {
             network: NetworkConfig::default(),
             start: StartMode::Now,
             record: None,
-            // A station records about 130 KB/s: a part holds about 8 minutes, the 24 parts (at
-            // most 1.5 GiB) about 3 hours.
+            // A station records about 190 KB/s (130 KB/s without the Foxglove channels): a part
+            // holds about 6 minutes, the 24 parts (at most 1.5 GiB) about 2 hours and a half.
             record_max_file_mib: 64,
             record_max_file_s: 600,
             record_keep_files: 24,
