@@ -33,7 +33,6 @@ pub mod cli;
 pub mod devbench;
 pub mod fuzz;
 pub mod latency;
-pub mod live;
 pub mod netbench;
 pub mod plots;
 pub mod ringbench;

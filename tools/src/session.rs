@@ -7,8 +7,12 @@
 //! MCAP recordings, and prints the metrics table of `sim compare` for the real run next to the
 //! simulator's figures for the same scenario, with the Fig. 9–12 plots per method.
 //!
+//! Next to the stations' recordings it writes `session.mcap`: every site's copy, tool and forces
+//! on the scenario's grid, the divergence, and the simulator's reference copy, in one file as
+//! `sim run` writes it for a simulated run ([`coop_transport::recording::session`]).
+//!
 //! With `--live`, the launcher also serves every site's copy, tool and force to Foxglove while the
-//! session runs ([`crate::live`]).
+//! session runs ([`coop_transport::live_view`]).
 //!
 //! With `--attach` ([`attach`]), it drives stations it did not start, on other machines: it waits
 //! for their presence through a router or at given locators, announces time 0 in its own clock
@@ -65,7 +69,7 @@ pub struct RunArgs {
     /// The stations' `record_max_file_s` (default: the station's own).
     pub record_max_file_s: Option<u64>,
     /// Serve each session live to Foxglove while it runs (`--live`).
-    pub live: Option<Arc<crate::live::LiveView>>,
+    pub live: Option<Arc<coop_transport::live_view::LiveView>>,
     /// Drive stations already running instead of starting them (`--attach`).
     pub attach: Option<attach::Attach>,
 }
@@ -348,6 +352,8 @@ pub fn run_method(
     }
     // Time 0 a little ahead, so every station has it before it matters.
     let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
+    // Time 0 on the wall clock, for the session file's log times (next to the recordings').
+    let t0_unix_ns = unix_ns_of(t0);
     epoch.announce(t0)?;
 
     // Overruns from here on are the session's (startup, with every station's processes and zenoh
@@ -453,6 +459,8 @@ pub fn run_method(
     let mut o = outcome(
         &sc,
         method,
+        session,
+        t0_unix_ns,
         &dir,
         &sites,
         &recordings,
@@ -463,6 +471,16 @@ pub fn run_method(
     Ok(o)
 }
 
+/// `mono_ns` (this machine's CLOCK_MONOTONIC, near now) on the wall clock: a session file's log
+/// times sit next to the recordings'.
+pub(crate) fn unix_ns_of(mono_ns: u64) -> u64 {
+    let now = coop_rt::timer::monotonic_ns();
+    let unix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    (i128::from(unix) + i128::from(mono_ns) - i128::from(now)).max(0) as u64
+}
+
 /// The figures of a session that ran: the stations' recordings (in the scenario's site order,
 /// with their paths in `sites`) on the scenario's grid from each one's time 0 (`epochs`, in its
 /// own clock), the simulator's runs of the same scenario, the metrics, `metrics.json` and the
@@ -470,9 +488,12 @@ pub fn run_method(
 ///
 /// # Errors
 /// A recording without samples; the plots or `metrics.json` cannot be written.
+#[allow(clippy::too_many_arguments)]
 fn outcome(
     sc: &Scenario,
     method: MethodName,
+    session: &str,
+    t0_unix_ns: u64,
     dir: &Path,
     sites: &[(String, PathBuf)],
     recordings: &[Recording],
@@ -495,6 +516,21 @@ fn outcome(
         s.others_work_j = f64::NAN;
     }
     crate::plots::figures(dir, sc, &real_run, &reference_run)?;
+    let session_file = dir.join("session.mcap");
+    recording::session::write(
+        &session_file,
+        BTreeMap::from([
+            ("session".into(), session.to_owned()),
+            ("scenario".into(), sc.name.clone()),
+            ("method".into(), method.as_str().to_owned()),
+        ]),
+        sc,
+        &real_run,
+        Some(&reference_run),
+        recording::session::Source::Stations,
+        t0_unix_ns,
+    )
+    .with_context(|| format!("writing {}", session_file.display()))?;
     std::fs::write(
         dir.join("metrics.json"),
         serde_json::to_string_pretty(&serde_json::json!({ "real": real, "simulated": simulated }))?

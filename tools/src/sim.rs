@@ -1,13 +1,16 @@
 //! `sim`: runs the deterministic multi-site simulator on a scenario file.
 //!
-//! - `sim run SCENARIO --out DIR`: one method; writes the trace, adoptions, metrics and the
-//!   Fig. 9–12 style plots.
+//! - `sim run SCENARIO --out DIR`: one method; writes the trace, adoptions, metrics, the
+//!   Fig. 9–12 style plots, and `session.mcap`: every site and the reference copy in Foxglove's
+//!   terms, as `session run` writes it for real stations
+//!   ([`coop_transport::recording::session`]).
 //! - `sim compare SCENARIO`: every method on the same scenario next to the reference run, one table
 //!   (or `--json`).
 //! - `sim sweep SCENARIO`: every method × constant delay × seed, one row each (or `--json`), and
 //!   with `--out` a plot of phases passed and co-contact divergence against delay.
 //! - `sim bench`: cost of a physics step and a servo step, and the simulator's speed.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -17,6 +20,7 @@ use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
 
 use coop_actors::scenario_file;
+use coop_transport::recording;
 
 /// Command line of `sim`.
 #[derive(Debug, Parser)]
@@ -346,7 +350,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
     }
 }
 
-/// Writes a run's trace, adoptions, metrics and plots into `dir`.
+/// Writes a run's trace, adoptions, metrics, session file (`session.mcap`) and plots into `dir`.
 ///
 /// # Errors
 /// The directory or a file cannot be written.
@@ -366,5 +370,20 @@ pub fn write_outputs(
     write("reference_trace.csv", reference.trace_csv())?;
     write("adoptions.csv", r.adoptions_csv())?;
     write("metrics.json", serde_json::to_string_pretty(m)? + "\n")?;
+    let session = dir.join("session.mcap");
+    recording::session::write(
+        &session,
+        BTreeMap::from([
+            ("scenario".into(), sc.name.clone()),
+            ("method".into(), r.mode.name().to_owned()),
+            ("seed".into(), sc.seed.to_string()),
+        ]),
+        sc,
+        r,
+        Some(reference),
+        recording::session::Source::Simulated,
+        recording::session::SIM_EPOCH_UNIX_NS,
+    )
+    .with_context(|| format!("writing {}", session.display()))?;
     crate::plots::figures(dir, sc, r, reference)
 }

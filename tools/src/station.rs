@@ -134,17 +134,26 @@ struct ChildArgs {
     /// The supervisor's pid: refuse to start if it is already gone (set by the supervisor).
     #[arg(long, hide = true)]
     parent: Option<u32>,
+    /// Serve this station's own live view to Foxglove or Lichtblick (foxglove.websocket.v1) on
+    /// ADDR, by default 127.0.0.1:8765 (loopback); port 0 picks a free one (printed). Overrides
+    /// the configuration's `live`. From the network process: the real-time loops never wait for it.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = false,
+          default_missing_value = coop_transport::live_view::DEFAULT_ADDR)]
+    live: Option<String>,
 }
 
 fn resolve(a: &ChildArgs) -> anyhow::Result<coop_actors::station::config::Resolved> {
     let mut r = StationConfig::load(a.config.as_deref())?;
-    if a.station.is_some() || a.session.is_some() {
+    if a.station.is_some() || a.session.is_some() || a.live.is_some() {
         let mut c = r.config.clone();
         if let Some(s) = &a.station {
             c.station = Some(s.clone());
         }
         if let Some(s) = &a.session {
             c.session = s.clone();
+        }
+        if let Some(l) = &a.live {
+            c.live = Some(l.clone());
         }
         r = c.resolve(a.config.as_deref().and_then(std::path::Path::parent))?;
     }

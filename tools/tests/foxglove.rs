@@ -165,6 +165,10 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
         }
     }
     assert!(arrows > 0, "the users push the object: force arrows");
+    // The real session's session file opens with the shipped layout too.
+    let session_file = foxglove_summary(&[out.join("paper").join("session.mcap")]);
+    assert_eq!(session_file["errors"], serde_json::json!([]));
+    assert!(check_layout(&session_file) > 0);
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -259,5 +263,375 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
         result["methods"]["paper"]["real"]["divergence_final_m"].as_f64() < Some(0.005),
         "{result}"
     );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// `sim run --out` writes `session.mcap`: read by the same foreign reader as a station's
+/// recording, it holds every site's frames, entities and JSON channels and the reference copy as
+/// its own frame, entity and colour, with times increasing and frame ids that are all declared.
+#[test]
+fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_terms() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let out = out_dir("sim");
+    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "paper", "--out"])
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        run.status.success(),
+        "sim failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v = foxglove_summary(&[out.join("session.mcap")]);
+    assert_eq!(v["errors"], serde_json::json!([]), "{}", v["errors"]);
+    let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
+    let mut sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
+    // Every site's copy and tool and the reference copy, one frame each per sample, in `world`.
+    let mut want: Vec<String> = sites
+        .iter()
+        .flat_map(|s| [format!("world>object/{s}"), format!("world>tool/{s}")])
+        .chain(["world>object/reference".to_owned()])
+        .collect();
+    want.sort();
+    let frames = v["frames"].as_object().expect("frames");
+    assert_eq!(frames.keys().cloned().collect::<Vec<_>>(), want);
+    for (f, n) in frames {
+        assert_eq!(n.as_u64(), Some(samples), "{f}");
+    }
+    // Each entity sits in `world` or in a frame the file transforms.
+    let declared: Vec<&str> = frames
+        .keys()
+        .map(|k| k.split_once('>').expect("parent>child").1)
+        .collect();
+    for e in v["entity_frames"].as_array().expect("entity frames") {
+        let frame = e[1].as_str().expect("frame");
+        assert!(
+            frame == "world" || declared.contains(&frame),
+            "entity {e} in a frame no /tf declares"
+        );
+    }
+    // The reference copy: its own entity, the object's real size, its own (grey) colour.
+    let o = &scenario.object;
+    let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
+    let entities = &v["entities"];
+    assert_eq!(
+        entities["object/reference"]["cylinder_size"],
+        serde_json::json!([d, d, h])
+    );
+    let grey = entities["object/reference"]["colour"].clone();
+    for s in &sites {
+        assert_eq!(
+            entities[format!("object/{s}")]["cylinder_size"],
+            serde_json::json!([d, d, h])
+        );
+        assert_ne!(entities[format!("object/{s}")]["colour"], grey, "{s}");
+        assert!(
+            entities[format!("tool/{s}")]["sphere_size"].is_array(),
+            "{s}"
+        );
+    }
+    assert!(
+        entities["environment"]["cubes"].as_u64() > Some(0),
+        "the floor"
+    );
+    // The JSON channels: every site (and the reference's /object) at every sample.
+    let per_site = |topic: &str| -> Vec<(String, u64)> {
+        v["json"][topic]
+            .as_object()
+            .unwrap_or_else(|| panic!("{topic} in {}", v["json"]))
+            .iter()
+            .map(|(k, n)| (k.clone(), n.as_u64().unwrap_or(0)))
+            .collect()
+    };
+    sites.sort_unstable();
+    let count = |names: &[&str]| -> Vec<(String, u64)> {
+        names.iter().map(|s| ((*s).to_owned(), samples)).collect()
+    };
+    assert_eq!(per_site("/tool"), count(&sites));
+    let mut with_reference = sites.clone();
+    with_reference.push("reference");
+    with_reference.sort_unstable();
+    assert_eq!(per_site("/object"), count(&with_reference));
+    assert_eq!(per_site("/divergence"), count(&[""]));
+    let logs = v["logs"].as_array().expect("logs");
+    assert!(
+        logs[0]["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("scenario three-users") && m.contains("simulated")),
+        "{logs:?}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// `station run --live`: the station serves its own live view (from its network process); a
+/// Foxglove WebSocket client that is not ours subscribes and receives the station's frames, scene
+/// and events while it runs, and the station stops cleanly with its recording whole.
+#[test]
+fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
+    use std::io::BufRead;
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["websockets", "google.protobuf"]).is_none() {
+        return;
+    }
+    let session = coop_tests::unique_session();
+    let dir = out_dir("station-live");
+    let record = dir.join("user1.mcap");
+    let cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
+        c.record = Some(record.clone());
+    });
+    let mut station = coop_tests::Reaped::spawn(
+        Command::new(env!("CARGO_BIN_EXE_station"))
+            .arg("run")
+            .arg("--config")
+            .arg(&cfg)
+            .args(["--live", "127.0.0.1:0", "--duration-s", "120"])
+            .stderr(std::process::Stdio::piped()),
+    );
+    let stderr = station
+        .0
+        .as_mut()
+        .and_then(|c| c.stderr.take())
+        .expect("stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(60))
+        .expect("the network process prints the live view's address");
+    assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
+    let client = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60", "user1"])
+        .output()
+        .expect("python3 runs");
+    let _ = nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(station.pid() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    );
+    let status = station.wait_timeout(std::time::Duration::from_secs(30));
+    drop(station);
+    let station_log = log.join().unwrap_or_default();
+    assert!(
+        client.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "the station did not stop cleanly ({status:?}): {station_log}"
+    );
+    let v: Value = serde_json::from_slice(&client.stdout).expect("the client prints JSON");
+    assert_eq!(v["errors"], serde_json::json!([]), "{v}");
+    assert_eq!(
+        v["channels"],
+        serde_json::json!({
+            "/tf": "foxglove.FrameTransform",
+            "/scene": "foxglove.SceneUpdate",
+            "/log": "foxglove.Log",
+        }),
+        "advertised"
+    );
+    assert_eq!(v["complete"], true, "the station's frames and scene: {v}");
+    assert_eq!(
+        v["tf_children"],
+        serde_json::json!(["object/user1", "tool/user1"]),
+        "{v}"
+    );
+    assert_eq!(v["max_scene_entities"].as_u64(), Some(4), "{v}");
+    assert!(
+        v["logs"][0]
+            .as_str()
+            .is_some_and(|l| l.starts_with(&format!("station user1 of session {session}"))),
+        "{v}"
+    );
+    let rec = coop_transport::recording::read(&record).expect("the recording reads");
+    assert!(!rec.truncated && !rec.samples.is_empty() && rec.status.is_some());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The shipped layout (`docs/foxglove-layout.json`).
+fn layout() -> Value {
+    let path = root().join("docs/foxglove-layout.json");
+    serde_json::from_str(&std::fs::read_to_string(&path).expect("the layout")).expect("JSON")
+}
+
+/// The panel ids a layout tree (a panel id, or `{first, second, direction}`) places.
+fn placed(tree: &Value, out: &mut Vec<String>) {
+    match tree {
+        Value::String(id) => out.push(id.clone()),
+        Value::Object(o) => {
+            assert!(
+                ["row", "column"].contains(&o["direction"].as_str().unwrap_or("")),
+                "a split has a direction: {tree}"
+            );
+            placed(&o["first"], out);
+            placed(&o["second"], out);
+        }
+        other => panic!("not a layout tree: {other}"),
+    }
+}
+
+/// Checks message path `value` (`/topic{field=="x"}.a[0]`) against a file's summary: its topic is a
+/// JSON channel of the file, the filter's field is a field and its value is one the file has, and
+/// every field and index is in the channel's schema, ending at a number.
+fn check_path(value: &str, v: &Value) -> Result<(), String> {
+    let end = value.find(['{', '.', '[']).unwrap_or(value.len());
+    let (topic, mut rest) = value.split_at(end);
+    let root_schema = &v["json_schemas"][topic];
+    if !root_schema.is_object() {
+        return Err(format!("{value}: no JSON channel {topic} in the file"));
+    }
+    if let Some(r) = rest.strip_prefix('{') {
+        let (filter, after) = r
+            .split_once('}')
+            .ok_or_else(|| format!("{value}: unclosed filter"))?;
+        let (field, wanted) = filter
+            .split_once("==")
+            .ok_or_else(|| format!("{value}: filter {filter} is not field==value"))?;
+        if !root_schema["properties"][field].is_object() {
+            return Err(format!("{value}: {topic} has no field {field}"));
+        }
+        let wanted = wanted.trim_matches('"');
+        if !v["json"][topic][wanted].is_u64() {
+            return Err(format!(
+                "{value}: no {topic} message with {field} {wanted:?}"
+            ));
+        }
+        rest = after;
+    }
+    let mut schema = root_schema;
+    while !rest.is_empty() {
+        if let Some(r) = rest.strip_prefix('.') {
+            let end = r.find(['.', '[']).unwrap_or(r.len());
+            let (name, after) = r.split_at(end);
+            schema = &schema["properties"][name];
+            if !schema.is_object() {
+                return Err(format!("{value}: no field {name}"));
+            }
+            rest = after;
+        } else if let Some(r) = rest.strip_prefix('[') {
+            let (index, after) = r
+                .split_once(']')
+                .ok_or_else(|| format!("{value}: unclosed index"))?;
+            let i: u64 = index
+                .parse()
+                .map_err(|_| format!("{value}: index {index}"))?;
+            if schema["type"] != "array" || schema["maxItems"].as_u64().is_some_and(|n| i >= n) {
+                return Err(format!("{value}: [{i}] indexes no array item ({schema})"));
+            }
+            schema = &schema["items"];
+            rest = after;
+        } else {
+            return Err(format!("{value}: cannot read {rest}"));
+        }
+    }
+    if schema["type"] != "number" {
+        return Err(format!("{value}: plots {schema}, not a number"));
+    }
+    Ok(())
+}
+
+/// Every panel of the shipped layout is placed and configured, and every topic and message path it
+/// refers to is in the file `v` summarises (a session file); returns the paths checked.
+fn check_layout(v: &Value) -> usize {
+    let l = layout();
+    let config = l["configById"].as_object().expect("configById");
+    let mut ids = Vec::new();
+    placed(&l["layout"], &mut ids);
+    for tabs in config.values().filter_map(|c| c["tabs"].as_array()) {
+        for t in tabs {
+            placed(&t["layout"], &mut ids);
+        }
+    }
+    ids.sort();
+    let mut configured: Vec<String> = config.keys().cloned().collect();
+    configured.sort();
+    assert_eq!(ids, configured, "every panel placed once and configured");
+    let types: Vec<&str> = ids
+        .iter()
+        .map(|id| id.split('!').next().unwrap_or(""))
+        .collect();
+    for t in ["3D", "Plot", "RosOut", "Tab"] {
+        assert!(types.contains(&t), "a {t} panel: {types:?}");
+    }
+    let counts = &v["parts"][0]["counts"];
+    let mut checked = 0;
+    let mut errors = Vec::new();
+    for (id, c) in config {
+        for topic in c["topics"].as_object().into_iter().flat_map(|t| t.keys()) {
+            if counts[topic].as_u64().unwrap_or(0) == 0 {
+                errors.push(format!("{id}: no {topic} messages"));
+            }
+        }
+        if let Some(topic) = c["topicToRender"].as_str() {
+            if counts[topic].as_u64().unwrap_or(0) == 0 {
+                errors.push(format!("{id}: no {topic} messages"));
+            }
+        }
+        for p in c["paths"].as_array().into_iter().flatten() {
+            checked += 1;
+            if let Err(e) = check_path(p["value"].as_str().expect("a path value"), v) {
+                errors.push(format!("{id}: {e}"));
+            }
+        }
+    }
+    assert!(errors.is_empty(), "{errors:#?}");
+    checked
+}
+
+/// The layout shipped in `docs/` names only topics and message paths a simulated run's session
+/// file has, so it cannot rot when a channel or field is renamed.
+#[test]
+fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let out = out_dir("layout");
+    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(root().join("scenarios/paper.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v = foxglove_summary(&[out.join("session.mcap")]);
+    assert!(check_layout(&v) >= 20, "the plots' paths were checked");
+    // The check itself fails on a path the file does not have.
+    assert!(check_path("/tool{site==\"user1\"}.f_desired[0]", &v).is_ok());
+    for bad in [
+        "/tools{site==\"user1\"}.f_desired[0]",
+        "/tool{site==\"nobody\"}.f_desired[0]",
+        "/tool{sight==\"user1\"}.f_desired[0]",
+        "/tool{site==\"user1\"}.f_wished[0]",
+        "/tool{site==\"user1\"}.f_desired[3]",
+        "/tool{site==\"user1\"}.f_desired",
+        "/tool.site",
+    ] {
+        assert!(check_path(bad, &v).is_err(), "{bad} passed");
+    }
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -87,6 +87,7 @@ fn same_seed_gives_byte_identical_outputs() {
         "adoptions.csv",
         "metrics.json",
         "fig_x.svg",
+        "session.mcap",
     ] {
         let (x, y) = (
             std::fs::read(d1.join(f)).expect(f),

@@ -6,7 +6,8 @@
 //!   its sequence), every refusal typed and counted.
 //! - [`acl`]: who may say what in a session (zenoh's access control, by certificate name).
 //! - [`router`]: a zenoh router enforcing it, for sessions across machines, and its status.
-//! - [`recording`]: the station's MCAP recording, written and read.
+//! - [`recording`]: the station's MCAP recording, written and read, and a run's session file.
+//! - [`live_view`]: a site or a whole session served live to Foxglove (`foxglove.websocket.v1`).
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
 //!
@@ -18,6 +19,7 @@
 pub mod acl;
 pub mod admit;
 pub mod keys;
+pub mod live_view;
 pub mod network;
 pub mod recording;
 pub mod router;

@@ -22,7 +22,7 @@
 //! from its message struct's fields.
 //!
 //! A recording made with a [`Scene`] ([`Recorder::create_with_scene`], as the network process makes
-//! it) also has Foxglove's well-known channels (`message_encoding = "protobuf"`, each schema the
+//! it unless the station's `record_foxglove` is off) also has Foxglove's well-known channels (`message_encoding = "protobuf"`, each schema the
 //! `foxglove` crate's FileDescriptorSet, named `foxglove.<Type>`), so Foxglove and Lichtblick show
 //! it in their 3-D panel and log view without any setup (see [`scene`] for the frames and entities):
 //!
@@ -35,6 +35,9 @@
 //! The protobuf messages go through the same writer as the JSON ones (not the SDK's own MCAP
 //! sink), so they rotate, flush and survive a crash with them, and each part holds its own
 //! schemas.
+//!
+//! A run's whole session in one file, as `sim run` and `session run` write it next to their plots,
+//! is [`session`]'s.
 //!
 //! Each file is written without chunks and flushed every [`FLUSH_EVERY`], so a crash keeps
 //! everything up to the last flush; [`read`] accepts such a file (no summary, no end magic).
@@ -67,6 +70,7 @@ use foxglove::Encode;
 use serde::{Deserialize, Serialize};
 
 pub mod scene;
+pub mod session;
 pub use scene::Scene;
 
 /// How often the writer pushes what it has to the file.
@@ -97,6 +101,12 @@ json_schema_is!("string": String);
 impl<T: JsonSchema, const N: usize> JsonSchema for [T; N] {
     fn schema() -> serde_json::Value {
         serde_json::json!({ "type": "array", "items": T::schema(), "minItems": N, "maxItems": N })
+    }
+}
+
+impl<T: JsonSchema> JsonSchema for Vec<T> {
+    fn schema() -> serde_json::Value {
+        serde_json::json!({ "type": "array", "items": T::schema() })
     }
 }
 
@@ -198,9 +208,13 @@ impl From<&TraceRecord> for SampleMsg {
 }
 
 json_message! {
+    /// `/object`: the sample's object part, named after its site (a viewer that opens several
+    /// sites' recordings, or a session file, tells them apart by it: `/object{site=="user1"}`).
     #[derive(Serialize, Deserialize)]
     struct ObjectPart {
         t_ns: u64,
+        #[serde(default)]
+        site: String,
         pos: [f64; 3],
         rot: [f64; 4],
         vel: [f64; 3],
@@ -209,9 +223,12 @@ json_message! {
 }
 
 json_message! {
+    /// `/tool`: the sample's tool part, named after its site as `/object` is.
     #[derive(Serialize, Deserialize)]
     struct ToolPart {
         t_ns: u64,
+        #[serde(default)]
+        site: String,
         tool_pos: [f64; 3],
         f_desired: [f64; 3],
         f_measured: [f64; 3],
@@ -353,6 +370,20 @@ json_message! {
     }
 }
 
+json_message! {
+    /// `/divergence`, in a session file ([`session`]): how far the sites' copies are apart.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+    pub struct DivergenceMsg {
+        /// ns since the session's time 0.
+        pub t_ns: u64,
+        /// The largest distance between any two sites' copies of the object, m
+        /// (`coop_model::metrics::divergence`).
+        pub max_m: f64,
+        /// Each site's copy's distance from the reference copy, m, in the scenario's site order.
+        pub vs_reference_m: Vec<f64>,
+    }
+}
+
 const TOPICS: [&str; 10] = [
     "/session",
     "/object",
@@ -487,7 +518,8 @@ struct Part {
     w: mcap::Writer<Counted>,
     path: PathBuf,
     number: u32,
-    channels: [u16; TOPICS.len()],
+    /// The JSON channels' ids, in the order they were declared.
+    channels: Vec<u16>,
     /// `/tf`, `/scene`, `/log`, when the recording has a scene.
     foxglove: Option<[u16; FOXGLOVE_TOPICS.len()]>,
     /// The sample time the whole scene was last written in this part at.
@@ -509,6 +541,8 @@ pub struct Recorder {
     session: Option<SessionMsg>,
     /// What the site shows, for the Foxglove channels (none: JSON channels only).
     scene: Option<Scene>,
+    /// The site, in `/object` and `/tool` (the scene's, else the metadata's `site`).
+    site: String,
     seq: u32,
     wall_minus_mono: i128,
     last_flush: Instant,
@@ -579,23 +613,29 @@ fn schema_of(topic: &str) -> serde_json::Value {
         "/clock" => ClockMsg::schema(),
         "/status" => StatusMsg::schema(),
         "/published" => PublishedMsg::schema(),
+        "/divergence" => DivergenceMsg::schema(),
         _ => serde_json::json!({ "type": "object" }),
     }
 }
 
 impl Part {
     /// Creates (truncates) part `number` at `path` and writes its header, metadata, schemas and
-    /// channels.
+    /// channels: the JSON channels `json` (each with [`schema_of`] its topic; ids in that order),
+    /// then, `with_foxglove`, the [`FOXGLOVE_TOPICS`]. A station's parts are written `!chunked`
+    /// (every message reaches the file at the next flush: crash-safe); a file written at once
+    /// (a session file) in chunks, with their indexes, which some readers (Rerun) need.
     fn create(
         path: PathBuf,
         number: u32,
         metadata: &BTreeMap<String, String>,
+        json: &[&str],
         with_foxglove: bool,
+        chunked: bool,
     ) -> Result<Self, RecordingError> {
         let file = File::create(&path).map_err(io_err(&path))?;
         let written = Rc::new(Cell::new(0));
         let mut w = mcap::WriteOptions::new()
-            .use_chunks(false)
+            .use_chunks(chunked)
             .profile("")
             .library(concat!("coop-haptics ", env!("CARGO_PKG_VERSION")))
             .create(Counted {
@@ -610,14 +650,15 @@ impl Part {
             metadata,
         })
         .map_err(mcap_err(&path))?;
-        let mut channels = [0u16; TOPICS.len()];
-        for (c, topic) in channels.iter_mut().zip(TOPICS) {
+        let mut channels = Vec::with_capacity(json.len());
+        for &topic in json {
             let schema = w
                 .add_schema(topic, "jsonschema", schema_of(topic).to_string().as_bytes())
                 .map_err(mcap_err(&path))?;
-            *c = w
-                .add_channel(schema, topic, "json", &BTreeMap::new())
-                .map_err(mcap_err(&path))?;
+            channels.push(
+                w.add_channel(schema, topic, "json", &BTreeMap::new())
+                    .map_err(mcap_err(&path))?,
+            );
         }
         let foxglove = if with_foxglove {
             let mut ids = [0u16; FOXGLOVE_TOPICS.len()];
@@ -648,6 +689,30 @@ impl Part {
             started: Instant::now(),
             messages: 0,
         })
+    }
+
+    /// Writes one message on channel `channel_id` at `log_time` (also its publish time), with
+    /// `sequence`.
+    fn write(
+        &mut self,
+        channel_id: u16,
+        sequence: u32,
+        log_time: u64,
+        data: &[u8],
+    ) -> Result<(), RecordingError> {
+        self.w
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id,
+                    sequence,
+                    log_time,
+                    publish_time: log_time,
+                },
+                data,
+            )
+            .map_err(mcap_err(&self.path))?;
+        self.messages += 1;
+        Ok(())
     }
 
     /// Whether the part has reached a bound (a part takes at least one message).
@@ -705,12 +770,25 @@ impl Recorder {
             .map_or(0, |d| d.as_nanos() as i128);
         let mono = i128::from(coop_rt::timer::monotonic_ns());
         metadata.insert("started_unix_ns".into(), wall.to_string());
+        let site = scene
+            .as_ref()
+            .map(|s| s.site.clone())
+            .or_else(|| metadata.get("site").cloned())
+            .unwrap_or_default();
         Ok(Self {
-            part: Part::create(path.to_owned(), 0, &metadata, scene.is_some())?,
+            part: Part::create(
+                path.to_owned(),
+                0,
+                &metadata,
+                &TOPICS,
+                scene.is_some(),
+                false,
+            )?,
             first: path.to_owned(),
             metadata,
             rotation,
             session: None,
+            site,
             scene,
             seq: 0,
             wall_minus_mono: wall - mono,
@@ -734,7 +812,9 @@ impl Recorder {
             part_path(&self.first, number),
             number,
             &self.metadata,
+            &TOPICS,
             self.scene.is_some(),
+            false,
         )?;
         let mut done = std::mem::replace(&mut self.part, next);
         done.w.finish().map_err(mcap_err(&done.path))?;
@@ -796,23 +876,10 @@ impl Recorder {
     fn put_bytes(&mut self, channel_id: u16, t_ns: u64, data: &[u8]) -> Result<(), RecordingError> {
         self.seq = self.seq.wrapping_add(1);
         let log_time = self.wall_ns(t_ns);
-        let part = &mut self.part;
-        let err = mcap_err(&part.path);
-        part.w
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id,
-                    sequence: self.seq,
-                    log_time,
-                    publish_time: log_time,
-                },
-                data,
-            )
-            .map_err(&err)?;
-        part.messages += 1;
+        self.part.write(channel_id, self.seq, log_time, data)?;
         if self.last_flush.elapsed() >= FLUSH_EVERY {
             self.last_flush = Instant::now();
-            part.w.flush().map_err(&err)?;
+            self.part.w.flush().map_err(mcap_err(&self.part.path))?;
         }
         Ok(())
     }
@@ -859,6 +926,7 @@ impl Recorder {
             m.t_ns,
             &ObjectPart {
                 t_ns: m.t_ns,
+                site: self.site.clone(),
                 pos: m.pos,
                 rot: m.rot,
                 vel: m.vel,
@@ -870,6 +938,7 @@ impl Recorder {
             m.t_ns,
             &ToolPart {
                 t_ns: m.t_ns,
+                site: self.site.clone(),
                 tool_pos: m.tool_pos,
                 f_desired: m.f_desired,
                 f_measured: m.f_measured,
@@ -1279,6 +1348,7 @@ mod tests {
                 "/object",
                 serde_json::to_value(ObjectPart {
                     t_ns: 0,
+                    site: String::new(),
                     pos: [0.0; 3],
                     rot: [0.0; 4],
                     vel: [0.0; 3],
@@ -1289,6 +1359,7 @@ mod tests {
                 "/tool",
                 serde_json::to_value(ToolPart {
                     t_ns: 0,
+                    site: String::new(),
                     tool_pos: [0.0; 3],
                     f_desired: [0.0; 3],
                     f_measured: [0.0; 3],
@@ -1305,7 +1376,11 @@ mod tests {
             ("/published", serde_json::to_value(PublishedMsg::default())),
         ];
         assert_eq!(written.len(), TOPICS.len());
-        for (topic, value) in written {
+        let session_file = [(
+            "/divergence",
+            serde_json::to_value(DivergenceMsg::default()),
+        )];
+        for (topic, value) in written.into_iter().chain(session_file) {
             let schema = schema_of(topic);
             assert!(arrays_have_items(&schema), "{topic}: {schema}");
             assert_eq!(
@@ -1776,8 +1851,10 @@ mod tests {
                     _ => {}
                 }
             }
+            // (The last part may hold only the final status, no sample.)
             assert!(
-                first_scene.is_some() && first_scene < first_tf.map(|s| s + 3),
+                first_tf.is_none()
+                    || (first_scene.is_some() && first_scene < first_tf.map(|s| s + 3)),
                 "{}: the part's scene comes with its first sample ({first_scene:?}, {first_tf:?})",
                 part.display()
             );

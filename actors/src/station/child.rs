@@ -289,6 +289,8 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             .collect(),
         scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
             .with_context(|| format!("the scenario has no site {}", cfg.site))?,
+        record_foxglove: cfg.config.record_foxglove,
+        live_view: cfg.config.live.clone(),
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.

@@ -126,6 +126,12 @@ pub struct StationConfig {
     pub record_keep_files: u32,
     /// The device: backend, placement in the world, loop owner, safety limits.
     pub device: crate::station::device::DeviceSpec,
+    /// The recording also holds Foxglove's `/tf`, `/scene` and `/log` channels (default: yes).
+    pub record_foxglove: bool,
+    /// Serve this station's own live view to Foxglove or Lichtblick (`foxglove.websocket.v1`) on
+    /// this address, `host:port` (port 0: one chosen at start, printed); from the network
+    /// process, off the real-time loops. Default: none (`station run --live` sets it).
+    pub live: Option<String>,
 }
 
 impl Default for StationConfig {
@@ -144,12 +150,14 @@ impl Default for StationConfig {
             network: NetworkConfig::default(),
             start: StartMode::Now,
             record: None,
-            // A station records about 130 KB/s: a part holds about 8 minutes, the 24 parts (at
-            // most 1.5 GiB) about 3 hours.
+            // A station records about 190 KB/s (130 KB/s without the Foxglove channels): a part
+            // holds about 6 minutes, the 24 parts (at most 1.5 GiB) about 2 hours and a half.
             record_max_file_mib: 64,
             record_max_file_s: 600,
             record_keep_files: 24,
             device: crate::station::device::DeviceSpec::default(),
+            record_foxglove: true,
+            live: None,
         }
     }
 }
@@ -396,6 +404,14 @@ impl StationConfig {
             bail!("network.lost_after_reports = {lost}: must be from 2 to 10000 report periods");
         }
         self.check_record_bounds()?;
+        if let Some(l) = &self.live {
+            if coop_transport::live_view::parse_addr(l).is_err() {
+                bail!(
+                    "live = {l:?}: not an address such as {} (host:port; port 0 picks a free one)",
+                    coop_transport::live_view::DEFAULT_ADDR
+                );
+            }
+        }
         let mut config = self;
         let rebase = |p: &mut PathBuf| {
             if let Some(b) = base.filter(|_| p.is_relative()) {
@@ -677,11 +693,23 @@ fn record_rules(path: &Path) -> anyhow::Result<()> {
 impl Resolved {
     /// The rules that look at the machine as it is now, checked by `station run` before it creates
     /// anything (not by every resolve: a child re-reads the configuration while its station's
-    /// network process holds the ports): every listen port that is not 0 is free.
+    /// network process holds the ports): every listen port that is not 0 is free, the live
+    /// view's too.
     ///
     /// # Errors
     /// A taken port (or an address of another machine), naming the field and the value.
     pub fn check_listen_ports_free(&self) -> anyhow::Result<()> {
+        if let Some(l) = &self.config.live {
+            let addr = coop_transport::live_view::parse_addr(l)
+                .map_err(|_| anyhow::anyhow!("live = {l:?}: not an address (host:port)"))?;
+            if addr.port() != 0 {
+                if let Err(e) = std::net::TcpListener::bind(addr) {
+                    bail!(
+                        "live = {l:?}: cannot listen there now ({e}); choose a free port, or 0 for one chosen at start"
+                    );
+                }
+            }
+        }
         let net = &self.config.network;
         if net.mode == Mode::Client {
             return Ok(());
@@ -742,6 +770,32 @@ mod tests {
             .expect("valid")
             .check_listen_ports_free()
             .expect("a client does not listen");
+        drop(taken);
+    }
+
+    #[test]
+    fn a_taken_live_view_port_is_refused_before_start_and_port_0_passes() {
+        let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = taken.local_addr().expect("addr").port();
+        let live = |addr: String| StationConfig {
+            live: Some(addr),
+            ..StationConfig::default()
+        };
+        let r = live(format!("127.0.0.1:{port}"))
+            .resolve(None)
+            .expect("no look at the machine in resolve");
+        let err = r.check_listen_ports_free().expect_err("taken");
+        assert!(
+            format!("{err:#}").contains(&format!(
+                "live = \"127.0.0.1:{port}\": cannot listen there now"
+            )),
+            "{err:#}"
+        );
+        live("127.0.0.1:0".into())
+            .resolve(None)
+            .expect("valid")
+            .check_listen_ports_free()
+            .expect("port 0 is chosen at start");
         drop(taken);
     }
 

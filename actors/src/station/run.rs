@@ -132,6 +132,10 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<C
         args.push("--config".into());
         args.push(c.display().to_string());
     }
+    // `station run --live` overrides the file, for the network process too.
+    if let Some(l) = &cfg.config.live {
+        args.push(format!("--live={l}"));
+    }
     Ok(ChildSpec {
         name: role.to_owned(),
         program: std::env::current_exe().context("finding the station binary")?,

@@ -135,7 +135,9 @@ pub struct Metrics {
     pub sites: Vec<SiteMetrics>,
 }
 
-fn divergence(r: &RunResult, k: usize) -> f64 {
+/// The inter-site divergence of `r` at sample `k`: the largest distance between any two sites'
+/// copies of the object, m.
+pub fn divergence(r: &RunResult, k: usize) -> f64 {
     let mut d: f64 = 0.0;
     for (i, a) in r.sites.iter().enumerate() {
         for b in &r.sites[i + 1..] {

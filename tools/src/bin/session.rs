@@ -61,7 +61,7 @@ enum Command {
         /// Serve the session live to Foxglove or Lichtblick (foxglove.websocket.v1) on ADDR, by
         /// default 127.0.0.1:8765 (loopback); port 0 picks a free one. The address is printed.
         #[arg(long, value_name = "ADDR", num_args = 0..=1,
-              default_missing_value = coop_tools::live::DEFAULT_ADDR)]
+              default_missing_value = coop_transport::live_view::DEFAULT_ADDR)]
         live: Option<String>,
         /// Drive stations already running (started by hand, with `start = "session"`, on this or
         /// other machines) instead of starting them: wait for every site's presence through
@@ -253,7 +253,7 @@ fn main() -> std::process::ExitCode {
                 record_max_file_s,
                 live: match live {
                     Some(addr) => {
-                        let view = coop_tools::live::LiveView::start(&addr)?;
+                        let view = coop_transport::live_view::LiveView::start(&addr)?;
                         eprintln!(
                             "live view: {} (foxglove.websocket.v1: open it in Foxglove or Lichtblick)",
                             view.url()

@@ -250,6 +250,8 @@ pub fn run_attached(
     let mut o = super::outcome(
         &sc,
         method,
+        session,
+        super::unix_ns_of(t0),
         &dir,
         &sites,
         &recordings,

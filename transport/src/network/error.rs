@@ -32,6 +32,9 @@ pub enum NetworkError {
     /// The recording could not be created.
     #[error("creating the recording: {0}")]
     Recording(#[from] RecordingError),
+    /// The station's live view could not be started.
+    #[error("the live view: {0}")]
+    LiveView(#[from] crate::live_view::LiveViewError),
     /// The zenoh session could not be opened.
     #[error("opening the zenoh session: {0}")]
     Open(zenoh::Error),

@@ -13,7 +13,9 @@
 //!   the launcher's clock into its own with the launcher's measured clock offset ([`epoch`], which
 //!   also holds the launcher's side, and [`clock`]);
 //! - writes the station's MCAP recording (physics' trace ring, the states received, presence,
-//!   clocks, final counters), and puts the newest sample for live viewers (`live`, ~60 Hz).
+//!   clocks, final counters), and puts the newest sample for live viewers (`live`, ~60 Hz);
+//! - with [`NetworkArgs::live_view`], serves the station's own live view to Foxglove
+//!   ([`crate::live_view`]): its samples offered as they are drained, its events logged.
 //!
 //! It is not a real-time loop: zenoh's own threads and this process's loop run at normal priority,
 //! off the servo's CPU, and touch the rings (lock-free, non-blocking) only on the real-time side's
@@ -36,7 +38,9 @@ use coop_rt::timer::monotonic_ns;
 use zenoh::{Session, Wait};
 
 use crate::admit::Bounds;
-use crate::recording::{Rotation, Scene, SessionMsg, StatusMsg};
+use crate::live_view::LiveView;
+use crate::recording::{Rotation, SampleMsg, Scene, SessionMsg, StatusMsg};
+use foxglove::messages::log::Level;
 
 pub mod clock;
 pub mod config;
@@ -96,8 +100,13 @@ pub struct NetworkArgs<'a> {
     pub bounds: Bounds,
     /// Per site: how long it may be silent before it is lost, ns.
     pub silence_ns: Vec<u64>,
-    /// What this site shows (object, tool, environment), for the recording's Foxglove channels.
+    /// What this site shows (object, tool, environment), for the recording's Foxglove channels
+    /// and the live view.
     pub scene: Scene,
+    /// Write the recording's Foxglove channels (`/tf`, `/scene`, `/log`) too.
+    pub record_foxglove: bool,
+    /// Serve this station's own live view on this address (`host:port`), if any.
+    pub live_view: Option<String>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -150,8 +159,28 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ("emulation".into(), ctx.emulation.clone()),
         ]),
         a.record_rotation,
-        a.scene,
+        a.record_foxglove.then(|| a.scene.clone()),
     )?;
+    let view = match &a.live_view {
+        Some(addr) => {
+            let v = LiveView::start(addr)?;
+            v.show(
+                ctx.session_name,
+                vec![a.scene.clone()],
+                &site,
+                format!(
+                    "station {site} of session {}: scenario {}, method {}, emulation {}",
+                    ctx.session_name, a.scenario, a.method, ctx.emulation
+                ),
+            );
+            eprintln!(
+                "network {site}: live view: {} (foxglove.websocket.v1: open it in Foxglove or Lichtblick)",
+                v.url()
+            );
+            Some(v)
+        }
+        None => None,
+    };
     ctx.ctl
         .network
         .emulated
@@ -179,6 +208,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             trace: a.trace,
             recording,
             live,
+            view,
             names,
         },
     )?;
@@ -211,6 +241,8 @@ struct Loop {
     recording: Recording,
     /// The newest sample for live viewers.
     live: Live,
+    /// The station's own live view, if it serves one.
+    view: Option<LiveView>,
     /// Scenario and method names, for the recording's session message.
     names: (String, String),
 }
@@ -315,12 +347,33 @@ impl Loop {
         }
         for m in &peers {
             self.recording.write(|w| w.peer(m));
+            if let Some(v) = &self.view {
+                let level = if m.event == "lost" {
+                    Level::Warning
+                } else {
+                    Level::Info
+                };
+                v.log(
+                    level,
+                    format!(
+                        "{} {} after {:.3} s of silence",
+                        m.site, m.event, m.silent_s
+                    ),
+                );
+            }
         }
         let newest = self.recording.drain_trace(&mut self.trace);
+        if let (Some(v), Some(t)) = (&self.view, &newest) {
+            v.offer(0, SampleMsg::from(t));
+        }
         self.live.offer(newest, now);
         self.recording.watch_servo(ctx.ctl, now);
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
+            if let Some(v) = &self.view {
+                let what = if m.present { "joined" } else { "left" };
+                v.log(Level::Info, format!("{} {what}", m.site));
+            }
         }
         for m in clocks.take_log() {
             self.recording.write(|w| w.clock(&m));

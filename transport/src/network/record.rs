@@ -28,16 +28,19 @@ pub(super) struct Recording {
 
 impl Recording {
     /// Creates the recording at `path` (none: nothing is recorded) with its `metadata`, in parts
-    /// bounded by `rotation`, showing `scene` on the Foxglove channels.
+    /// bounded by `rotation`, showing `scene` on the Foxglove channels (none: JSON channels only).
     pub(super) fn create(
         path: Option<&Path>,
         metadata: BTreeMap<String, String>,
         rotation: Rotation,
-        scene: Scene,
+        scene: Option<Scene>,
     ) -> Result<Self, NetworkError> {
-        let recorder = match path {
-            Some(p) => Some(Recorder::create_with_scene(p, metadata, rotation, scene)?),
-            None => None,
+        let recorder = match (path, scene) {
+            (Some(p), Some(scene)) => {
+                Some(Recorder::create_with_scene(p, metadata, rotation, scene)?)
+            }
+            (Some(p), None) => Some(Recorder::create(p, metadata, rotation)?),
+            (None, _) => None,
         };
         Ok(Self {
             recorder,

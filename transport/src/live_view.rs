@@ -1,15 +1,15 @@
-//! `session run --live`: the whole session seen while it runs — every site's copy of the object,
-//! its tool and its force in one 3-D scene — served to Foxglove or Lichtblick over the
-//! `foxglove.websocket.v1` protocol.
+//! The live view: a site's or a whole session's copies of the object, tools and forces in one 3-D
+//! scene, served to Foxglove or Lichtblick over the `foxglove.websocket.v1` protocol while they
+//! run — `session run --live` (the launcher follows every site's live key, [`LiveView::follow`])
+//! and `station run --live` (the network process offers its own samples, [`LiveView::offer`]).
 //!
-//! The launcher subscribes to the stations' live key (`coop/<session>/live/<site>`: each network
-//! process puts its newest sample there at most every [`LIVE_EVERY_NS`], from the samples it
-//! already records), and a publishing thread wakes every [`PERIOD`] (about 60 Hz) and sends, for
-//! what arrived since its last turn, the frames `world → object/<site>` and `world → tool/<site>`
-//! on `/tf` and one `/scene` with every site's entities (the same messages as the recordings',
-//! [`Scene`]), and the session's events on `/log`. The stations' loops never wait for it: the live
-//! key is put at background priority and dropped under congestion; here each viewer has its own
-//! thread and a bounded queue, and a viewer too slow to take a frame loses it.
+//! A publishing thread wakes every [`PERIOD`] (about 60 Hz) and sends, for what arrived since its
+//! last turn, the frames `world → object/<site>` and `world → tool/<site>` on `/tf` and one
+//! `/scene` with every site's entities (the same messages as the recordings', [`Scene`]), and the
+//! events on `/log`. Nothing that feeds it waits for a viewer: [`LiveView::offer`] only replaces
+//! the newest sample under a short lock (the publishing thread encodes and sends outside it), the
+//! stations' live key is put at background priority and dropped under congestion, and each viewer
+//! has its own thread and a bounded queue: a viewer too slow to take a frame loses it.
 //!
 //! The server is ours, small (the protocol's `serverInfo`, `advertise`, `subscribe`,
 //! `unsubscribe` and binary `messageData`, on `tungstenite`): the `foxglove` crate's server speaks
@@ -23,19 +23,19 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use anyhow::Context as _;
 use base64::Engine as _;
 use coop_model::scenario::Scenario;
 use coop_rt::sync::{AtomicU64, Ordering};
-use coop_transport::keys;
-use coop_transport::network::LIVE_EVERY_NS;
-use coop_transport::recording::scene::{encode, timestamp};
-use coop_transport::recording::{SampleMsg, Scene};
 use foxglove::messages::{log::Level, FrameTransform, Log, SceneUpdate};
 use foxglove::Encode;
 use tungstenite::handshake::server::{ErrorResponse, Request, Response};
 use tungstenite::Message;
 use zenoh::Wait;
+
+use crate::keys;
+use crate::network::LIVE_EVERY_NS;
+use crate::recording::scene::{encode, timestamp};
+use crate::recording::{SampleMsg, Scene};
 
 /// The WebSocket subprotocol spoken.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
@@ -69,6 +69,36 @@ pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 /// How often the viewer gets the newest state: about 60 Hz.
 pub const PERIOD: Duration = Duration::from_nanos(16_666_667);
 
+/// The live view could not be started or could not follow a session.
+#[derive(Debug, thiserror::Error)]
+pub enum LiveViewError {
+    /// The address is not `host:port`.
+    #[error("{addr:?}: not an address such as {DEFAULT_ADDR}")]
+    Address {
+        /// What was given.
+        addr: String,
+    },
+    /// The server cannot listen there.
+    #[error("{addr}: cannot listen there: {error}")]
+    Listen {
+        /// Where.
+        addr: String,
+        /// Why.
+        error: std::io::Error,
+    },
+    /// A thread of the view could not be started.
+    #[error("starting the live view's {what} thread: {error}")]
+    Thread {
+        /// Which thread.
+        what: &'static str,
+        /// Why.
+        error: std::io::Error,
+    },
+    /// The session's live samples cannot be subscribed to.
+    #[error("subscribing to the live samples: {0}")]
+    Subscribe(zenoh::Error),
+}
+
 /// What the publishing thread shows.
 #[derive(Default)]
 struct Shown {
@@ -81,6 +111,22 @@ struct Shown {
     shown: Vec<Option<SampleMsg>>,
     /// Log lines to send.
     logs: Vec<(Level, String)>,
+    /// The name on the log lines (`session`, or the station's site).
+    log_name: String,
+}
+
+impl Shown {
+    /// Site `i`'s newest sample (the first says the site is live).
+    fn offer(&mut self, i: usize, m: SampleMsg) {
+        if i >= self.scenes.len() {
+            return;
+        }
+        if self.shown[i].is_none() && self.newest[i].is_none() {
+            let text = format!("{}: live", self.scenes[i].site);
+            self.logs.push((Level::Info, text));
+        }
+        self.newest[i] = Some(m);
+    }
 }
 
 /// The viewers' queues.
@@ -123,42 +169,59 @@ pub struct Following {
     _subscriber: zenoh::pubsub::Subscriber<()>,
 }
 
+/// `addr` as a socket address, or why not.
+///
+/// # Errors
+/// It is not `host:port`.
+pub fn parse_addr(addr: &str) -> Result<SocketAddr, LiveViewError> {
+    addr.parse().map_err(|_| LiveViewError::Address {
+        addr: addr.to_owned(),
+    })
+}
+
 impl LiveView {
     /// Starts the server on `addr` (`host:port`) and the publishing thread.
     ///
     /// # Errors
-    /// `addr` is not `host:port`, or the server cannot listen there.
-    pub fn start(addr: &str) -> anyhow::Result<Self> {
-        let want: SocketAddr = addr
-            .parse()
-            .with_context(|| format!("--live {addr}: not an address such as {DEFAULT_ADDR}"))?;
-        let listener =
-            TcpListener::bind(want).with_context(|| format!("--live {addr}: listening"))?;
-        let addr = listener.local_addr().context("the live view's address")?;
-        listener
-            .set_nonblocking(true)
-            .context("the live view's listener")?;
+    /// `addr` is not `host:port`, the server cannot listen there, or a thread cannot start.
+    pub fn start(addr: &str) -> Result<Self, LiveViewError> {
+        let want = parse_addr(addr)?;
+        let listen_err = |error| LiveViewError::Listen {
+            addr: addr.to_owned(),
+            error,
+        };
+        let listener = TcpListener::bind(want).map_err(listen_err)?;
+        let addr = listener.local_addr().map_err(listen_err)?;
+        listener.set_nonblocking(true).map_err(listen_err)?;
         let shown: Arc<Mutex<Shown>> = Arc::default();
         let stop = Arc::new(AtomicU64::new(0));
         let viewers: Viewers = Arc::default();
         let history: LogHistory = Arc::default();
-        let spawn = |name: &str, f: Box<dyn FnOnce() + Send>| {
+        let spawn = |what: &'static str, f: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
-                .name(name.into())
+                .name(what.into())
                 .spawn(f)
-                .with_context(|| format!("starting the live view's {name} thread"))
+                .map_err(|error| LiveViewError::Thread { what, error })
         };
-        let threads = vec![
-            spawn("live-view", {
-                let (shown, stop) = (shown.clone(), stop.clone());
-                let (viewers, history) = (viewers.clone(), history.clone());
-                Box::new(move || publish(&viewers, &history, &shown, &stop))
-            })?,
-            spawn("live-accept", {
-                let (stop, viewers) = (stop.clone(), viewers.clone());
-                Box::new(move || accept(&listener, &viewers, &history, &stop))
-            })?,
-        ];
+        let mut threads = vec![spawn("live-view", {
+            let (shown, stop) = (shown.clone(), stop.clone());
+            let (viewers, history) = (viewers.clone(), history.clone());
+            Box::new(move || publish(&viewers, &history, &shown, &stop))
+        })?];
+        let accepting = spawn("live-accept", {
+            let (stop, viewers) = (stop.clone(), viewers.clone());
+            Box::new(move || accept(&listener, &viewers, &history, &stop))
+        });
+        match accepting {
+            Ok(t) => threads.push(t),
+            Err(e) => {
+                stop.store(1, Ordering::Relaxed);
+                for t in threads {
+                    let _ = t.join();
+                }
+                return Err(e);
+            }
+        }
         Ok(Self {
             addr,
             shown,
@@ -172,6 +235,29 @@ impl LiveView {
         format!("ws://{}", self.addr)
     }
 
+    /// Shows `session`'s sites `scenes` from now on (forgetting what was shown before), and says
+    /// `intro` on `/log`, where `log_name` names the lines.
+    pub fn show(&self, session: &str, scenes: Vec<Scene>, log_name: &str, intro: String) {
+        let mut s = lock(&self.shown);
+        s.session = session.to_owned();
+        log_name.clone_into(&mut s.log_name);
+        s.newest = vec![None; scenes.len()];
+        s.shown = vec![None; scenes.len()];
+        s.scenes = scenes;
+        s.logs.push((Level::Info, intro));
+    }
+
+    /// Site `i`'s (of the scenes shown) newest sample: shown at the next turn unless a newer one
+    /// comes first. Takes a short lock and copies; never waits for a viewer.
+    pub fn offer(&self, i: usize, m: SampleMsg) {
+        lock(&self.shown).offer(i, m);
+    }
+
+    /// An event for `/log`.
+    pub fn log(&self, level: Level, text: String) {
+        lock(&self.shown).logs.push((level, text));
+    }
+
     /// Shows `session` (of scenario `sc`) from now on, through the launcher's zenoh session `z`,
     /// until the returned [`Following`] is dropped.
     ///
@@ -182,29 +268,24 @@ impl LiveView {
         z: &zenoh::Session,
         session: &str,
         sc: &Scenario,
-    ) -> anyhow::Result<Following> {
-        {
-            let mut s = lock(&self.shown);
-            s.session = session.to_owned();
-            s.scenes = (0..sc.site.len())
+    ) -> Result<Following, LiveViewError> {
+        self.show(
+            session,
+            (0..sc.site.len())
                 .filter_map(|i| Scene::from_scenario(sc, i))
-                .collect();
-            s.newest = vec![None; s.scenes.len()];
-            s.shown = vec![None; s.scenes.len()];
-            s.logs.push((
-                Level::Info,
-                format!(
-                    "session {session}: scenario {}, method {}, sites {}",
-                    sc.name,
-                    sc.method.as_str(),
-                    sc.site
-                        .iter()
-                        .map(|s| s.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ));
-        }
+                .collect(),
+            "session",
+            format!(
+                "session {session}: scenario {}, method {}, sites {}",
+                sc.name,
+                sc.method.as_str(),
+                sc.site
+                    .iter()
+                    .map(|s| s.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        );
         let shown = self.shown.clone();
         let name = session.to_owned();
         let subscriber = z
@@ -221,14 +302,11 @@ impl LiveView {
                     return;
                 }
                 if let Some(i) = s.scenes.iter().position(|sc| sc.site == site) {
-                    if s.shown[i].is_none() && s.newest[i].is_none() {
-                        s.logs.push((Level::Info, format!("{site}: live")));
-                    }
-                    s.newest[i] = Some(m);
+                    s.offer(i, m);
                 }
             })
             .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to the live samples: {e}"))?;
+            .map_err(LiveViewError::Subscribe)?;
         Ok(Following {
             _subscriber: subscriber,
         })
@@ -279,7 +357,7 @@ fn publish(
                     timestamp: Some(timestamp(now)),
                     level: level as i32,
                     message,
-                    name: "session".into(),
+                    name: s.log_name.clone(),
                     ..Log::default()
                 })
                 .collect();
@@ -370,7 +448,7 @@ fn serve(
     frames: &Receiver<Frame>,
     history: &Mutex<Vec<Frame>>,
     stop: &AtomicU64,
-) -> anyhow::Result<()> {
+) -> Result<(), tungstenite::Error> {
     stream.set_nonblocking(false)?;
     stream.set_nodelay(true)?;
     stream.set_read_timeout(Some(Duration::from_secs(5)))?;
@@ -395,8 +473,8 @@ fn serve(
         );
         Ok(res)
     };
-    let mut ws =
-        tungstenite::accept_hdr(stream, check).map_err(|e| anyhow::anyhow!("handshake: {e}"))?;
+    let mut ws = tungstenite::accept_hdr(stream, check)
+        .map_err(|e| tungstenite::Error::Io(std::io::Error::other(format!("handshake: {e}"))))?;
     ws.get_ref().set_read_timeout(Some(CLIENT_POLL))?;
     ws.get_ref()
         .set_write_timeout(Some(Duration::from_secs(2)))?;
@@ -437,7 +515,7 @@ fn serve(
             Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
                 return Ok(())
             }
-            Err(e) => return Err(e.into()),
+            Err(e) => return Err(e),
         }
         let mut sent = false;
         let queued = std::iter::from_fn(|| frames.try_recv().ok());
@@ -454,7 +532,7 @@ fn serve(
                 match ws.write(Message::binary(m)) {
                     Ok(()) => sent = true,
                     Err(e) if would_block(&e) => sent = true,
-                    Err(e) => return Err(e.into()),
+                    Err(e) => return Err(e),
                 }
             }
         }
@@ -462,7 +540,7 @@ fn serve(
             match ws.flush() {
                 Ok(()) => {}
                 Err(e) if would_block(&e) => {}
-                Err(e) => return Err(e.into()),
+                Err(e) => return Err(e),
             }
         }
     }

@@ -1,0 +1,140 @@
+#!/usr/bin/env bash
+# What a live viewer and the Foxglove channels cost a running station, in one run, at the same
+# settings (the paper scenario's rates, servo 600 Hz SCHED_FIFO 80 on CPU 1, physics 1 kHz
+# SCHED_FIFO 70 on CPU 0, mlockall, recording on):
+#   one station with `station run --live`, measured (`latency attach`) in alternating windows
+#   without a viewer and with a Foxglove WebSocket client (Python `websockets`, not ours)
+#   subscribed to every channel — R rounds of one window each, so that whatever else loads the
+#   machine weighs on both alike; then a station recording with `record_foxglove = false`.
+# Prints the servo's wake-up p99 / p99.9 / max and overruns and physics' overruns over each
+# condition's windows, the ratio viewer/none (goal: servo p99.9 <= 1.1x, no more overruns), and the
+# recording's size per minute of session with and without the Foxglove channels.
+#
+# Usage: tools/bench/live-view.sh [--quick] [--duration SECONDS]
+#   default 60 s per condition in 6 rounds; --quick: 3 s per condition, 1 round (CI smoke run).
+set -euo pipefail
+duration=60; rounds=6
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) duration=3; rounds=1 ;;
+    --duration) duration="$2"; shift ;;
+    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+window=$(( (duration + rounds - 1) / rounds ))
+root=$(cd "$(dirname "$0")/../.." && pwd)
+cargo build --release --quiet --manifest-path "$root/Cargo.toml" -p coop-tools --bin latency --bin station
+target=${CARGO_TARGET_DIR:-$root/target}
+work=$(mktemp -d)
+station_pid=; viewer_pid=
+cleanup() {
+  [ -n "$viewer_pid" ] && kill "$viewer_pid" 2>/dev/null
+  [ -n "$station_pid" ] && kill "$station_pid" 2>/dev/null && wait "$station_pid" 2>/dev/null
+  [ -n "${KEEP_WORK:-}" ] && echo "kept $work" >&2 || rm -rf "$work"
+}
+trap cleanup EXIT
+cpu=1; [ "$(nproc)" -gt 1 ] || cpu=0
+
+echo "# live viewer vs none and Foxglove channels vs none: scenarios/paper.toml, servo SCHED_FIFO 80 on CPU $cpu, physics SCHED_FIFO 70 on CPU 0, mlockall, recording on, $rounds round(s) of ${window} s per condition"
+echo "# load average before: $(cut -d' ' -f1-3 /proc/loadavg) (anything else running on these cores shows in every row)"
+config() { # config RUN FOXGLOVE
+  mkdir -p "$work/$1"
+  cat > "$work/$1.toml" <<TOML
+session = "lv$$${1%%-*}"
+station = "user1"
+scenario = "$root/scenarios/paper.toml"
+mlockall = true
+record = "$work/$1/user1.mcap"
+record_foxglove = $2
+[servo]
+cpu = $cpu
+policy = "fifo"
+priority = 80
+[physics]
+cpu = 0
+policy = "fifo"
+priority = 70
+TOML
+}
+config live true
+"$target/release/station" run --config "$work/live.toml" --live 127.0.0.1:0 --duration-s $((2 * rounds * (window + 2) + 30)) 2> "$work/live.log" &
+station_pid=$!
+url=
+for _ in $(seq 400); do
+  url=$(grep -o 'ws://[0-9.:]*' "$work/live.log" | head -1 || true)
+  [ -n "$url" ] && break
+  sleep 0.05
+done
+[ -n "$url" ] || { echo "the station printed no live view address:" >&2; cat "$work/live.log" >&2; exit 1; }
+sleep 1
+# The observers stay off the servo's CPU too.
+attach() { taskset -c 0 "$target/release/latency" attach user1 --session "lv$$live" -D "${window}s" -q --json "$1" > /dev/null; }
+for r in $(seq "$rounds"); do
+  attach "$work/none-$r.json"
+  taskset -c 0 python3 "$root/tools/bench/live_viewer.py" "$url" $((window + 1)) > "$work/client-$r.json" &
+  viewer_pid=$!
+  sleep 0.5 # connected and subscribed
+  attach "$work/viewer-$r.json"
+  wait "$viewer_pid"; viewer_pid=
+done
+kill -TERM "$station_pid"; wait "$station_pid"; station_pid=
+config no-foxglove false
+"$target/release/station" run --config "$work/no-foxglove.toml" --duration-s $((window + 4)) 2> "$work/no-foxglove.log" &
+station_pid=$!
+wait "$station_pid"; station_pid=
+
+echo "# load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
+python3 - "$work" "$rounds" <<'PY'
+import glob, json, os, sys
+from mcap.reader import make_reader
+work, rounds = sys.argv[1], int(sys.argv[2])
+def merged(cond, thread):
+    """One loop's windows of a condition, as one: histograms and counters added."""
+    h, cycles, overruns, mx = {}, 0, 0, 0.0
+    for r in range(1, rounds + 1):
+        t = json.load(open(f"{work}/{cond}-{r}.json"))["thread"][thread]
+        for k, v in t["histogram_us"].items():
+            h[int(k)] = h.get(int(k), 0) + v
+        cycles += t["cycles"]; overruns += t["overruns"]; mx = max(mx, t["max_us"])
+    return h, cycles, overruns, mx
+def pct(h, q):
+    n, seen = sum(h.values()), 0
+    for b in sorted(h):
+        seen += h[b]
+        if seen >= q * n:
+            return b
+    return max(h)
+def per_minute(run):
+    size, first, last = 0, None, None
+    for f in sorted(glob.glob(f"{work}/{run}/user1*.mcap")):
+        size += os.path.getsize(f)
+        with open(f, "rb") as fh:
+            for _, _, m in make_reader(fh).iter_messages(topics=["/object"]):
+                first = m.log_time if first is None else first
+                last = m.log_time
+    return size * 60e9 / max(1, last - first), (last - first) / 1e9
+rows = {}
+for cond in ("none", "viewer"):
+    sh, sc, so, smax = merged(cond, "0")
+    _, _, po, _ = merged(cond, "1")
+    rows[cond] = (sc, pct(sh, 0.99), pct(sh, 0.999), smax, so, po)
+print(f"{'condition':<13}{'cycles':>8}{'p99 us':>8}{'p99.9 us':>10}{'max us':>9}{'servo ovr':>11}{'phys ovr':>10}")
+for k, r in rows.items():
+    print(f"{k:<13}{r[0]:>8}{r[1]:>8}{r[2]:>10}{r[3]:>9.0f}{r[4]:>11}{r[5]:>10}")
+a, b = rows["none"], rows["viewer"]
+ratio = lambda x, y: x / max(y, 1)
+print(f"{'viewer/none':<13}{'':>8}{ratio(b[1], a[1]):>8.2f}{ratio(b[2], a[2]):>10.2f}{ratio(b[3], a[3]):>9.2f}{b[4] - a[4]:>+11}{b[5] - a[5]:>+10}")
+msgs, size = {}, 0
+for r in range(1, rounds + 1):
+    v = json.load(open(f"{work}/client-{r}.json"))
+    for t, n in v["messages"].items():
+        msgs[t] = msgs.get(t, 0) + n
+    size += sum(v["bytes"].values())
+print(f"# the viewer received {sum(msgs.values())} messages ({', '.join(f'{t} {n}' for t, n in sorted(msgs.items()))}), {size / 1e6:.2f} MB")
+met = ratio(b[2], a[2]) <= 1.1 and b[4] <= a[4] and b[5] <= a[5]
+print(f"# goal: with a viewer, servo p99.9 <= 1.1x none and no more overruns: {'met' if met else 'NOT met'}")
+(on, on_s), (off, off_s) = per_minute("live"), per_minute("no-foxglove")
+print(f"# recording per minute of session: {off / 1e6:.2f} MB without the Foxglove channels ({off_s:.0f} s recorded), {on / 1e6:.2f} MB with them ({on_s:.0f} s recorded): {ratio(on, off):.2f}x")
+PY
