@@ -23,6 +23,7 @@ pub mod scenario;
 pub mod servo;
 pub mod shape;
 pub mod sim;
+pub mod tank;
 pub mod timewarp;
 pub mod user;
 

@@ -430,6 +430,7 @@ impl Consistency for TimeWarp {
                     jump: before.pos - copy.state.pos,
                     energy_j: e(&copy.state) - e(&before),
                     age_s: (self.now_tick - from_tick) as f64 * self.dt,
+                    clipped_j: 0.0,
                 });
             }
         }
