@@ -442,7 +442,7 @@ impl SiteReport {
             },
             // A timewarp report has no ring layout yet (stations refuse the method at
             // configuration): kind 0, which every receiver refuses.
-            Report::Tools(_) => Self {
+            Report::Tools(_) | Report::Coupled(_) => Self {
                 seq,
                 site: site as u64,
                 ..Self::default()

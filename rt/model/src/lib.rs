@@ -13,6 +13,7 @@
 pub mod body;
 pub mod contact;
 pub mod controller;
+pub mod coupled;
 pub mod device;
 pub mod histogram;
 pub mod link;

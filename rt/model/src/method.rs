@@ -132,6 +132,8 @@ pub enum Report {
     },
     /// `timewarp`: the sender's tool positions on the tick grid, and its confirmed frontier.
     Tools(crate::timewarp::ToolReport),
+    /// `coupled`: the sender's tool positions, its copy, and when its user's contact began.
+    Coupled(crate::coupled::CoupledReport),
 }
 
 /// A received state replaced the local one.

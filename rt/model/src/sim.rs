@@ -197,6 +197,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 Mode::Distributed(MethodName::Timewarp) => {
                     Box::new(scenario.timewarp(i, &ObjectCopy::new(start)))
                 }
+                Mode::Distributed(MethodName::Coupled) => Box::new(scenario.coupled(i)),
             };
             Site {
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),

@@ -54,7 +54,8 @@ pub fn quantize(p: Vec3) -> Quantized {
     [q(p.x), q(p.y), q(p.z)]
 }
 
-fn position(q: Quantized) -> Vec3 {
+/// A quantized position in metres.
+pub fn position(q: Quantized) -> Vec3 {
     Vec3::new(
         f64::from(q[0]) * QUANTUM_M,
         f64::from(q[1]) * QUANTUM_M,
