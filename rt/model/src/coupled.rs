@@ -15,8 +15,10 @@
 //!   a first-order convergence with time constant [`PULL_TIME_S`].
 //! - **Energy-bounded** (PSPM-style set-position clipping): each pull may add at most what the
 //!   copy's tank holds ([`crate::tank::bound_gain`] scales it back along the way, counted); the tank
-//!   is filled by the users' positive work on this copy and drained by what pulls add. So the pulls
-//!   together can never give a copy more energy than its users gave it.
+//!   is filled by the users' positive work on this copy, drained by what pulls add and refilled by
+//!   what they take. So the pulls together can never give a copy more energy than its users gave
+//!   it. Along the normal of a plane the local copy rests on, the pull keeps the local contact (as
+//!   `paper` does): transplanting another copy's micro-bounce would only pump the table's spring.
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
@@ -42,6 +44,8 @@ pub struct CoupledReport {
     pub accel: Vec3,
     /// When the sender's user's current contact began, s; infinite: not touching.
     pub touch_since_s: f64,
+    /// When the sender's user last touched, s; negative infinity: never.
+    pub last_touch_s: f64,
 }
 
 /// The `coupled` method of one site.
@@ -64,6 +68,8 @@ pub struct Coupled {
     contacts: [ToolContactState; MAX_SITES],
     /// Per site: when its user's current contact began, s (infinite: not touching).
     touch_since: [f64; MAX_SITES],
+    /// Per site: when its user last touched, s (negative infinity: never).
+    last_touch: [f64; MAX_SITES],
     leader: usize,
     /// Per site: the time of its newest report taken.
     newest_from: [f64; MAX_SITES],
@@ -99,6 +105,7 @@ impl Coupled {
             played: [UNKNOWN; MAX_SITES],
             contacts: [ToolContactState::default(); MAX_SITES],
             touch_since: [f64::INFINITY; MAX_SITES],
+            last_touch: [f64::NEG_INFINITY; MAX_SITES],
             leader: 0,
             newest_from: [f64::NEG_INFINITY; MAX_SITES],
             last_pull_s: 0.0,
@@ -117,7 +124,7 @@ impl Coupled {
     }
 
     /// The site that leads: the earliest current contact (ties: the lower index); when nobody
-    /// touches, the one that led last.
+    /// touches, the one whose user touched last (its copy holds the newest push), as far as known.
     fn pick_leader(&mut self) {
         let mut best: Option<usize> = None;
         for k in 0..self.sites {
@@ -125,6 +132,15 @@ impl Coupled {
                 && best.is_none_or(|b| self.touch_since[k] < self.touch_since[b])
             {
                 best = Some(k);
+            }
+        }
+        if best.is_none() {
+            for k in 0..self.sites {
+                if self.last_touch[k].is_finite()
+                    && best.is_none_or(|b| self.last_touch[k] > self.last_touch[b])
+                {
+                    best = Some(k);
+                }
             }
         }
         if let Some(b) = best {
@@ -199,6 +215,10 @@ impl Consistency for Coupled {
             (false, true) => self.touch_since[self.me] = f64::INFINITY,
             _ => {}
         }
+        if own_touch {
+            self.last_touch[self.me] = now_s;
+        }
+        self.pick_leader();
         let before = copy.energy.users_positive_j;
         // Summed in site order; every user acts on this copy.
         integrate(world, copy, &users[..self.sites], self.sites, self.dt);
@@ -226,6 +246,7 @@ impl Consistency for Coupled {
             state: copy.state,
             accel: copy.passive_accel,
             touch_since_s: self.touch_since[self.me],
+            last_touch_s: self.last_touch[self.me],
         })
     }
     fn receive(
@@ -256,11 +277,20 @@ impl Consistency for Coupled {
         }
         self.newest_from[from] = r.t_s;
         self.touch_since[from] = r.touch_since_s;
+        self.last_touch[from] = r.last_touch_s;
         self.pick_leader();
         if from != self.leader {
             return None;
         }
-        let target = dead_reckon(world, &r.state, r.accel, now_s - r.t_s, 2);
+        let mut target = dead_reckon(world, &r.state, r.accel, now_s - r.t_s, 2);
+        // Along the normal of a plane the local copy rests on, its contact is local physics.
+        for plane in world.planes() {
+            if crate::method::plane_depth(world, plane, &copy.state) > -1e-4 {
+                let n = plane.normal;
+                target.pos += n * (copy.state.pos - target.pos).dot(&n);
+                target.vel += n * (copy.state.vel - target.vel).dot(&n);
+            }
+        }
         let since = (now_s - self.last_pull_s).max(0.0);
         self.last_pull_s = now_s;
         let alpha = since / (since + PULL_TIME_S);
@@ -271,7 +301,9 @@ impl Consistency for Coupled {
                 None => (full, 0.0),
             };
         let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
-        self.tank_j = (self.tank_j - (stored(&new) - stored(&copy.state)).max(0.0)).max(0.0);
+        // What a pull adds is drained; what it takes is returned (the tank never exceeds the users'
+        // positive work less what pulls added net).
+        self.tank_j = (self.tank_j - (stored(&new) - stored(&copy.state))).max(0.0);
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
