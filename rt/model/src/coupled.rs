@@ -48,6 +48,9 @@ pub struct CoupledReport {
     pub last_touch_s: f64,
 }
 
+/// A received position and its tick.
+type Received = Option<(i64, Quantized)>;
+
 /// The `coupled` method of one site.
 #[derive(Debug, Clone)]
 pub struct Coupled {
@@ -59,7 +62,7 @@ pub struct Coupled {
     playout_ticks: i64,
     now_tick: i64,
     /// Received positions with their ticks, tick `t` at `t % len`.
-    received: Box<[[Option<(i64, Quantized)>; MAX_SITES]]>,
+    received: Box<[[Received; MAX_SITES]]>,
     /// Own positions of the last ticks (tick `t` at `t % WINDOW_TICKS`).
     own_hist: Box<[Quantized]>,
     own: Quantized,

@@ -416,6 +416,10 @@ impl Consistency for Naive {
     }
 }
 
+/// One own step's impulse: (end of the step, middle of the step, linear impulse, angular impulse,
+/// the own user's work in the step), s, s, N·s, N·m·s, J.
+type LoggedImpulse = (f64, f64, Vec3, Vec3, f64);
+
 /// Own impulses a site remembers for replay: 8 s at 1 kHz.
 const LOG_CAP: usize = 8192;
 
@@ -447,7 +451,7 @@ pub struct Paper {
     newest_from: [f64; MAX_SITES],
     /// Own impulses: (end of the step, middle of the step, linear impulse, angular impulse, the
     /// own user's work in the step on the local copy), a ring.
-    log: Box<[(f64, f64, Vec3, Vec3, f64)]>,
+    log: Box<[LoggedImpulse]>,
     log_next: usize,
     log_len: usize,
     /// The own tool as a spring, for the no-gain bound (position from [`Consistency::own_tool`]).
