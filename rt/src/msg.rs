@@ -442,7 +442,7 @@ impl SiteReport {
             },
             // A timewarp report has no ring layout yet (stations refuse the method at
             // configuration): kind 0, which every receiver refuses.
-            Report::Tools(_) => Self {
+            Report::Tools(_) | Report::Coupled(_) => Self {
                 seq,
                 site: site as u64,
                 ..Self::default()
@@ -543,7 +543,7 @@ mod tests {
                 );
                 assert!(s.rot.angle_to(&state.rot) < 1e-12);
             }
-            Report::Force { .. } | Report::Tools(_) => panic!("kind changed"),
+            Report::Force { .. } | Report::Tools(_) | Report::Coupled(_) => panic!("kind changed"),
         }
         let mut bad = SiteReport::new(1, 7, &r);
         bad.vel[0] = f64::NAN;

@@ -262,7 +262,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         sc.site.len()
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}  phases",
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}  phases",
         "method",
         "div max",
         "div rms",
@@ -273,11 +273,12 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "adopt step",
         "E others",
         "others did",
-        "adoptions"
+        "adoptions",
+        "bounded"
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}",
-        "", "mm", "mm", "contact mm", "max mm", "rms mm", "N", "max N", "mJ", "mJ", ""
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}",
+        "", "mm", "mm", "contact mm", "max mm", "rms mm", "N", "max N", "mJ", "mJ", "", ""
     );
     for m in all {
         // The worst site; NaN (not measured, e.g. on real stations) if any site's is.
@@ -306,7 +307,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}  {}",
+            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}{:>8}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
@@ -318,12 +319,13 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             cell(worst(&|s| s.energy_from_others_j) * 1e3, 11, 2),
             cell(worst(&|s| s.others_work_j) * 1e3, 11, 2),
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
+            m.bounded_corrections,
             phases.join(", ")
         );
     }
     let radius = sc.object.radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown)",
+        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown); bounded = corrections the no-gain bound scaled back",
         all.iter()
             .map(|m| format!("{:.2} s ({})", m.after_contact_from_s, m.method))
             .collect::<Vec<_>>()

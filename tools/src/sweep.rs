@@ -44,6 +44,14 @@ pub struct Row {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave the copies, all sites, J.
     pub correction_energy_j: f64,
+    /// Corrections the no-gain bound scaled back, all sites.
+    pub bounded_corrections: usize,
+    /// Energy the no-gain bound took out of corrections, all sites, J.
+    pub bounded_energy_j: f64,
+    /// The most a copy's energy exceeded its start beyond all users' positive work, J (≤ 0: passive).
+    pub energy_beyond_users_j: f64,
+    /// The farthest a copy's centre was from the reference object, m.
+    pub farthest_from_reference_m: f64,
     /// Rollbacks per simulated second, busiest site.
     pub rollbacks_per_s: f64,
     /// Re-simulated ticks per simulated second, busiest site.
@@ -72,6 +80,10 @@ impl Row {
             max_force_step_n: m.max_force_step_n,
             force_steps_over_jnd: m.force_steps_over_jnd,
             correction_energy_j: m.correction_energy_j,
+            bounded_corrections: m.bounded_corrections,
+            bounded_energy_j: m.bounded_energy_j,
+            energy_beyond_users_j: m.energy_beyond_users_j,
+            farthest_from_reference_m: m.farthest_from_reference_m,
             rollbacks_per_s: m.rollbacks_per_s,
             resimulated_ticks_per_s: m.resimulated_ticks_per_s,
             rollback_depth_p99_ticks: m.rollback_depth_p99_ticks,
@@ -206,7 +218,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>8}{:>9}{:>10}{:>6}",
         "method",
         "delay",
         "seed",
@@ -217,13 +229,14 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "f step",
         ">JND",
         "E corr",
+        "bound",
         "rollback",
         "depth",
         "hash"
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>8}{:>9}{:>10}{:>6}",
         "",
         "ms",
         "",
@@ -234,6 +247,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "max N",
         "steps",
         "mJ",
+        "count",
         "per s",
         "p99 ticks",
         "miss"
@@ -241,7 +255,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{:>9.1}{:>10}{:>6}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{:>8}{:>9.1}{:>10}{:>6}",
             r.method,
             r.delay_ms,
             r.seed,
@@ -252,6 +266,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             cell(r.max_force_step_n, 9, 3),
             r.force_steps_over_jnd,
             cell(r.correction_energy_j * 1e3, 12, 2),
+            r.bounded_corrections,
             r.rollbacks_per_s,
             r.rollback_depth_p99_ticks,
             r.hash_mismatches
@@ -259,7 +274,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); E corr = energy corrections gave the copies; rollback per s = busiest site; depth p99 = all sites' rollbacks",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); E corr = energy corrections gave the copies; bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

@@ -1,6 +1,7 @@
 //! `sim sweep` as a user runs it (every method × delay present; timewarp does the paper's task at
 //! 0 and 150 ms with confirmed states agreeing, naive does not; bad arguments are refused with the
-//! reason), and the determinism the sweep rests on: two timewarp runs give the same bits.
+//! reason), the determinism the sweep rests on: two timewarp runs give the same bits, and coupled
+//! doing the task at 50 ms.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -207,4 +208,32 @@ fn eight_user_bench_scenario_has_everyone_touching() {
     let m = metrics::compute(&sc, &r, &reference);
     assert_eq!(m.hash_mismatches, 0);
     assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+}
+
+/// `coupled` exchanges the tools without rollback: at a constant 50 ms (seed 1) it does the whole
+/// paper task with the copies together while both users hold the disk, its pulls are counted as
+/// corrections with their energy, and they never give a copy more than the users' work.
+#[test]
+fn coupled_does_the_task_at_50_ms_with_bounded_pulls() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = scenario_at(&base, 50.0, 1).expect("valid");
+    let r = sim::run(&sc, Mode::Distributed(MethodName::Coupled), &mut |_| {});
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    assert_eq!(m.method, "coupled");
+    assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
+    assert!(m.co_contact_samples > 100, "{}", m.co_contact_samples);
+    assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+    assert!(!r.adoptions.is_empty(), "the pulls are corrections");
+    assert!(
+        m.correction_energy_j.is_finite() && m.correction_energy_j > 0.0,
+        "{}",
+        m.correction_energy_j
+    );
+    assert!(
+        m.energy_beyond_users_j <= 0.0,
+        "{}",
+        m.energy_beyond_users_j
+    );
+    assert_eq!(m.rollbacks_per_s, 0.0, "no rollback");
 }

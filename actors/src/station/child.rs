@@ -201,8 +201,9 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let method: Box<dyn Consistency> = match sc.method {
         MethodName::Naive => Box::<Naive>::default(),
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
-        MethodName::Timewarp => bail!(
-            "method timewarp runs in the simulator (`sim`) only so far: its tool reports have no wire format yet"
+        MethodName::Timewarp | MethodName::Coupled => bail!(
+            "method {} runs in the simulator (`sim`) only so far: its tool reports have no wire format yet",
+            sc.method.as_str()
         ),
     };
     let step = period(sc.site[i].physics_rate_hz);

@@ -360,9 +360,10 @@ impl StationConfig {
         if let Some(m) = self.method {
             scenario.method = m;
         }
-        if scenario.method == MethodName::Timewarp {
+        if matches!(scenario.method, MethodName::Timewarp | MethodName::Coupled) {
             bail!(
-                "method = \"timewarp\" (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive or paper",
+                "method = {:?} (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive or paper",
+                scenario.method.as_str(),
                 scenario.name
             );
         }

@@ -13,6 +13,7 @@
 pub mod body;
 pub mod contact;
 pub mod controller;
+pub mod coupled;
 pub mod device;
 pub mod histogram;
 pub mod link;
@@ -24,6 +25,7 @@ pub mod scenario;
 pub mod servo;
 pub mod shape;
 pub mod sim;
+pub mod tank;
 pub mod timewarp;
 pub mod user;
 

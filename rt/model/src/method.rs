@@ -65,6 +65,9 @@ pub struct EnergyAccount {
     pub env_j: f64,
     /// Mechanical-energy change caused by adoptions, J.
     pub adoption_j: f64,
+    /// The users' work on this copy counted only where positive, step by step (own and remote), J:
+    /// what the users can have given it at most (the bound of [`crate::tank`]'s checks).
+    pub users_positive_j: f64,
 }
 
 /// One site's copy of the object.
@@ -129,6 +132,8 @@ pub enum Report {
     },
     /// `timewarp`: the sender's tool positions on the tick grid, and its confirmed frontier.
     Tools(crate::timewarp::ToolReport),
+    /// `coupled`: the sender's tool positions, its copy, and when its user's contact began.
+    Coupled(crate::coupled::CoupledReport),
 }
 
 /// A received state replaced the local one.
@@ -140,6 +145,9 @@ pub struct Adoption {
     pub energy_j: f64,
     /// How far the state was extrapolated, s.
     pub age_s: f64,
+    /// Energy the no-gain bound ([`crate::tank::bound_gain`]) took out of the correction, J (0: it
+    /// fitted).
+    pub clipped_j: f64,
 }
 
 /// A consistency method (see the module docs).
@@ -227,8 +235,10 @@ pub fn integrate(
         let (a, b) = (seen[0][k], seen[1][k]);
         (a.force + b.force).dot(&dx) * 0.5 + (a.torque + b.torque).dot(&omega_mid) * 0.5 * dt
     };
-    copy.energy.own_j += work(0);
-    copy.energy.remote_j += work(1);
+    let (w_own, w_remote) = (work(0), work(1));
+    copy.energy.own_j += w_own;
+    copy.energy.remote_j += w_remote;
+    copy.energy.users_positive_j += w_own.max(0.0) + w_remote.max(0.0);
     copy.energy.env_j += work(2);
     copy.passive_accel = supported_gravity(world, &next);
     copy.env_touching = touching;
@@ -288,7 +298,7 @@ fn slide_with_friction(world: &World, s: &BodyState, accel: Vec3, dt: f64, out: 
 }
 
 /// Deepest penetration of `s` into `plane` (negative when clear of it).
-fn plane_depth(world: &World, plane: &Plane, s: &BodyState) -> f64 {
+pub(crate) fn plane_depth(world: &World, plane: &Plane, s: &BodyState) -> f64 {
     let n = plane.normal;
     match world.shape {
         Shape::Sphere { radius } => plane.offset - n.dot(&(s.pos - n * radius)),
@@ -406,6 +416,10 @@ impl Consistency for Naive {
     }
 }
 
+/// One own step's impulse: (end of the step, middle of the step, linear impulse, angular impulse,
+/// the own user's work in the step), s, s, N·s, N·m·s, J.
+type LoggedImpulse = (f64, f64, Vec3, Vec3, f64);
+
 /// Own impulses a site remembers for replay: 8 s at 1 kHz.
 const LOG_CAP: usize = 8192;
 
@@ -435,10 +449,16 @@ pub struct Paper {
     pub order: u8,
     me: usize,
     newest_from: [f64; MAX_SITES],
-    /// Own impulses: (end of the step, middle of the step, linear impulse, angular impulse), a ring.
-    log: Box<[(f64, f64, Vec3, Vec3)]>,
+    /// Own impulses: (end of the step, middle of the step, linear impulse, angular impulse, the
+    /// own user's work in the step on the local copy), a ring.
+    log: Box<[LoggedImpulse]>,
     log_next: usize,
     log_len: usize,
+    /// The own tool as a spring, for the no-gain bound (position from [`Consistency::own_tool`]).
+    tool: Option<crate::tank::ToolSpring>,
+    /// The own user's positive work on the local copy not yet spent by replays, J: each joule the
+    /// user put in is granted to replays once ([`crate::tank`]).
+    tank_j: f64,
 }
 
 impl Paper {
@@ -448,10 +468,23 @@ impl Paper {
             order,
             me,
             newest_from: [f64::NEG_INFINITY; MAX_SITES],
-            log: vec![(0.0, 0.0, Vec3::zeros(), Vec3::zeros()); LOG_CAP].into_boxed_slice(),
+            log: vec![(0.0, 0.0, Vec3::zeros(), Vec3::zeros(), 0.0); LOG_CAP].into_boxed_slice(),
             log_next: 0,
             log_len: 0,
+            tool: None,
+            tank_j: 0.0,
         }
+    }
+
+    /// With the own tool's radius and contact stiffness known: the no-gain bound then counts the
+    /// tool's spring ([`crate::tank::ToolSpring`]) once the tool's position is given.
+    pub fn with_tool(mut self, radius_m: f64, stiffness_n_per_m: f64) -> Self {
+        self.tool = Some(crate::tank::ToolSpring {
+            pos: Vec3::repeat(f64::INFINITY),
+            radius_m,
+            stiffness_n_per_m,
+        });
+        self
     }
 
     /// The site whose user's impulse is the newest in `included` (ties: the lowest index).
@@ -470,15 +503,23 @@ impl Consistency for Paper {
     fn name(&self) -> &'static str {
         "paper"
     }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        if let Some(t) = &mut self.tool {
+            t.pos = tool_pos;
+        }
+    }
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let work_before = copy.energy.own_j;
         let impulse = integrate(world, copy, std::slice::from_ref(own), 1, dt);
+        self.tank_j += (copy.energy.own_j - work_before).max(0.0);
         if own.touching {
             self.log[self.log_next] = (
                 copy.time_s,
                 copy.time_s - 0.5 * dt,
                 impulse.force,
                 impulse.torque,
+                copy.energy.own_j - work_before,
             );
             self.log_next = (self.log_next + 1) % LOG_CAP;
             self.log_len = (self.log_len + 1).min(LOG_CAP);
@@ -526,14 +567,17 @@ impl Consistency for Paper {
             return None;
         }
         let mut new = dead_reckon(world, &state, accel, now_s - t_s, self.order);
+        let given = new;
         // Replay our own impulses the sender had not seen.
         let seen_until = included.get(self.me).copied().unwrap_or(f64::NEG_INFINITY);
         let inv_i = new.inv_inertia_world(&world.mass);
+        let mut own_work_j = 0.0;
         for k in 0..self.log_len {
-            let (t_end, t_mid, dp, dl) = self.log[(self.log_next + LOG_CAP - 1 - k) % LOG_CAP];
+            let (t_end, t_mid, dp, dl, w) = self.log[(self.log_next + LOG_CAP - 1 - k) % LOG_CAP];
             if t_end <= seen_until {
                 break;
             }
+            own_work_j += w;
             // The impulse acted over its step: it has moved the object for (now − step middle).
             let age = (now_s - t_mid).max(0.0);
             let dv = dp / world.mass.mass_kg;
@@ -542,18 +586,35 @@ impl Consistency for Paper {
             new.ang_mom += dl;
             new.rot = UnitQuaternion::from_scaled_axis(inv_i * dl * age) * new.rot;
         }
+        let mut base = given;
         for plane in world.planes() {
             if plane_depth(world, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
-                new.pos += n * (copy.state.pos - new.pos).dot(&n);
-                new.vel += n * (copy.state.vel - new.vel).dot(&n);
+                for s in [&mut new, &mut base] {
+                    s.pos += n * (copy.state.pos - s.pos).dot(&n);
+                    s.vel += n * (copy.state.vel - s.vel).dot(&n);
+                }
             }
         }
+        // Never more energy than the sender's copy or this one had, plus the replayed work.
+        let (new, clipped_j, spent_j) = crate::tank::bound_adoption(
+            world,
+            &crate::tank::Adopted {
+                local: copy.state,
+                given,
+                base,
+                full: new,
+                tool: self.tool.filter(|t| t.pos.iter().all(|v| v.is_finite())),
+            },
+            own_work_j.min(self.tank_j),
+        );
+        self.tank_j = (self.tank_j - spent_j).max(0.0);
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
             age_s: now_s - t_s,
+            clipped_j,
         };
         copy.energy.adoption_j += adoption.energy_j;
         copy.env.shift(new.pos - copy.state.pos);

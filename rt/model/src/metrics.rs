@@ -25,6 +25,13 @@
 //!   reference run shows how many the task itself has).
 //! - **Correction energy**: per site, the energy its copy gained from corrections — the positive
 //!   part of each adoption's (paper) or rollback's (timewarp) change of mechanical energy, summed.
+//! - **Bounded corrections**: per site, the corrections the no-gain bound ([`crate::tank`]) scaled
+//!   back because they would have given the copy energy no user put in, and the energy it took out.
+//! - **Energy beyond the users' work**: the most any copy's translational energy (½ m v² plus
+//!   gravity's potential, from the trace) ever exceeded its start by more than every user's positive
+//!   work on every copy ([`crate::method::EnergyAccount::users_positive_j`], summed over the sites:
+//!   all the energy the users can have given, at any site). Positive only if a copy gained energy no
+//!   user put in; passivity's figure, checked on every sweep run.
 //! - **Rollbacks**: per site, rollbacks and re-simulated ticks per simulated second; over all
 //!   sites, the 99th percentile of rollback depth (from [`crate::histogram::DepthHistogram`]) and
 //!   confirmed-state hash mismatches. 0 for methods that do not roll back.
@@ -76,6 +83,10 @@ pub struct SiteMetrics {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave this copy (positive parts summed), J (NaN: not known).
     pub correction_energy_j: f64,
+    /// Corrections the no-gain bound scaled back.
+    pub bounded_corrections: usize,
+    /// Energy the no-gain bound took out of corrections, J (NaN: not known).
+    pub bounded_energy_j: f64,
     /// Rollbacks this site made.
     pub rollbacks: u64,
     /// Ticks this site re-simulated.
@@ -120,6 +131,15 @@ pub struct Metrics {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave the copies, all sites, J (NaN: not known).
     pub correction_energy_j: f64,
+    /// Corrections the no-gain bound scaled back, all sites.
+    pub bounded_corrections: usize,
+    /// Energy the no-gain bound took out of corrections, all sites, J (NaN: not known).
+    pub bounded_energy_j: f64,
+    /// The most a copy's translational energy exceeded its start beyond all users' positive work,
+    /// J (≤ 0: passive).
+    pub energy_beyond_users_j: f64,
+    /// The farthest any copy's centre was from the reference object's at the same time, m.
+    pub farthest_from_reference_m: f64,
     /// Rollbacks per simulated second of the busiest site.
     pub rollbacks_per_s: f64,
     /// Re-simulated ticks per simulated second of the busiest site.
@@ -260,6 +280,8 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 },
                 force_steps_over_jnd: steps.over_jnd,
                 correction_energy_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
+                bounded_corrections: adoptions.iter().filter(|a| a.clipped_j > 0.0).count(),
+                bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
                 rollbacks: tw.rollbacks,
                 resimulated_ticks: tw.resimulated_ticks,
             }
@@ -300,6 +322,13 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         max_force_step_n: max_known(sites.iter().map(|s| s.max_force_step_n)),
         force_steps_over_jnd: sites.iter().map(|s| s.force_steps_over_jnd).sum(),
         correction_energy_j: sum_known(sites.iter().map(|s| s.correction_energy_j)),
+        bounded_corrections: sites.iter().map(|s| s.bounded_corrections).sum(),
+        bounded_energy_j: sum_known(sites.iter().map(|s| s.bounded_energy_j)),
+        energy_beyond_users_j: energy_beyond_users(scenario, run),
+        farthest_from_reference_m: sites
+            .iter()
+            .map(|s| s.error_vs_reference_max_m)
+            .fold(0.0, f64::max),
         rollbacks_per_s: sites.iter().map(|s| per_s(s.rollbacks)).fold(0.0, f64::max),
         resimulated_ticks_per_s: sites
             .iter()
@@ -318,6 +347,21 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         messages: run.messages,
         sites,
     }
+}
+
+/// See the module docs ("energy beyond the users' work").
+fn energy_beyond_users(scenario: &Scenario, run: &RunResult) -> f64 {
+    let world = scenario.world();
+    let m = world.mass.mass_kg;
+    let e = |pos: Vec3, vel: Vec3| 0.5 * m * vel.norm_squared() - m * world.gravity.dot(&pos);
+    let given: f64 = run.energy.iter().map(|a| a.users_positive_j).sum();
+    let start = Vec3::from(scenario.object.start_m);
+    let e0 = e(start, Vec3::zeros());
+    run.sites
+        .iter()
+        .flat_map(|s| s.obj_pos.iter().zip(&s.obj_vel))
+        .map(|(&p, &v)| e(p, v) - e0 - given)
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 fn phase_happened(

@@ -29,20 +29,28 @@ pub enum MethodName {
     Paper,
     /// Exchange the tools, roll back (deterministic physics on a common tick grid).
     Timewarp,
+    /// Exchange the tools, play them from a jitter buffer, pull the copies together within an
+    /// energy tank (no rollback).
+    Coupled,
 }
 
 impl MethodName {
     /// The methods real stations run, in table order.
     pub const ALL: [MethodName; 2] = [MethodName::Naive, MethodName::Paper];
     /// Every method the simulator runs, in table order.
-    pub const SIMULATED: [MethodName; 3] =
-        [MethodName::Naive, MethodName::Paper, MethodName::Timewarp];
+    pub const SIMULATED: [MethodName; 4] = [
+        MethodName::Naive,
+        MethodName::Paper,
+        MethodName::Timewarp,
+        MethodName::Coupled,
+    ];
     /// Its name.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Naive => "naive",
             Self::Paper => "paper",
             Self::Timewarp => "timewarp",
+            Self::Coupled => "coupled",
         }
     }
 }
@@ -858,6 +866,30 @@ impl Scenario {
             radii,
             (horizon_s / dt).ceil() as usize,
             copy,
+        )
+    }
+
+    /// Site `i`'s `coupled` method: remote tools are played the largest delay, its jitter and the
+    /// slowest report period late (when every position has arrived, short of a loss).
+    pub fn coupled(&self, i: usize) -> crate::coupled::Coupled {
+        let dt = 1.0 / self.site[i].physics_rate_hz;
+        let slowest = self
+            .site
+            .iter()
+            .map(|s| 1.0 / s.report_rate_hz)
+            .fold(0.0, f64::max);
+        let playout_s = (self.network.delay_max_ms + self.network.jitter_ms) * 1e-3 + slowest;
+        let mut radii = [0.0; MAX_SITES];
+        for (r, s) in radii.iter_mut().zip(&self.site) {
+            *r = s.tool_radius_m;
+        }
+        crate::coupled::Coupled::new(
+            i,
+            self.site.len(),
+            dt,
+            self.contact,
+            radii,
+            (playout_s / dt).ceil() as usize,
         )
     }
 

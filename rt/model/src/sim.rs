@@ -86,6 +86,8 @@ pub struct AdoptionEvent {
     pub force_step_n: f64,
     /// Mechanical energy the adoption gave the copy (negative: took), J; NaN if not known.
     pub energy_j: f64,
+    /// Energy the no-gain bound took out of it ([`crate::tank`]), J; 0: it fitted; NaN if not known.
+    pub clipped_j: f64,
 }
 
 /// One site's displayed-force steps, counted at every servo tick (the traces are sampled slower).
@@ -202,12 +204,14 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             let p0 = script[0].target;
             let method: Box<dyn Consistency> = match mode {
                 Mode::Distributed(MethodName::Naive) => Box::<Naive>::default(),
-                Mode::Distributed(MethodName::Paper) | Mode::Reference => {
-                    Box::new(Paper::new(scenario.dead_reckoning_order, i))
-                }
+                Mode::Distributed(MethodName::Paper) | Mode::Reference => Box::new(
+                    Paper::new(scenario.dead_reckoning_order, i)
+                        .with_tool(spec.tool_radius_m, scenario.contact.stiffness_n_per_m),
+                ),
                 Mode::Distributed(MethodName::Timewarp) => {
                     Box::new(scenario.timewarp(i, &ObjectCopy::new(start)))
                 }
+                Mode::Distributed(MethodName::Coupled) => Box::new(scenario.coupled(i)),
             };
             Site {
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
@@ -317,6 +321,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     age_s: a.age_s,
                     force_step_n: 0.0,
                     energy_j: a.energy_j,
+                    clipped_j: a.clipped_j,
                 });
             }
         }

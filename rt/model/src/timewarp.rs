@@ -54,7 +54,8 @@ pub fn quantize(p: Vec3) -> Quantized {
     [q(p.x), q(p.y), q(p.z)]
 }
 
-fn position(q: Quantized) -> Vec3 {
+/// A quantized position in metres.
+pub fn position(q: Quantized) -> Vec3 {
     Vec3::new(
         f64::from(q[0]) * QUANTUM_M,
         f64::from(q[1]) * QUANTUM_M,
@@ -430,6 +431,7 @@ impl Consistency for TimeWarp {
                     jump: before.pos - copy.state.pos,
                     energy_j: e(&copy.state) - e(&before),
                     age_s: (self.now_tick - from_tick) as f64 * self.dt,
+                    clipped_j: 0.0,
                 });
             }
         }

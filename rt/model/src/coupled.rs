@@ -1,0 +1,322 @@
+//! Method `coupled`: exchange the users' *tools* as `timewarp` does, but without rollback — for
+//! sites that cannot run the same deterministic physics, or lose packets — and hold the copies
+//! together with an energy-bounded pull.
+//!
+//! - **Tools from a jitter buffer.** Every site's copy feels every user's tool through the same
+//!   contact law: its own as measured, and each remote one as it was a fixed *playout delay* ago
+//!   ([`Coupled::playout_ticks`]: the configured largest delay, its jitter and the slowest report
+//!   period), so a remote tool is played late but whole, in step, rather than predicted and
+//!   corrected. A tool position missing at its playout tick (lost, late) holds the last one played.
+//!   The reports are [`crate::timewarp::ToolReport`]s, the same tool trajectory `timewarp` sends.
+//! - **Pull towards the site that touched first.** Played late, the remote tools make the copies
+//!   drift apart. The site whose user's current contact began first (ties: the lower index) leads;
+//!   the others pull their copy towards its reported state (dead-reckoned to now): on each of its
+//!   reports, the fraction Δ / (Δ + [`PULL_TIME_S`]) of the way, Δ the time since the last pull —
+//!   a first-order convergence with time constant [`PULL_TIME_S`].
+//! - **Energy-bounded** (PSPM-style set-position clipping): each pull may add at most what the
+//!   copy's tank holds ([`crate::tank::bound_gain`] scales it back along the way, counted); the tank
+//!   is filled by the users' positive work on this copy, drained by what pulls add and refilled by
+//!   what they take. So the pulls together can never give a copy more energy than its users gave
+//!   it. Along the normal of a plane the local copy rests on, the pull keeps the local contact (as
+//!   `paper` does): transplanting another copy's micro-bounce would only pump the table's spring.
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::method::MAX_SITES;
+use crate::method::{dead_reckon, integrate, Adoption, Consistency, ObjectCopy, Report, World};
+use crate::timewarp::{position, quantize, Quantized, ToolReport, UNKNOWN, WINDOW_TICKS};
+
+/// Time constant of the pull towards the leading site's copy, s: long against the contact's
+/// oscillation (a 0.1 kg disk on the 800 N/m tool spring rings at ~14 ms), short against a task
+/// phase (~1 s).
+pub const PULL_TIME_S: f64 = 0.05;
+
+/// What a `coupled` site reports: its tool trajectory, its copy, and when its user's contact began.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoupledReport {
+    /// The tool positions, as `timewarp` sends them (no confirmed hash: `confirmed_hash` 0).
+    pub tools: ToolReport,
+    /// Time of `state`, s (sender's clock).
+    pub t_s: f64,
+    /// The sender's copy.
+    pub state: BodyState,
+    /// Gravity less the environment's support at `state`, m/s² (for dead reckoning).
+    pub accel: Vec3,
+    /// When the sender's user's current contact began, s; infinite: not touching.
+    pub touch_since_s: f64,
+    /// When the sender's user last touched, s; negative infinity: never.
+    pub last_touch_s: f64,
+}
+
+/// A received position and its tick.
+type Received = Option<(i64, Quantized)>;
+
+/// The `coupled` method of one site.
+#[derive(Debug, Clone)]
+pub struct Coupled {
+    me: usize,
+    sites: usize,
+    dt: f64,
+    contact: ContactParams,
+    radii: [f64; MAX_SITES],
+    playout_ticks: i64,
+    now_tick: i64,
+    /// Received positions with their ticks, tick `t` at `t % len`.
+    received: Box<[[Received; MAX_SITES]]>,
+    /// Own positions of the last ticks (tick `t` at `t % WINDOW_TICKS`).
+    own_hist: Box<[Quantized]>,
+    own: Quantized,
+    /// Per site: the position played at the last tick.
+    played: [Quantized; MAX_SITES],
+    contacts: [ToolContactState; MAX_SITES],
+    /// Per site: when its user's current contact began, s (infinite: not touching).
+    touch_since: [f64; MAX_SITES],
+    /// Per site: when its user last touched, s (negative infinity: never).
+    last_touch: [f64; MAX_SITES],
+    leader: usize,
+    /// Per site: the time of its newest report taken.
+    newest_from: [f64; MAX_SITES],
+    last_pull_s: f64,
+    tank_j: f64,
+    /// Forces of the remote tools on the copy at the last tick (for traces), N.
+    remote_force: Vec3,
+}
+
+impl Coupled {
+    /// Site `me` of `sites`, stepping `dt` s, with the tool contact law and each site's tool radius,
+    /// playing remote tools `playout_ticks` late.
+    pub fn new(
+        me: usize,
+        sites: usize,
+        dt: f64,
+        contact: ContactParams,
+        radii: [f64; MAX_SITES],
+        playout_ticks: usize,
+    ) -> Self {
+        let len = playout_ticks + 2 * WINDOW_TICKS + 1;
+        Self {
+            me,
+            sites: sites.min(MAX_SITES),
+            dt,
+            contact,
+            radii,
+            playout_ticks: playout_ticks as i64,
+            now_tick: 0,
+            received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
+            own_hist: vec![[0; 3]; WINDOW_TICKS].into_boxed_slice(),
+            own: [0; 3],
+            played: [UNKNOWN; MAX_SITES],
+            contacts: [ToolContactState::default(); MAX_SITES],
+            touch_since: [f64::INFINITY; MAX_SITES],
+            last_touch: [f64::NEG_INFINITY; MAX_SITES],
+            leader: 0,
+            newest_from: [f64::NEG_INFINITY; MAX_SITES],
+            last_pull_s: 0.0,
+            tank_j: 0.0,
+            remote_force: Vec3::zeros(),
+        }
+    }
+
+    /// The playout delay of remote tools, ticks.
+    pub fn playout_ticks(&self) -> i64 {
+        self.playout_ticks
+    }
+
+    fn slot(&self, t: i64) -> usize {
+        t.rem_euclid(self.received.len() as i64) as usize
+    }
+
+    /// The site that leads: the earliest current contact (ties: the lower index); when nobody
+    /// touches, the one whose user touched last (its copy holds the newest push), as far as known.
+    fn pick_leader(&mut self) {
+        let mut best: Option<usize> = None;
+        for k in 0..self.sites {
+            if self.touch_since[k].is_finite()
+                && best.is_none_or(|b| self.touch_since[k] < self.touch_since[b])
+            {
+                best = Some(k);
+            }
+        }
+        if best.is_none() {
+            for k in 0..self.sites {
+                if self.last_touch[k].is_finite()
+                    && best.is_none_or(|b| self.last_touch[k] > self.last_touch[b])
+                {
+                    best = Some(k);
+                }
+            }
+        }
+        if let Some(b) = best {
+            self.leader = b;
+        }
+    }
+}
+
+impl Consistency for Coupled {
+    fn name(&self) -> &'static str {
+        "coupled"
+    }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        self.own = quantize(tool_pos);
+    }
+    fn remote_force(&self) -> Vec3 {
+        self.remote_force
+    }
+    fn physics_step(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        _own: &ContactForce,
+        _dt: f64,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let t = self.now_tick;
+        let mut users = [ContactForce::default(); MAX_SITES];
+        let mut remote = Vec3::zeros();
+        for (j, user) in users.iter_mut().enumerate().take(self.sites) {
+            let q = if j == self.me {
+                self.own
+            } else {
+                let at = t - self.playout_ticks;
+                match self.received[self.slot(at)][j] {
+                    Some((tick, q)) if tick == at => q,
+                    _ => self.played[j], // missing at its playout tick: hold
+                }
+            };
+            let p = position(q);
+            let v = if self.played[j] != UNKNOWN && q != UNKNOWN {
+                let v = (p - position(self.played[j])) / self.dt;
+                let speed = v.norm();
+                let max = crate::timewarp::MAX_TOOL_SPEED_M_PER_S;
+                if speed > max {
+                    v * (max / speed)
+                } else {
+                    v
+                }
+            } else {
+                Vec3::zeros()
+            };
+            self.played[j] = q;
+            *user = tool_contact(
+                &self.contact,
+                &mut self.contacts[j],
+                &world.shape,
+                &copy.state,
+                &world.mass,
+                p,
+                v,
+                self.radii[j],
+            );
+            if j != self.me {
+                remote += user.force;
+            }
+        }
+        let now_s = copy.time_s;
+        let own_touch = users[self.me].touching;
+        match (own_touch, self.touch_since[self.me].is_finite()) {
+            (true, false) => self.touch_since[self.me] = now_s,
+            (false, true) => self.touch_since[self.me] = f64::INFINITY,
+            _ => {}
+        }
+        if own_touch {
+            self.last_touch[self.me] = now_s;
+        }
+        self.pick_leader();
+        let before = copy.energy.users_positive_j;
+        // Summed in site order; every user acts on this copy.
+        integrate(world, copy, &users[..self.sites], self.sites, self.dt);
+        self.tank_j += copy.energy.users_positive_j - before;
+        self.remote_force = remote;
+        self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize] = self.own;
+        self.now_tick = t + 1;
+    }
+    fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
+        let end = self.now_tick;
+        let first = (end - WINDOW_TICKS as i64).max(0);
+        let mut tools = ToolReport {
+            first_tick: first,
+            count: (end - first) as usize,
+            positions: [[0; 3]; WINDOW_TICKS],
+            confirmed_tick: 0,
+            confirmed_hash: 0,
+        };
+        for (k, t) in (first..end).enumerate() {
+            tools.positions[k] = self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize];
+        }
+        Report::Coupled(CoupledReport {
+            tools,
+            t_s: now_s,
+            state: copy.state,
+            accel: copy.passive_accel,
+            touch_since_s: self.touch_since[self.me],
+            last_touch_s: self.last_touch[self.me],
+        })
+    }
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        now_s: f64,
+    ) -> Option<Adoption> {
+        let Report::Coupled(r) = msg else {
+            return None;
+        };
+        if from >= self.sites || from == self.me || !r.state.is_finite() {
+            return None;
+        }
+        let tools = &r.tools;
+        for (k, &q) in tools.positions[..tools.count.min(WINDOW_TICKS)]
+            .iter()
+            .enumerate()
+        {
+            let t = tools.first_tick + k as i64;
+            let i = self.slot(t);
+            self.received[i][from] = Some((t, q));
+        }
+        if r.t_s <= self.newest_from[from] {
+            return None; // an older state than one taken: its tools are kept, not its state
+        }
+        self.newest_from[from] = r.t_s;
+        self.touch_since[from] = r.touch_since_s;
+        self.last_touch[from] = r.last_touch_s;
+        self.pick_leader();
+        if from != self.leader {
+            return None;
+        }
+        let mut target = dead_reckon(world, &r.state, r.accel, now_s - r.t_s, 2);
+        // Along the normal of a plane the local copy rests on, its contact is local physics.
+        for plane in world.planes() {
+            if crate::method::plane_depth(world, plane, &copy.state) > -1e-4 {
+                let n = plane.normal;
+                target.pos += n * (copy.state.pos - target.pos).dot(&n);
+                target.vel += n * (copy.state.vel - target.vel).dot(&n);
+            }
+        }
+        let since = (now_s - self.last_pull_s).max(0.0);
+        self.last_pull_s = now_s;
+        let alpha = since / (since + PULL_TIME_S);
+        let full = crate::tank::blend(&copy.state, &target, alpha);
+        let (new, clipped_j) =
+            match crate::tank::bound_gain(world, &copy.state, &full, self.tank_j, None) {
+                Some((s, c)) => (s, c),
+                None => (full, 0.0),
+            };
+        let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
+        // What a pull adds is drained; what it takes is returned (the tank never exceeds the users'
+        // positive work less what pulls added net).
+        self.tank_j = (self.tank_j - (stored(&new) - stored(&copy.state))).max(0.0);
+        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let adoption = Adoption {
+            jump: copy.state.pos - new.pos,
+            energy_j: e(&new) - e(&copy.state),
+            age_s: now_s - r.t_s,
+            clipped_j,
+        };
+        copy.energy.adoption_j += adoption.energy_j;
+        copy.env.shift(new.pos - copy.state.pos);
+        copy.state = new;
+        Some(adoption)
+    }
+}

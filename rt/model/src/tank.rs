@@ -1,0 +1,251 @@
+//! The energy bound every correction of a copy obeys: a copy never gains energy it was not given.
+//!
+//! A copy's energy ([`stored_energy`]) is what it can give back: kinetic (linear and angular),
+//! gravity's potential, and the environment's penalty springs (½ K d², d the deepest penetration
+//! of each plane, the same spring [`crate::contact::environment_wrench`] pushes with); where the own
+//! tool is known, its contact spring too ([`ToolSpring`]). Physics alone changes it only by the work
+//! of the users' contact forces and of the environment (passive: its dampers and friction take
+//! energy, its springs give back at most what they stored). A *correction* — a state adopted from
+//! another site — is not physics, and nothing in it says where its energy came from. So it is split
+//! into a *base*, whose energy is accounted for (for `paper`: the sender's state dead-reckoned — its
+//! energy is what the sender's copy got from its users — or the local copy's own), and the rest,
+//! which may add at most a **budget** of real work done at this site. A correction that would exceed
+//! it is scaled back along the line from the base ([`bound_gain`]) until it fits, and counted
+//! ([`crate::method::Adoption::clipped_j`]).
+//!
+//! For `paper` the budget is an energy **tank** filled by the own user's positive work on the local
+//! copy, step by step, and drained by what replays add: the own impulses the sender had not seen,
+//! replayed on the adopted state, may add at most the work they did here, and each joule the user
+//! put in is granted once. Why the work and not the impulses' kinetic energy: an impulse the user
+//! gave while the table's friction or support held the object (a user pressing the disk down and
+//! sideways in a squeeze) did no work on the local copy, and replayed on a state that is not held
+//! the same way it throws the object. That is the `paper` blow-up at 300 ms, seed 3: a 3 N press
+//! held by friction, replayed over 0.3 s into the left wall's penalty spring, 4.7 kJ and 98 m. Why
+//! once: a replay's velocity along the user's force makes the force do positive work on the next
+//! steps, and granting that work again to the next replay pumps the copy.
+//!
+//! Every step of the bound leaves a correction that fits alone, to the bit, so a method's figures
+//! change only where it bites ([`crate::metrics::Metrics::bounded_corrections`] counts it).
+
+use crate::body::{BodyState, Vec3};
+use crate::method::{plane_depth, World};
+
+/// Kinetic, gravitational and environment-spring energy of `s`, J (see the module docs).
+pub fn stored_energy(world: &World, s: &BodyState) -> f64 {
+    s.mechanical_energy(&world.mass, world.gravity) + spring_energy(world, s)
+}
+
+/// The environment's penalty springs' energy at `s`: ½ K d² per plane, J.
+pub fn spring_energy(world: &World, s: &BodyState) -> f64 {
+    let k = world.env_contact.stiffness_n_per_m;
+    world
+        .planes()
+        .iter()
+        .map(|plane| plane_depth(world, plane, s).max(0.0))
+        .fold(0.0, |e, d| e + 0.5 * k * d * d)
+}
+
+/// The states a `paper` adoption is made of.
+#[derive(Debug, Clone, Copy)]
+pub struct Adopted {
+    /// The local copy before it.
+    pub local: BodyState,
+    /// The sender's state dead-reckoned to now: its energy is the sender's copy's.
+    pub given: BodyState,
+    /// `given` with the local position and velocity along the normals of the planes the local copy
+    /// rests on.
+    pub base: BodyState,
+    /// `base` with the own user's impulses the sender had not seen replayed on it.
+    pub full: BodyState,
+    /// The own tool, if known.
+    pub tool: Option<ToolSpring>,
+}
+
+/// `paper`'s adoption bounded (see the module docs): the state to adopt, the energy the bound
+/// took out, J, and the energy the replay added over the base (what it spent of `own_work_j`), J. Two steps, each left alone (to the bit) when it fits:
+///
+/// 1. Keeping the local contact along a plane's normal must not press the adopted object deeper
+///    into the environment than either copy was (the sender's tilt on the local height puts a rim
+///    into the table): if it does, `base` is scaled back towards `given` to the larger of the two
+///    copies' energies.
+/// 2. The replayed impulses may add at most `own_work_j`, the work they did on the local copy.
+///
+/// Energies count the own tool's spring when it is known: an adoption that moves the object onto
+/// the tool is a gain.
+pub fn bound_adoption(world: &World, a: &Adopted, own_work_j: f64) -> (BodyState, f64, f64) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    let tool = a.tool.as_ref();
+    let e_full = energy(world, &a.full, tool);
+    let deepest_held = spring_energy(world, &a.local).max(spring_energy(world, &a.given));
+    let (base, full) = if spring_energy(world, &a.base) > deepest_held {
+        let held = energy(world, &a.local, tool).max(energy(world, &a.given, tool));
+        let budget = held - energy(world, &a.given, tool) + own_work_j.max(0.0);
+        match bound_gain(world, &a.given, &a.base, budget, tool) {
+            Some((base, _)) => {
+                // The replay moves the bounded base as it moved the unbounded one.
+                let full = BodyState {
+                    pos: base.pos + (a.full.pos - a.base.pos),
+                    vel: base.vel + (a.full.vel - a.base.vel),
+                    ang_mom: base.ang_mom + (a.full.ang_mom - a.base.ang_mom),
+                    rot: a.full.rot * a.base.rot.inverse() * base.rot,
+                };
+                (base, full)
+            }
+            None => (a.base, a.full),
+        }
+    } else {
+        (a.base, a.full)
+    };
+    let out = bound_gain(world, &base, &full, own_work_j, tool).map_or(full, |(s, _)| s);
+    let clipped = e_full - energy(world, &out, tool);
+    let spent = energy(world, &out, tool) - energy(world, &base, tool);
+    (out, clipped.max(0.0), spent.max(0.0))
+}
+
+/// The own user's tool as the spring it is on the object (the contact law's normal stiffness): a
+/// correction that moves the object onto the tool loads that spring, and its release would count as
+/// the user's work though the user did nothing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolSpring {
+    /// Tool centre, world, m.
+    pub pos: Vec3,
+    /// Tool radius, m.
+    pub radius_m: f64,
+    /// Normal stiffness of the tool contact, N/m.
+    pub stiffness_n_per_m: f64,
+}
+
+impl ToolSpring {
+    /// ½ K d², d the tool's penetration into the object at `s`, J.
+    pub fn energy(&self, world: &World, s: &BodyState) -> f64 {
+        let (dist, _) = world
+            .shape
+            .signed_distance(s.rot.inverse() * (self.pos - s.pos));
+        let d = (self.radius_m - dist).max(0.0);
+        0.5 * self.stiffness_n_per_m * d * d
+    }
+}
+
+/// [`stored_energy`] plus the own tool's spring, if known, J.
+fn energy(world: &World, s: &BodyState, tool: Option<&ToolSpring>) -> f64 {
+    stored_energy(world, s) + tool.map_or(0.0, |t| t.energy(world, s))
+}
+
+/// `base` moved the fraction `s` of the way to `full` (position, velocity and angular momentum
+/// linearly, orientation normalised-linearly).
+pub fn blend(base: &BodyState, full: &BodyState, s: f64) -> BodyState {
+    BodyState {
+        pos: base.pos + (full.pos - base.pos) * s,
+        vel: base.vel + (full.vel - base.vel) * s,
+        ang_mom: base.ang_mom + (full.ang_mom - base.ang_mom) * s,
+        rot: base.rot.nlerp(&full.rot, s),
+    }
+}
+
+/// Bisection steps of [`bound_gain`]: the fraction is found to 2⁻³⁰.
+const BISECTIONS: u32 = 30;
+
+/// The correction `base → full` bounded so the energy gained over `base` is at most `budget_j`
+/// (negative budgets count as 0): `None` when `full` already fits (it is then used as it is, to the
+/// bit), else the largest fraction of it that fits and the energy the bound removed, J.
+///
+/// `base` always fits (it is the fraction 0), so the result exists; a `full` that is not finite
+/// gives `base`. Deterministic: a fixed number of bisection steps of plain arithmetic.
+pub fn bound_gain(
+    world: &World,
+    base: &BodyState,
+    full: &BodyState,
+    budget_j: f64,
+    tool: Option<&ToolSpring>,
+) -> Option<(BodyState, f64)> {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    let limit = energy(world, base, tool) + budget_j.max(0.0);
+    let e_full = energy(world, full, tool);
+    if e_full <= limit {
+        return None;
+    }
+    if !full.is_finite() {
+        return Some((*base, f64::INFINITY));
+    }
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    for _ in 0..BISECTIONS {
+        let mid = 0.5 * (lo + hi);
+        if energy(world, &blend(base, full, mid), tool) <= limit {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let bounded = blend(base, full, lo);
+    Some((bounded, e_full - energy(world, &bounded, tool)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::{MassProps, Vec3};
+    use crate::contact::{ContactParams, Plane, MAX_PLANES};
+    use crate::shape::Shape;
+
+    fn world() -> World {
+        let shape = Shape::Sphere { radius: 0.05 };
+        let mut planes = [Plane {
+            normal: Vec3::z(),
+            offset: 0.0,
+        }; MAX_PLANES];
+        planes[1] = Plane {
+            normal: Vec3::x(),
+            offset: -0.25,
+        };
+        World {
+            shape,
+            mass: MassProps {
+                mass_kg: 0.1,
+                inertia_body: shape.inertia(0.1),
+            },
+            gravity: Vec3::new(0.0, 0.0, -3.27),
+            planes,
+            plane_count: 2,
+            env_contact: ContactParams {
+                stiffness_n_per_m: 3000.0,
+                damping_n_s_per_m: 30.0,
+                tangential_stiffness_n_per_m: 3000.0,
+                tangential_damping_n_s_per_m: 15.0,
+                friction_static: 0.35,
+                friction_kinetic: 0.3,
+            },
+        }
+    }
+
+    /// A state inside a wall holds the wall's spring energy; moving there is a gain.
+    #[test]
+    fn a_wall_penetration_stores_its_spring_energy() {
+        let w = world();
+        let out = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.05));
+        let inside = BodyState::at_rest(Vec3::new(-0.30, 0.0, 0.05));
+        let de = stored_energy(&w, &inside) - stored_energy(&w, &out);
+        assert!((de - 0.5 * 3000.0 * 0.1 * 0.1).abs() < 1e-9, "{de}");
+    }
+
+    /// Within the budget a correction is left alone; beyond it, it is scaled to the budget exactly
+    /// (to the bisection's precision) and what it would have added beyond is reported.
+    #[test]
+    fn a_correction_beyond_its_budget_is_scaled_to_it() {
+        let w = world();
+        let base = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.05));
+        let full = BodyState {
+            vel: Vec3::new(3.0, 0.0, 0.0),
+            ..base
+        };
+        // ½ m v² = 0.45 J.
+        assert!(bound_gain(&w, &base, &full, 0.5, None).is_none());
+        let (s, clipped) = bound_gain(&w, &base, &full, 0.05, None).expect("bounded");
+        let gained = stored_energy(&w, &s) - stored_energy(&w, &base);
+        assert!(gained <= 0.05 && gained > 0.05 - 1e-6, "{gained}");
+        assert!((clipped - (0.45 - gained)).abs() < 1e-9, "{clipped}");
+        assert!(s.vel.x > 0.0 && s.vel.x < 3.0, "{:?}", s.vel);
+        // No budget: the base.
+        let (s, _) = bound_gain(&w, &base, &full, -1.0, None).expect("bounded");
+        assert!(s.vel.norm() < 1e-8, "{:?}", s.vel);
+    }
+}
