@@ -174,3 +174,71 @@ fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The A/B harness on human-like input: both users' hands, recorded once, replayed under every
+/// simulated method at two delays. A replayed hand is position-driven, so every method and delay
+/// gets the very same tool trajectories (what differs is only what the copies do with them), and
+/// the object still moves under them.
+#[test]
+fn recorded_hands_replay_identically_under_every_method_and_delay() {
+    let dir = tempdir("ab");
+    let paper = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let first = sim::run(&paper, Mode::Reference, &mut |_| {});
+    let mut text = paper_with_replay("user1.csv");
+    for (i, name) in ["user1", "user2"].iter().enumerate() {
+        let recorded = Trajectory::new(
+            first
+                .t
+                .iter()
+                .copied()
+                .zip(first.sites[i].tool_pos.iter().copied()),
+        )
+        .expect("a recorded trajectory");
+        std::fs::write(dir.join(format!("{name}.csv")), recorded.to_csv()).expect("write csv");
+    }
+    // user2 replays too.
+    let mut v: toml::Table = toml::from_str(&text).expect("toml");
+    v.get_mut("site")
+        .and_then(toml::Value::as_array_mut)
+        .expect("sites")[1]
+        .as_table_mut()
+        .expect("a site table")
+        .insert(
+            "hand_replay".into(),
+            toml::Value::String("user2.csv".into()),
+        );
+    text = toml::to_string(&v).expect("toml out");
+    std::fs::write(dir.join("replay.toml"), text).expect("scenario");
+    let replay = scenario_file::load(&dir.join("replay.toml")).expect("the replay scenario");
+    let mut runs = 0;
+    for method in MethodName::SIMULATED {
+        for delay_ms in [0.0, 150.0] {
+            let sc = coop_tools::sweep::scenario_at(&replay, delay_ms, 1).expect("scenario at");
+            let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
+            for (i, site) in r.sites.iter().enumerate() {
+                assert_eq!(site.tool_pos.len(), first.t.len());
+                let worst = site
+                    .tool_pos
+                    .iter()
+                    .zip(&first.sites[i].tool_pos)
+                    .map(|(a, b)| (a - b).norm())
+                    .fold(0.0f64, f64::max);
+                assert!(
+                    worst < 1e-9,
+                    "{} at {delay_ms} ms: site {i}'s replayed tool is {worst} m off the recorded hand",
+                    method.as_str()
+                );
+            }
+            let moved =
+                (r.sites[0].obj_pos.last().expect("samples") - r.sites[0].obj_pos[0]).norm();
+            assert!(
+                moved > 0.01,
+                "{} at {delay_ms} ms: the replayed hands moved the object {moved} m",
+                method.as_str()
+            );
+            runs += 1;
+        }
+    }
+    assert_eq!(runs, 2 * MethodName::SIMULATED.len());
+    let _ = std::fs::remove_dir_all(&dir);
+}
