@@ -75,6 +75,36 @@ pub struct RunArgs {
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
+/// The sites whose presence tokens `z` sees in `session`, kept up to date by zenoh's callback
+/// while the returned subscriber lives.
+///
+/// # Errors
+/// Zenoh refuses the liveliness subscriber.
+#[allow(clippy::type_complexity)]
+pub(crate) fn watch_presence(
+    z: &zenoh::Session,
+    session: &str,
+) -> anyhow::Result<(Arc<Mutex<BTreeSet<String>>>, zenoh::pubsub::Subscriber<()>)> {
+    let present: Arc<Mutex<BTreeSet<String>>> = Arc::default();
+    let p = present.clone();
+    let sub = z
+        .liveliness()
+        .declare_subscriber(keys::all_presence(session))
+        .history(true)
+        .callback(move |s| {
+            let site = keys::site_of(s.key_expr().as_str()).to_owned();
+            let mut set = lock(&p);
+            if s.kind() == zenoh::sample::SampleKind::Put {
+                set.insert(site);
+            } else {
+                set.remove(&site);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
+    Ok((present, sub))
+}
+
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
@@ -273,23 +303,7 @@ pub fn run_method(
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
         .wait()
         .map_err(|e| anyhow::anyhow!("opening the launcher's zenoh session: {e}"))?;
-    let present: Arc<Mutex<BTreeSet<String>>> = Arc::default();
-    let p = present.clone();
-    let _presence = z
-        .liveliness()
-        .declare_subscriber(keys::all_presence(session))
-        .history(true)
-        .callback(move |s| {
-            let site = keys::site_of(s.key_expr().as_str()).to_owned();
-            let mut set = lock(&p);
-            if s.kind() == zenoh::sample::SampleKind::Put {
-                set.insert(site);
-            } else {
-                set.remove(&site);
-            }
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
+    let (present, _presence) = watch_presence(&z, session)?;
     let epoch = network::EpochAnnouncer::declare(&z, session)?;
     let _live = a
         .live

@@ -194,9 +194,10 @@ mod ffi {
     }
 
     fn load_one(file: &Path) -> Result<libloading::Library, libloading::Error> {
-        // SAFETY: loading runs the library's initialisers. We load only the file the station's config
-        // names (or the SDK's own name on the loader's path): a DHD SDK, whose initialisers only set
-        // up its own state. This is the trust any program linking the SDK gives it.
+        // Loading runs the library's initialisers. We load only the file the station's config names
+        // (or the SDK's own name on the loader's path): a DHD SDK, whose initialisers only set up
+        // its own state.
+        // SAFETY: the trust any program linking the SDK gives it (above).
         unsafe { libloading::Library::new(file) }
     }
 
@@ -236,9 +237,10 @@ mod ffi {
             };
             macro_rules! sym {
                 ($name:literal) => {{
-                    // SAFETY: the symbol's type is the DHD SDK's declaration of that function in
-                    // dhdc.h (argument and return types as C declares them); the pointer is copied out
+                    // The symbol's type is the DHD SDK's declaration of that function in dhdc.h
+                    // (argument and return types as C declares them); the pointer is copied out
                     // and used only while `_lib` keeps the library loaded.
+                    // SAFETY: the type matches the C declaration and the library outlives it (above).
                     let s = unsafe { lib.get(concat!($name, "\0").as_bytes()) };
                     *s.map_err(|_| DhdError::MissingSymbol {
                         file: file.clone(),

@@ -20,15 +20,14 @@
 //! reader as on one machine, and still there to read again if anything fails. The launcher waits,
 //! bounded, for each recording to hold its final counters (what a station writes last).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use coop_model::scenario::{MethodName, Scenario};
+use coop_transport::network;
 use coop_transport::recording::{self, Recording};
-use coop_transport::{keys, network};
 use zenoh::Wait;
 
 use super::{lock, MethodOutcome, RunArgs};
@@ -152,23 +151,7 @@ pub fn run_attached(
                 at.connect.join(", ")
             )
         })?;
-    let present: Arc<Mutex<BTreeSet<String>>> = Arc::default();
-    let p = present.clone();
-    let _presence = z
-        .liveliness()
-        .declare_subscriber(keys::all_presence(session))
-        .history(true)
-        .callback(move |s| {
-            let site = keys::site_of(s.key_expr().as_str()).to_owned();
-            let mut set = lock(&p);
-            if s.kind() == zenoh::sample::SampleKind::Put {
-                set.insert(site);
-            } else {
-                set.remove(&site);
-            }
-        })
-        .wait()
-        .map_err(|e| anyhow::anyhow!("watching presence: {e}"))?;
+    let (present, _presence) = super::watch_presence(&z, session)?;
     // From here on the launcher answers its clock: the stations measure their offset to it while
     // the others come.
     let epoch = network::EpochAnnouncer::declare(&z, session)?;
