@@ -177,7 +177,6 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
 /// frames and scene while the session runs; the session ends as it would without a viewer.
 #[test]
 fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
-    use std::io::BufRead;
     let _turn = ONE_AT_A_TIME.lock();
     if python_with(&["websockets", "google.protobuf"]).is_none() {
         return;
@@ -197,24 +196,7 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
         .spawn()
         .expect("session starts");
     let stderr = child.stderr.take().expect("stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    let log = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in std::io::BufReader::new(stderr)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
-                let _ = tx.send(url.to_owned());
-            }
-            all.push_str(&line);
-            all.push('\n');
-        }
-        all
-    });
-    let url = rx
-        .recv_timeout(std::time::Duration::from_secs(30))
-        .expect("the launcher prints the live view's address");
+    let (url, log) = live_url(stderr, 30, "the launcher");
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     // The client waits (up to 60 s) until it has seen every site; it connects before the stations
@@ -375,7 +357,6 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
 /// and events while it runs, and the station stops cleanly with its recording whole.
 #[test]
 fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
-    use std::io::BufRead;
     let _turn = ONE_AT_A_TIME.lock();
     if python_with(&["websockets", "google.protobuf"]).is_none() {
         return;
@@ -399,24 +380,7 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
         .as_mut()
         .and_then(|c| c.stderr.take())
         .expect("stderr");
-    let (tx, rx) = std::sync::mpsc::channel();
-    let log = std::thread::spawn(move || {
-        let mut all = String::new();
-        for line in std::io::BufReader::new(stderr)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
-                let _ = tx.send(url.to_owned());
-            }
-            all.push_str(&line);
-            all.push('\n');
-        }
-        all
-    });
-    let url = rx
-        .recv_timeout(std::time::Duration::from_secs(60))
-        .expect("the network process prints the live view's address");
+    let (url, log) = live_url(stderr, 60, "the network process");
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
     let client = Command::new("python3")
         .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
@@ -634,4 +598,33 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
         assert!(check_path(bad, &v).is_err(), "{bad} passed");
     }
     let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Follows a live-view server's stderr: the first `ws://` address it prints (within `limit_s`,
+/// else the test fails naming `who`), and a thread that gathers the whole log.
+fn live_url(
+    stderr: std::process::ChildStderr,
+    limit_s: u64,
+    who: &str,
+) -> (String, std::thread::JoinHandle<String>) {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let log = std::thread::spawn(move || {
+        use std::io::BufRead;
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if let Some(url) = line.split_whitespace().find(|w| w.starts_with("ws://")) {
+                let _ = tx.send(url.to_owned());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let url = rx
+        .recv_timeout(std::time::Duration::from_secs(limit_s))
+        .unwrap_or_else(|_| panic!("{who} prints the live view's address"));
+    (url, log)
 }
