@@ -36,6 +36,27 @@ pub fn wait_until<T>(what: &str, limit: Duration, mut f: impl FnMut() -> Option<
     }
 }
 
+/// Polls `f` until it returns `Ok`, or panics after `limit` naming `what` and the last `Err` seen
+/// (what the condition looked like when time ran out).
+///
+/// # Panics
+/// When `limit` passes first.
+pub fn wait_for<T>(what: &str, limit: Duration, mut f: impl FnMut() -> Result<T, String>) -> T {
+    let start = Instant::now();
+    let mut last;
+    loop {
+        match f() {
+            Ok(v) => return v,
+            Err(seen) => last = seen,
+        }
+        assert!(
+            start.elapsed() < limit,
+            "timed out after {limit:?} waiting for {what}; last seen: {last}"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 /// A child process that is SIGKILLed and reaped when dropped, so a failing test leaves no process.
 #[derive(Debug)]
 pub struct Reaped(pub Option<Child>);

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use coop_tests::{
     paper_with_scripts, shifted_clock, station_config, time_namespaces_work, unique_session,
-    wait_until, Reaped,
+    wait_for, wait_until, Reaped,
 };
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
@@ -97,11 +97,44 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
             "{me}: offset {off} us, off by {err_us} us"
         );
     }
-    // After the push, the disk rests; both copies adopted the other's states throughout.
-    let (sa, sb) = wait_until("both stations past the push and adopting", LIMIT, || {
-        let (sa, sb) = (status("user1")?, status("user2")?);
-        let done = sa.loops.physics.cycles > 4800 && sb.loops.physics.cycles > 4800;
-        (done && sa.physics.adoptions > 10 && sb.physics.adoptions > 10).then_some((sa, sb))
+    // After the push back (user 2 leaves at 3.4 s) the disk comes to rest; both copies adopted the
+    // other's states throughout. "After" is read on each station's own session time (its newest
+    // published state's time from its epoch), not from physics cycles: a loaded machine's skipped
+    // deadlines would make cycles lag the script, and the check would race the station's end.
+    let newest = |name: &str, epoch_ns: Option<u64>| {
+        let n = coop_rt::shm::SegmentName::new(&session, name, "ctl").ok()?;
+        let ctl = coop_rt::shm::BlockSegment::<coop_rt::shm::control::ControlBlock>::open(
+            &n,
+            Duration::from_millis(200),
+        )
+        .ok()?;
+        let s = ctl.resume()?;
+        let t_s = s.t_ns.checked_sub(epoch_ns?)? as f64 * 1e-9;
+        Some((t_s, s.pos, s.vel))
+    };
+    let speed = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let (sa, sb, (pa, pb)) = wait_for("both copies at rest after the push back", LIMIT, || {
+        let read = |me: &str| status(me).ok_or_else(|| format!("no status from {me} (stopped?)"));
+        let (sa, sb) = (read("user1")?, read("user2")?);
+        let (na, nb) = (
+            newest("user1", sa.network.epoch_ns).ok_or("no state from user1")?,
+            newest("user2", sb.network.epoch_ns).ok_or("no state from user2")?,
+        );
+        let rest = |n: &(f64, [f64; 3], [f64; 3])| n.0 > 4.5 && speed(n.2) < 0.002;
+        if rest(&na) && rest(&nb) && sa.physics.adoptions > 10 && sb.physics.adoptions > 10 {
+            return Ok((sa, sb, (na.1, nb.1)));
+        }
+        Err(format!(
+            "user1 at {:.2} s: {:?} at {:.4} m/s, {} adoptions; user2 at {:.2} s: {:?} at {:.4} m/s, {} adoptions",
+            na.0,
+            na.1,
+            speed(na.2),
+            sa.physics.adoptions,
+            nb.0,
+            nb.1,
+            speed(nb.2),
+            sb.physics.adoptions,
+        ))
     });
     for s in [&sa, &sb] {
         let r = &s.network.refused;
@@ -115,16 +148,6 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
         }
     }
     // The copies end together: the resting disk is where user1's copy has it.
-    let resume = |name: &str| {
-        let n = coop_rt::shm::SegmentName::new(&session, name, "ctl").expect("name");
-        let ctl = coop_rt::shm::BlockSegment::<coop_rt::shm::control::ControlBlock>::open(
-            &n,
-            Duration::from_secs(1),
-        )
-        .expect("control block");
-        ctl.resume().expect("a published state").pos
-    };
-    let (pa, pb) = (resume("user1"), resume("user2"));
     let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
     assert!(pa[0] > -0.04, "the disk was pushed: {pa:?}");
     assert!(apart < 0.002, "copies {apart} m apart: {pa:?} vs {pb:?}");
