@@ -44,6 +44,14 @@ pub struct Row {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave the copies, all sites, J.
     pub correction_energy_j: f64,
+    /// The largest displayed-force step beyond the displayed object's own contact change (the
+    /// display's step limiter bounds it), any site, N.
+    pub max_correction_force_step_n: f64,
+    /// Servo ticks at which a display's step limiter held the force back, all sites.
+    pub display_limited_ticks: u64,
+    /// The most energy a display's deviation from the simulated contact had injected into its
+    /// user, any site, J (≤ 0: passive).
+    pub display_energy_max_j: f64,
     /// Corrections the no-gain bound scaled back, all sites.
     pub bounded_corrections: usize,
     /// Energy the no-gain bound took out of corrections, all sites, J.
@@ -80,6 +88,9 @@ impl Row {
             max_force_step_n: m.max_force_step_n,
             force_steps_over_jnd: m.force_steps_over_jnd,
             correction_energy_j: m.correction_energy_j,
+            max_correction_force_step_n: m.max_correction_force_step_n,
+            display_limited_ticks: m.display_limited_ticks,
+            display_energy_max_j: m.display_energy_max_j,
             bounded_corrections: m.bounded_corrections,
             bounded_energy_j: m.bounded_energy_j,
             energy_beyond_users_j: m.energy_beyond_users_j,
@@ -218,7 +229,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>8}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}",
         "method",
         "delay",
         "seed",
@@ -228,6 +239,8 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "err ref",
         "f step",
         ">JND",
+        "c step",
+        "E disp",
         "E corr",
         "bound",
         "rollback",
@@ -236,7 +249,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>12}{:>8}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}",
         "",
         "ms",
         "",
@@ -246,6 +259,8 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "rms mm",
         "max N",
         "steps",
+        "max N",
+        "mJ",
         "mJ",
         "count",
         "per s",
@@ -255,7 +270,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{:>8}{:>9.1}{:>10}{:>6}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}",
             r.method,
             r.delay_ms,
             r.seed,
@@ -265,6 +280,8 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             cell(r.error_vs_reference_rms_m * 1e3, 12, 2),
             cell(r.max_force_step_n, 9, 3),
             r.force_steps_over_jnd,
+            cell(r.max_correction_force_step_n, 9, 3),
+            cell(r.display_energy_max_j * 1e3, 9, 3),
             cell(r.correction_energy_j * 1e3, 12, 2),
             r.bounded_corrections,
             r.rollbacks_per_s,
@@ -274,7 +291,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); E corr = energy corrections gave the copies; bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies; bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

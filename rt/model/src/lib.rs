@@ -15,6 +15,7 @@ pub mod contact;
 pub mod controller;
 pub mod coupled;
 pub mod device;
+pub mod display;
 pub mod histogram;
 pub mod link;
 pub mod method;

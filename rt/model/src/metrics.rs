@@ -23,6 +23,9 @@
 //!   tick to the next, and how many ticks changed it by more than the just-noticeable difference
 //!   ([`force_jnd_n`]), counted by the simulator at every servo tick. Contact onsets count too (the
 //!   reference run shows how many the task itself has).
+//! - **Display**: per site, the servo ticks at which the display's step limiter held the force
+//!   back, and the most energy the display's deviation from the simulated contact ever had put
+//!   into the user (the passivity observer's figure, [`crate::display`]; ≤ 0 is passive).
 //! - **Correction energy**: per site, the energy its copy gained from corrections — the positive
 //!   part of each adoption's (paper) or rollback's (timewarp) change of mechanical energy, summed.
 //! - **Bounded corrections**: per site, the corrections the no-gain bound ([`crate::tank`]) scaled
@@ -83,6 +86,14 @@ pub struct SiteMetrics {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave this copy (positive parts summed), J (NaN: not known).
     pub correction_energy_j: f64,
+    /// Servo ticks at which the display's step limiter held the force back ([`crate::display`]).
+    pub display_limited_ticks: u64,
+    /// The largest displayed-force step beyond the displayed object's own contact change, N (NaN:
+    /// not measured).
+    pub max_correction_force_step_n: f64,
+    /// The most energy the display's deviation from the simulated contact ever had injected into
+    /// the user, J (0: never any; NaN: not measured).
+    pub display_energy_max_j: f64,
     /// Corrections the no-gain bound scaled back.
     pub bounded_corrections: usize,
     /// Energy the no-gain bound took out of corrections, J (NaN: not known).
@@ -131,6 +142,14 @@ pub struct Metrics {
     pub force_steps_over_jnd: u64,
     /// Energy corrections gave the copies, all sites, J (NaN: not known).
     pub correction_energy_j: f64,
+    /// Servo ticks at which a display's step limiter held the force back, all sites.
+    pub display_limited_ticks: u64,
+    /// The largest displayed-force step beyond a displayed object's own contact change, any site,
+    /// N (NaN: not measured).
+    pub max_correction_force_step_n: f64,
+    /// The most energy any site's display deviation had injected into its user, J (NaN: not
+    /// measured).
+    pub display_energy_max_j: f64,
     /// Corrections the no-gain bound scaled back, all sites.
     pub bounded_corrections: usize,
     /// Energy the no-gain bound took out of corrections, all sites, J (NaN: not known).
@@ -280,6 +299,17 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 },
                 force_steps_over_jnd: steps.over_jnd,
                 correction_energy_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
+                display_limited_ticks: steps.display.ticks_limited,
+                max_correction_force_step_n: if steps.servo_ticks == 0 {
+                    f64::NAN
+                } else {
+                    steps.display.max_correction_step_n
+                },
+                display_energy_max_j: if steps.servo_ticks == 0 {
+                    f64::NAN
+                } else {
+                    steps.display.max_energy_j
+                },
                 bounded_corrections: adoptions.iter().filter(|a| a.clipped_j > 0.0).count(),
                 bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
                 rollbacks: tw.rollbacks,
@@ -322,6 +352,9 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         max_force_step_n: max_known(sites.iter().map(|s| s.max_force_step_n)),
         force_steps_over_jnd: sites.iter().map(|s| s.force_steps_over_jnd).sum(),
         correction_energy_j: sum_known(sites.iter().map(|s| s.correction_energy_j)),
+        display_limited_ticks: sites.iter().map(|s| s.display_limited_ticks).sum(),
+        max_correction_force_step_n: max_known(sites.iter().map(|s| s.max_correction_force_step_n)),
+        display_energy_max_j: max_known(sites.iter().map(|s| s.display_energy_max_j)),
         bounded_corrections: sites.iter().map(|s| s.bounded_corrections).sum(),
         bounded_energy_j: sum_known(sites.iter().map(|s| s.bounded_energy_j)),
         energy_beyond_users_j: energy_beyond_users(scenario, run),

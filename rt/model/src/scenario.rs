@@ -108,6 +108,8 @@ pub struct Scenario {
     pub site: Vec<SiteSpec>,
     /// Task phases to check per site.
     pub phase: Vec<PhaseSpec>,
+    /// Display continuity and passivity of every site's servo (issue 12, item 3).
+    pub display: crate::display::DisplaySpec,
 }
 
 /// The object.
@@ -204,8 +206,6 @@ pub struct SiteSpec {
     pub stale_limit_ms: f64,
     /// Ramp of the displayed force to zero when stale, ms.
     pub stale_ramp_ms: f64,
-    /// Largest displayed-force step per servo tick an adoption may cause, N.
-    pub max_adoption_step_n: f64,
     /// The user's hand.
     pub hand: HandParams,
     /// The force controller.
@@ -279,6 +279,7 @@ impl Default for Scenario {
             network: LinkSpec::default(),
             site: Vec::new(),
             phase: Vec::new(),
+            display: crate::display::DisplaySpec::default(),
         }
     }
 }
@@ -333,7 +334,6 @@ impl Default for SiteSpec {
             sensor_noise_n: 0.0,
             stale_limit_ms: 100.0,
             stale_ramp_ms: 50.0,
-            max_adoption_step_n: 0.5,
             hand: HandParams::default(),
             controller: ControllerParams::default(),
             script: Vec::new(),
@@ -403,7 +403,7 @@ fn in_range(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> 
 }
 
 /// `lo <= v <= hi` and finite.
-fn in_closed(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
+pub(crate) fn in_closed(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
     if v >= lo && v <= hi && v.is_finite() {
         Ok(())
     } else {
@@ -485,7 +485,7 @@ pub fn valid_name(s: &str) -> bool {
 
 /// `lo <= v <= hi` and finite, with the unit in the rule: a lower bound that keeps the value
 /// meaningful (a rate of 1e-300 Hz, a mass of 1e-300 kg), not only positive.
-fn bounded(field: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), ScenarioError> {
+pub(crate) fn bounded(field: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), ScenarioError> {
     if v >= lo && v <= hi && v.is_finite() {
         Ok(())
     } else {
@@ -559,6 +559,7 @@ impl Scenario {
             )?;
         }
         validate_contact(&self.contact, "contact")?;
+        self.display.validate()?;
         validate_contact(&self.environment_contact, "environment_contact")?;
         let n = &self.network;
         in_closed("network.delay_min_ms", n.delay_min_ms, 0.0, 10_000.0)?;
@@ -629,12 +630,6 @@ impl Scenario {
             in_closed(&at("sensor_noise_n"), s.sensor_noise_n, 0.0, 100.0)?;
             bounded(&at("stale_limit_ms"), s.stale_limit_ms, 1.0, 60_000.0, "ms")?;
             bounded(&at("stale_ramp_ms"), s.stale_ramp_ms, 1.0, 60_000.0, "ms")?;
-            in_range(
-                &at("max_adoption_step_n"),
-                s.max_adoption_step_n,
-                0.0,
-                1000.0,
-            )?;
             let h = &s.hand;
             bounded(&at("hand.mass_kg"), h.mass_kg, 1e-3, 100.0, "kg")?;
             in_range(&at("hand.stiffness_n_per_m"), h.stiffness_n_per_m, 0.0, 1e5)?;
@@ -906,7 +901,7 @@ impl Scenario {
             contact: self.contact,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
-            max_adoption_step_n: s.max_adoption_step_n,
+            display: self.display.params(),
         }
     }
 

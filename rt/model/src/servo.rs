@@ -10,15 +10,16 @@
 //!   stopped), or the station is stopping, the displayed force ramps linearly to zero over the ramp time and stays there until
 //!   fresh states return, then ramps back. The commanded force and torques ramp with it, so the
 //!   device goes limp rather than holding a force against the hand.
-//! - **Bounded adoption step.** When physics adopts a remote state, the object can jump, and with it
-//!   the contact force. Physics always gets the contact with the object where it really is (so the
-//!   copy's dynamics stay consistent); only the *displayed* force is blended: at an adoption the display
-//!   continues from its last value and closes the gap to the true force by at most
-//!   `max_adoption_step_n` per tick. (Rendering the object at an offset pose instead would feed
-//!   physics forces computed on a pose that is not the copy's, and throw the object.)
+//! - **Display continuity and passivity** ([`crate::display`]). Physics always gets the contact with
+//!   the copy where it really is (so the copy's dynamics stay consistent); the *displayed* force is
+//!   the contact with a displayed object that absorbs a correction (adoption, rollback, pull) and
+//!   converges to the copy smoothly, stepped by at most the limiter's allowance per tick, with a
+//!   passivity controller adding damping when the display's deviation from the simulated contact
+//!   would inject energy into the user.
 
 use crate::body::{BodyState, MassProps, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::display::{DisplayParams, DisplayStats, DisplayedObject, PassivityObserver, StepLimiter};
 use crate::shape::Shape;
 
 /// Servo parameters.
@@ -32,8 +33,8 @@ pub struct ServoParams {
     pub stale_limit_s: f64,
     /// Time to ramp the displayed force to zero (and back), s.
     pub stale_ramp_s: f64,
-    /// Largest displayed-force change per tick an adoption may cause, N.
-    pub max_adoption_step_n: f64,
+    /// Display continuity and passivity.
+    pub display: DisplayParams,
 }
 
 /// What a servo tick reads.
@@ -51,8 +52,6 @@ pub struct ServoInput<'a> {
     pub object: &'a BodyState,
     /// Its time, s.
     pub object_time_s: f64,
-    /// Whether physics adopted a remote state since the last tick.
-    pub adopted: bool,
     /// A cooperative stop was requested: ramp the display to zero as for a stale world.
     pub stopping: bool,
 }
@@ -60,8 +59,11 @@ pub struct ServoInput<'a> {
 /// What a servo tick produces.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoOutput {
-    /// Desired force at the hand F_h (after the stale ramp and the adoption blend), world, N.
+    /// Desired force at the hand F_h (the display stages' output after the stale ramp), world, N.
     pub f_desired: Vec3,
+    /// The force the copy's own contact puts on the hand after the stale ramp (what F_h would be
+    /// without the display stages), world, N.
+    pub f_simulated: Vec3,
     /// The tool's contact on the object (force on the object), for physics.
     pub contact: ContactForce,
     /// Tool position, world.
@@ -79,8 +81,11 @@ pub struct Servo {
     pub params: ServoParams,
     contact: ToolContactState,
     scale: f64,
-    blend: Vec3,
-    last_display: Vec3,
+    displayed: DisplayedObject,
+    display_contact: ToolContactState,
+    limiter: StepLimiter,
+    observer: PassivityObserver,
+    stats: DisplayStats,
 }
 
 impl Servo {
@@ -90,9 +95,17 @@ impl Servo {
             params,
             contact: ToolContactState::default(),
             scale: 1.0,
-            blend: Vec3::zeros(),
-            last_display: Vec3::zeros(),
+            displayed: DisplayedObject::default(),
+            display_contact: ToolContactState::default(),
+            limiter: StepLimiter::default(),
+            observer: PassivityObserver::default(),
+            stats: DisplayStats::default(),
         }
+    }
+
+    /// What the display stages did so far.
+    pub fn display_stats(&self) -> &DisplayStats {
+        &self.stats
     }
 
     /// One tick.
@@ -100,6 +113,7 @@ impl Servo {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let p = &self.params;
         let (tool_pos, tool_vel) = (inp.tool_pos, inp.tool_vel);
+        let synced = self.display_contact == self.contact;
         let contact = tool_contact(
             &p.contact,
             &mut self.contact,
@@ -118,22 +132,69 @@ impl Servo {
         } else {
             (self.scale + rate).min(1.0)
         };
-        // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
-        let f_true = -contact.force * self.scale;
-        // Bounded adoption step, in force space.
-        if inp.adopted {
-            self.blend = self.last_display - f_true;
+        // The displayed object: a stale world (no state yet, or none fresh) has nothing to blend
+        // from, so the first fresh state is displayed as it is.
+        if stale {
+            self.displayed = DisplayedObject::default();
         }
-        let n = self.blend.norm();
-        self.blend = if n > p.max_adoption_step_n {
-            self.blend * ((n - p.max_adoption_step_n) / n)
+        let d = &p.display;
+        let was_copy = self.displayed.is_copy();
+        let (shown, _corrected) = self.displayed.update(
+            d,
+            inp.object,
+            inp.object_time_s,
+            inp.dt_s,
+            mass,
+            &mut self.stats,
+        );
+        // The copy's contact serves the display while they agree (pose and friction memory); the
+        // display keeps its own stick point after a blend until it slips or lets go, so that
+        // switching back never steps the tangential force.
+        let shown_contact = if self.displayed.is_copy() && (synced || stale) {
+            self.display_contact = self.contact;
+            contact
         } else {
-            Vec3::zeros()
+            tool_contact(
+                &p.contact,
+                &mut self.display_contact,
+                shape,
+                &shown,
+                mass,
+                tool_pos,
+                tool_vel,
+                p.tool_radius_m,
+            )
         };
-        let f_desired = f_true + self.blend;
-        self.last_display = f_desired;
+        // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
+        let (f_target, f_sim) = (-shown_contact.force, -contact.force);
+        // While a correction is blended out, every step is limited; otherwise the contact's own
+        // change is rendered as it is.
+        let blending = !(was_copy && self.displayed.is_copy());
+        let base = if blending {
+            self.limiter.last()
+        } else {
+            self.limiter.base(f_target)
+        };
+        let (f, limited) = self.limiter.limit(d, base, f_target);
+        let f = self.observer.step(
+            d,
+            &self.limiter,
+            base,
+            f,
+            f_sim,
+            tool_vel,
+            inp.dt_s * self.scale,
+            &mut self.stats,
+        );
+        let s = &mut self.stats;
+        s.ticks_limited += u64::from(limited);
+        s.max_step_n = s.max_step_n.max((f - self.limiter.last()).norm());
+        s.max_correction_step_n = s.max_correction_step_n.max((f - base).norm());
+        self.limiter.set(f, f_target);
+        let f_desired = f * self.scale;
         ServoOutput {
             f_desired,
+            f_simulated: f_sim * self.scale,
             contact,
             tool_pos,
             tool_vel,

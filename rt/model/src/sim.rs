@@ -100,6 +100,8 @@ pub struct ForceSteps {
     /// Ticks whose step exceeded the just-noticeable difference
     /// ([`crate::metrics::force_jnd_n`] of the force before the step).
     pub over_jnd: u64,
+    /// What the servo's display stages did ([`crate::display`]; default: not measured).
+    pub display: crate::display::DisplayStats,
 }
 
 impl ForceSteps {
@@ -372,7 +374,6 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                         tool_vel,
                         object: &copy.state,
                         object_time_s: copy.time_s,
-                        adopted: !s.pending_adoptions.is_empty(),
                         stopping: false,
                     },
                     &world.shape,
@@ -443,7 +444,10 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             .mech_energy
             .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
         result.rollback.push(s.method.timewarp_stats());
-        result.force_steps.push(s.force_steps);
+        result.force_steps.push(ForceSteps {
+            display: *s.servo.display_stats(),
+            ..s.force_steps
+        });
     }
     result
 }

@@ -55,7 +55,7 @@ fn counting_allocator_counts() {
 }
 
 #[test]
-fn servo_physics_and_adoption_steps_allocate_nothing() {
+fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
     let w = world();
     let start = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.0099));
     let arm = ScaraParams::paper(Vec3::new(-0.3, -0.2, 0.0));
@@ -64,7 +64,7 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
         contact: contact(),
         stale_limit_s: 0.1,
         stale_ramp_s: 0.05,
-        max_adoption_step_n: 0.5,
+        display: Default::default(),
     };
     let mut servo = Servo::new(params);
     let mut force_loop = ScaraForceLoop::new(arm, Default::default());
@@ -78,6 +78,10 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
     let n = allocations(|| {
         for k in 0..5_000 {
             let now = k as f64 * 1e-3;
+            // A correction every 97 ticks: the display blends it out (its second contact runs).
+            if k % 97 == 0 {
+                a.state.pos.x += 2e-3;
+            }
             let out = servo.step(
                 &ServoInput {
                     now_s: now,
@@ -86,7 +90,6 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
                     tool_vel: arm.jacobian(&q) * Vec3::zeros(),
                     object: &a.state,
                     object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
-                    adopted: k % 7 == 0,
                     stopping: false,
                 },
                 &w.shape,
@@ -117,4 +120,6 @@ fn servo_physics_and_adoption_steps_allocate_nothing() {
         }
     });
     assert_eq!(n, 0, "the model's step functions allocated {n} times");
+    // The forced jumps went through the display's blending, not around it.
+    assert!(servo.display_stats().corrections >= 50, "{:?}", servo.display_stats());
 }
