@@ -1,6 +1,6 @@
 //! The servo loop's body, in Cartesian space: sample the device (through the safety layer), place
 //! the tool in the world, take the newest object state from physics, run the model's servo step
-//! (contact Eq. 7, displayed force Eq. 6, stale ramp, bounded adoption step), command the force in
+//! (contact Eq. 7, displayed force Eq. 6, stale ramp, display continuity and passivity), command the force in
 //! the device's frame (through the safety layer, which releases on a stale world or a stop), send
 //! the tool sample to physics, publish statistics. The periodic timer and scheduling around it
 //! belong to the station's servo process.
@@ -215,6 +215,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
             if let Some(t) = self.device.last_trip() {
                 publish_trip(c, t);
             }
+            publish_display(c, self.servo.display_stats());
         }
         self.limp = out.scale == 0.0;
         ServoTick {
@@ -254,4 +255,19 @@ pub fn publish_trip(c: &ControlBlock, t: Trip) {
         s.safety_at_ns.store(t.at_ns, Relaxed);
         s.safety_episodes.store(t.episodes, Relaxed);
     }
+}
+
+/// Publishes the display stages' figures in the control block's servo group.
+pub fn publish_display(c: &ControlBlock, d: &coop_model::display::DisplayStats) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    use crate::sync::Ordering::Relaxed;
+    let s = &c.servo.display;
+    s.corrections.store(d.corrections, Relaxed);
+    s.ticks_limited.store(d.ticks_limited, Relaxed);
+    ControlBlock::store_f64(&s.max_step_n, d.max_step_n);
+    ControlBlock::store_f64(&s.max_correction_step_n, d.max_correction_step_n);
+    s.ticks_damped.store(d.ticks_damped, Relaxed);
+    ControlBlock::store_f64(&s.max_damping_n_s_per_m, d.max_damping_n_s_per_m);
+    ControlBlock::store_f64(&s.energy_j, d.energy_j);
+    ControlBlock::store_f64(&s.max_energy_j, d.max_energy_j);
 }

@@ -238,6 +238,62 @@ pub struct ServoStatus {
     pub display_scale: f64,
     /// The device safety limit that acted last, if any.
     pub safety: Option<SafetyStatus>,
+    /// What the display stages did (issue 12, item 3).
+    pub display: DisplayStatus,
+}
+
+/// The servo's display continuity and passivity figures (`coop_model::display`).
+#[derive(Debug, Clone, Serialize)]
+pub struct DisplayStatus {
+    /// Corrections of the copy absorbed into the displayed object.
+    pub corrections: u64,
+    /// Servo ticks at which the step limiter held the displayed force back.
+    pub ticks_limited: u64,
+    /// The largest displayed-force step per tick, N.
+    pub max_step_n: f64,
+    /// The largest step beyond the displayed object's own contact change, N.
+    pub max_correction_step_n: f64,
+    /// Servo ticks at which the passivity controller added damping.
+    pub ticks_damped: u64,
+    /// The largest damping it added, N·s/m.
+    pub max_damping_n_s_per_m: f64,
+    /// The energy the display's deviation has injected into the user, J (≤ 0: passive).
+    pub energy_j: f64,
+    /// The largest it ever was, J.
+    pub max_energy_j: f64,
+}
+
+impl DisplayStatus {
+    fn of(d: &coop_rt::shm::control::DisplayShared) -> Self {
+        let f = ControlBlock::load_f64;
+        Self {
+            corrections: d.corrections.load(Ordering::Relaxed),
+            ticks_limited: d.ticks_limited.load(Ordering::Relaxed),
+            max_step_n: f(&d.max_step_n),
+            max_correction_step_n: f(&d.max_correction_step_n),
+            ticks_damped: d.ticks_damped.load(Ordering::Relaxed),
+            max_damping_n_s_per_m: f(&d.max_damping_n_s_per_m),
+            energy_j: f(&d.energy_j),
+            max_energy_j: f(&d.max_energy_j),
+        }
+    }
+}
+
+impl std::fmt::Display for DisplayStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "display: {} corrections blended; step limiter held {} ticks (largest step {:.3} N, {:.3} N beyond the contact's own); passivity damped {} ticks (up to {:.2} N·s/m), display energy {:.3} mJ (peak {:.3} mJ)",
+            self.corrections,
+            self.ticks_limited,
+            self.max_step_n,
+            self.max_correction_step_n,
+            self.ticks_damped,
+            self.max_damping_n_s_per_m,
+            self.energy_j * 1e3,
+            self.max_energy_j * 1e3
+        )
+    }
 }
 
 /// The device safety limit that acted last (see `coop_rt::device::safety`).
@@ -431,6 +487,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
                     episodes: ctl.servo.safety_episodes.load(Ordering::Relaxed),
                 }
             }),
+            display: DisplayStatus::of(&ctl.servo.display),
         },
         running: run_state == RunState::Running,
     })
@@ -640,6 +697,7 @@ impl fmt::Display for StationStatus {
             "servo: commanding {:.2} N, display scale {:.2}",
             self.servo.command_n, self.servo.display_scale
         )?;
+        write!(f, "\n{}", self.servo.display)?;
         match &self.servo.safety {
             None => write!(f, "\nsafety: no device limit has acted"),
             Some(s) => write!(

@@ -293,13 +293,13 @@ impl PassivityObserver {
         let next = self.energy_j + (f - f_sim).dot(&v) * dt_s;
         let mut out = f;
         let mut alpha = 0.0;
-        if next > 0.0 && v2 * dt_s > 0.0 {
+        if next > 0.0 && v2 * dt_s > 0.0 && p.max_damping_n_s_per_m > 0.0 {
             alpha = (next / (v2 * dt_s)).min(p.max_damping_n_s_per_m);
             // The damping may not step the force beyond the limiter's allowance either.
             out = limiter.limit(p, base, f - v * alpha).0;
             let taken = (f - out).dot(&v) * dt_s;
-            alpha = if v2 > 0.0 { taken / (v2 * dt_s) } else { 0.0 };
-            stats.ticks_damped += 1;
+            alpha = (taken / (v2 * dt_s)).clamp(0.0, p.max_damping_n_s_per_m);
+            stats.ticks_damped += u64::from(taken > 0.0);
             stats.dissipated_j += taken.max(0.0);
         }
         self.energy_j += (out - f_sim).dot(&v) * dt_s;
@@ -562,8 +562,10 @@ mod tests {
         assert!(off.corrections > 100, "{off:?}");
         assert!(off.energy_j > 1e-3, "without damping the corrections inject: {off:?}");
         let on = run(DisplayParams::default().max_damping_n_s_per_m);
-        eprintln!("off {off:?}\non {on:?}");
         assert!(on.energy_j <= 0.0, "{on:?}");
+        // Between corrections the residual the bounded, step-limited damping could not take out
+        // at once stays below a millijoule (measured: 0.96 mJ, against 8.2 mJ without).
+        assert!(on.max_energy_j < 0.25 * off.max_energy_j, "{on:?}");
         assert!(on.ticks_damped > 0 && on.dissipated_j > 0.0, "{on:?}");
     }
 

@@ -346,6 +346,31 @@ pub struct ServoShared {
     pub roundtrip_count: AtomicU64,
     /// Their histogram.
     pub roundtrip: SharedHistogram,
+    /// What the display stages did (`coop_model::display`; issue 12, item 3).
+    pub display: DisplayShared,
+}
+
+/// The servo's display stages (`coop_model::display::DisplayStats`), as the servo last published
+/// them. f64 fields hold f64 bits.
+#[derive(Debug)]
+#[repr(C)]
+pub struct DisplayShared {
+    /// Corrections of the copy absorbed into the displayed object.
+    pub corrections: AtomicU64,
+    /// Servo ticks at which the step limiter held the displayed force back.
+    pub ticks_limited: AtomicU64,
+    /// The largest displayed-force step per tick, N (f64 bits).
+    pub max_step_n: AtomicU64,
+    /// The largest step beyond the displayed object's own contact change, N (f64 bits).
+    pub max_correction_step_n: AtomicU64,
+    /// Servo ticks at which the passivity controller added damping.
+    pub ticks_damped: AtomicU64,
+    /// The largest damping it added, N·s/m (f64 bits).
+    pub max_damping_n_s_per_m: AtomicU64,
+    /// The energy the display's deviation has injected into the user, J (f64 bits; ≤ 0 passive).
+    pub energy_j: AtomicU64,
+    /// The largest it ever was, J (f64 bits).
+    pub max_energy_j: AtomicU64,
 }
 
 /// What the physics process writes.
