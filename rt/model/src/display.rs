@@ -512,7 +512,10 @@ mod tests {
             (last, last_sim, f) = (now, sim, now);
             k += 1;
         }
-        assert!(worst_sim_step > 3.9, "the copy's own contact stepped {worst_sim_step} N");
+        assert!(
+            worst_sim_step > 3.9,
+            "the copy's own contact stepped {worst_sim_step} N"
+        );
         assert!((f - last_sim).norm() < 1e-3, "converged: {f} vs {last_sim}");
         let st = s.display_stats();
         assert_eq!(st.corrections, 1, "{st:?}");
@@ -560,7 +563,10 @@ mod tests {
         };
         let off = run(0.0);
         assert!(off.corrections > 100, "{off:?}");
-        assert!(off.energy_j > 1e-3, "without damping the corrections inject: {off:?}");
+        assert!(
+            off.energy_j > 1e-3,
+            "without damping the corrections inject: {off:?}"
+        );
         let on = run(DisplayParams::default().max_damping_n_s_per_m);
         assert!(on.energy_j <= 0.0, "{on:?}");
         // Between corrections the residual the bounded, step-limited damping could not take out

@@ -485,7 +485,13 @@ pub fn valid_name(s: &str) -> bool {
 
 /// `lo <= v <= hi` and finite, with the unit in the rule: a lower bound that keeps the value
 /// meaningful (a rate of 1e-300 Hz, a mass of 1e-300 kg), not only positive.
-pub(crate) fn bounded(field: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), ScenarioError> {
+pub(crate) fn bounded(
+    field: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Result<(), ScenarioError> {
     if v >= lo && v <= hi && v.is_finite() {
         Ok(())
     } else {

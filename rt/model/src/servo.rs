@@ -19,7 +19,9 @@
 
 use crate::body::{BodyState, MassProps, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
-use crate::display::{DisplayParams, DisplayStats, DisplayedObject, PassivityObserver, StepLimiter};
+use crate::display::{
+    DisplayParams, DisplayStats, DisplayedObject, PassivityObserver, StepLimiter,
+};
 use crate::shape::Shape;
 
 /// Servo parameters.

@@ -121,5 +121,9 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
     });
     assert_eq!(n, 0, "the model's step functions allocated {n} times");
     // The forced jumps went through the display's blending, not around it.
-    assert!(servo.display_stats().corrections >= 50, "{:?}", servo.display_stats());
+    assert!(
+        servo.display_stats().corrections >= 50,
+        "{:?}",
+        servo.display_stats()
+    );
 }
