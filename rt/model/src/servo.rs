@@ -168,7 +168,11 @@ impl Servo {
             )
         };
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
-        let (f_target, f_sim) = (-shown_contact.force, -contact.force);
+        // (0 − F rather than −F: no contact displays +0, not −0, as before the display stages.)
+        let (f_target, f_sim) = (
+            Vec3::zeros() - shown_contact.force,
+            Vec3::zeros() - contact.force,
+        );
         // While a correction is blended out, every step is limited; otherwise the contact's own
         // change is rendered as it is.
         let blending = !(was_copy && self.displayed.is_copy());
