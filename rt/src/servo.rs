@@ -108,6 +108,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
     /// command ramp to zero as for a stale world; [`ServoLoop::is_limp`] says when they got there.
     pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoTick {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
+        let mut adopted = false;
         if let Ok(n) = self.objects.pop_newest() {
             // The round trip of the tool sample this state was computed with, once per tool sample.
             if n.value.tool_t_ns > self.last_roundtrip_tool_ns && n.value.tool_t_ns <= now_ns {
@@ -123,6 +124,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
                 }
             }
             if let Some(state) = n.value.state() {
+                adopted = self.latest.is_some_and(|(_, _, a)| a != n.value.adoptions);
                 self.latest = Some((state, n.value.t_ns, n.value.adoptions));
             }
         }
@@ -152,6 +154,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
                 tool_vel,
                 object: &object,
                 object_time_s: t_ns as f64 * 1e-9,
+                adopted,
                 stopping: control.is_some_and(|c| c.run_state() == RunState::Stopping),
             },
             &self.world.shape,

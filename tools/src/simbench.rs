@@ -271,6 +271,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                             tool_vel: arm.jacobian(&q) * Vec3::zeros(),
                             object: &start,
                             object_time_s: k as f64 * dt,
+                            adopted: false,
                             stopping: false,
                         },
                         &world.shape,

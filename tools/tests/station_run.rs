@@ -558,6 +558,7 @@ fn station_status_names_the_device_limit_that_acted_last() {
     std::fs::write(
         dir.join("press.toml"),
         "name = \"press\"\nduration_s = 600.0\n\
+         [display]\nenabled = true\n\
          [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
          [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
          planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\

@@ -41,6 +41,9 @@ use crate::body::{BodyState, MassProps, Vec3};
 /// Display parameters (the scenario's `[display]` table; see [`crate::scenario::DisplaySpec`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DisplayParams {
+    /// Whether the display stages run (off: the servo renders the copy's contact, with only the
+    /// bounded adoption step of [`crate::servo::ServoParams::max_adoption_step_n`]).
+    pub enabled: bool,
     /// Time constant of the displayed pose's convergence to the copy's after a correction, s.
     pub blend_time_constant_s: f64,
     /// A position jump of the copy at most this large passes through unblended, m.
@@ -63,6 +66,7 @@ pub struct DisplayParams {
 impl Default for DisplayParams {
     fn default() -> Self {
         Self {
+            enabled: false,
             blend_time_constant_s: 0.01,
             pass_through_jump_m: 1e-4,
             pass_through_jump_rad: 2e-3,
@@ -313,6 +317,13 @@ impl PassivityObserver {
 
 /// The scenario's `[display]` table: [`DisplayParams`] with units in the names. Every field is
 /// optional; the defaults are [`DisplayParams::default`]'s.
+///
+/// NB (issue 12, item 3): off by default for now. On, every correction reaches the hand within
+/// the JND and the display's deviation injects no net energy, but rendering against the displayed
+/// object moves the scripted hands differently, and on the paper task that costs phases the
+/// committed tests assert (`timewarp` 12/12 at 0 and 150 ms in `tools/tests/sweep.rs`: 12/12 and
+/// 11/12 with it on; no time constant from 5 to 30 ms keeps both). Turn it on per scenario with
+/// `[display] enabled = true`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -320,6 +331,8 @@ impl PassivityObserver {
     serde(deny_unknown_fields, default)
 )]
 pub struct DisplaySpec {
+    /// Whether the display stages run (default off: see the NB on [`DisplaySpec`]).
+    pub enabled: bool,
     /// Time constant of the displayed pose's convergence after a correction, ms.
     pub blend_time_constant_ms: f64,
     /// Position jumps of the copy up to this pass through unblended, m.
@@ -342,6 +355,7 @@ impl Default for DisplaySpec {
     fn default() -> Self {
         let p = DisplayParams::default();
         Self {
+            enabled: p.enabled,
             blend_time_constant_ms: p.blend_time_constant_s * 1e3,
             pass_through_jump_m: p.pass_through_jump_m,
             pass_through_jump_rad: p.pass_through_jump_rad,
@@ -358,6 +372,7 @@ impl DisplaySpec {
     /// The servo's parameters.
     pub fn params(&self) -> DisplayParams {
         DisplayParams {
+            enabled: self.enabled,
             blend_time_constant_s: self.blend_time_constant_ms / 1e3,
             pass_through_jump_m: self.pass_through_jump_m,
             pass_through_jump_rad: self.pass_through_jump_rad,
@@ -446,7 +461,12 @@ mod tests {
     }
 
     fn servo(display: DisplayParams) -> Servo {
+        let display = DisplayParams {
+            enabled: true,
+            ..display
+        };
         Servo::new(ServoParams {
+            max_adoption_step_n: 0.5,
             tool_radius_m: 0.005,
             contact: ContactParams {
                 stiffness_n_per_m: 800.0,
@@ -473,6 +493,7 @@ mod tests {
                 tool_vel: vel,
                 object: obj,
                 object_time_s: now,
+                adopted: false,
                 stopping: false,
             },
             &SHAPE,

@@ -206,6 +206,9 @@ pub struct SiteSpec {
     pub stale_limit_ms: f64,
     /// Ramp of the displayed force to zero when stale, ms.
     pub stale_ramp_ms: f64,
+    /// Largest displayed-force step per servo tick an adoption may cause, N (without the
+    /// `[display]` stages; with them, their step limiter bounds every correction).
+    pub max_adoption_step_n: f64,
     /// The user's hand.
     pub hand: HandParams,
     /// The force controller.
@@ -334,6 +337,7 @@ impl Default for SiteSpec {
             sensor_noise_n: 0.0,
             stale_limit_ms: 100.0,
             stale_ramp_ms: 50.0,
+            max_adoption_step_n: 0.5,
             hand: HandParams::default(),
             controller: ControllerParams::default(),
             script: Vec::new(),
@@ -636,6 +640,12 @@ impl Scenario {
             in_closed(&at("sensor_noise_n"), s.sensor_noise_n, 0.0, 100.0)?;
             bounded(&at("stale_limit_ms"), s.stale_limit_ms, 1.0, 60_000.0, "ms")?;
             bounded(&at("stale_ramp_ms"), s.stale_ramp_ms, 1.0, 60_000.0, "ms")?;
+            in_range(
+                &at("max_adoption_step_n"),
+                s.max_adoption_step_n,
+                0.0,
+                1000.0,
+            )?;
             let h = &s.hand;
             bounded(&at("hand.mass_kg"), h.mass_kg, 1e-3, 100.0, "kg")?;
             in_range(&at("hand.stiffness_n_per_m"), h.stiffness_n_per_m, 0.0, 1e5)?;
@@ -907,6 +917,7 @@ impl Scenario {
             contact: self.contact,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
+            max_adoption_step_n: s.max_adoption_step_n,
             display: self.display.params(),
         }
     }

@@ -35,6 +35,9 @@ pub struct ServoParams {
     pub stale_limit_s: f64,
     /// Time to ramp the displayed force to zero (and back), s.
     pub stale_ramp_s: f64,
+    /// Largest displayed-force change per tick an adoption may cause, N (with the display stages
+    /// off).
+    pub max_adoption_step_n: f64,
     /// Display continuity and passivity.
     pub display: DisplayParams,
 }
@@ -54,6 +57,9 @@ pub struct ServoInput<'a> {
     pub object: &'a BodyState,
     /// Its time, s.
     pub object_time_s: f64,
+    /// Whether physics adopted a remote state since the last tick (for the bounded adoption step
+    /// with the display stages off).
+    pub adopted: bool,
     /// A cooperative stop was requested: ramp the display to zero as for a stale world.
     pub stopping: bool,
 }
@@ -88,6 +94,8 @@ pub struct Servo {
     limiter: StepLimiter,
     observer: PassivityObserver,
     stats: DisplayStats,
+    blend: Vec3,
+    last_display: Vec3,
 }
 
 impl Servo {
@@ -102,6 +110,8 @@ impl Servo {
             limiter: StepLimiter::default(),
             observer: PassivityObserver::default(),
             stats: DisplayStats::default(),
+            blend: Vec3::zeros(),
+            last_display: Vec3::zeros(),
         }
     }
 
@@ -134,6 +144,9 @@ impl Servo {
         } else {
             (self.scale + rate).min(1.0)
         };
+        if !p.display.enabled {
+            return self.bounded_adoption_step(inp, contact);
+        }
         // The displayed object: a stale world (no state yet, or none fresh) has nothing to blend
         // from, so the first fresh state is displayed as it is.
         if stale {
@@ -204,6 +217,41 @@ impl Servo {
             contact,
             tool_pos,
             tool_vel,
+            scale: self.scale,
+        }
+    }
+
+    /// Without the display stages: the contact with the copy, and at an adoption the display
+    /// continues from its last value and closes the gap to the true force by at most
+    /// `max_adoption_step_n` per tick.
+    fn bounded_adoption_step(
+        &mut self,
+        inp: &ServoInput<'_>,
+        contact: ContactForce,
+    ) -> ServoOutput {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let p = &self.params;
+        // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
+        let f_true = -contact.force * self.scale;
+        if inp.adopted {
+            self.blend = self.last_display - f_true;
+        }
+        let n = self.blend.norm();
+        self.blend = if n > p.max_adoption_step_n {
+            self.blend * ((n - p.max_adoption_step_n) / n)
+        } else {
+            Vec3::zeros()
+        };
+        let f_desired = f_true + self.blend;
+        let st = &mut self.stats;
+        st.max_step_n = st.max_step_n.max((f_desired - self.last_display).norm());
+        self.last_display = f_desired;
+        ServoOutput {
+            f_desired,
+            f_simulated: f_true,
+            contact,
+            tool_pos: inp.tool_pos,
+            tool_vel: inp.tool_vel,
             scale: self.scale,
         }
     }

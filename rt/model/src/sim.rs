@@ -374,6 +374,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                         tool_vel,
                         object: &copy.state,
                         object_time_s: copy.time_s,
+                        adopted: !s.pending_adoptions.is_empty(),
                         stopping: false,
                     },
                     &world.shape,

@@ -64,9 +64,18 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
         contact: contact(),
         stale_limit_s: 0.1,
         stale_ramp_s: 0.05,
-        display: Default::default(),
+        max_adoption_step_n: 0.5,
+        display: coop_model::display::DisplayParams {
+            enabled: true,
+            ..Default::default()
+        },
     };
     let mut servo = Servo::new(params);
+    // And the servo without the display stages (the bounded adoption step).
+    let mut plain = Servo::new(ServoParams {
+        display: Default::default(),
+        ..params
+    });
     let mut force_loop = ScaraForceLoop::new(arm, Default::default());
     let q = arm
         .inverse(Vec3::new(-0.044, 0.0, 0.01), 1.0)
@@ -82,19 +91,18 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
             if k % 97 == 0 {
                 a.state.pos.x += 2e-3;
             }
-            let out = servo.step(
-                &ServoInput {
-                    now_s: now,
-                    dt_s: 1e-3,
-                    tool_pos: arm.forward(&q),
-                    tool_vel: arm.jacobian(&q) * Vec3::zeros(),
-                    object: &a.state,
-                    object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
-                    stopping: false,
-                },
-                &w.shape,
-                &w.mass,
-            );
+            let inp = ServoInput {
+                now_s: now,
+                dt_s: 1e-3,
+                tool_pos: arm.forward(&q),
+                tool_vel: arm.jacobian(&q) * Vec3::zeros(),
+                object: &a.state,
+                object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
+                adopted: k % 7 == 0,
+                stopping: false,
+            };
+            plain.step(&inp, &w.shape, &w.mass);
+            let out = servo.step(&inp, &w.shape, &w.mass);
             force_loop.step(out.f_desired, out.scale, Vec3::zeros(), &q, 1e-3);
             let own: ContactForce = out.contact;
             paper.physics_step(&w, &mut a, &own, 1e-3);
