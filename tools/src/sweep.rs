@@ -45,12 +45,12 @@ pub struct Row {
     /// Energy corrections gave the copies, all sites, J.
     pub correction_energy_j: f64,
     /// The largest displayed-force step beyond the displayed object's own contact change (the
-    /// display's step limiter bounds it), any site, N.
+    /// display's step limiter bounds it), any site, N (null: the display stages are off).
     pub max_correction_force_step_n: f64,
     /// Servo ticks at which a display's step limiter held the force back, all sites.
     pub display_limited_ticks: u64,
     /// The most energy a display's deviation from the simulated contact had injected into its
-    /// user, any site, J (≤ 0: passive).
+    /// user, any site, J (≤ 0: passive; null: the display stages are off).
     pub display_energy_max_j: f64,
     /// Corrections the no-gain bound scaled back, all sites.
     pub bounded_corrections: usize,

@@ -49,6 +49,9 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "max_force_step_n",
         "force_steps_over_jnd",
         "correction_energy_j",
+        "max_correction_force_step_n",
+        "display_limited_ticks",
+        "display_energy_max_j",
         "rollbacks_per_s",
         "rollback_depth_p99_ticks",
         "hash_mismatches",
@@ -190,6 +193,43 @@ fn force_steps_are_counted_per_servo_tick() {
         metrics::compute(&sc, &naive, &reference).correction_energy_j,
         0.0
     );
+}
+
+/// The display stages on the paper task at a constant 150 ms (issue 12, item 3): corrections are
+/// blended out instead of felt, so `timewarp` and `coupled` (which correct every few ticks) step
+/// the displayed force over the JND less often than without them, no step beyond the displayed
+/// object's own contact change exceeds the JND of the force, and the stages really act.
+#[test]
+fn display_stages_keep_corrections_under_the_jnd() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let off = scenario_at(&base, 150.0, 1).expect("valid");
+    let mut on = off.clone();
+    on.display.enabled = true;
+    let reference = sim::run(&off, Mode::Reference, &mut |_| {});
+    for m in [MethodName::Timewarp, MethodName::Coupled] {
+        let run = |sc| {
+            let r = sim::run(sc, Mode::Distributed(m), &mut |_| {});
+            (metrics::compute(sc, &r, &reference), r)
+        };
+        let ((m_off, _), (m_on, r_on)) = (run(&off), run(&on));
+        assert!(
+            m_on.force_steps_over_jnd < m_off.force_steps_over_jnd,
+            "{m:?}: {} over the JND with the display stages, {} without",
+            m_on.force_steps_over_jnd,
+            m_off.force_steps_over_jnd
+        );
+        assert!(
+            m_off.max_correction_force_step_n.is_nan(),
+            "off: not measured"
+        );
+        for s in &r_on.force_steps {
+            let d = s.display;
+            assert!(d.corrections > 0 && d.ticks_limited > 0, "{m:?}: {d:?}");
+            // The allowance is 7 % of the force, at least 0.05 N; forces on the disk stay below
+            // 10 N here, so a correction's share of a step stays under 0.7 N.
+            assert!(d.max_correction_step_n < 0.7, "{m:?}: {d:?}");
+        }
+    }
 }
 
 /// The bench's eight-user scenario is valid and really has all eight users on the object at once,

@@ -89,10 +89,10 @@ pub struct SiteMetrics {
     /// Servo ticks at which the display's step limiter held the force back ([`crate::display`]).
     pub display_limited_ticks: u64,
     /// The largest displayed-force step beyond the displayed object's own contact change, N (NaN:
-    /// not measured).
+    /// not measured, or the display stages are off).
     pub max_correction_force_step_n: f64,
     /// The most energy the display's deviation from the simulated contact ever had injected into
-    /// the user, J (0: never any; NaN: not measured).
+    /// the user, J (0: never any; NaN: not measured, or the display stages are off).
     pub display_energy_max_j: f64,
     /// Corrections the no-gain bound scaled back.
     pub bounded_corrections: usize,
@@ -300,12 +300,13 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 force_steps_over_jnd: steps.over_jnd,
                 correction_energy_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
                 display_limited_ticks: steps.display.ticks_limited,
-                max_correction_force_step_n: if steps.servo_ticks == 0 {
+                max_correction_force_step_n: if steps.servo_ticks == 0 || !scenario.display.enabled
+                {
                     f64::NAN
                 } else {
                     steps.display.max_correction_step_n
                 },
-                display_energy_max_j: if steps.servo_ticks == 0 {
+                display_energy_max_j: if steps.servo_ticks == 0 || !scenario.display.enabled {
                     f64::NAN
                 } else {
                     steps.display.max_energy_j
