@@ -8,7 +8,9 @@
 #   machine weighs on both alike; then a station recording with `record_foxglove = false`.
 # Prints the servo's wake-up p99 / p99.9 / max and overruns and physics' overruns over each
 # condition's windows, the ratio viewer/none (goal: servo p99.9 <= 1.1x, no more overruns), and the
-# recording's size per minute of session with and without the Foxglove channels.
+# recording's size per minute of session with and without the Foxglove channels. Per condition it
+# also prints each CPU's busy %, steal % and NET_RX softirqs/s over the windows: on a shared machine
+# the ratio follows whatever else ran in each window, and this shows how much that was.
 #
 # Usage: tools/bench/live-view.sh [--quick] [--duration SECONDS]
 #   default 60 s per condition in 6 rounds; --quick: 3 s per condition, 1 round (CI smoke run).
@@ -18,7 +20,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --quick) duration=3; rounds=1 ;;
     --duration) duration="$2"; shift ;;
-    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
     *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
