@@ -8,7 +8,9 @@
 #   machine weighs on both alike; then a station recording with `record_foxglove = false`.
 # Prints the servo's wake-up p99 / p99.9 / max and overruns and physics' overruns over each
 # condition's windows, the ratio viewer/none (goal: servo p99.9 <= 1.1x, no more overruns), and the
-# recording's size per minute of session with and without the Foxglove channels.
+# recording's size per minute of session with and without the Foxglove channels. Per condition it
+# also prints each CPU's busy %, steal % and NET_RX softirqs/s over the windows: on a shared machine
+# the ratio follows whatever else ran in each window, and this shows how much that was.
 #
 # Usage: tools/bench/live-view.sh [--quick] [--duration SECONDS]
 #   default 60 s per condition in 6 rounds; --quick: 3 s per condition, 1 round (CI smoke run).
@@ -18,7 +20,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --quick) duration=3; rounds=1 ;;
     --duration) duration="$2"; shift ;;
-    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
     *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
@@ -70,7 +72,15 @@ done
 [ -n "$url" ] || { echo "the station printed no live view address:" >&2; cat "$work/live.log" >&2; exit 1; }
 sleep 1
 # The observers stay off the servo's CPU too.
-attach() { taskset -c 0 "$target/release/latency" attach user1 --session "lv$$live" -D "${window}s" -q --json "$1" > /dev/null; }
+# Each window also keeps what the kernel counted per CPU across it (/proc/stat's busy and steal
+# time, /proc/softirqs' NET_RX): whether the viewer's loopback traffic lands on the servo's CPU,
+# and how much else (other jobs, the host taking the vCPU) ran there, show beside the figures.
+snap() { grep -E '^cpu[0-9]+ ' /proc/stat; grep -E 'NET_RX' /proc/softirqs; }
+attach() {
+  snap > "${1%.json}.before"
+  taskset -c 0 "$target/release/latency" attach user1 --session "lv$$live" -D "${window}s" -q --json "$1" > /dev/null
+  snap > "${1%.json}.after"
+}
 for r in $(seq "$rounds"); do
   attach "$work/none-$r.json"
   taskset -c 0 python3 "$root/tools/bench/live_viewer.py" "$url" $((window + 1)) > "$work/client-$r.json" &
@@ -86,10 +96,10 @@ station_pid=$!
 wait "$station_pid"; station_pid=
 
 echo "# load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
-python3 - "$work" "$rounds" <<'PY'
+python3 - "$work" "$rounds" "$window" <<'PY'
 import glob, json, os, sys
 from mcap.reader import make_reader
-work, rounds = sys.argv[1], int(sys.argv[2])
+work, rounds, window = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 def merged(cond, thread):
     """One loop's windows of a condition, as one: histograms and counters added."""
     h, cycles, overruns, mx = {}, 0, 0, 0.0
@@ -115,6 +125,29 @@ def per_minute(run):
                 first = m.log_time if first is None else first
                 last = m.log_time
     return size * 60e9 / max(1, last - first), (last - first) / 1e9
+def kernel(cond):
+    """Per CPU over a condition's windows: busy % (user+nice+system+irq+softirq), steal %, NET_RX/s."""
+    busy, steal, total, netrx = {}, {}, {}, {}
+    for r in range(1, rounds + 1):
+        snaps = []
+        for side in ("before", "after"):
+            stat, rx = {}, []
+            for line in open(f"{work}/{cond}-{r}.{side}"):
+                f = line.split()
+                if f[0].startswith("cpu"):
+                    stat[int(f[0][3:])] = [int(x) for x in f[1:9]]
+                elif f[0] == "NET_RX:":
+                    rx = [int(x) for x in f[1:]]
+            snaps.append((stat, rx))
+        (s0, n0), (s1, n1) = snaps
+        for c in s0:
+            d = [b - a for a, b in zip(s0[c], s1[c])]
+            busy[c] = busy.get(c, 0) + d[0] + d[1] + d[2] + d[5] + d[6]
+            steal[c] = steal.get(c, 0) + d[7]
+            total[c] = total.get(c, 0) + sum(d)
+            netrx[c] = netrx.get(c, 0) + n1[c] - n0[c]
+    secs = rounds * window
+    return {c: (100 * busy[c] / max(1, total[c]), 100 * steal[c] / max(1, total[c]), netrx[c] / secs) for c in sorted(busy)}
 rows = {}
 for cond in ("none", "viewer"):
     sh, sc, so, smax = merged(cond, "0")
@@ -126,6 +159,9 @@ for k, r in rows.items():
 a, b = rows["none"], rows["viewer"]
 ratio = lambda x, y: x / max(y, 1)
 print(f"{'viewer/none':<13}{'':>8}{ratio(b[1], a[1]):>8.2f}{ratio(b[2], a[2]):>10.2f}{ratio(b[3], a[3]):>9.2f}{b[4] - a[4]:>+11}{b[5] - a[5]:>+10}")
+print("# per CPU over the windows: busy % (everything: the station's loops, other jobs), steal % (the host ran something else on the vCPU), NET_RX softirqs/s")
+for cond in ("none", "viewer"):
+    print(f"#   {cond:<7}" + "".join(f"  CPU {c}: busy {b:5.1f} steal {st:4.1f} NET_RX/s {n:7.1f}" for c, (b, st, n) in kernel(cond).items()))
 msgs, size = {}, 0
 for r in range(1, rounds + 1):
     v = json.load(open(f"{work}/client-{r}.json"))
