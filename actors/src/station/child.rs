@@ -196,6 +196,8 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         objects: Producer::open(&names.object, &opts).context("opening the object ring")?,
         reports: Producer::open(&names.report, &opts).context("opening the report ring")?,
         trace: Some(Producer::open(&names.trace, &opts).context("opening the trace ring")?),
+        tracks_out: None,
+        tracks_in: None,
     };
     let (sc, i) = (&cfg.scenario, cfg.site);
     let method: Box<dyn Consistency> = match sc.method {
