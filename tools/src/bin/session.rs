@@ -33,7 +33,7 @@ enum Command {
         /// and plots.
         #[arg(long, value_name = "DIR", default_value = "out/session")]
         out: PathBuf,
-        /// naive, paper, or all (both, one session each).
+        /// naive, paper, timewarp, or all (each, one session each).
         #[arg(long, default_value = "all", value_parser = parse_methods)]
         method: Methods,
         /// Print JSON instead of the table.
@@ -159,8 +159,9 @@ fn parse_methods(s: &str) -> Result<Methods, String> {
     match s {
         "naive" => Ok(Methods(vec![MethodName::Naive])),
         "paper" => Ok(Methods(vec![MethodName::Paper])),
+        "timewarp" => Ok(Methods(vec![MethodName::Timewarp])),
         "all" => Ok(Methods(MethodName::ALL.to_vec())),
-        _ => Err(format!("unknown method {s:?}: use naive, paper or all")),
+        _ => Err(format!("unknown method {s:?}: use naive, paper, timewarp or all (coupled runs in the simulator only so far)")),
     }
 }
 
