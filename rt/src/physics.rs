@@ -280,7 +280,7 @@ impl PhysicsLoop {
                 self.copy = before;
                 self.nonfinite_kept += 1;
             }
-            self.ticks.done += 1;
+            self.ticks.done += u64::from(self.ticks.on_grid);
         }
         self.copy.time_s = now_s;
         self.seq += 1;
@@ -400,6 +400,22 @@ impl PhysicsLoop {
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);
+        let r = &p.rollback;
+        let set = |a: &crate::sync::AtomicU64, v: u64| a.store(v, crate::sync::Ordering::Relaxed);
+        if let Some(st) = self.method.timewarp_stats() {
+            set(&r.rollbacks, st.rollbacks);
+            set(&r.resimulated_ticks, st.resimulated_ticks);
+            set(&r.max_depth, st.max_depth);
+            set(&r.depth_p99, st.depths.quantile(0.99).unwrap_or(0));
+            set(&r.fallbacks, st.fallbacks);
+            set(&r.hash_checks, st.hash_checks);
+            set(&r.hash_mismatches, st.hash_mismatches);
+        }
+        set(&r.tracks_received, self.tracks.received);
+        set(&r.tracks_rejected, self.tracks.rejected);
+        set(&r.track_drops, self.tracks.drops);
+        set(&r.late_periods, self.tracks.late_periods);
+        set(&r.ticks, self.ticks.done);
     }
 
     /// The last report sequence number used.

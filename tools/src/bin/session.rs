@@ -152,6 +152,40 @@ enum Command {
     },
 }
 
+/// Per method and station, from the statuses read just before the end: physics overruns during
+/// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
+/// and a rolling-back method's rollbacks and hash checks.
+fn print_station_loops(v: &serde_json::Value) {
+    println!("# stations: method  site  physics overruns  compute p99 us  rollbacks  depth max/p99 ticks  fallbacks  hash checks  mismatches");
+    for (m, r) in v["methods"].as_object().into_iter().flatten() {
+        for (site, st) in r["stations"].as_object().into_iter().flatten() {
+            let live = &st["live"];
+            let rb = &live["physics"]["rollback"];
+            let or_dash = |x: &serde_json::Value| {
+                if x.is_null() {
+                    "-".to_owned()
+                } else {
+                    x.to_string()
+                }
+            };
+            println!(
+                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}",
+                or_dash(&live["overruns_during_session"]["physics"]),
+                or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
+                or_dash(&rb["rollbacks"]),
+                if rb.is_null() {
+                    "-".to_owned()
+                } else {
+                    format!("{}/{}", rb["max_depth"], rb["depth_p99"])
+                },
+                or_dash(&rb["fallbacks"]),
+                or_dash(&rb["hash_checks"]),
+                or_dash(&rb["hash_mismatches"]),
+            );
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Methods(Vec<MethodName>);
 
@@ -283,6 +317,7 @@ fn main() -> std::process::ExitCode {
                         );
                     }
                 }
+                print_station_loops(&v);
                 println!(
                     "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
                     a.out.display()
