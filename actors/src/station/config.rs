@@ -752,6 +752,35 @@ mod tests {
     use super::*;
 
     #[test]
+    fn timewarp_needs_one_physics_rate_and_coupled_is_refused_by_name() {
+        let tw = StationConfig {
+            method: Some(MethodName::Timewarp),
+            ..StationConfig::default()
+        };
+        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
+        tw.clone()
+            .resolve_with(None, sc.clone())
+            .expect("the paper's sites share a physics rate");
+        sc.site[1].physics_rate_hz = 500.0;
+        let err = tw.resolve_with(None, sc).expect_err("two rates");
+        assert!(
+            format!("{err:#}").contains("site[1].physics_rate_hz = 500")
+                && format!("{err:#}").contains("must equal site[0]'s"),
+            "{err:#}"
+        );
+        let err = StationConfig {
+            method: Some(MethodName::Coupled),
+            ..StationConfig::default()
+        }
+        .resolve(None)
+        .expect_err("coupled");
+        assert!(
+            format!("{err:#}").contains("method = \"coupled\""),
+            "{err:#}"
+        );
+    }
+
+    #[test]
     fn defaults_resolve_to_the_paper_scenario_first_site() {
         let r = StationConfig::default()
             .resolve(None)
