@@ -1,16 +1,17 @@
 //! The messages on a station's rings, as plain old data (H5): servo → physics [`ToolSample`],
-//! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`], physics → recorder
+//! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`] and [`ToolTrack`], physics → recorder
 //! [`TraceRecord`]. Each is declared once with [`pod_message!`], which derives from the one field
 //! list its words (`WORDS`, `to_words`, `from_words`) and its `LAYOUT`: the wire format
 //! (`coop_transport::wire`) and the control block's resume seqlock are built on those, never on a
 //! second, hand-written field order. Each has a stable `TYPE_NAME` and a compile-time size check;
 //! conversions to the model's types validate what they read (finite numbers, unit quaternion, known
 //! site), because a ring's bytes are only as good as its writer.
-#![allow(unsafe_code)] // the four `unsafe impl ShmPod` below, each with its SAFETY argument
+#![allow(unsafe_code)] // the five `unsafe impl ShmPod` below, each with its SAFETY argument
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
 use coop_model::method::{Report, MAX_SITES};
+use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
@@ -316,6 +317,136 @@ unsafe impl ShmPod for SiteReport {
     const TYPE_NAME: &'static str = "coop.SiteReport.v1";
 }
 
+// ---- tool tracks (timewarp / coupled: the tools on the wire, issue 12 item 1) ----
+
+/// Words holding a [`ToolTrack`]'s positions: two quantized coordinates (i32) per word.
+pub const TRACK_POSITION_WORDS: usize = WINDOW_TICKS * 3 / 2;
+/// The largest tick a track may name: 2⁴⁰ ticks are 35 years at 1 kHz (a larger one is garbage).
+pub const MAX_TRACK_TICK: u64 = 1 << 40;
+/// The largest magnitude of a quantized coordinate ([`coop_model::timewarp::quantize`]'s clamp).
+pub const MAX_QUANTIZED: i64 = 2_000_000_000;
+
+pod_message! {
+    /// What a `timewarp` site reports besides (instead of) a state: its own tool's quantized
+    /// positions at the last ticks of the session's tick grid, and its confirmed frontier with the
+    /// hash of its state there (the model's [`ToolReport`] in a fixed layout). Physics → network
+    /// (own), network → physics (remote). 3 128 bytes, copied, never boxed.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct ToolTrack {
+        /// Sender's time of the report, ns (CLOCK_MONOTONIC of the sender).
+        pub t_ns: u64,
+        /// Sender's tool-track counter (its own sequence, apart from its states').
+        pub seq: u64,
+        /// Sender's site index.
+        pub site: u64,
+        /// The tick of the first position.
+        pub first_tick: u64,
+        /// How many positions are filled (≤ [`WINDOW_TICKS`]).
+        pub count: u64,
+        /// The sender's confirmed frontier: the first tick whose inputs it does not all know.
+        pub confirmed_tick: u64,
+        /// FNV-1a 64 of the sender's state at the start of `confirmed_tick` (0: none kept).
+        pub confirmed_hash: u64,
+        /// Positions in quanta, tick `first_tick + k` at coordinates `3k..3k+3`; coordinate `c`
+        /// is the i32 in bits `32 (c % 2) ..` of word `c / 2` (little end first); unused ones 0.
+        pub positions: [u64; TRACK_POSITION_WORDS],
+    }
+}
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3128);
+// SAFETY: repr(C), only u64 fields and an array of them (3128 bytes, no padding); every bit
+// pattern is valid.
+unsafe impl ShmPod for ToolTrack {
+    const TYPE_NAME: &'static str = "coop.ToolTrack.v1";
+}
+
+impl Default for ToolTrack {
+    fn default() -> Self {
+        Self {
+            t_ns: 0,
+            seq: 0,
+            site: 0,
+            first_tick: 0,
+            count: 0,
+            confirmed_tick: 0,
+            confirmed_hash: 0,
+            positions: [0; TRACK_POSITION_WORDS],
+        }
+    }
+}
+
+impl ToolTrack {
+    /// Lays out `r` from `site` at `seq`, sent at `t_ns`. Negative ticks (never produced by
+    /// `timewarp`, whose grid starts at 0) are laid out as 0.
+    pub fn new(site: usize, seq: u64, t_ns: u64, r: &ToolReport) -> Self {
+        let count = r.count.min(WINDOW_TICKS);
+        let mut out = Self {
+            t_ns,
+            seq,
+            site: site as u64,
+            first_tick: r.first_tick.max(0) as u64,
+            count: count as u64,
+            confirmed_tick: r.confirmed_tick.max(0) as u64,
+            confirmed_hash: r.confirmed_hash,
+            ..Self::default()
+        };
+        for (c, &v) in r.positions[..count].iter().flatten().enumerate() {
+            out.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+        }
+        out
+    }
+
+    /// Coordinate `c` (of `3 * count`).
+    fn coordinate(&self, c: usize) -> i32 {
+        (self.positions[c / 2] >> (32 * (c % 2))) as u32 as i32
+    }
+
+    /// The sender and the model's report, or `None` for a site out of range, more than
+    /// [`WINDOW_TICKS`] positions, a tick beyond [`MAX_TRACK_TICK`], a confirmed frontier past the
+    /// last tick sent (a sender cannot know inputs of ticks it has not simulated), a coordinate
+    /// beyond [`MAX_QUANTIZED`], or a nonzero unused coordinate. The one validation of a track:
+    /// the wire's decode and physics' ring → model conversion both apply it (see
+    /// [`SiteReport::report`] for why both).
+    pub fn report(&self) -> Option<(usize, Report)> {
+        let site = usize::try_from(self.site).ok().filter(|&s| s < MAX_SITES)?;
+        let count = usize::try_from(self.count)
+            .ok()
+            .filter(|&c| c <= WINDOW_TICKS)?;
+        let end = self.first_tick.checked_add(self.count)?;
+        (end <= MAX_TRACK_TICK && self.confirmed_tick <= end).then_some(())?;
+        let used = 3 * count;
+        for c in 0..3 * WINDOW_TICKS {
+            let v = i64::from(self.coordinate(c));
+            if (c < used && v.abs() > MAX_QUANTIZED) || (c >= used && v != 0) {
+                return None;
+            }
+        }
+        let mut r = ToolReport {
+            first_tick: self.first_tick as i64,
+            count,
+            positions: [[0; 3]; WINDOW_TICKS],
+            confirmed_tick: self.confirmed_tick as i64,
+            confirmed_hash: self.confirmed_hash,
+        };
+        for (k, p) in r.positions[..count].iter_mut().enumerate() {
+            *p = [
+                self.coordinate(3 * k),
+                self.coordinate(3 * k + 1),
+                self.coordinate(3 * k + 2),
+            ];
+        }
+        Some((site, Report::Tools(r)))
+    }
+
+    /// The largest magnitude of a filled coordinate, in quanta (for plausibility checks).
+    pub fn max_abs_quantized(&self) -> i64 {
+        let used = 3 * (self.count as usize).min(WINDOW_TICKS);
+        (0..used)
+            .map(|c| i64::from(self.coordinate(c)).abs())
+            .max()
+            .unwrap_or(0)
+    }
+}
+
 pod_message! {
     /// Physics → network (the recorder), at the scenario's sample rate and at every adoption: what this
     /// site believed and displayed, for the station's recording. Nothing on the real-time side reads it.
@@ -617,5 +748,65 @@ mod tests {
         let mut bad = s;
         bad.pos[2] = f64::INFINITY;
         assert!(bad.state().is_none());
+    }
+
+    #[test]
+    fn tool_tracks_round_trip_and_garbage_is_refused() {
+        let mut r = ToolReport {
+            first_tick: 1000,
+            count: 3,
+            positions: [[0; 3]; WINDOW_TICKS],
+            confirmed_tick: 990,
+            confirmed_hash: 0xdead_beef,
+        };
+        r.positions[0] = [-4500, 0, 1000];
+        r.positions[1] = [i32::MIN + 147_483_648, -1, 2_000_000_000];
+        r.positions[2] = [7, -7, 0];
+        let t = ToolTrack::new(1, 5, 42, &r);
+        assert_eq!(
+            t.positions[0] as u32 as i32, -4500,
+            "coordinate 0 in the low half"
+        );
+        assert_eq!((t.positions[0] >> 32) as u32 as i32, 0);
+        assert_eq!(t.positions[1] as u32 as i32, 1000);
+        assert_eq!(t.max_abs_quantized(), 2_000_000_000);
+        assert_eq!(t.report(), Some((1, Report::Tools(r))));
+        assert_eq!(ToolTrack::from_words(&t.to_words()), t);
+        let full = ToolReport {
+            count: WINDOW_TICKS,
+            positions: [[-3, 2, i32::MAX - 147_483_647]; WINDOW_TICKS],
+            ..r
+        };
+        let t = ToolTrack::new(0, 1, 1, &full);
+        assert_eq!(t.report(), Some((0, Report::Tools(full))), "a full window");
+        let bad = |f: &dyn Fn(&mut ToolTrack)| {
+            let mut b = ToolTrack::new(1, 5, 42, &r);
+            f(&mut b);
+            b.report()
+        };
+        assert!(bad(&|b| b.site = MAX_SITES as u64).is_none(), "site");
+        assert!(
+            bad(&|b| b.count = WINDOW_TICKS as u64 + 1).is_none(),
+            "count"
+        );
+        assert!(bad(&|b| b.first_tick = MAX_TRACK_TICK).is_none(), "tick");
+        assert!(bad(&|b| b.first_tick = u64::MAX).is_none(), "tick overflow");
+        assert!(
+            bad(&|b| b.confirmed_tick = 1004).is_none(),
+            "frontier ahead"
+        );
+        assert!(
+            bad(&|b| b.positions[0] = u64::from(i32::MIN as u32)).is_none(),
+            "range"
+        );
+        assert!(
+            bad(&|b| b.positions[100] = 1).is_none(),
+            "unused coordinate"
+        );
+        assert!(
+            bad(&|b| b.count = 2).is_none(),
+            "a dropped position is unused, not zero"
+        );
+        assert_eq!(ToolTrack::WORDS * 8, 3128);
     }
 }

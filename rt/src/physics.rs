@@ -7,7 +7,10 @@
 use coop_model::contact::ContactForce;
 use coop_model::method::{Consistency, ObjectCopy, World};
 
-use crate::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
+use coop_model::body::Vec3;
+use coop_model::method::Report;
+
+use crate::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack, TraceRecord};
 use crate::shm::control::{ControlBlock, Ring};
 use crate::shm::{Consumer, Producer};
 
@@ -26,6 +29,9 @@ pub struct PhysicsLoop {
     objects: Producer<ObjectSample>,
     reports: Producer<SiteReport>,
     trace: Option<Producer<TraceRecord>>,
+    tracks_out: Option<Producer<ToolTrack>>,
+    tracks_in: Option<Consumer<ToolTrack>>,
+    ticks: Ticks,
     trace_period_ns: u64,
     next_trace_ns: u64,
     period_ns: u64,
@@ -46,6 +52,43 @@ pub struct PhysicsLoop {
     pub report_drops: u64,
     /// Trace records dropped because the recorder's ring was full.
     pub trace_drops: u64,
+    /// Tool tracks (methods that exchange tools): received, refused as malformed, dropped because
+    /// the ring to the network was full.
+    pub tracks: TrackCounters,
+}
+
+/// What a physics loop did with tool tracks.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TrackCounters {
+    /// Remote tracks taken from the ring (valid or not).
+    pub received: u64,
+    /// ... refused as malformed (see [`ToolTrack::report`]) or naming this site.
+    pub rejected: u64,
+    /// Own tracks not pushed: the ring to the network was full.
+    pub drops: u64,
+    /// Physics periods that had to step more than one tick to stay on the session's grid
+    /// (the loop was late), and the ticks stepped in them beyond the first.
+    pub late_periods: u64,
+    /// See `late_periods`.
+    pub caught_up_ticks: u64,
+}
+
+/// Most extra ticks one physics period steps to catch up with the session's grid (a longer
+/// stall is made up over the following periods).
+pub const MAX_CATCH_UP_TICKS: u64 = 8;
+
+/// The session's tick grid, for methods that step on it (`timewarp`, `coupled`): tick `k` starts
+/// at `origin_ns + k × period`, the same at every site once each knows the session's time 0.
+#[derive(Debug, Clone, Copy, Default)]
+struct Ticks {
+    /// Whether the method steps on the grid (it takes tool tracks).
+    on_grid: bool,
+    /// Time 0 of the grid (the session's), once known.
+    origin_ns: Option<u64>,
+    /// Ticks stepped so far (the next tick to step).
+    done: u64,
+    /// Tool tracks sent.
+    seq: u64,
 }
 
 /// A physics loop's clock: its fixed step, its report period, and when it starts (ns).
@@ -76,10 +119,16 @@ pub struct PhysicsRings {
     pub reports: Producer<SiteReport>,
     /// Trace records to the recorder (the network process), if the station records.
     pub trace: Option<Producer<TraceRecord>>,
+    /// Own tool tracks to the network process (methods that exchange tools; else `None`).
+    pub tracks_out: Option<Producer<ToolTrack>>,
+    /// Remote tool tracks from the network process (methods that exchange tools; else `None`).
+    pub tracks_in: Option<Consumer<ToolTrack>>,
 }
 
 impl PhysicsLoop {
-    /// A physics loop for `site` with `method`, starting from `copy`.
+    /// A physics loop for `site` with `method`, starting from `copy`. A method that exchanges
+    /// tools (`timewarp`, `coupled`) steps on the session's tick grid: it holds the copy until
+    /// [`PhysicsLoop::set_tick_origin`] gives the grid's time 0.
     pub fn new(
         site: usize,
         method: Box<dyn Consistency>,
@@ -88,6 +137,7 @@ impl PhysicsLoop {
         rings: PhysicsRings,
         timing: PhysicsTiming,
     ) -> Self {
+        let method_name = method.name();
         Self {
             site,
             method,
@@ -101,6 +151,10 @@ impl PhysicsLoop {
             objects: rings.objects,
             reports: rings.reports,
             trace: rings.trace,
+            ticks: Ticks {
+                on_grid: matches!(method_name, "timewarp" | "coupled"),
+                ..Ticks::default()
+            },
             trace_period_ns: timing.trace_period_ns.max(1),
             next_trace_ns: timing.start_ns,
             period_ns: timing.period_ns,
@@ -115,7 +169,49 @@ impl PhysicsLoop {
             object_drops: 0,
             report_drops: 0,
             trace_drops: 0,
+            tracks: TrackCounters::default(),
+            tracks_out: rings.tracks_out,
+            tracks_in: rings.tracks_in,
         }
+    }
+
+    /// The session's time 0 (ns on this machine's CLOCK_MONOTONIC): tick `k` of the grid starts at
+    /// `origin_ns + k × period`. Set once; later calls change nothing (the grid never moves).
+    pub fn set_tick_origin(&mut self, origin_ns: u64) {
+        self.ticks.origin_ns.get_or_insert(origin_ns);
+    }
+
+    /// Ticks of the session's grid stepped so far (methods that step on it).
+    pub fn ticks(&self) -> u64 {
+        self.ticks.done
+    }
+
+    /// The method's rollback figures, if it rolls back.
+    pub fn timewarp_stats(&self) -> Option<coop_model::timewarp::Stats> {
+        self.method.timewarp_stats()
+    }
+
+    /// How many ticks to step at `now_ns`: one per physics period on the grid (up to
+    /// [`MAX_CATCH_UP_TICKS`] more when late, the rest skipped and counted), none before the
+    /// grid's time 0 is known or reached; one for a method off the grid.
+    fn ticks_due(&mut self, now_ns: u64) -> u64 {
+        if !self.ticks.on_grid {
+            return 1;
+        }
+        let Some(origin) = self.ticks.origin_ns.filter(|&o| now_ns >= o) else {
+            return 0;
+        };
+        // Ticks whose start has come: 0 ..= (now - origin) / period.
+        let due = (now_ns - origin) / self.period_ns.max(1) + 1;
+        let behind = due.saturating_sub(self.ticks.done);
+        if behind > 1 {
+            // Late (an overrun, a stall): catch up at most MAX_CATCH_UP_TICKS extra per period,
+            // never skip one (the method counts its steps: a skipped tick would shift this
+            // site's grid against the others').
+            self.tracks.late_periods += 1;
+            self.tracks.caught_up_ticks += (behind - 1).min(MAX_CATCH_UP_TICKS);
+        }
+        behind.min(1 + MAX_CATCH_UP_TICKS)
     }
 
     /// One step at `now_ns`.
@@ -165,17 +261,26 @@ impl PhysicsLoop {
                 _ => self.rejected += 1,
             }
         }
-        self.copy.time_s = now_s - self.period_ns as f64 * 1e-9;
-        let before = self.copy;
-        self.method.physics_step(
-            &self.world,
-            &mut self.copy,
-            &self.own,
-            self.period_ns as f64 * 1e-9,
-        );
-        if !sane(&self.world, &self.copy) {
-            self.copy = before;
-            self.nonfinite_kept += 1;
+        self.receive_tracks(now_ns);
+        let steps = self.ticks_due(now_ns);
+        if self.ticks.on_grid && steps > 0 {
+            // The tool as measured at this tick (held over catch-up ticks).
+            self.method.own_tool(Vec3::from(self.tool.tool_pos));
+        }
+        for _ in 0..steps {
+            self.copy.time_s = now_s - self.period_ns as f64 * 1e-9;
+            let before = self.copy;
+            self.method.physics_step(
+                &self.world,
+                &mut self.copy,
+                &self.own,
+                self.period_ns as f64 * 1e-9,
+            );
+            if !sane(&self.world, &self.copy) {
+                self.copy = before;
+                self.nonfinite_kept += 1;
+            }
+            self.ticks.done += u64::from(self.ticks.on_grid);
         }
         self.copy.time_s = now_s;
         self.seq += 1;
@@ -202,14 +307,60 @@ impl PhysicsLoop {
                 .next_report_ns
                 .max(now_ns.saturating_sub(self.report_period_ns))
                 + self.report_period_ns;
-            self.report_seq += 1;
             let report = self.method.report(&self.copy, &self.own, now_s);
-            if self
-                .reports
-                .push(SiteReport::new(self.site, self.report_seq, &report))
-                .is_err()
-            {
-                self.report_drops += 1;
+            if let Report::Tools(r) = &report {
+                // Tools go out as a track (its own ring and sequence), and only once the grid
+                // has begun (before, there is nothing of this site's to say).
+                if self.ticks.done > 0 {
+                    self.ticks.seq += 1;
+                    let t = ToolTrack::new(self.site, self.ticks.seq, now_ns, r);
+                    let pushed = self.tracks_out.as_mut().map(|p| p.push(t).is_ok());
+                    if pushed != Some(true) {
+                        self.tracks.drops += 1;
+                    }
+                }
+            } else {
+                self.report_seq += 1;
+                if self
+                    .reports
+                    .push(SiteReport::new(self.site, self.report_seq, &report))
+                    .is_err()
+                {
+                    self.report_drops += 1;
+                }
+            }
+        }
+    }
+
+    /// Hands every received tool track to the method (it rolls back where a received position
+    /// differs from what it predicted), through the one validating conversion.
+    fn receive_tracks(&mut self, now_ns: u64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let now_s = now_ns as f64 * 1e-9;
+        while let Some(Ok(t)) = self.tracks_in.as_mut().map(Consumer::pop) {
+            self.tracks.received += 1;
+            match t.report() {
+                Some((from, msg)) if from != self.site => {
+                    let before = self.copy;
+                    let adopted =
+                        self.method
+                            .receive(&self.world, &mut self.copy, from, &msg, now_s);
+                    if !sane(&self.world, &self.copy) {
+                        self.copy = before;
+                        self.nonfinite_kept += 1;
+                        continue;
+                    }
+                    if let Some(a) = adopted {
+                        // A rollback moved the copy: traced as an adoption (jump and depth).
+                        self.adoptions += 1;
+                        let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
+                        rec.from = from as u64;
+                        rec.jump_m = a.jump.norm();
+                        rec.age_s = a.age_s;
+                        self.push_trace(rec);
+                    }
+                }
+                _ => self.tracks.rejected += 1,
             }
         }
     }
@@ -249,6 +400,22 @@ impl PhysicsLoop {
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);
+        let r = &p.rollback;
+        let set = |a: &crate::sync::AtomicU64, v: u64| a.store(v, crate::sync::Ordering::Relaxed);
+        if let Some(st) = self.method.timewarp_stats() {
+            set(&r.rollbacks, st.rollbacks);
+            set(&r.resimulated_ticks, st.resimulated_ticks);
+            set(&r.max_depth, st.max_depth);
+            set(&r.depth_p99, st.depths.quantile(0.99).unwrap_or(0));
+            set(&r.fallbacks, st.fallbacks);
+            set(&r.hash_checks, st.hash_checks);
+            set(&r.hash_mismatches, st.hash_mismatches);
+        }
+        set(&r.tracks_received, self.tracks.received);
+        set(&r.tracks_rejected, self.tracks.rejected);
+        set(&r.track_drops, self.tracks.drops);
+        set(&r.late_periods, self.tracks.late_periods);
+        set(&r.ticks, self.ticks.done);
     }
 
     /// The last report sequence number used.

@@ -124,6 +124,8 @@ fn rig_with<D: CartesianDevice>(
             objects: obj.producer().expect("p"),
             reports: rep.producer().expect("p"),
             trace: Some(trc.producer().expect("p")),
+            tracks_out: None,
+            tracks_in: None,
         },
         PhysicsTiming {
             period_ns: MS,

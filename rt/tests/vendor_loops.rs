@@ -75,6 +75,8 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
             objects: obj.producer().expect("p"),
             reports: rep.producer().expect("p"),
             trace: None,
+            tracks_out: None,
+            tracks_in: None,
         },
         PhysicsTiming {
             period_ns: MS,

@@ -517,3 +517,50 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Issue 12: the paper's task under `timewarp` on real stations (tool tracks over zenoh, rollbacks
+/// in the physics process): all six phases at both stations, rollbacks that happened, confirmed
+/// frontiers compared and never different.
+#[test]
+fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = out_dir("timewarp");
+    let v = run_json(session(
+        &["scenarios/paper.toml", "--method", "timewarp"],
+        &out,
+    ));
+    let real = &v["methods"]["timewarp"]["real"];
+    assert_eq!(
+        (
+            real["phases_passed"].as_u64(),
+            real["phases_total"].as_u64()
+        ),
+        (Some(12), Some(12)),
+        "six phases at each of the two stations: {real}"
+    );
+    let stations = v["methods"]["timewarp"]["stations"]
+        .as_object()
+        .expect("stations");
+    assert_eq!(stations.len(), 2);
+    for (site, st) in stations {
+        let rb = &st["live"]["physics"]["rollback"];
+        assert!(
+            rb["ticks"].as_u64() > Some(10_000),
+            "{site} stepped the session's grid: {rb}"
+        );
+        assert!(
+            rb["tracks_received"].as_u64() > Some(100) && rb["tracks_rejected"] == 0,
+            "{site} took the other's tool tracks: {rb}"
+        );
+        assert!(
+            rb["rollbacks"].as_u64() > Some(0),
+            "{site} rolled back: {rb}"
+        );
+        assert!(
+            rb["hash_checks"].as_u64() > Some(100),
+            "{site} compared confirmed frontiers: {rb}"
+        );
+        assert_eq!(rb["hash_mismatches"], 0, "{site}: {rb}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

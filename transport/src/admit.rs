@@ -11,11 +11,12 @@
 //! stays refused.
 
 use coop_model::scenario::Scenario;
+use coop_model::timewarp::QUANTUM_M;
 use coop_model::MAX_SITES;
-use coop_rt::msg::SiteReport;
+use coop_rt::msg::{SiteReport, ToolTrack};
 use coop_rt::shm::control::Refused;
 
-use crate::wire::{decode, DecodeError};
+use crate::wire::{decode, decode_track, DecodeError};
 
 /// Genuine states refused in a row as out of order, with newer plausible times, before the site's
 /// sequence is resynchronised.
@@ -82,7 +83,9 @@ impl Refusal {
     pub fn reason(&self) -> Refused {
         match self {
             Refusal::Decode(DecodeError::Version { .. }) => Refused::Version,
-            Refusal::Decode(DecodeError::Length { .. }) => Refused::Length,
+            Refusal::Decode(DecodeError::Length { .. } | DecodeError::TrackLength { .. }) => {
+                Refused::Length
+            }
             Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
             Refusal::Foreign { .. } => Refused::Foreign,
             Refusal::Stale { .. } => Refused::Stale,
@@ -256,6 +259,10 @@ pub struct Inbound {
     sites: Vec<String>,
     bounds: Bounds,
     seen: Vec<Seen>,
+    /// Per site: what was taken of its tool tracks.
+    seen_tracks: Vec<Seen>,
+    /// Per site: the tick after the last of its newest track taken.
+    track_ticks: Vec<u64>,
 }
 
 impl Inbound {
@@ -266,6 +273,8 @@ impl Inbound {
             sites,
             bounds,
             seen: vec![Seen::default(); n],
+            seen_tracks: vec![Seen::default(); n],
+            track_ticks: vec![0; n],
         }
     }
     /// The index of a site name.
@@ -305,42 +314,13 @@ impl Inbound {
             let off = offsets.get(k).copied().flatten()?;
             Some(now_ns.saturating_add_signed(off) as f64 * 1e-9)
         };
-        let seen = self.seen[site];
-        let plausible = self.window(site, &r, now_ns).and_then(|()| {
+        let plausible = self.window(site, r.t_ns, now_ns).and_then(|()| {
             match self.bounds.implausible(&r, now_of) {
                 Some(what) => Err(Refusal::Implausible { site, what }),
                 None => Ok(()),
             }
         });
-        if let Some(newest) = seen.seq.filter(|&n| r.seq <= n) {
-            // Out of order: a replay (an old time), or a genuine sender whose sequence is behind a
-            // forged or stale one (newer, plausible times).
-            let genuine = plausible.is_ok() && r.t_ns > seen.t_ns;
-            if !genuine {
-                return Err(Refusal::Stale {
-                    site,
-                    seq: r.seq,
-                    newest,
-                });
-            }
-            let s = &mut self.seen[site];
-            s.strikes += 1;
-            if s.strikes < RESYNC_STRIKES {
-                return Err(Refusal::Stale {
-                    site,
-                    seq: r.seq,
-                    newest,
-                });
-            }
-        } else {
-            plausible?;
-        }
-        let resync = seen.seq.is_some_and(|n| r.seq <= n);
-        self.seen[site] = Seen {
-            seq: Some(r.seq),
-            t_ns: r.t_ns,
-            strikes: 0,
-        };
+        let resync = order(&mut self.seen[site], site, r.seq, r.t_ns, plausible)?;
         Ok(Admitted {
             site,
             report: r,
@@ -349,11 +329,11 @@ impl Inbound {
         })
     }
 
-    /// The time rule: `r`'s corrected time lies within the age limit behind `now_ns` and the
+    /// The time rule: a corrected time `t_ns` lies within the age limit behind `now_ns` and the
     /// window ahead of it.
-    fn window(&self, site: usize, r: &SiteReport, now_ns: u64) -> Result<(), Refusal> {
-        self.age_ok(site, r.t_ns, now_ns)?;
-        let ahead = r.t_ns.saturating_sub(now_ns);
+    fn window(&self, site: usize, t_ns: u64, now_ns: u64) -> Result<(), Refusal> {
+        self.age_ok(site, t_ns, now_ns)?;
+        let ahead = t_ns.saturating_sub(now_ns);
         if ahead > self.bounds.future_ns {
             return Err(Refusal::Future {
                 site,
@@ -384,6 +364,113 @@ impl Inbound {
         if let Some(s) = self.seen.get_mut(site) {
             *s = Seen::default();
         }
+        if let Some(s) = self.seen_tracks.get_mut(site) {
+            *s = Seen::default();
+        }
+        if let Some(t) = self.track_ticks.get_mut(site) {
+            *t = 0;
+        }
+    }
+}
+
+/// The sequence rule for one site's messages of one kind (`seen` is what was taken of them):
+/// newer than any taken, or a genuine sender behind a forged sequence (newer, `plausible` times,
+/// [`RESYNC_STRIKES`] in a row). On success `seen` takes this message and the result says whether
+/// it was a resynchronisation.
+fn order(
+    seen: &mut Seen,
+    site: usize,
+    seq: u64,
+    t_ns: u64,
+    plausible: Result<(), Refusal>,
+) -> Result<bool, Refusal> {
+    let before = *seen;
+    if let Some(newest) = before.seq.filter(|&n| seq <= n) {
+        // Out of order: a replay (an old time), or a genuine sender whose sequence is behind a
+        // forged or stale one (newer, plausible times).
+        let genuine = plausible.is_ok() && t_ns > before.t_ns;
+        if !genuine {
+            return Err(Refusal::Stale { site, seq, newest });
+        }
+        seen.strikes += 1;
+        if seen.strikes < RESYNC_STRIKES {
+            return Err(Refusal::Stale { site, seq, newest });
+        }
+    } else {
+        plausible?;
+    }
+    *seen = Seen {
+        seq: Some(seq),
+        t_ns,
+        strikes: 0,
+    };
+    Ok(before.seq.is_some_and(|n| seq <= n))
+}
+
+/// A tool track the receiver took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdmittedTrack {
+    /// The sender's site index.
+    pub site: usize,
+    /// The track, its time corrected to our clock (its ticks are the session's, not corrected).
+    pub track: ToolTrack,
+    /// The sender's clock offset it was corrected by, ns.
+    pub offset_ns: i64,
+    /// It was taken by resynchronising the site's track sequence.
+    pub resync: bool,
+}
+
+impl Inbound {
+    /// [`Inbound::check`] for a tool track (`tool/<key_site>`): decoded and validated
+    /// ([`crate::wire::decode_track`]), its site the key's, its time readable and in the window,
+    /// every position inside the world's extent, its sequence newer than any track taken from
+    /// that site (tracks have their own sequence, apart from states'), and its last tick not
+    /// before the last tick of the newest track taken (ticks only move forward on the grid).
+    ///
+    /// # Errors
+    /// [`Refusal`], counted by the same reasons as states'; nothing changes then.
+    pub fn check_track(
+        &mut self,
+        key_site: &str,
+        bytes: &[u8],
+        now_ns: u64,
+        offsets: &[Option<i64>],
+    ) -> Result<AdmittedTrack, Refusal> {
+        let mut t = decode_track(bytes)?;
+        let site = self
+            .index_of(key_site)
+            .filter(|&i| i as u64 == t.site)
+            .ok_or(Refusal::Foreign { site: t.site })?;
+        let offset_ns = offsets
+            .get(site)
+            .copied()
+            .flatten()
+            .ok_or(Refusal::NoOffset { site })?;
+        t.t_ns = t.t_ns.saturating_add_signed(offset_ns.saturating_neg());
+        let end_tick = t.first_tick + t.count;
+        let plausible = self.window(site, t.t_ns, now_ns).and_then(|()| {
+            if t.max_abs_quantized() as f64 * QUANTUM_M > self.bounds.extent_m {
+                return Err(Refusal::Implausible {
+                    site,
+                    what: "tool position",
+                });
+            }
+            if end_tick < self.track_ticks[site] {
+                return Err(Refusal::Implausible {
+                    site,
+                    what: "tool track tick",
+                });
+            }
+            Ok(())
+        });
+        let resync = order(&mut self.seen_tracks[site], site, t.seq, t.t_ns, plausible)?;
+        self.track_ticks[site] = self.track_ticks[site].max(end_tick);
+        Ok(AdmittedTrack {
+            site,
+            track: t,
+            offset_ns,
+            resync,
+        })
     }
 }
 
@@ -607,5 +694,84 @@ mod tests {
         assert!(b.extent_m > 1.0 && b.extent_m < 10.0, "{b:?}");
         assert!(b.speed_m_per_s > 5.0 && b.speed_m_per_s < 1e3, "{b:?}");
         assert!(b.max_age_ns >= 100_000_000, "{b:?}");
+    }
+
+    #[test]
+    fn tool_tracks_are_admitted_by_the_same_rules_as_states() {
+        use crate::wire::encode_track;
+        use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
+        let r = ToolReport {
+            first_tick: 100,
+            count: 10,
+            positions: [[-4500, 0, 1000]; WINDOW_TICKS],
+            confirmed_tick: 90,
+            confirmed_hash: 5,
+        };
+        let mut r = r;
+        r.positions[10..].fill([0; 3]);
+        let track = |seq: u64, first: i64, r: &ToolReport| {
+            let mut t = ToolTrack::new(
+                1,
+                seq,
+                1_000_000_000,
+                &ToolReport {
+                    first_tick: first,
+                    confirmed_tick: first - 10,
+                    ..*r
+                },
+            );
+            t.site = 1;
+            encode_track(&t)
+        };
+        let sites = vec!["user1".to_owned(), "user2".to_owned()];
+        let mut inb = Inbound::new(sites, paper_bounds());
+        let now = 1_010_000_000;
+        let clocks = same_clock(2);
+        let a = inb
+            .check_track("user2", &track(1, 100, &r), now, &clocks)
+            .expect("a genuine track");
+        assert_eq!((a.site, a.track.first_tick, a.track.count), (1, 100, 10));
+        // Sender = key site.
+        let e = inb.check_track("user1", &track(2, 110, &r), now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Foreign));
+        // A replay.
+        let e = inb.check_track("user2", &track(1, 100, &r), now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Stale));
+        // Ticks going back.
+        let e = inb.check_track("user2", &track(3, 50, &r), now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
+        // A tool 10 km away.
+        let mut far = r;
+        far.positions[3] = [1_000_000_000, 0, 0];
+        let e = inb.check_track("user2", &track(4, 110, &far), now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
+        // Malformed: a count past the window.
+        let mut bytes = track(5, 110, &r);
+        bytes[1 + 32..1 + 40].copy_from_slice(&(WINDOW_TICKS as u64 + 1).to_le_bytes());
+        let e = inb.check_track("user2", &bytes, now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Contents));
+        // Too old.
+        let e = inb.check_track("user2", &track(6, 110, &r), now + 10_000_000_000, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::TooOld));
+        // No offset known.
+        let e = inb.check_track("user2", &track(7, 110, &r), now, &[Some(0), None]);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::NoOffset));
+        // Nothing refused moved anything: the next genuine one is taken.
+        let a = inb
+            .check_track("user2", &track(8, 110, &r), now, &clocks)
+            .expect("the next genuine track");
+        assert_eq!(a.track.seq, 8);
+        // States and tracks keep separate sequences.
+        let state = SiteReport {
+            t_ns: 1_000_000_000,
+            seq: 1,
+            ..sample()
+        };
+        let a = inb.check("user2", &encode(&state), now, &clocks);
+        assert_eq!(
+            a.map(|a| a.report.seq),
+            Ok(1),
+            "a state's sequence is not a track's"
+        );
     }
 }

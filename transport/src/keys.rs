@@ -12,8 +12,8 @@ pub fn all_states(session: &str, obj: u32) -> String {
 }
 
 /// The key a site's tool (its device's end effector) of object `obj`'s world goes on:
-/// `coop/<session>/obj/<obj>/tool/<site>`. Nothing publishes it yet; the access control reserves
-/// it for its site already.
+/// `coop/<session>/obj/<obj>/tool/<site>`: the site's tool track (wire version 2, methods that
+/// exchange tools: `timewarp`); the access control lets only that site put it.
 pub fn tool(session: &str, obj: u32, site: &str) -> String {
     format!("coop/{session}/obj/{obj}/tool/{site}")
 }

@@ -12,8 +12,15 @@
 //! sequence) is [`crate::admit`]'s. Any failure is a typed error and changes nothing.
 //!
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
+//!
+//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 2` then
+//! [`ToolTrack::to_words`], exactly [`TRACK_ENCODED_LEN`] bytes, on its own key (`tool/<site>`).
+//! Version 2 adds this message and changes nothing else: a state is still version 1, byte for
+//! byte, so a version-1 reader still reads states (and refuses a track by its version byte,
+//! should it subscribe to its key). [`TRACK_PINNED`] ties the track's layout to the doc as
+//! [`PINNED`] does the state's.
 
-use coop_rt::msg::SiteReport;
+use coop_rt::msg::{SiteReport, ToolTrack};
 
 /// Current wire version.
 pub const VERSION: u8 = 1;
@@ -24,6 +31,14 @@ pub const VERSION: u8 = 1;
 pub const PINNED: (u8, u64) = (1, 0xfbfded3318dbe2b7);
 /// Bytes of an encoded report.
 pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
+/// The wire version that added tool tracks (and the version byte a track carries). States are
+/// still [`VERSION`].
+pub const TRACK_VERSION: u8 = 2;
+/// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
+/// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
+pub const TRACK_PINNED: (u8, u64) = (2, 0x73a7a41cef742147);
+/// Bytes of an encoded tool track.
+pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
 /// Why a message was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -37,6 +52,12 @@ pub enum DecodeError {
     /// Too short, too long.
     #[error("{found} bytes, expected exactly {ENCODED_LEN}")]
     Length {
+        /// Length found.
+        found: usize,
+    },
+    /// A tool track too short or too long.
+    #[error("{found} bytes, expected exactly {TRACK_ENCODED_LEN} for a tool track")]
+    TrackLength {
         /// Length found.
         found: usize,
     },
@@ -105,6 +126,42 @@ pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
     let r = SiteReport::from_words(&words);
     r.report().ok_or(DecodeError::Invalid)?;
     Ok(r)
+}
+
+/// Encodes a tool track: [`TRACK_VERSION`], then [`ToolTrack::to_words`] little-endian.
+pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
+    let mut out = Vec::with_capacity(TRACK_ENCODED_LEN);
+    out.push(TRACK_VERSION);
+    for w in t.to_words() {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
+    out
+}
+
+/// Decodes a tool track and validates it with [`ToolTrack::report`] (the one validation of a
+/// track, which physics applies again as its ring → model conversion).
+///
+/// # Errors
+/// [`DecodeError`]: wrong version, wrong length ([`DecodeError::TrackLength`]), invalid contents.
+pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
+    let (&version, body) = bytes
+        .split_first()
+        .ok_or(DecodeError::TrackLength { found: 0 })?;
+    if version != TRACK_VERSION {
+        return Err(DecodeError::Version { found: version });
+    }
+    if bytes.len() != TRACK_ENCODED_LEN {
+        return Err(DecodeError::TrackLength { found: bytes.len() });
+    }
+    let mut words = [0u64; ToolTrack::WORDS];
+    for (w, c) in words.iter_mut().zip(body.chunks_exact(8)) {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(c);
+        *w = u64::from_le_bytes(b);
+    }
+    let t = ToolTrack::from_words(&words);
+    t.report().ok_or(DecodeError::Invalid)?;
+    Ok(t)
 }
 
 #[cfg(test)]
@@ -250,5 +307,99 @@ mod tests {
             Err(DecodeError::Version { found: 2 })
         );
         assert_eq!(decode_u64(&[1, 0]), Err(DecodeError::Length { found: 2 }));
+    }
+
+    #[test]
+    fn the_track_layout_is_pinned_to_its_version_and_the_doc() {
+        let text = layout_text(ToolTrack::LAYOUT);
+        let hash = fnv1a64(text.as_bytes());
+        assert!(
+            TRACK_PINNED == (TRACK_VERSION, hash),
+            "ToolTrack's layout is pinned as {TRACK_PINNED:?} but is ({TRACK_VERSION}, {hash:#018x}): \
+             another field order is another wire format. Bump TRACK_VERSION, update the tool track \
+             table in docs/wire.md, and re-pin. The layout now:\n{text}"
+        );
+        let doc = include_str!("../../docs/wire.md");
+        let start = doc
+            .find("\n## Tool track")
+            .expect("docs/wire.md has no \"## Tool track\" section");
+        let section = &doc[start + 1..];
+        let section = &section[..section[1..].find("\n## ").map_or(section.len(), |e| e + 1)];
+        let mut fields = Vec::new();
+        for row in section.lines().filter(|l| l.starts_with('|')) {
+            let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+            if cells[1] == "words" || cells[1].starts_with('-') {
+                continue;
+            }
+            let (n, _) = cells[1].split_once(' ').expect("`| <n> u | `name` | … |`");
+            let name = cells[2].trim_matches('`');
+            fields.push((name.to_string(), n.parse::<usize>().expect("word count")));
+        }
+        let ours: Vec<(String, usize)> = ToolTrack::LAYOUT
+            .iter()
+            .map(|&(n, _, c)| (n.to_string(), c))
+            .collect();
+        assert_eq!(
+            fields, ours,
+            "docs/wire.md's tool track table (left) is not ToolTrack::LAYOUT"
+        );
+        let heading = section.lines().next().unwrap_or_default();
+        assert!(
+            heading.contains(&format!("(version {TRACK_VERSION})"))
+                && heading.contains(&format!("exactly {TRACK_ENCODED_LEN} bytes")),
+            "docs/wire.md: `{heading}` should name version {TRACK_VERSION} and {TRACK_ENCODED_LEN} bytes"
+        );
+    }
+
+    #[test]
+    fn tracks_round_trip_and_every_corruption_is_refused_while_states_stay_version_1() {
+        use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
+        let mut r = ToolReport {
+            first_tick: 500,
+            count: 20,
+            positions: [[0; 3]; WINDOW_TICKS],
+            confirmed_tick: 480,
+            confirmed_hash: 77,
+        };
+        for (k, p) in r.positions[..20].iter_mut().enumerate() {
+            *p = [-4500 + k as i32, 3, 1000];
+        }
+        let t = ToolTrack::new(1, 3, 99, &r);
+        let bytes = encode_track(&t);
+        assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
+        assert_eq!(TRACK_ENCODED_LEN, 3129, "docs/wire.md says 3129 bytes");
+        assert_eq!(bytes[0], 2);
+        // Where docs/wire.md puts them: site in word 2, the first x in the low half of word 7.
+        assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
+        assert_eq!(&bytes[1 + 56..1 + 60], (-4500i32).to_le_bytes());
+        assert_eq!(decode_track(&bytes), Ok(t));
+        // A version-1 reader refuses a track by its version; a track reader refuses a state.
+        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 2 }));
+        assert_eq!(
+            decode_track(&encode(&sample())),
+            Err(DecodeError::Version { found: 1 })
+        );
+        assert_eq!(encode(&sample())[0], 1, "states are still version 1");
+        assert_eq!(
+            decode_track(&bytes[..100]),
+            Err(DecodeError::TrackLength { found: 100 })
+        );
+        let mut long = bytes.clone();
+        long.push(0);
+        assert_eq!(
+            decode_track(&long),
+            Err(DecodeError::TrackLength {
+                found: TRACK_ENCODED_LEN + 1
+            })
+        );
+        let mut bad = t;
+        bad.count = WINDOW_TICKS as u64 + 1;
+        assert_eq!(decode_track(&encode_track(&bad)), Err(DecodeError::Invalid));
+        // Flipping any single byte never panics.
+        for i in 0..bytes.len() {
+            let mut b = bytes.clone();
+            b[i] ^= 0xff;
+            let _ = decode_track(&b);
+        }
     }
 }

@@ -196,13 +196,26 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         objects: Producer::open(&names.object, &opts).context("opening the object ring")?,
         reports: Producer::open(&names.report, &opts).context("opening the report ring")?,
         trace: Some(Producer::open(&names.trace, &opts).context("opening the trace ring")?),
+        tracks_out: None,
+        tracks_in: None,
     };
     let (sc, i) = (&cfg.scenario, cfg.site);
+    let mut rings = rings;
+    if sc.method == MethodName::Timewarp {
+        rings.tracks_out =
+            Some(Producer::open(&names.track_out, &opts).context("opening the track-out ring")?);
+        rings.tracks_in =
+            Some(Consumer::open(&names.track_in, &opts).context("opening the track-in ring")?);
+    }
+    let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
     let method: Box<dyn Consistency> = match sc.method {
         MethodName::Naive => Box::<Naive>::default(),
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
-        MethodName::Timewarp | MethodName::Coupled => bail!(
-            "method {} runs in the simulator (`sim`) only so far: its tool reports have no wire format yet",
+        // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
+        // the confirmed state is the same bits everywhere only from the same start.
+        MethodName::Timewarp => Box::new(sc.timewarp(i, &ObjectCopy::new(start))),
+        MethodName::Coupled => bail!(
+            "method {} runs in the simulator (`sim`) only so far",
             sc.method.as_str()
         ),
     };
@@ -217,16 +230,19 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     };
     // A restarted physics resumes from the newest state its predecessor published, not from the
     // scenario's start (the servo kept displaying that state; a jump back would be felt).
-    let resumed = ctl.resume().and_then(|s| s.state());
+    // (timewarp restarts from the start: its copy is a function of the tick and the inputs.)
+    let resumed = if sc.method == MethodName::Timewarp {
+        None
+    } else {
+        ctl.resume().and_then(|s| s.state())
+    };
     if resumed.is_some() {
         eprintln!(
             "station physics {}: resuming from the last published state",
             cfg.name
         );
     }
-    let copy = ObjectCopy::new(
-        resumed.unwrap_or_else(|| BodyState::at_rest(Vec3::from(sc.object.start_m))),
-    );
+    let copy = ObjectCopy::new(resumed.unwrap_or(start));
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;
@@ -240,6 +256,10 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         step,
         &in_force,
         |now| {
+            if let Some(epoch) = ctl.epoch() {
+                // The session's time 0 is tick 0 of the grid (methods that step on it).
+                physics.set_tick_origin(epoch);
+            }
             physics.step(now);
             physics.publish_counters(&ctl);
             if physics.report_seq() != last_report_seq {
@@ -276,6 +296,14 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
         trace: Consumer::open(&names.trace, &opts).context("opening the trace ring")?,
+        tracks: if sc.method == MethodName::Timewarp {
+            Some((
+                Consumer::open(&names.track_out, &opts).context("opening the track-out ring")?,
+                Producer::open(&names.track_in, &opts).context("opening the track-in ring")?,
+            ))
+        } else {
+            None
+        },
         record: cfg.config.record.clone(),
         record_rotation: cfg.config.record_rotation(),
         emulation: net.emulate.then(|| coop_transport::network::Emulation {

@@ -360,12 +360,28 @@ impl StationConfig {
         if let Some(m) = self.method {
             scenario.method = m;
         }
-        if matches!(scenario.method, MethodName::Timewarp | MethodName::Coupled) {
+        if scenario.method == MethodName::Coupled {
             bail!(
-                "method = {:?} (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive or paper",
+                "method = {:?} (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive, paper or timewarp",
                 scenario.method.as_str(),
                 scenario.name
             );
+        }
+        if scenario.method == MethodName::Timewarp {
+            // One tick grid for the session: every site steps at the same rate.
+            let r0 = scenario.site[0].physics_rate_hz;
+            if let Some((k, s)) = scenario
+                .site
+                .iter()
+                .enumerate()
+                .find(|(_, s)| s.physics_rate_hz != r0)
+            {
+                bail!(
+                    "site[{k}].physics_rate_hz = {} (scenario {:?}): method timewarp steps every site on one tick grid, so every site's physics rate must equal site[0]'s ({r0} Hz)",
+                    s.physics_rate_hz,
+                    scenario.name
+                );
+            }
         }
         let name = self
             .station
@@ -389,6 +405,7 @@ impl StationConfig {
             ("rings.report_slots", self.rings.report_slots),
             ("rings.remote_slots", self.rings.remote_slots),
             ("rings.trace_slots", self.rings.trace_slots),
+            ("rings.track_slots", self.rings.track_slots),
         ] {
             if !(slots.is_power_of_two() && (2..=65536).contains(&slots)) {
                 bail!("{field} = {slots}: must be a power of two from 2 to 65536");
@@ -733,6 +750,35 @@ impl Resolved {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn timewarp_needs_one_physics_rate_and_coupled_is_refused_by_name() {
+        let tw = StationConfig {
+            method: Some(MethodName::Timewarp),
+            ..StationConfig::default()
+        };
+        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
+        tw.clone()
+            .resolve_with(None, sc.clone())
+            .expect("the paper's sites share a physics rate");
+        sc.site[1].physics_rate_hz = 500.0;
+        let err = tw.resolve_with(None, sc).expect_err("two rates");
+        assert!(
+            format!("{err:#}").contains("site[1].physics_rate_hz = 500")
+                && format!("{err:#}").contains("must equal site[0]'s"),
+            "{err:#}"
+        );
+        let err = StationConfig {
+            method: Some(MethodName::Coupled),
+            ..StationConfig::default()
+        }
+        .resolve(None)
+        .expect_err("coupled");
+        assert!(
+            format!("{err:#}").contains("method = \"coupled\""),
+            "{err:#}"
+        );
+    }
 
     #[test]
     fn defaults_resolve_to_the_paper_scenario_first_site() {

@@ -227,6 +227,83 @@ pub struct PhysicsStatus {
     pub adoptions: u64,
     /// Adoptions or steps that would have made the copy non-finite (it kept its state).
     pub nonfinite_kept: u64,
+    /// Rollback and tool-track figures, if the method exchanges tools (it stepped on the grid).
+    pub rollback: Option<RollbackStatus>,
+}
+
+// ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
+
+/// A rolling-back method's figures (`ControlBlock::physics.rollback`).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, Eq)]
+pub struct RollbackStatus {
+    /// Ticks of the session's grid stepped.
+    pub ticks: u64,
+    /// Rollbacks.
+    pub rollbacks: u64,
+    /// Ticks re-simulated in all.
+    pub resimulated_ticks: u64,
+    /// Deepest rollback, ticks.
+    pub max_depth: u64,
+    /// Rollback depth, 99th percentile, ticks.
+    pub depth_p99: u64,
+    /// Positions older than the horizon (could not be undone).
+    pub fallbacks: u64,
+    /// Confirmed-frontier hashes compared.
+    pub hash_checks: u64,
+    /// ... that differed.
+    pub hash_mismatches: u64,
+    /// Remote tool tracks taken, rejected; own tracks dropped (ring full).
+    pub tracks_received: u64,
+    /// See `tracks_received`.
+    pub tracks_rejected: u64,
+    /// See `tracks_received`.
+    pub track_drops: u64,
+    /// Physics periods that caught up more than one tick.
+    pub late_periods: u64,
+}
+
+impl RollbackStatus {
+    /// Read from the control block; `None` if physics never stepped on the grid.
+    pub fn of(ctl: &ControlBlock) -> Option<Self> {
+        let r = &ctl.physics.rollback;
+        let l = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
+        let ticks = l(&r.ticks);
+        (ticks > 0).then(|| Self {
+            ticks,
+            rollbacks: l(&r.rollbacks),
+            resimulated_ticks: l(&r.resimulated_ticks),
+            max_depth: l(&r.max_depth),
+            depth_p99: l(&r.depth_p99),
+            fallbacks: l(&r.fallbacks),
+            hash_checks: l(&r.hash_checks),
+            hash_mismatches: l(&r.hash_mismatches),
+            tracks_received: l(&r.tracks_received),
+            tracks_rejected: l(&r.tracks_rejected),
+            track_drops: l(&r.track_drops),
+            late_periods: l(&r.late_periods),
+        })
+    }
+}
+
+impl std::fmt::Display for RollbackStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up",
+            self.ticks,
+            self.rollbacks,
+            self.resimulated_ticks,
+            self.max_depth,
+            self.depth_p99,
+            self.fallbacks,
+            self.hash_checks,
+            self.hash_mismatches,
+            self.tracks_received,
+            self.tracks_rejected,
+            self.track_drops,
+            self.late_periods
+        )
+    }
 }
 
 /// The servo's figures.
@@ -470,6 +547,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
             remote_rejected: ctl.physics.rejected.load(Ordering::Relaxed),
             adoptions: ctl.physics.adoptions.load(Ordering::Relaxed),
             nonfinite_kept: ctl.physics.nonfinite_kept.load(Ordering::Relaxed),
+            rollback: RollbackStatus::of(&ctl),
         },
         servo: ServoStatus {
             command_n: ControlBlock::load_f64(&ctl.servo.command_n),
@@ -692,6 +770,9 @@ impl fmt::Display for StationStatus {
             self.physics.adoptions,
             self.physics.nonfinite_kept
         )?;
+        if let Some(r) = &self.physics.rollback {
+            writeln!(f, "{r}")?;
+        }
         write!(
             f,
             "servo: commanding {:.2} N, display scale {:.2}",

@@ -36,7 +36,7 @@ pub enum MethodName {
 
 impl MethodName {
     /// The methods real stations run, in table order.
-    pub const ALL: [MethodName; 2] = [MethodName::Naive, MethodName::Paper];
+    pub const ALL: [MethodName; 3] = [MethodName::Naive, MethodName::Paper, MethodName::Timewarp];
     /// Every method the simulator runs, in table order.
     pub const SIMULATED: [MethodName; 4] = [
         MethodName::Naive,

@@ -403,6 +403,41 @@ pub struct PhysicsShared {
     pub last_report_ns: AtomicU64,
     /// See `last_report_ns`.
     pub report_period_ns: AtomicU64,
+    /// Rollback and tool-track figures (methods that exchange tools; zero otherwise).
+    pub rollback: RollbackShared,
+}
+
+// ---- physics/network: rollback and tool-track figures (issue 12, timewarp on stations) ----
+
+/// What physics writes of a rolling-back method (`coop_model::timewarp::Stats`) and of the tool
+/// tracks it exchanges: relaxed stores by physics, the one writer.
+#[derive(Debug)]
+#[repr(C)]
+pub struct RollbackShared {
+    /// Rollbacks (restores and re-simulations).
+    pub rollbacks: AtomicU64,
+    /// Ticks re-simulated in all.
+    pub resimulated_ticks: AtomicU64,
+    /// The deepest rollback, ticks.
+    pub max_depth: AtomicU64,
+    /// The 99th percentile of rollback depth, ticks (0: none yet).
+    pub depth_p99: AtomicU64,
+    /// Received positions older than the horizon (could not be undone).
+    pub fallbacks: AtomicU64,
+    /// Confirmed-frontier hashes compared with a sender's.
+    pub hash_checks: AtomicU64,
+    /// ... that differed: the sites' confirmed states are not the same bits.
+    pub hash_mismatches: AtomicU64,
+    /// Remote tool tracks taken from the ring.
+    pub tracks_received: AtomicU64,
+    /// ... that did not convert (a foreign writer of the ring), or named this site.
+    pub tracks_rejected: AtomicU64,
+    /// Own tracks not pushed: the ring to the network was full.
+    pub track_drops: AtomicU64,
+    /// Physics periods that stepped more than one tick to stay on the session's grid.
+    pub late_periods: AtomicU64,
+    /// Ticks of the session's grid stepped.
+    pub ticks: AtomicU64,
 }
 
 /// What the network process writes.
@@ -484,7 +519,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v8";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v9";
 }
 
 impl ControlBlock {

@@ -1,8 +1,8 @@
-//! The shared-memory segments of one station, by name and layout: the control block and the five
-//! rings, created by its supervisor before any child starts and unlinked when the supervisor's handles
+//! The shared-memory segments of one station, by name and layout: the control block and the seven
+//! rings (five, and the two tool-track rings of methods that exchange tools), created by its supervisor before any child starts and unlinked when the supervisor's handles
 //! drop. Every process of the station (and `station status`, `latency attach`) finds them here.
 
-use crate::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
+use crate::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack, TraceRecord};
 use crate::shm::control::ControlBlock;
 use crate::shm::{BlockSegment, CreateError, NameError, RingSegment, SegmentName};
 
@@ -24,6 +24,8 @@ pub struct RingSlots {
     pub remote_slots: usize,
     /// Physics → recorder trace records (the scenario's sample rate plus adoptions).
     pub trace_slots: usize,
+    /// Each of the tool-track rings (physics → network, network → physics), 3 KB a slot.
+    pub track_slots: usize,
 }
 
 impl Default for RingSlots {
@@ -34,6 +36,7 @@ impl Default for RingSlots {
             report_slots: 256,
             remote_slots: 256,
             trace_slots: 4096,
+            track_slots: 64,
         }
     }
 }
@@ -53,6 +56,10 @@ pub struct Names {
     pub remote: SegmentName,
     /// Physics → recorder (the network process).
     pub trace: SegmentName,
+    /// Physics → network: this site's tool tracks.
+    pub track_out: SegmentName,
+    /// Network → physics: the other sites' tool tracks.
+    pub track_in: SegmentName,
 }
 
 impl Names {
@@ -69,6 +76,8 @@ impl Names {
             report: n("rep")?,
             remote: n("rem")?,
             trace: n("trc")?,
+            track_out: n("tko")?,
+            track_in: n("tki")?,
         })
     }
 }
@@ -88,6 +97,10 @@ pub struct StationSegments {
     pub remote: RingSegment<SiteReport>,
     /// Physics → recorder.
     pub trace: RingSegment<TraceRecord>,
+    /// Physics → network tool tracks.
+    pub track_out: RingSegment<ToolTrack>,
+    /// Network → physics tool tracks.
+    pub track_in: RingSegment<ToolTrack>,
 }
 
 impl StationSegments {
@@ -103,6 +116,8 @@ impl StationSegments {
             report: RingSegment::create(&names.report, rings.report_slots)?,
             remote: RingSegment::create(&names.remote, rings.remote_slots)?,
             trace: RingSegment::create(&names.trace, rings.trace_slots)?,
+            track_out: RingSegment::create(&names.track_out, rings.track_slots)?,
+            track_in: RingSegment::create(&names.track_in, rings.track_slots)?,
         })
     }
 }

@@ -33,7 +33,7 @@ enum Command {
         /// and plots.
         #[arg(long, value_name = "DIR", default_value = "out/session")]
         out: PathBuf,
-        /// naive, paper, or all (both, one session each).
+        /// naive, paper, timewarp, or all (each, one session each).
         #[arg(long, default_value = "all", value_parser = parse_methods)]
         method: Methods,
         /// Print JSON instead of the table.
@@ -152,6 +152,40 @@ enum Command {
     },
 }
 
+/// Per method and station, from the statuses read just before the end: physics overruns during
+/// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
+/// and a rolling-back method's rollbacks and hash checks.
+fn print_station_loops(v: &serde_json::Value) {
+    println!("# stations: method  site  physics overruns  compute p99 us  rollbacks  depth max/p99 ticks  fallbacks  hash checks  mismatches");
+    for (m, r) in v["methods"].as_object().into_iter().flatten() {
+        for (site, st) in r["stations"].as_object().into_iter().flatten() {
+            let live = &st["live"];
+            let rb = &live["physics"]["rollback"];
+            let or_dash = |x: &serde_json::Value| {
+                if x.is_null() {
+                    "-".to_owned()
+                } else {
+                    x.to_string()
+                }
+            };
+            println!(
+                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}",
+                or_dash(&live["overruns_during_session"]["physics"]),
+                or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
+                or_dash(&rb["rollbacks"]),
+                if rb.is_null() {
+                    "-".to_owned()
+                } else {
+                    format!("{}/{}", rb["max_depth"], rb["depth_p99"])
+                },
+                or_dash(&rb["fallbacks"]),
+                or_dash(&rb["hash_checks"]),
+                or_dash(&rb["hash_mismatches"]),
+            );
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Methods(Vec<MethodName>);
 
@@ -159,8 +193,9 @@ fn parse_methods(s: &str) -> Result<Methods, String> {
     match s {
         "naive" => Ok(Methods(vec![MethodName::Naive])),
         "paper" => Ok(Methods(vec![MethodName::Paper])),
+        "timewarp" => Ok(Methods(vec![MethodName::Timewarp])),
         "all" => Ok(Methods(MethodName::ALL.to_vec())),
-        _ => Err(format!("unknown method {s:?}: use naive, paper or all")),
+        _ => Err(format!("unknown method {s:?}: use naive, paper, timewarp or all (coupled runs in the simulator only so far)")),
     }
 }
 
@@ -282,6 +317,7 @@ fn main() -> std::process::ExitCode {
                         );
                     }
                 }
+                print_station_loops(&v);
                 println!(
                     "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
                     a.out.display()

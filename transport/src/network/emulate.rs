@@ -33,16 +33,17 @@ impl Emulation {
     }
 }
 
-/// The emulated links into this site, and the states they still hold.
+/// The emulated links into this site, and the states (or, as `T`, tool tracks: their own links
+/// with the same law and seed) they still hold.
 #[derive(Debug)]
-pub(super) struct Emulator {
+pub(super) struct Emulator<T = Delivery> {
     link: LinkSpec,
     /// One generator per sending site.
     rngs: Vec<Rng>,
-    held: DueQueue<Delivery>,
+    held: DueQueue<T>,
 }
 
-impl Emulator {
+impl<T> Emulator<T> {
     /// The links from each of `n` sites to site `me`.
     pub(super) fn new(e: &Emulation, n: usize, me: usize) -> Self {
         Self {
@@ -64,12 +65,12 @@ impl Emulator {
     }
 
     /// Holds `d` until `at_ns`.
-    pub(super) fn hold(&mut self, at_ns: u64, d: Delivery) {
+    pub(super) fn hold(&mut self, at_ns: u64, d: T) {
         self.held.push(at_ns, d);
     }
 
     /// The next held state due at or before `now`.
-    pub(super) fn pop_due(&mut self, now: u64) -> Option<Delivery> {
+    pub(super) fn pop_due(&mut self, now: u64) -> Option<T> {
         self.held.pop_due(now)
     }
 }
@@ -99,7 +100,7 @@ mod tests {
             },
             seed: 1,
         };
-        let mut em = Emulator::new(&e, 2, 1);
+        let mut em: Emulator = Emulator::new(&e, 2, 1);
         assert_eq!(em.arrival(0, 1_000, Some(1_000)), Some(50_001_000));
     }
 }

@@ -30,7 +30,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
-use coop_rt::msg::{SiteReport, TraceRecord};
+use coop_rt::msg::{SiteReport, ToolTrack, TraceRecord};
 use coop_rt::shm::control::{Child, ControlBlock, RunState, MAX_SITES};
 use coop_rt::shm::{Consumer, Producer};
 use coop_rt::sync::{AtomicU64, Ordering};
@@ -63,7 +63,7 @@ pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_R
 
 use live::Live;
 use presence::Presence;
-use publish::Publish;
+use publish::{Publish, TrackPublish};
 use receive::Receiver;
 use record::Recording;
 
@@ -90,6 +90,9 @@ pub struct NetworkArgs<'a> {
     pub remote: Producer<SiteReport>,
     /// Physics' trace records, for the recording.
     pub trace: Consumer<TraceRecord>,
+    /// Tool tracks (methods that exchange tools): this site's from physics, and the others' to
+    /// physics; `None` for methods that exchange states only.
+    pub tracks: Option<(Consumer<ToolTrack>, Producer<ToolTrack>)>,
     /// Recording file (its first part), if any.
     pub record: Option<PathBuf>,
     /// When the recording goes on in its next part, and how many parts are kept.
@@ -187,7 +190,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         .store(u64::from(a.emulation.is_some()), Ordering::Relaxed);
     let session = open(&ctx, a.endpoints)?;
     let mut publish = Publish::declare(&session, ctx.session_name, &site)?;
-    let receiver = Mutex::new(Receiver::new(
+    let mut rx = Receiver::new(
         ctx.sites,
         ctx.me,
         ctx.ctl,
@@ -195,7 +198,18 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         a.emulation.as_ref(),
         a.bounds,
         a.silence_ns,
-    ));
+    );
+    let tracks = match a.tracks {
+        Some((from_physics, to_physics)) => {
+            rx.take_tracks(to_physics, a.emulation.as_ref());
+            Some((
+                TrackPublish::declare(&session, ctx.session_name, &site)?,
+                from_physics,
+            ))
+        }
+        None => None,
+    };
+    let receiver = Mutex::new(rx);
     let names = (a.scenario, a.method);
     let live = Live::declare(&session, ctx.session_name, &site)?;
     let status = serve(
@@ -206,6 +220,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         Loop {
             reports: a.reports,
             trace: a.trace,
+            tracks,
             recording,
             live,
             view,
@@ -237,6 +252,8 @@ fn open(ctx: &Ctx<'_>, mut endpoints: NetworkConfig) -> Result<Session, NetworkE
 /// What the loop owns.
 struct Loop {
     reports: Consumer<SiteReport>,
+    /// This site's tool-track publisher and physics' tracks, if the method exchanges tools.
+    tracks: Option<(TrackPublish, Consumer<ToolTrack>)>,
     trace: Consumer<TraceRecord>,
     recording: Recording,
     /// The newest sample for live viewers.
@@ -265,11 +282,18 @@ fn serve(
         let mut presence = Presence::declare(session, name, site)?;
         receive::join_from_current(session, name, receiver, clocks);
         let states = receive::subscribe(session, name)?;
+        let tracks = match lp.tracks {
+            Some(_) => Some(receive::subscribe_tracks(session, name)?),
+            None => None,
+        };
         publish.serve_current(session, name, site)?;
         let _clock = clock::serve(session, name, site)?;
         // Every declaration is made before the threads start: an error returns before anything
         // would wait for `stop`.
         scope.spawn(move || receive::deliver(&states, receiver, stop));
+        if let Some(t) = tracks {
+            scope.spawn(move || receive::deliver_tracks(&t, receiver, stop));
+        }
         scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
         scope.spawn(move || clocks.run(stop));
         scope.spawn(move || clocks.run_launcher(stop));
@@ -331,11 +355,15 @@ impl Loop {
         if let Some(m) = publish.newest(&mut self.reports) {
             self.recording.write(|w| w.published(&m));
         }
+        if let Some((p, ring)) = &mut self.tracks {
+            p.newest(ring);
+        }
         let now = monotonic_ns();
         let (log, peers) = {
             let mut rx = lock(receiver);
             rx.retry_waiting();
             rx.release_due(now);
+            rx.release_tracks(now);
             rx.check_lost(now);
             (
                 std::mem::take(&mut rx.log),

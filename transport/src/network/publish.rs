@@ -6,7 +6,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use coop_rt::msg::SiteReport;
+use coop_rt::msg::{SiteReport, ToolTrack};
 use coop_rt::shm::Consumer;
 use coop_rt::timer::monotonic_ns;
 use zenoh::pubsub::Publisher;
@@ -134,6 +134,59 @@ impl Publish {
         });
         *lock(&self.last) = Some(bytes);
         put
+    }
+}
+
+/// This site's tool-track key (methods that exchange tools): each track is put as it comes, at
+/// the state's QoS. Only the newest waiting one: a track repeats the last 256 ticks, so a newer
+/// one holds everything an older one said.
+pub(super) struct TrackPublish {
+    publisher: Publisher<'static>,
+    /// Tracks published.
+    pub(super) published: u64,
+    /// Tracks not published: replaced by a newer one, or stale.
+    pub(super) stale_skipped: u64,
+}
+
+impl TrackPublish {
+    /// Declares `site`'s tool-track publisher.
+    pub(super) fn declare(
+        session: &Session,
+        session_name: &str,
+        site: &str,
+    ) -> Result<Self, NetworkError> {
+        let publisher = session
+            .declare_publisher(keys::tool(session_name, 0, site))
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::RealTime)
+            .express(true)
+            .wait()
+            .map_err(NetworkError::declare("tool track publisher"))?;
+        Ok(Self {
+            publisher,
+            published: 0,
+            stale_skipped: 0,
+        })
+    }
+
+    /// Publishes the newest track in `tracks`, if there is a fresh one.
+    pub(super) fn newest(&mut self, tracks: &mut Consumer<ToolTrack>) {
+        let Ok(newest) = tracks.pop_newest() else {
+            return;
+        };
+        self.stale_skipped += newest.skipped;
+        if monotonic_ns().saturating_sub(newest.value.t_ns) > STALE_REPORT_NS {
+            self.stale_skipped += 1;
+            return;
+        }
+        if self
+            .publisher
+            .put(wire::encode_track(&newest.value))
+            .wait()
+            .is_ok()
+        {
+            self.published += 1;
+        }
     }
 }
 

@@ -9,7 +9,7 @@
 use std::sync::Mutex;
 use std::time::Duration;
 
-use coop_rt::msg::SiteReport;
+use coop_rt::msg::{SiteReport, ToolTrack};
 use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, REFUSED_REASONS};
 use coop_rt::shm::Producer;
 use coop_rt::sync::{AtomicU64, Ordering};
@@ -64,6 +64,20 @@ pub(super) struct Receiver<'a> {
     /// Per site: its newest message that arrived before its clock offset was known.
     waiting: Vec<Option<Waiting>>,
     held: u64,
+    /// Tool tracks (methods that exchange tools), if this station takes them.
+    pub(super) tracks: Option<TrackIn>,
+}
+
+/// The receive side of tool tracks: checked by the same rules and counters as states
+/// ([`admit::Inbound::check_track`]), delayed by their own emulated links when the station
+/// emulates (the same law and seed as its states'), handed to physics through the track ring.
+pub(super) struct TrackIn {
+    ring: Producer<ToolTrack>,
+    emulator: Option<Emulator<ToolTrack>>,
+    /// Per site: its newest track that arrived before its clock offset was known.
+    waiting: Vec<Option<Vec<u8>>>,
+    /// Tracks handed to physics.
+    pub(super) received: u64,
 }
 
 /// A message held until its sender's clock offset is known.
@@ -107,7 +121,105 @@ impl<'a> Receiver<'a> {
             peer_log: Vec::new(),
             waiting: (0..sites.len()).map(|_| None).collect(),
             held: 0,
+            tracks: None,
         }
+    }
+
+    /// Takes the other sites' tool tracks too, handing them over into `ring`.
+    pub(super) fn take_tracks(&mut self, ring: Producer<ToolTrack>, emulation: Option<&Emulation>) {
+        self.tracks = Some(TrackIn {
+            ring,
+            emulator: emulation.map(|e| Emulator::new(e, self.sites.len(), self.me)),
+            waiting: vec![None; self.sites.len()],
+            received: 0,
+        });
+    }
+
+    /// A tool track on `key`.
+    pub(super) fn on_track(&mut self, key: &str, bytes: &[u8]) {
+        let now = monotonic_ns();
+        let offsets = self.offsets();
+        let epoch = self.control.epoch();
+        let Some(tr) = self.tracks.as_mut() else {
+            return;
+        };
+        let a = match self
+            .inbound
+            .check_track(keys::site_of(key), bytes, now, &offsets)
+        {
+            Ok(a) => a,
+            Err(Refusal::NoOffset { site }) => {
+                // As a state: the newest is held until its sender's time can be read.
+                tr.waiting[site] = Some(bytes.to_vec());
+                return;
+            }
+            Err(e) => return self.refuse(key, &e),
+        };
+        if a.site == self.me {
+            return;
+        }
+        tr.waiting[a.site] = None;
+        let release = match &mut tr.emulator {
+            Some(emu) => match emu.arrival(a.site, a.track.t_ns, epoch) {
+                Some(at) => at,
+                None => {
+                    self.emulated_lost += 1;
+                    self.control
+                        .network
+                        .emulated_lost
+                        .store(self.emulated_lost, Ordering::Relaxed);
+                    return;
+                }
+            },
+            None => now,
+        };
+        match &mut tr.emulator {
+            Some(emu) if release > now => emu.hold(release, a.track),
+            _ => self.hand_over_track(a.track, now),
+        }
+    }
+
+    /// Hands over the held tracks the emulated links have delivered by `now`, and checks again
+    /// those held for their sender's clock offset.
+    pub(super) fn release_tracks(&mut self, now: u64) {
+        let offsets = self.offsets();
+        let Some(tr) = self.tracks.as_mut() else {
+            return;
+        };
+        let mut retry: Vec<(usize, Vec<u8>)> = Vec::new();
+        for (j, known) in offsets.iter().enumerate() {
+            if let (Some(_), Some(b)) = (known, tr.waiting.get_mut(j).and_then(Option::take)) {
+                retry.push((j, b));
+            }
+        }
+        let mut due = Vec::new();
+        while let Some(t) = tr.emulator.as_mut().and_then(|e| e.pop_due(now)) {
+            due.push(t);
+        }
+        for (j, b) in retry {
+            let key = keys::tool("", 0, &self.sites[j]);
+            self.on_track(&key, &b);
+        }
+        for t in due {
+            self.hand_over_track(t, now);
+        }
+    }
+
+    fn hand_over_track(&mut self, t: ToolTrack, now: u64) {
+        let from = t.site as usize;
+        if let Err(e) = self.inbound.age_ok(from, t.t_ns, now) {
+            let key = format!("{}'s tool track, at hand-over", self.sites[from]);
+            return self.refuse(&key, &e);
+        }
+        let Some(tr) = self.tracks.as_mut() else {
+            return;
+        };
+        if tr.ring.push(t).is_err() {
+            self.control.network.drops.add(Ring::Remote, 1);
+            return;
+        }
+        tr.received += 1;
+        self.heard(from, now);
     }
 
     /// Checks again the held messages whose sender's clock offset is now known.
@@ -381,6 +493,30 @@ pub(super) fn subscribe(session: &Session, session_name: &str) -> Result<States,
         .with(zenoh::handlers::FifoChannel::new(1024))
         .wait()
         .map_err(NetworkError::declare("subscriber"))
+}
+
+/// The other sites' tool tracks, queued by zenoh for [`deliver_tracks`].
+pub(super) fn subscribe_tracks(
+    session: &Session,
+    session_name: &str,
+) -> Result<States, NetworkError> {
+    session
+        .declare_subscriber(keys::all_tools(session_name, 0))
+        .allowed_origin(Locality::Remote)
+        .with(zenoh::handlers::FifoChannel::new(1024))
+        .wait()
+        .map_err(NetworkError::declare("tool track subscriber"))
+}
+
+/// The tool tracks' delivery thread, as [`deliver`] is the states'.
+pub(super) fn deliver_tracks(tracks: &States, rx: &Mutex<Receiver<'_>>, stop: &AtomicU64) {
+    while stop.load(Ordering::Relaxed) == 0 {
+        match tracks.recv_timeout(Duration::from_millis(50)) {
+            Ok(Some(s)) => lock(rx).on_track(s.key_expr().as_str(), &s.payload().to_bytes()),
+            Ok(None) => {}
+            Err(_) => break,
+        }
+    }
 }
 
 /// The delivery thread: each state is handled the moment zenoh hands it over, until `stop`.

@@ -1,0 +1,194 @@
+//! Two stations' physics loops running `timewarp` over real shared-memory rings, stepped with
+//! injected time on the session's tick grid (no sleeping, no timing assertions): each loop's own
+//! tool tracks go out through its track ring, the test carries them to the other loop's track ring
+//! 30 ms later (the network's part), the loops roll back where a received position differs from the
+//! prediction, both copies agree bit for bit at every confirmed frontier compared, and the
+//! physics steps, rollbacks included, allocate nothing.
+
+use std::collections::VecDeque;
+
+use coop_model::body::{BodyState, Vec3};
+use coop_model::method::ObjectCopy;
+use coop_model::scenario::{Scenario, SiteSpec};
+use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack};
+use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
+use coop_rt::shm::{Consumer, Producer, RingSegment, SegmentName};
+
+mod common;
+use common::counting_alloc::allocations_during;
+
+const MS: u64 = 1_000_000;
+/// The session's time 0, ns (the grid's origin at both sites).
+const EPOCH: u64 = 1_000 * MS;
+/// The emulated one-way delay of the test's "network", ms.
+const DELAY_MS: u64 = 30;
+
+fn name(tag: &str, what: &str) -> SegmentName {
+    SegmentName::new(&format!("tw{}", std::process::id()), tag, what).expect("name")
+}
+
+/// One site's loop with its rings (the segments kept alive with it).
+struct Site {
+    physics: PhysicsLoop,
+    tool_in: Producer<ToolSample>,
+    tracks_out: Consumer<ToolTrack>,
+    tracks_in: Producer<ToolTrack>,
+    _objects: Consumer<ObjectSample>,
+    _reports: Consumer<SiteReport>,
+    _segments: Segments,
+}
+
+/// A site's rings, kept alive with it.
+type Segments = (
+    RingSegment<ToolSample>,
+    RingSegment<ObjectSample>,
+    RingSegment<SiteReport>,
+    RingSegment<SiteReport>,
+    RingSegment<ToolTrack>,
+    RingSegment<ToolTrack>,
+);
+
+fn scenario() -> Scenario {
+    let mut sc = Scenario::default();
+    sc.object.start_m = [0.0, 0.0, 0.01];
+    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+    sc.world.planes[0].offset_m = 0.0;
+    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    sc.network.delay_min_ms = DELAY_MS as f64;
+    sc.network.delay_max_ms = DELAY_MS as f64;
+    sc.network.jitter_ms = 0.0;
+    sc.site.clear();
+    for n in ["user1", "user2"] {
+        sc.site.push(SiteSpec {
+            name: n.into(),
+            physics_rate_hz: 1000.0,
+            report_rate_hz: 100.0,
+            tool_radius_m: 0.005,
+            ..SiteSpec::default()
+        });
+    }
+    sc
+}
+
+fn site(sc: &Scenario, i: usize) -> Site {
+    let tag = format!("s{i}");
+    let tool = RingSegment::<ToolSample>::create(&name(&tag, "tool"), 64).expect("tool");
+    let obj = RingSegment::<ObjectSample>::create(&name(&tag, "obj"), 64).expect("obj");
+    let rep = RingSegment::<SiteReport>::create(&name(&tag, "rep"), 64).expect("rep");
+    let rem = RingSegment::<SiteReport>::create(&name(&tag, "rem"), 64).expect("rem");
+    let tko = RingSegment::<ToolTrack>::create(&name(&tag, "tko"), 64).expect("tko");
+    let tki = RingSegment::<ToolTrack>::create(&name(&tag, "tki"), 64).expect("tki");
+    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m)));
+    let mut physics = PhysicsLoop::new(
+        i,
+        Box::new(sc.timewarp(i, &copy)),
+        sc.world(),
+        copy,
+        PhysicsRings {
+            tools: tool.consumer().expect("c"),
+            remote: rem.consumer().expect("c"),
+            objects: obj.producer().expect("p"),
+            reports: rep.producer().expect("p"),
+            trace: None,
+            tracks_out: Some(tko.producer().expect("p")),
+            tracks_in: Some(tki.consumer().expect("c")),
+        },
+        PhysicsTiming {
+            period_ns: MS,
+            report_period_ns: 10 * MS,
+            start_ns: EPOCH - 50 * MS,
+            trace_period_ns: 5 * MS,
+            report_seq: 0,
+        },
+    );
+    physics.set_tick_origin(EPOCH);
+    Site {
+        physics,
+        tool_in: tool.producer().expect("p"),
+        tracks_out: tko.consumer().expect("c"),
+        tracks_in: tki.producer().expect("p"),
+        _objects: obj.consumer().expect("c"),
+        _reports: rep.consumer().expect("c"),
+        _segments: (tool, obj, rep, rem, tko, tki),
+    }
+}
+
+/// Where site `i`'s tool is at session time `s`: both squeeze the disk from either side, then
+/// carry it along y.
+fn tool_at(i: usize, s: f64) -> Vec3 {
+    let side = if i == 0 { -1.0 } else { 1.0 };
+    let squeeze = (s * 0.02).min(0.008);
+    let carry = (s - 0.8).max(0.0) * 0.05;
+    Vec3::new(side * (0.045 - squeeze), carry, 0.01)
+}
+
+#[test]
+fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirmed_ticks() {
+    let sc = scenario();
+    let mut sites = [site(&sc, 0), site(&sc, 1)];
+    // Tracks in flight: (delivery time, to site, track).
+    let mut wire: VecDeque<(u64, usize, ToolTrack)> = VecDeque::with_capacity(1024);
+    let mut allocations = 0;
+    // 50 ms before time 0 (the copies hold), then 1.5 s, with a late period now and then.
+    let mut now = EPOCH - 50 * MS;
+    let end = EPOCH + 1500 * MS;
+    let mut k = 0u64;
+    let mut last = now;
+    while now < end {
+        last = now;
+        for (i, s) in sites.iter_mut().enumerate() {
+            let t_s = now.saturating_sub(EPOCH) as f64 * 1e-9;
+            let p = tool_at(i, t_s);
+            let sample = ToolSample {
+                t_ns: now,
+                tool_pos: [p.x, p.y, p.z],
+                ..ToolSample::default()
+            };
+            s.tool_in.push(sample).expect("tool ring has room");
+            allocations += allocations_during(|| s.physics.step(now));
+            while let Ok(t) = s.tracks_out.pop() {
+                wire.push_back((now + DELAY_MS * MS, 1 - i, t));
+            }
+        }
+        while wire.front().is_some_and(|&(at, _, _)| at <= now) {
+            let (_, to, t) = wire.pop_front().expect("front");
+            sites[to].tracks_in.push(t).expect("track ring has room");
+        }
+        k += 1;
+        // Every 97th period is 3 ms late: the loop catches up on the grid.
+        now += if k.is_multiple_of(97) { 3 * MS } else { MS };
+    }
+    assert_eq!(
+        allocations, 0,
+        "physics steps (rollbacks included) allocated"
+    );
+    for (i, s) in sites.iter().enumerate() {
+        let st = s.physics.timewarp_stats().expect("timewarp has stats");
+        let tr = s.physics.tracks;
+        assert_eq!(
+            s.physics.ticks(),
+            (last - EPOCH) / MS + 1,
+            "site {i} is on the grid: every tick up to the last period's stepped ({tr:?})"
+        );
+        assert!(tr.late_periods > 0 && tr.caught_up_ticks > 0, "{tr:?}");
+        assert!(
+            tr.received > 100 && tr.rejected == 0 && tr.drops == 0,
+            "{tr:?}"
+        );
+        assert!(st.rollbacks > 10, "site {i} rolled back: {st:?}");
+        assert!(st.hash_checks > 50, "site {i} compared hashes: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
+        assert!(
+            s.physics.copy().state.pos.y > 0.01,
+            "site {i}: the squeezed disk was carried: {:?}",
+            s.physics.copy().state.pos
+        );
+    }
+    let (a, b) = (sites[0].physics.copy().state, sites[1].physics.copy().state);
+    assert!(
+        (a.pos - b.pos).norm() < 0.01,
+        "the copies agree within 10 mm: {:?} vs {:?}",
+        a.pos,
+        b.pos
+    );
+}
