@@ -111,6 +111,19 @@ impl Reaped {
 
 impl Drop for Reaped {
     fn drop(&mut self) {
+        // A failing test (unwinding) first asks the child to stop (SIGTERM), so a station removes
+        // its shared-memory segments as it does on Ctrl-C; SIGKILL after 3 s, or at once otherwise.
+        if std::thread::panicking() {
+            if let Some(c) = self.0.as_ref() {
+                if let Ok(pid) = i32::try_from(c.id()) {
+                    let _ = nix::sys::signal::kill(
+                        nix::unistd::Pid::from_raw(pid),
+                        nix::sys::signal::Signal::SIGTERM,
+                    );
+                }
+            }
+            let _ = self.wait_timeout(Duration::from_secs(3));
+        }
         if let Some(mut c) = self.0.take() {
             let _ = c.kill();
             let _ = c.wait();

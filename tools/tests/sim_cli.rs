@@ -162,7 +162,9 @@ fn zero_delay_both_methods_match_the_reference() {
     let sc =
         scenario_file::load(&repo().join("scenarios/zero-delay.toml")).expect("zero-delay.toml");
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    for method in MethodName::ALL {
+    // The two state-exchanging methods (`MethodName::ALL` also holds timewarp since stations run
+    // it: it predicts the partner's tool between reports, and the sweep tests judge it).
+    for method in [MethodName::Naive, MethodName::Paper] {
         let m = metrics::compute(
             &sc,
             &sim::run(&sc, Mode::Distributed(method), &mut |_| {}),
