@@ -17,7 +17,7 @@ use coop_actors::station::config::StartMode;
 use coop_model::scenario::MethodName;
 use coop_tests::{
     ip, paper_with_scripts, shifted_clock, shm_entries, station_config, time_namespaces_work,
-    wait_until, Namespaces, Reaped, StationConfig,
+    wait_for, wait_until, Namespaces, Reaped, StationConfig,
 };
 use coop_transport::network::{Mode, Tls};
 
@@ -179,10 +179,14 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
             (s.network.refused.get("length").copied().unwrap_or(0) > 0).then_some(s)
         },
     );
-    let rs = wait_until("the router counting its refusals", LIMIT, || {
-        let s = coop_actors::router::read_status(&resolved).ok()?;
+    let rs = wait_for("the router counting its refusals", LIMIT, || {
+        let s = coop_actors::router::read_status(&resolved).map_err(|e| e.to_string())?;
         let on = |k: String| s.recent_refusals.iter().any(|r| r.key == k);
-        (on(coop_transport::keys::state(&session, 0, "user1"))).then_some(s)
+        if on(coop_transport::keys::state(&session, 0, "user1")) {
+            Ok(s)
+        } else {
+            Err(format!("router status: {s}"))
+        }
     });
     assert!(rs.refused > 0 && rs.access_control, "{rs}");
     // What it said for user1 never reached user2: user2 counts the impostor's garbage on its
