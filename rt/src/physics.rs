@@ -238,26 +238,7 @@ impl PhysicsLoop {
                 continue;
             }
             match r.report() {
-                Some((from, msg)) if from != self.site => {
-                    let before = self.copy;
-                    let adopted =
-                        self.method
-                            .receive(&self.world, &mut self.copy, from, &msg, now_s);
-                    if !sane(&self.world, &self.copy) {
-                        // Whatever arrived, the copy never becomes NaN or infinite: keep it.
-                        self.copy = before;
-                        self.nonfinite_kept += 1;
-                        continue;
-                    }
-                    if let Some(a) = adopted {
-                        self.adoptions += 1;
-                        let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
-                        rec.from = from as u64;
-                        rec.jump_m = a.jump.norm();
-                        rec.age_s = a.age_s;
-                        self.push_trace(rec);
-                    }
-                }
+                Some((from, msg)) if from != self.site => self.take(from, &msg, now_ns, now_s),
                 _ => self.rejected += 1,
             }
         }
@@ -340,28 +321,33 @@ impl PhysicsLoop {
         while let Some(Ok(t)) = self.tracks_in.as_mut().map(Consumer::pop) {
             self.tracks.received += 1;
             match t.report() {
-                Some((from, msg)) if from != self.site => {
-                    let before = self.copy;
-                    let adopted =
-                        self.method
-                            .receive(&self.world, &mut self.copy, from, &msg, now_s);
-                    if !sane(&self.world, &self.copy) {
-                        self.copy = before;
-                        self.nonfinite_kept += 1;
-                        continue;
-                    }
-                    if let Some(a) = adopted {
-                        // A rollback moved the copy: traced as an adoption (jump and depth).
-                        self.adoptions += 1;
-                        let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
-                        rec.from = from as u64;
-                        rec.jump_m = a.jump.norm();
-                        rec.age_s = a.age_s;
-                        self.push_trace(rec);
-                    }
-                }
+                Some((from, msg)) if from != self.site => self.take(from, &msg, now_ns, now_s),
                 _ => self.tracks.rejected += 1,
             }
+        }
+    }
+
+    /// Hands a valid report (a state or a tool track) from site `from` to the method. Whatever
+    /// arrived, the copy never becomes NaN or infinite: such a result is undone and counted. A
+    /// jump (an adoption, or a rollback that moved the copy) is counted and traced.
+    fn take(&mut self, from: usize, msg: &Report, now_ns: u64, now_s: f64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let before = self.copy;
+        let adopted = self
+            .method
+            .receive(&self.world, &mut self.copy, from, msg, now_s);
+        if !sane(&self.world, &self.copy) {
+            self.copy = before;
+            self.nonfinite_kept += 1;
+            return;
+        }
+        if let Some(a) = adopted {
+            self.adoptions += 1;
+            let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
+            rec.from = from as u64;
+            rec.jump_m = a.jump.norm();
+            rec.age_s = a.age_s;
+            self.push_trace(rec);
         }
     }
 
