@@ -52,6 +52,22 @@ pub fn next_wake(period: u64, last: u64, now: u64) -> u64 {
     }
 }
 
+/// A publisher at the states' QoS: dropped rather than queued under congestion (a newer report
+/// replaces it), real-time priority, sent at once (`express`, no batching).
+fn realtime_publisher(
+    session: &Session,
+    key: String,
+    what: &'static str,
+) -> Result<Publisher<'static>, NetworkError> {
+    session
+        .declare_publisher(key)
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::RealTime)
+        .express(true)
+        .wait()
+        .map_err(NetworkError::declare(what))
+}
+
 /// This site's state key: the publisher, and the queryable answering with the last state put.
 pub(super) struct Publish {
     publisher: Publisher<'static>,
@@ -70,13 +86,8 @@ impl Publish {
         session_name: &str,
         site: &str,
     ) -> Result<Self, NetworkError> {
-        let publisher = session
-            .declare_publisher(keys::state(session_name, 0, site))
-            .congestion_control(CongestionControl::Drop)
-            .priority(Priority::RealTime)
-            .express(true)
-            .wait()
-            .map_err(NetworkError::declare("publisher"))?;
+        let publisher =
+            realtime_publisher(session, keys::state(session_name, 0, site), "publisher")?;
         Ok(Self {
             publisher,
             last: Arc::default(),
@@ -155,13 +166,11 @@ impl TrackPublish {
         session_name: &str,
         site: &str,
     ) -> Result<Self, NetworkError> {
-        let publisher = session
-            .declare_publisher(keys::tool(session_name, 0, site))
-            .congestion_control(CongestionControl::Drop)
-            .priority(Priority::RealTime)
-            .express(true)
-            .wait()
-            .map_err(NetworkError::declare("tool track publisher"))?;
+        let publisher = realtime_publisher(
+            session,
+            keys::tool(session_name, 0, site),
+            "tool track publisher",
+        )?;
         Ok(Self {
             publisher,
             published: 0,
