@@ -65,9 +65,11 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
         [
             STATION.to_owned(),
             "run".into(),
-            // Long enough for the checks below on a loaded machine; the stations stop by themselves.
+            // A bound, not the test's length: the test stops both stations once its checks hold
+            // (a fixed 10 s raced a slow start on a loaded CI machine: the copies came to rest
+            // after the stations had stopped).
             "--duration-s".into(),
-            "10".into(),
+            "120".into(),
             "--config".into(),
             cfg.display().to_string(),
         ]
@@ -113,18 +115,20 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
         Some((t_s, s.pos, s.vel))
     };
     let speed = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    // What the copies looked like while both stations still answered: once they stop, "no status"
+    // alone would hide why the condition never held.
+    let mut seen = String::from("nothing yet");
     let (sa, sb, (pa, pb)) = wait_for("both copies at rest after the push back", LIMIT, || {
-        let read = |me: &str| status(me).ok_or_else(|| format!("no status from {me} (stopped?)"));
+        let read = |me: &str| {
+            status(me).ok_or_else(|| format!("no status from {me} (stopped?); before that: {seen}"))
+        };
         let (sa, sb) = (read("user1")?, read("user2")?);
         let (na, nb) = (
             newest("user1", sa.network.epoch_ns).ok_or("no state from user1")?,
             newest("user2", sb.network.epoch_ns).ok_or("no state from user2")?,
         );
         let rest = |n: &(f64, [f64; 3], [f64; 3])| n.0 > 4.5 && speed(n.2) < 0.002;
-        if rest(&na) && rest(&nb) && sa.physics.adoptions > 10 && sb.physics.adoptions > 10 {
-            return Ok((sa, sb, (na.1, nb.1)));
-        }
-        Err(format!(
+        seen = format!(
             "user1 at {:.2} s: {:?} at {:.4} m/s, {} adoptions; user2 at {:.2} s: {:?} at {:.4} m/s, {} adoptions",
             na.0,
             na.1,
@@ -134,7 +138,12 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
             nb.1,
             speed(nb.2),
             sb.physics.adoptions,
-        ))
+        );
+        if rest(&na) && rest(&nb) && sa.physics.adoptions > 10 && sb.physics.adoptions > 10 {
+            eprintln!("both at rest: {seen}");
+            return Ok((sa, sb, (na.1, nb.1)));
+        }
+        Err(seen.clone())
     });
     for s in [&sa, &sb] {
         let r = &s.network.refused;
@@ -151,11 +160,27 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
     let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
     assert!(pa[0] > -0.04, "the disk was pushed: {pa:?}");
     assert!(apart < 0.002, "copies {apart} m apart: {pa:?} vs {pb:?}");
+    // Stop both as Ctrl-C would: station A directly, station B through `unshare`'s child (the
+    // station itself; `unshare --fork` exits with its status).
+    for pid in [a.pid(), children(b.pid()).first().copied().unwrap_or(0)] {
+        assert_ne!(pid, 0, "station B runs under unshare");
+        let _ = nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid as i32),
+            nix::sys::signal::Signal::SIGTERM,
+        );
+    }
     for s in [&mut a, &mut b] {
-        let st = s
-            .wait_timeout(LIMIT)
-            .expect("stopped at the end of its duration");
+        let st = s.wait_timeout(LIMIT).expect("stopped on SIGTERM");
         assert!(st.success(), "a station stopped cleanly: {st}");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The pids of `pid`'s children (empty if it has none or is gone).
+fn children(pid: u32) -> Vec<u32> {
+    std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+        .unwrap_or_default()
+        .split_whitespace()
+        .filter_map(|p| p.parse().ok())
+        .collect()
 }
