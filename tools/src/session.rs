@@ -641,6 +641,7 @@ pub fn run_from_recordings(
                 age_s: a.age_s,
                 force_step_n: 0.0,
                 energy_j: f64::NAN,
+                work_j: f64::NAN,
                 clipped_j: f64::NAN,
             });
         }

@@ -42,8 +42,11 @@ pub struct Row {
     pub max_force_step_n: f64,
     /// Servo ticks whose displayed-force step exceeded the JND, all sites.
     pub force_steps_over_jnd: u64,
-    /// Energy corrections gave the copies, all sites, J.
+    /// Energy corrections gave the copies beyond the work of the corrected history's forces, all
+    /// sites, J: what no user and no wall put in.
     pub correction_energy_j: f64,
+    /// Mechanical-energy change at corrections, all sites, J (a remote push learned late counts).
+    pub correction_energy_gross_j: f64,
     /// The largest displayed-force step beyond the displayed object's own contact change (the
     /// display's step limiter bounds it), any site, N (null: the display stages are off).
     pub max_correction_force_step_n: f64,
@@ -88,6 +91,7 @@ impl Row {
             max_force_step_n: m.max_force_step_n,
             force_steps_over_jnd: m.force_steps_over_jnd,
             correction_energy_j: m.correction_energy_j,
+            correction_energy_gross_j: m.correction_energy_gross_j,
             max_correction_force_step_n: m.max_correction_force_step_n,
             display_limited_ticks: m.display_limited_ticks,
             display_energy_max_j: m.display_energy_max_j,
@@ -291,7 +295,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies; bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

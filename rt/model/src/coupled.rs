@@ -311,6 +311,7 @@ impl Consistency for Coupled {
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
+            work_j: 0.0,
             age_s: now_s - r.t_s,
             clipped_j,
         };

@@ -143,6 +143,11 @@ pub struct Adoption {
     pub jump: Vec3,
     /// Mechanical energy after minus before, J.
     pub energy_j: f64,
+    /// The work the forces (users' and environment's) did in the corrected history minus what
+    /// they did in the one it replaced, J: the part of `energy_j` some force accounts for (a
+    /// remote push learned late). 0 where the method does not re-simulate (an adopted state or a
+    /// pull): its whole energy change is the correction's own.
+    pub work_j: f64,
     /// How far the state was extrapolated, s.
     pub age_s: f64,
     /// Energy the no-gain bound ([`crate::tank::bound_gain`]) took out of the correction, J (0: it
@@ -613,6 +618,7 @@ impl Consistency for Paper {
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
+            work_j: 0.0,
             age_s: now_s - t_s,
             clipped_j,
         };

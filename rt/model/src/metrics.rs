@@ -84,8 +84,12 @@ pub struct SiteMetrics {
     pub max_force_step_n: f64,
     /// Servo ticks whose displayed-force change exceeded the JND ([`force_jnd_n`]).
     pub force_steps_over_jnd: u64,
-    /// Energy corrections gave this copy (positive parts summed), J (NaN: not known).
+    /// Energy corrections gave this copy beyond what the forces of the corrected history did
+    /// (positive parts summed), J (NaN: not known): what no user and no wall put in.
     pub correction_energy_j: f64,
+    /// Mechanical-energy change at corrections, positive parts summed, J (NaN: not known): with
+    /// a remote push learned late, the energy that push gave the object.
+    pub correction_energy_gross_j: f64,
     /// Servo ticks at which the display's step limiter held the force back ([`crate::display`]).
     pub display_limited_ticks: u64,
     /// The largest displayed-force step beyond the displayed object's own contact change, N (NaN:
@@ -140,8 +144,10 @@ pub struct Metrics {
     pub max_force_step_n: f64,
     /// Displayed-force steps over the JND, all sites.
     pub force_steps_over_jnd: u64,
-    /// Energy corrections gave the copies, all sites, J (NaN: not known).
+    /// Energy corrections gave the copies beyond the forces' work, all sites, J (NaN: not known).
     pub correction_energy_j: f64,
+    /// Mechanical-energy change at corrections, all sites, J (NaN: not known).
+    pub correction_energy_gross_j: f64,
     /// Servo ticks at which a display's step limiter held the force back, all sites.
     pub display_limited_ticks: u64,
     /// The largest displayed-force step beyond a displayed object's own contact change, any site,
@@ -298,7 +304,14 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                     steps.max_step_n
                 },
                 force_steps_over_jnd: steps.over_jnd,
-                correction_energy_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
+                correction_energy_j: sum_known(
+                    adoptions
+                        .iter()
+                        .map(|a| positive_part(a.energy_j - a.work_j)),
+                ),
+                correction_energy_gross_j: sum_known(
+                    adoptions.iter().map(|a| positive_part(a.energy_j)),
+                ),
                 display_limited_ticks: steps.display.ticks_limited,
                 max_correction_force_step_n: if steps.servo_ticks == 0 || !scenario.display.enabled
                 {
@@ -353,6 +366,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         max_force_step_n: max_known(sites.iter().map(|s| s.max_force_step_n)),
         force_steps_over_jnd: sites.iter().map(|s| s.force_steps_over_jnd).sum(),
         correction_energy_j: sum_known(sites.iter().map(|s| s.correction_energy_j)),
+        correction_energy_gross_j: sum_known(sites.iter().map(|s| s.correction_energy_gross_j)),
         display_limited_ticks: sites.iter().map(|s| s.display_limited_ticks).sum(),
         max_correction_force_step_n: max_known(sites.iter().map(|s| s.max_correction_force_step_n)),
         display_energy_max_j: max_known(sites.iter().map(|s| s.display_energy_max_j)),

@@ -86,6 +86,9 @@ pub struct AdoptionEvent {
     pub force_step_n: f64,
     /// Mechanical energy the adoption gave the copy (negative: took), J; NaN if not known.
     pub energy_j: f64,
+    /// The part of it the forces' work in the corrected history accounts for
+    /// ([`crate::method::Adoption::work_j`]), J; NaN if not known.
+    pub work_j: f64,
     /// Energy the no-gain bound took out of it ([`crate::tank`]), J; 0: it fitted; NaN if not known.
     pub clipped_j: f64,
 }
@@ -323,6 +326,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     age_s: a.age_s,
                     force_step_n: 0.0,
                     energy_j: a.energy_j,
+                    work_j: a.work_j,
                     clipped_j: a.clipped_j,
                 });
             }

@@ -424,12 +424,16 @@ impl Consistency for TimeWarp {
         }
         let mut adoption = None;
         if let Some(from_tick) = self.dirty_from.take() {
-            let before = copy.state;
+            let before = *copy;
             if self.rollback(world, copy, from_tick) > 0 {
                 let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+                // Every force's work so far, as the copy's account has it (restored with the
+                // snapshot and re-accumulated by the re-simulation).
+                let w = |c: &ObjectCopy| c.energy.own_j + c.energy.remote_j + c.energy.env_j;
                 adoption = Some(Adoption {
-                    jump: before.pos - copy.state.pos,
-                    energy_j: e(&copy.state) - e(&before),
+                    jump: before.state.pos - copy.state.pos,
+                    energy_j: e(&copy.state) - e(&before.state),
+                    work_j: w(copy) - w(&before),
                     age_s: (self.now_tick - from_tick) as f64 * self.dt,
                     clipped_j: 0.0,
                 });
