@@ -3,6 +3,8 @@
 //! (never leaked) when a test fails.
 #![forbid(unsafe_code)]
 
+pub mod forgery;
+
 pub use coop_actors::station::config::StationConfig;
 use coop_rt::sync::{AtomicU64, Ordering};
 use std::process::{Child, Command, Stdio};

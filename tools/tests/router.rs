@@ -15,10 +15,13 @@ use std::time::Duration;
 
 use coop_actors::station::config::StartMode;
 use coop_model::scenario::MethodName;
+use coop_tests::forgery::{self, FORGED_SEQ};
 use coop_tests::{
     ip, paper_with_scripts, shifted_clock, shm_entries, station_config, time_namespaces_work,
     wait_for, wait_until, Namespaces, Reaped, StationConfig,
 };
+use coop_transport::admit::{Bounds, Inbound};
+use coop_transport::keys;
 use coop_transport::network::{Mode, Tls};
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
@@ -81,6 +84,9 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
     };
     let dir = std::env::temp_dir().join(format!("coop-router-{pid}"));
     std::fs::create_dir_all(&dir).expect("dir");
+    let scenario = dir.join("hold.toml");
+    std::fs::write(&scenario, push_catch_and_hold()).expect("scenario");
+    let sc = coop_actors::scenario_file::load(&scenario).expect("scenario");
     let session = format!("nr{pid}");
     let certs = certs(&dir, &session);
     let pem = |n: &str| certs.join(format!("{n}.pem"));
@@ -91,8 +97,9 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
 
     let station = |me: &'static str, router_addr: &'static str| {
         let (cert, k, ca, acl) = (pem(me), key(me), certs.join("ca.pem"), acl.clone());
-        let record = dir.join(format!("{me}.mcap"));
+        let (record, scenario) = (dir.join(format!("{me}.mcap")), scenario.clone());
         move |c: &mut StationConfig| {
+            c.scenario = Some(scenario);
             c.record = Some(record);
             c.network.mode = Mode::Client;
             c.network.connect = vec![format!("tls/{router_addr}:7447")];
@@ -145,31 +152,71 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
         "a clean start through the router refuses nothing: {ra0:?} {rb0:?}"
     );
 
+    // What the impostors say a site's object is: the disk 0.10 m towards the users from where it
+    // starts (inside the world, where the scripts never take it).
+    let index = |site: &str| sc.site.iter().position(|s| s.name == site).expect("a site");
+    let start_m = sc.object.start_m;
+    let forged_pos = [start_m[0], start_m[1] - 0.10, start_m[2]];
+    let forged_arg = format!("{},{},{}", forged_pos[0], forged_pos[1], forged_pos[2]);
+
     // A client without a certificate does not get in (the TLS handshake fails).
     let nocert = in_ns(&ns.names[1], IMPOSTOR)
         .args(["tls/192.0.2.1:7447"])
         .arg(certs.join("ca.pem"))
-        .args(["-", "-", &session, "user1", "user2"])
+        .args([
+            "-",
+            "-",
+            &session,
+            "user1",
+            "user2",
+            &index("user2").to_string(),
+        ])
+        .arg(&forged_arg)
         .output()
         .expect("no-cert client");
     let said = String::from_utf8_lossy(&nocert.stdout);
     assert_eq!(nocert.status.code(), Some(3), "refused at connect: {said}");
     assert!(said.starts_with("refused:"), "{said}");
 
-    // An impostor holding user2's certificate speaks for user1.
+    // An impostor holding user2's certificate speaks for user1: user1's clock and presence, and
+    // states of user1 that user2's receive checks would take (`forgery`).
+    let user1 = index("user1");
+    let mut inbound = Inbound::new(sites.to_vec(), Bounds::from_scenario(&sc, None));
+    let now = coop_rt::timer::monotonic_ns();
+    let taken = inbound.check(
+        "user1",
+        &forgery::forged_state(user1, now, forged_pos),
+        now,
+        &[Some(0), Some(0)],
+    );
+    assert!(
+        matches!(&taken, Ok(t) if t.report.seq == FORGED_SEQ && t.report.pos == forged_pos),
+        "user2's receive checks would take the forgery (only the router keeps it out): {taken:?}"
+    );
+    let b_before = status("user2").expect("b");
+    let impostor_from_ns = coop_rt::timer::monotonic_ns();
     let imp = in_ns(&ns.names[2], IMPOSTOR)
         .args(["tls/192.0.2.5:7447"])
         .arg(certs.join("ca.pem"))
         .arg(pem("user2"))
         .arg(key("user2"))
-        .args([&session, "user2", "user1"])
+        .args([&session, "user2", "user1", &user1.to_string()])
+        .arg(&forged_arg)
         .output()
         .expect("impostor");
+    // The stations and this test share one CLOCK_MONOTONIC (no time namespace here).
+    let impostor_to_ns = coop_rt::timer::monotonic_ns();
     let said = String::from_utf8_lossy(&imp.stdout);
     assert!(
         imp.status.success() && said.contains("connected") && said.contains("done"),
         "{said}"
     );
+    let impostor_zid = said
+        .split("connected ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .expect("the impostor's zenoh id")
+        .to_owned();
     // Its puts on its own key reach user1 (refused there as garbage): its link worked.
     let a_after = wait_until(
         "user1 refusing the impostor's garbage on user2's key",
@@ -179,19 +226,30 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
             (s.network.refused.get("length").copied().unwrap_or(0) > 0).then_some(s)
         },
     );
-    let rs = wait_for("the router counting its refusals", LIMIT, || {
-        let s = coop_actors::router::read_status(&resolved).map_err(|e| e.to_string())?;
-        let on = |k: String| s.recent_refusals.iter().any(|r| r.key == k);
-        if on(coop_transport::keys::state(&session, 0, "user1")) {
-            Ok(s)
-        } else {
-            Err(format!("router status: {s}"))
-        }
-    });
-    assert!(rs.refused > 0 && rs.access_control, "{rs}");
+    // user1 was not silenced: user2 goes on receiving its states and adopting them.
+    let b_mid = status("user2").expect("b");
+    wait_for(
+        "user2 receiving and adopting user1's states after the impostor",
+        LIMIT,
+        || {
+            let s = status("user2").ok_or("no status")?;
+            let (got, adopted) = (
+                s.network.received.saturating_sub(b_mid.network.received),
+                s.physics.adoptions.saturating_sub(b_mid.physics.adoptions),
+            );
+            if got > 10 && adopted > 0 {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{got} received, {adopted} adopted since the impostor left"
+                ))
+            }
+        },
+    );
     // What it said for user1 never reached user2: user2 counts the impostor's garbage on its
     // own key (200 puts, each arriving at most once) as `length` refusals, and would count the
-    // 200 on user1's key there too. Nothing else is refused.
+    // 200 on user1's key there too, and its forged states as user1's newest (no refusal, but
+    // user1's next genuine ones `stale` until a resynchronisation). Nothing else is refused.
     let b_after = status("user2").expect("b");
     let b_len = b_after.network.refused.get("length").copied().unwrap_or(0);
     assert!(
@@ -200,9 +258,11 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
                 .network
                 .refused
                 .iter()
-                .all(|(r, &n)| *r == "length" || n == 0),
-        "nothing the impostor said for user1 reached user2: {:?}",
-        b_after.network.refused
+                .all(|(r, &n)| *r == "length" || n == 0)
+            && b_after.network.resyncs == 0,
+        "nothing the impostor said for user1 reached user2: refused {:?}, {} resyncs",
+        b_after.network.refused,
+        b_after.network.resyncs
     );
     // user2's view of user1's clock stayed true (the impostor answers an hour ahead).
     let offset = b_after.network.peers[0]
@@ -213,7 +273,52 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
         "user2's offset of user1's clock: {offset} µs"
     );
     assert!(!a_after.network.peers[1].lost && a_after.running);
+
+    // The router refused each of the impostor's claims for user1, by kind and key, and refused
+    // nothing else: every refusal it counted is one of these.
+    let claims = [
+        ("Put (ingress)", keys::state(&session, 0, "user1")),
+        (
+            "Declare Queryable (ingress)",
+            keys::clock(&session, "user1"),
+        ),
+        (
+            "Liveliness Token (ingress)",
+            keys::presence(&session, "user1"),
+        ),
+    ];
+    // A status taken once the impostor's session is gone holds all its refusals.
+    let rs = wait_for("the router counting its refusals", LIMIT, || {
+        let s = coop_actors::router::read_status(&resolved).map_err(|e| e.to_string())?;
+        let refused = |(action, key): &(&str, String)| {
+            s.recent_refusals
+                .iter()
+                .any(|r| r.zid == impostor_zid && r.action == *action && r.key == *key)
+        };
+        let gone = !s.sessions.iter().any(|l| l.zid == impostor_zid);
+        if gone && claims.iter().all(refused) {
+            Ok(s)
+        } else {
+            Err(format!("router status: {s}"))
+        }
+    });
     println!("{rs}");
+    assert!(rs.access_control, "{rs}");
+    let put = rs
+        .recent_refusals
+        .iter()
+        .find(|r| r.action == claims[0].0 && r.key == claims[0].1)
+        .expect("the puts' refusal");
+    assert!(
+        put.count <= 400,
+        "at most the impostor's 200 forged states and 200 garbage puts on user1's key: {rs}"
+    );
+    assert!(
+        rs.recent_refusals.len() == claims.len()
+            && rs.recent_refusals.iter().all(|r| r.zid == impostor_zid)
+            && rs.recent_refusals.iter().map(|r| r.count).sum::<u64>() == rs.refused,
+        "the router refused the impostor's claims for user1 and nothing else: {rs}"
+    );
     assert!(rs.sessions.len() >= 2, "both stations linked: {rs}");
 
     for s in [&sa, &sb] {
@@ -223,15 +328,49 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
         let st = s.wait_timeout(LIMIT).expect("station stopped");
         assert!(st.success(), "a station stopped cleanly: {st}");
     }
-    // user1's recording: every state it handed physics came from user2's physics (none of the
-    // impostor's: garbage never decodes), and its last counters agree.
-    let rec = coop_transport::recording::read(&dir.join("user1.mcap")).expect("recording");
-    assert!(!rec.remote.is_empty(), "user1 received states");
+    // user2's recording: no state of user1 it handed physics carried the forged sequence number
+    // or the forged position; user1's genuine states went on being handed over, their sequence
+    // continuing from before the impostor came, and adopted, after it left.
+    let rec = coop_transport::recording::read(&dir.join("user2.mcap")).expect("recording");
+    let from_user1: Vec<_> = rec.remote.iter().filter(|r| r.from == user1).collect();
+    let forged: Vec<_> = from_user1
+        .iter()
+        .filter(|r| r.seq == FORGED_SEQ || distance(r.pos, forged_pos) < 0.05)
+        .collect();
     assert!(
-        rec.status.as_ref().is_some_and(|s| s.received > 100),
-        "{:?}",
-        rec.status
+        forged.is_empty(),
+        "user2 handed physics {} of the impostor's states for user1, first {:?}",
+        forged.len(),
+        forged.first()
     );
+    let newest_before = from_user1
+        .iter()
+        .filter(|r| r.t_ns < impostor_from_ns)
+        .map(|r| r.seq)
+        .max()
+        .expect("user2 received user1's states before the impostor came");
+    let after: Vec<_> = from_user1
+        .iter()
+        .filter(|r| r.t_ns > impostor_to_ns)
+        .collect();
+    assert!(
+        after.len() > 10 && after.iter().all(|r| r.seq > newest_before),
+        "user1's states after the impostor: {} handed over, sequences {:?} (newest before it: {newest_before})",
+        after.len(),
+        after.iter().map(|r| r.seq).take(5).collect::<Vec<_>>()
+    );
+    assert!(
+        rec.adoptions
+            .iter()
+            .any(|a| a.from == user1 && a.t_ns > impostor_to_ns),
+        "user2 adopted none of user1's states after the impostor"
+    );
+    let counters = rec.status.as_ref().expect("user2's final counters");
+    assert!(
+        counters.received >= after.len() as u64 && counters.received > b_before.network.received,
+        "{counters:?}"
+    );
+
     terminate(&router);
     let st = router.wait_timeout(LIMIT).expect("router stopped");
     assert!(st.success(), "the router stopped cleanly: {st}");
@@ -299,6 +438,14 @@ fn router(ns: &str, dir: &Path, certs: &Path) -> (Reaped, coop_actors::router::R
     (r, resolved)
 }
 
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
 fn terminate(r: &Reaped) {
     let _ = nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(r.pid() as i32),
@@ -320,6 +467,23 @@ fn push_and_catch() -> String {
         "[{ t_s = 0.0, target_m = [0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [0.20, 0.0, 0.01] }, \
           { t_s = 1.0, target_m = [0.095, 0.0, 0.01] }, { t_s = 2.5, target_m = [0.095, 0.0, 0.01] }, \
           { t_s = 3.0, target_m = [0.04, 0.0, 0.01] }, { t_s = 3.4, target_m = [0.20, -0.10, 0.01] }]",
+    )
+}
+
+/// The paper's push, catch, grasp and squeeze, and then both users hold the disk to the end: user2
+/// goes on adopting user1's states for as long as a test looks, whenever its impostor is done (in
+/// the paper's script both let go at 9.6 s, and user2's adoptions of user1 stop there).
+fn push_catch_and_hold() -> String {
+    paper_with_scripts(
+        "hold",
+        120.0,
+        "[{ t_s = 0.0, target_m = [-0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [-0.06, 0.0, 0.01] }, { t_s = 1.4, target_m = [-0.20, 0.0, 0.01] }, \
+          { t_s = 3.0, target_m = [-0.20, 0.0, 0.01] }, { t_s = 4.0, target_m = [0.005, 0.0, 0.01] }, \
+          { t_s = 5.0, target_m = [0.005, 0.0, 0.01] }, { t_s = 6.0, target_m = [0.018, 0.0, 0.01] }]",
+        "[{ t_s = 0.0, target_m = [0.20, 0.0, 0.01] }, { t_s = 0.5, target_m = [0.20, 0.0, 0.01] }, \
+          { t_s = 1.0, target_m = [0.095, 0.0, 0.01] }, { t_s = 5.0, target_m = [0.095, 0.0, 0.01] }, \
+          { t_s = 6.0, target_m = [0.082, 0.0, 0.01] }]",
     )
 }
 

@@ -11,7 +11,7 @@
 //! | `/object`   | scenario sample rate         | object pose and velocity as this site believes it     |
 //! | `/tool`     | scenario sample rate         | tool position, desired/measured force, force on object |
 //! | `/adoption` | each adoption                | sender, position jump, how far it was dead-reckoned  |
-//! | `/remote`   | each state handed to physics | sender, sequence, sent time, age, emulated delay      |
+//! | `/remote`   | each state handed to physics | sender, sequence, sent time, position, age, emulated delay |
 //! | `/published`| each report published        | sequence and time of the state                        |
 //! | `/presence` | each join or leave           | site, present                                         |
 //! | `/peer`     | each loss or rejoin          | site, lost or rejoined, how long it was silent        |
@@ -276,6 +276,9 @@ json_message! {
         pub seq: u64,
         /// Sender's time of the state, corrected to our clock, ns.
         pub sent_ns: u64,
+        /// The state's centre of mass as the sender gave it, m (0 in a force report).
+        #[serde(default)]
+        pub pos: [f64; 3],
         /// The correction applied: the sender's clock minus ours, ns.
         #[serde(default)]
         pub offset_ns: i64,

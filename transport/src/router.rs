@@ -91,16 +91,18 @@ pub struct LinkedSession {
     pub links: Vec<String>,
 }
 
-/// One refusal of the access control.
+/// One kind of refusal of the access control: who, what, on which key, and how often.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Refusal {
     /// The zenoh id of the link's other side.
     pub zid: String,
-    /// What it was refused, as zenoh names it (`Put (ingress)`, `Declare/Undeclare Queryable
-    /// (ingress)`, …).
+    /// What it was refused, as zenoh names it (`Put (ingress)`, `Declare Queryable (ingress)`,
+    /// `Liveliness Token (ingress)`, …).
     pub action: String,
     /// On which key.
     pub key: String,
+    /// How many times, since it was first refused.
+    pub count: u64,
 }
 
 /// What a router shows (`station router status`).
@@ -128,11 +130,13 @@ pub struct RouterStatus {
     pub refused: u64,
     /// …by what was refused.
     pub refused_by_action: BTreeMap<String, u64>,
-    /// The most recent refusals (at most [`RECENT`]).
+    /// The most recently refused (who, what, key), oldest first, at most [`RECENT`] of them,
+    /// each with its count: a repeat moves its entry to the end, so a flood of one refusal (an
+    /// impostor's puts) does not push out the one-off ones (its declarations).
     pub recent_refusals: Vec<Refusal>,
 }
 
-/// Refusals kept for status.
+/// Distinct refusals kept for status.
 pub const RECENT: usize = 16;
 
 impl std::fmt::Display for RouterStatus {
@@ -161,7 +165,7 @@ impl std::fmt::Display for RouterStatus {
             .collect();
         writeln!(f, "  refused: {} ({})", self.refused, by.join(", "))?;
         for r in &self.recent_refusals {
-            writeln!(f, "    {} {} on {}", r.zid, r.action, r.key)?;
+            writeln!(f, "    {} {} on {} ×{}", r.zid, r.action, r.key, r.count)?;
         }
         Ok(())
     }
@@ -228,13 +232,25 @@ impl Refusals {
         self.total.fetch_add(1, Ordering::Relaxed);
         let mut d = self.detail.lock().unwrap_or_else(|e| e.into_inner());
         *d.0.entry(action.to_owned()).or_default() += 1;
-        if d.1.len() == RECENT {
-            d.1.remove(0);
-        }
-        d.1.push(Refusal {
-            zid,
-            action: action.to_owned(),
-            key: key.to_owned(),
+        let recent = &mut d.1;
+        let same = |r: &Refusal| r.zid == zid && r.action == action && r.key == key;
+        let entry = match recent.iter().position(same) {
+            Some(i) => recent.remove(i),
+            None => {
+                if recent.len() == RECENT {
+                    recent.remove(0);
+                }
+                Refusal {
+                    zid,
+                    action: action.to_owned(),
+                    key: key.to_owned(),
+                    count: 0,
+                }
+            }
+        };
+        recent.push(Refusal {
+            count: entry.count + 1,
+            ..entry
         });
     }
 
@@ -397,8 +413,48 @@ mod tests {
             Refusal {
                 zid: "bb".into(),
                 action: "Declare/Undeclare Queryable (ingress)".into(),
-                key: "coop/s/clock/user1".into()
+                key: "coop/s/clock/user1".into(),
+                count: 1,
             }
         );
+    }
+
+    #[test]
+    fn a_flood_of_one_refusal_keeps_the_others_in_recent() {
+        let r = Refusals::default();
+        let put =
+            "Using cached result: aa is unauthorized to Put (ingress) on coop/s/obj/0/state/user1";
+        r.event("aa on Subject(user2) is unauthorized to Declare Queryable (ingress) on coop/s/clock/user1");
+        r.event("aa on Subject(user2) is unauthorized to Liveliness Token (ingress) on coop/s/presence/user1");
+        for _ in 0..3 * RECENT {
+            r.event(put);
+        }
+        assert_eq!(r.total(), 2 + 3 * RECENT as u64);
+        let (_, recent) = r.detail();
+        let seen: Vec<(&str, &str, u64)> = recent
+            .iter()
+            .map(|x| (x.action.as_str(), x.key.as_str(), x.count))
+            .collect();
+        assert_eq!(
+            seen,
+            [
+                ("Declare Queryable (ingress)", "coop/s/clock/user1", 1),
+                ("Liveliness Token (ingress)", "coop/s/presence/user1", 1),
+                (
+                    "Put (ingress)",
+                    "coop/s/obj/0/state/user1",
+                    3 * RECENT as u64
+                ),
+            ]
+        );
+        // Distinct refusals beyond RECENT push out the oldest.
+        for k in 0..RECENT {
+            r.event(&format!(
+                "Using cached result: aa is unauthorized to Put (ingress) on coop/s/k{k}"
+            ));
+        }
+        let (_, recent) = r.detail();
+        assert_eq!(recent.len(), RECENT);
+        assert_eq!(recent[0].key, "coop/s/k0");
     }
 }

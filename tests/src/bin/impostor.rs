@@ -1,11 +1,17 @@
 //! Fakes a station that speaks for a site it is not: a zenoh client holding one site's
 //! certificate (or none) that puts on another site's state key, declares a queryable for that
-//! site's clock (answering an hour ahead) and its presence token. To show its link works, it also
-//! puts on its own site's state key. Everything it puts is 5 bytes of garbage, so a station that
-//! receives any of it counts it as a `length` refusal: where it arrives is visible in counters.
+//! site's clock (answering an hour ahead) and its presence token.
 //!
-//! `impostor CONNECT CA CERT KEY SESSION AS FORGE`: CERT and KEY `-` for none. Prints
-//! `connected <zid>` then `done` after 200 puts of each kind 10 ms apart, and exits 0; prints
+//! On the other site's key it puts two things: 5 bytes of garbage, and well-formed, plausible
+//! states of that site ([`forgery::forged_state`]: sequence [`forgery::FORGED_SEQ`], the
+//! time now, the object at rest at POS), which a receiver's checks would take if they arrived, so
+//! only the access control keeps them from its physics. To show its link works, it also puts the
+//! garbage on its own site's state key: a station that receives any garbage counts it as a
+//! `length` refusal, so where it arrives is visible in counters.
+//!
+//! `impostor CONNECT CA CERT KEY SESSION AS FORGE FORGE_INDEX POS`: CERT and KEY `-` for none;
+//! FORGE_INDEX the forged site's index in the scenario, POS `x,y,z` in m. Prints
+//! `connected <zid>` then `done` after 200 rounds of its puts 10 ms apart, and exits 0; prints
 //! `refused: <why>` and exits 3 when it cannot connect.
 
 use std::time::Duration;
@@ -14,11 +20,26 @@ use coop_transport::network::{config, Mode, NetworkConfig, Tls};
 use coop_transport::{keys, wire};
 use zenoh::Wait;
 
+// The forgery's one definition, which the tests look for (this fixture is built by `coop-tools`
+// too, where `coop_tests` is only a dev-dependency, so it includes the file).
+#[path = "../forgery.rs"]
+mod forgery;
+
 fn main() -> std::process::ExitCode {
     let a: Vec<String> = std::env::args().skip(1).collect();
-    let [connect, ca, cert, key, session, me, forge] = a.as_slice() else {
-        eprintln!("usage: impostor CONNECT CA CERT|- KEY|- SESSION AS FORGE");
-        return std::process::ExitCode::from(2);
+    let usage = || {
+        eprintln!("usage: impostor CONNECT CA CERT|- KEY|- SESSION AS FORGE FORGE_INDEX X,Y,Z");
+        std::process::ExitCode::from(2)
+    };
+    let [connect, ca, cert, key, session, me, forge, index, pos] = a.as_slice() else {
+        return usage();
+    };
+    let Ok(index) = index.parse::<usize>() else {
+        return usage();
+    };
+    let pos: Vec<f64> = pos.split(',').filter_map(|x| x.parse().ok()).collect();
+    let Ok(pos) = <[f64; 3]>::try_from(pos) else {
+        return usage();
     };
     let file = |f: &String| (f != "-").then(|| f.into());
     let net = NetworkConfig {
@@ -61,11 +82,12 @@ fn main() -> std::process::ExitCode {
         .declare_token(keys::presence(session, forge))
         .wait();
     let garbage = [1u8, 2, 3, 4, 5];
+    let (theirs, mine) = (keys::state(session, 0, forge), keys::state(session, 0, me));
     for _ in 0..200 {
-        let _ = z
-            .put(keys::state(session, 0, forge), garbage.to_vec())
-            .wait();
-        let _ = z.put(keys::state(session, 0, me), garbage.to_vec()).wait();
+        let forged = forgery::forged_state(index, coop_rt::timer::monotonic_ns(), pos);
+        let _ = z.put(&theirs, forged).wait();
+        let _ = z.put(&theirs, garbage.to_vec()).wait();
+        let _ = z.put(&mine, garbage.to_vec()).wait();
         // Pacing, so the messages spread over 2 s of the session (not a wait for anything).
         std::thread::sleep(Duration::from_millis(10));
     }

@@ -443,6 +443,7 @@ impl<'a> Receiver<'a> {
             from: d.from,
             seq: d.report.seq,
             sent_ns: d.report.t_ns,
+            pos: d.report.pos,
             offset_ns: d.offset_ns,
             age_s: age as f64 * 1e-9,
             emulated_delay_s: d.delay_s,
