@@ -2,7 +2,8 @@
 //! (`rt/tests/fixtures/fake_dhd.c`, compiled here with `cc`), whose `[device.dhd]` table names the
 //! fake's file. The fake records every call the servo process makes (`COOP_FAKE_DHD_LOG`), and the
 //! tests assert from that record: the firmware watchdog is armed before forces are enabled, the
-//! contact force reaches the library, and a stop or a failing call releases the device.
+//! contact force reaches the library, and a stop or a failing call releases the device. A device
+//! that renders less stiffness than the scenario's contact shows the clamp in `station status`.
 
 #[path = "../../rt/tests/common/fake_dhd.rs"]
 mod fake_dhd;
@@ -329,6 +330,47 @@ fn a_call_failing_mid_run_releases_the_device_and_status_names_the_fault() {
                 .iter()
                 .all(|c| c.name == "dhdSetForce" && !c.is_nonzero_force()),
         "the backend's and the safety layer's releases in the failing tick: {tick:?}"
+    );
+    assert_released_and_closed(&calls);
+}
+
+/// The fake reports a Novint Falcon (system type 60: 3000 N/m), stiffer than the scenario's contact
+/// (4000 N/m): the servo renders the contact at the device's maximum, and `station status` names
+/// the stiffness limit as clamped (the hand stays in free space, so no later limit replaces it).
+#[test]
+fn a_device_softer_than_the_contact_shows_the_stiffness_clamp_in_status() {
+    let contact = "[contact]\nstiffness_n_per_m = 4000.0\ntangential_stiffness_n_per_m = 4000.0\n";
+    let run = start(
+        "falcon",
+        contact,
+        [-0.15, 0.0, 0.05],
+        &[("COOP_FAKE_DHD_SET", "system_type=60".to_owned())],
+    );
+    wait_until("the stiffness clamp published", LIMIT, || {
+        (run.ctl.servo.safety_limit.load(Ordering::Relaxed) != 0).then_some(())
+    });
+    let v = run.status();
+    let s = &v["servo"]["safety"];
+    assert_eq!(s["limit"], "max_stiffness", "{v}");
+    assert_eq!(s["releases"], false, "{v}");
+    assert!(s["at_ns"].as_u64() > Some(0), "{s}");
+    let text = run.status_text();
+    assert!(
+        text.contains("safety: limit max_stiffness clamped last"),
+        "{text}"
+    );
+    let (stderr, calls) = run.stop();
+    assert!(
+        stderr.contains(
+            "contact stiffness 4000 N/m, damping 4.0 N·s/m clamped to the device's 3000 N/m, 4.0 N·s/m"
+        ),
+        "the servo says what it clamped to the Falcon's maximum:\n{stderr}"
+    );
+    assert!(
+        calls
+            .iter()
+            .any(|c| c.name == "dhdGetSystemType" && c.result == 60),
+        "the device's maxima came from the library's system type"
     );
     assert_released_and_closed(&calls);
 }
