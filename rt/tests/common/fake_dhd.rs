@@ -1,5 +1,7 @@
 //! The fake DHD SDK (`fixtures/fake_dhd.c`) compiled with `cc` into a directory of its own, with
-//! its control entry points, for the tests that load it (`#[path]`-included).
+//! its control entry points, for the tests that load it, and the record of calls it keeps when a
+//! process it runs in is given `COOP_FAKE_DHD_LOG` (`#[path]`-included, by coop-rt's tests and by
+//! the station tests in tools).
 #![allow(dead_code)]
 
 use std::path::PathBuf;
@@ -8,7 +10,11 @@ use std::process::Command as Proc;
 use coop_model::body::Vec3;
 use coop_rt::device::dhd::DhdConfig;
 
-pub const SOURCE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/fake_dhd.c");
+// `rt/../rt`, so the path holds from any crate beside rt that includes this file.
+pub const SOURCE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../rt/tests/fixtures/fake_dhd.c"
+);
 
 /// A compiled fake in a directory of its own (removed on drop), with its control entry points.
 pub struct Fake {
@@ -75,4 +81,56 @@ impl Drop for Fake {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// One DHD call in the fake's record (`COOP_FAKE_DHD_LOG`): `dhdSetForce 0.5 0 0 0 -> 0` is
+/// `{ name: "dhdSetForce", args: [0.5, 0.0, 0.0, 0.0], result: 0 }` (the device ID is the last
+/// argument).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Call {
+    pub name: String,
+    pub args: Vec<f64>,
+    pub result: i64,
+}
+
+impl Call {
+    /// A `dhdSetForce` that commanded a nonzero force.
+    pub fn is_nonzero_force(&self) -> bool {
+        self.name == "dhdSetForce" && self.args[..3].iter().any(|&c| c != 0.0)
+    }
+
+    /// The force a `dhdSetForce` commanded, N.
+    pub fn force(&self) -> Vec3 {
+        assert_eq!(self.name, "dhdSetForce", "{self:?}");
+        Vec3::new(self.args[0], self.args[1], self.args[2])
+    }
+}
+
+/// The calls recorded in `log`, in order (none when the file does not exist yet; a line still being
+/// written, without its newline, is left for the next read).
+///
+/// # Panics
+/// On a line that is not `name args... -> result` (the fake writes each line with one `write`, so
+/// even a killed process leaves whole lines).
+pub fn record(log: &std::path::Path) -> Vec<Call> {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    text.split_inclusive('\n')
+        .filter_map(|l| l.strip_suffix('\n'))
+        .map(|l| {
+            let (call, result) = l.split_once(" -> ").unwrap_or_else(|| panic!("line {l:?}"));
+            let mut words = call.split(' ');
+            let name = words.next().unwrap_or_default().to_owned();
+            let args = words
+                .map(|w| {
+                    w.parse()
+                        .unwrap_or_else(|_| panic!("argument {w:?} in {l:?}"))
+                })
+                .collect();
+            Call {
+                name,
+                args,
+                result: result.parse().unwrap_or_else(|_| panic!("result in {l:?}")),
+            }
+        })
+        .collect()
 }
