@@ -1,8 +1,9 @@
 //! `station run` with real processes: it comes up, keeps going through killed children,
 //! stops on SIGTERM leaving nothing behind, its children die with it, a live station's name is
 //! refused, a loop failing every start stops it, and a network that cannot come up leaves it running
-//! degraded until it can. Unique session names keep parallel tests apart; every wait has a deadline; nothing
-//! asserts on timing.
+//! degraded until it can; a recording station's restarts and device limits are in its recording's
+//! `/log`, and a restarted network process continues the recording. Unique session names keep
+//! parallel tests apart; every wait has a deadline; nothing asserts on timing.
 
 use std::process::Command;
 use std::time::Duration;
@@ -12,6 +13,7 @@ use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::Ordering;
 use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
 use coop_transport::network::Tls;
+use coop_transport::recording::{self, SampleMsg};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
@@ -23,6 +25,45 @@ fn config(session: &str) -> std::path::PathBuf {
     station_config(&dir, session, "user1", |c| {
         c.supervisor.backoff_initial_ms = 20
     })
+}
+
+/// As [`config`], recording to `user1.mcap` next to the config; the config and the recording.
+fn recording_config(session: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("coop-run-{session}"));
+    let rec = dir.join("user1.mcap");
+    let cfg = station_config(&dir, session, "user1", |c| {
+        c.supervisor.backoff_initial_ms = 20;
+        c.record = Some(rec.clone());
+    });
+    (cfg, rec)
+}
+
+/// The recording at `rec` as it is now, once it holds a sample that passes `want` (read at most
+/// every 100 ms: the station goes on writing it).
+fn recorded_until(
+    rec: &std::path::Path,
+    what: &str,
+    want: impl Fn(&SampleMsg) -> bool,
+) -> coop_transport::recording::Recording {
+    let mut last: Option<std::time::Instant> = None;
+    wait_until(what, LIMIT, || {
+        if last.is_some_and(|t| t.elapsed() < Duration::from_millis(100)) {
+            return None;
+        }
+        last = Some(std::time::Instant::now());
+        recording::read(rec)
+            .ok()
+            .filter(|r| r.samples.iter().any(&want))
+    })
+}
+
+/// The `/log` lines of a recording that start with `prefix`.
+fn logged<'a>(r: &'a coop_transport::recording::Recording, prefix: &str) -> Vec<&'a str> {
+    r.logs
+        .iter()
+        .map(|l| l.text.as_str())
+        .filter(|t| t.starts_with(prefix))
+        .collect()
 }
 
 fn start(cfg: &std::path::Path) -> Reaped {
@@ -86,10 +127,12 @@ fn runs_then_stops_on_sigterm_leaving_nothing() {
     );
 }
 
+/// ... and each restart is a `/log` line of the station's recording, naming the child and why it
+/// went down (the network's own told by its successor, which goes on with the recording).
 #[test]
 fn killed_children_are_restarted_and_the_station_goes_on() {
     let session = unique_session();
-    let cfg = config(&session);
+    let (cfg, rec) = recording_config(&session);
     let station = start(&cfg);
     let ctl = control(&session);
     running(&ctl);
@@ -112,6 +155,105 @@ fn killed_children_are_restarted_and_the_station_goes_on() {
     assert!(status.success(), "exit {status}");
     drop(ctl);
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let r = recording::read(&rec).expect("the recording reads as one");
+    for child in ["servo", "physics", "network"] {
+        let lines = logged(
+            &r,
+            &format!("restart: the supervisor restarted the {child} process (restart 1 of this station run) after: {child} (pid "),
+        );
+        assert_eq!(
+            lines.len(),
+            1,
+            "one line for the {child}'s restart: {:?}",
+            r.logs
+        );
+    }
+    let _ = std::fs::remove_dir_all(rec.parent().expect("dir"));
+}
+
+/// A recording station whose network process is SIGKILLed mid-run: its successor goes on in the
+/// recording's next part instead of creating it anew. After the stop the recording reads as one,
+/// with every sample the killed process had got to the disk, samples from after the restart, and
+/// `/log` lines for the restart; a new run of the station on the same path starts a new recording.
+#[test]
+fn a_restarted_network_process_continues_the_recording() {
+    let session = unique_session();
+    let (cfg, rec) = recording_config(&session);
+    let station = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    let before = recorded_until(&rec, "a second of samples recorded", |s| {
+        ctl.epoch().is_some_and(|e| s.t_ns > e + 1_000_000_000)
+    });
+    let old = pid(&ctl, Child::Network);
+    kill(Pid::from_raw(old as i32), Signal::SIGKILL).expect("SIGKILL network");
+    let killed_ns = coop_rt::timer::monotonic_ns();
+    wait_until("the restarted network", LIMIT, || {
+        (pid(&ctl, Child::Network) != old
+            && ctl.child(Child::Network).restarts.load(Ordering::Relaxed) == 1)
+            .then_some(())
+    });
+    recorded_until(&rec, "a second of samples after the restart", |s| {
+        s.t_ns > killed_ns + 1_000_000_000
+    });
+    kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+
+    let r = recording::read(&rec).expect("the recording reads as one");
+    assert_eq!(r.files.first(), Some(&rec), "its first part is still there");
+    assert!(
+        r.files.len() >= 2,
+        "the restart began a part: {:?}",
+        r.files
+    );
+    assert_eq!(
+        r.samples[..before.samples.len()],
+        before.samples[..],
+        "every sample recorded before the kill is still there"
+    );
+    assert!(
+        r.samples.iter().any(|s| s.t_ns > killed_ns + 1_000_000_000),
+        "and samples from after the restart"
+    );
+    assert!(
+        r.samples.windows(2).all(|w| w[0].t_ns < w[1].t_ns),
+        "in time order, none twice"
+    );
+    assert!(r.status.is_some(), "the successor finished it");
+    let restart = logged(
+        &r,
+        "restart: the supervisor restarted the network process (restart 1 of this station run)",
+    );
+    assert_eq!(restart.len(), 1, "{:?}", r.logs);
+    assert_eq!(
+        logged(&r, "station user1 recording again in session").len(),
+        1,
+        "{:?}",
+        r.logs
+    );
+    assert_eq!(logged(&r, "station user1 started").len(), 1, "{:?}", r.logs);
+
+    // A new run of the station on the same path: a new recording.
+    let last_ns = r.samples.last().expect("samples").t_ns;
+    let again = start(&cfg);
+    let ctl = control(&session);
+    running(&ctl);
+    recorded_until(&rec, "the new run's samples", |s| s.t_ns > last_ns);
+    kill(Pid::from_raw(again.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
+    let (status, _) = again.finish();
+    assert!(status.success(), "exit {status}");
+    drop(ctl);
+    let r2 = recording::read(&rec).expect("the new recording");
+    assert_eq!(r2.files, std::slice::from_ref(&rec));
+    assert!(
+        r2.samples.iter().all(|s| s.t_ns > last_ns),
+        "nothing of the earlier run"
+    );
+    assert!(logged(&r2, "restart:").is_empty(), "{:?}", r2.logs);
+    assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(rec.parent().expect("dir"));
 }
 
 #[test]
@@ -566,9 +708,11 @@ fn station_status_names_the_device_limit_that_acted_last() {
          script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
     )
     .expect("scenario");
+    let rec = dir.join("user1.mcap");
     let cfg = station_config(&dir, &session, "user1", |c| {
         c.scenario = Some("press.toml".into());
         c.device.safety.max_force_n = 0.2;
+        c.record = Some(rec.clone());
     });
     let station = start(&cfg);
     let ctl = control(&session);
@@ -629,5 +773,17 @@ fn station_status_names_the_device_limit_that_acted_last() {
     assert!(status.success(), "exit {status}");
     drop(ctl);
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    // The station's recording logged the clamp acting, as a warning.
+    let r = recording::read(&rec).expect("the recording");
+    let clamp: Vec<_> = r
+        .logs
+        .iter()
+        .filter(|l| l.text.starts_with("safety limit max_force_n clamped ("))
+        .collect();
+    assert!(!clamp.is_empty(), "{:?}", r.logs);
+    assert!(
+        clamp.iter().all(|l| l.level == recording::Level::Warning),
+        "{clamp:?}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -30,7 +30,7 @@
 //! |----------|---------------------------|-----------------------|---------------------------------|
 //! | `/tf`    | `foxglove.FrameTransform` | two per sample        | `world → object/<site>`, `world → tool/<site>` |
 //! | `/scene` | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`] of samples, and the first sample of each part | the object, tool, force arrow, environment |
-//! | `/log`   | `foxglove.Log`            | each station event    | started, joined/left, lost/rejoined, stale/fresh, stopping |
+//! | `/log`   | `foxglove.Log`            | each station event    | started, joined/left, lost/rejoined, stale/fresh, a child restarted, a device safety limit acting, stopping |
 //!
 //! The protobuf messages go through the same writer as the JSON ones (not the SDK's own MCAP
 //! sink), so they rotate, flush and survive a crash with them, and each part holds its own
@@ -52,8 +52,11 @@
 //! plus `part`, its number, and `started_unix_ns`, when the recording's first part was created,
 //! which tells one recording from another), and the `/session` message again at its top once the
 //! session is known. A sample's `/object` and `/tool` are never split between parts. Creating a
-//! recording removes the parts an earlier one left at the same path. [`read`] reads every part in
-//! order as one recording and refuses parts of different recordings; [`read_part`] reads one.
+//! recording removes the parts an earlier one left at the same path, unless it continues it
+//! ([`Recorder::continue_or_create`]: a restarted network process of the same station run goes on
+//! in the next part of what its predecessor wrote, as the same recording). [`read`] reads every
+//! part in order as one recording and refuses parts of different recordings; [`read_part`] reads
+//! one.
 
 use std::cell::Cell;
 use std::collections::BTreeMap;
@@ -65,7 +68,9 @@ use std::time::{Duration, Instant};
 
 use coop_rt::msg::TraceRecord;
 use coop_rt::shm::control::REFUSED_REASONS;
-use foxglove::messages::{log::Level, FrameTransform, Log, SceneUpdate};
+/// Foxglove's log level ([`LogLine::level`], [`Recorder::event`]).
+pub use foxglove::messages::log::Level;
+use foxglove::messages::{FrameTransform, Log, SceneUpdate};
 use foxglove::Encode;
 use serde::{Deserialize, Serialize};
 
@@ -75,6 +80,12 @@ pub use scene::Scene;
 
 /// How often the writer pushes what it has to the file.
 pub const FLUSH_EVERY: Duration = Duration::from_millis(200);
+/// The metadata key naming the station run a recording belongs to (the run's supervisor, as
+/// `coop_rt::shm::BlockSegment::creator` of its control block gives it): a recorder created with
+/// the same one at the same path continues the recording ([`Recorder::continue_or_create`]).
+pub const STATION_RUN: &str = "station_run";
+/// How much of a part's beginning is read for its metadata (written right after its header).
+const HEAD_BYTES: u64 = 64 << 10;
 /// How often, in sample time, the whole `/scene` is written (the frames move it in between).
 pub const SCENE_EVERY: Duration = Duration::from_millis(50);
 
@@ -493,6 +504,45 @@ fn parts_on_disk(first: &Path) -> std::io::Result<Vec<(u32, PathBuf)>> {
     Ok(parts)
 }
 
+/// The first [`HEAD_BYTES`] of a file.
+fn head_of(path: &Path) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    File::open(path)?.take(HEAD_BYTES).read_to_end(&mut head)?;
+    Ok(head)
+}
+
+/// The newest part on disk of the recording at `first` that holds metadata, with its
+/// `started_unix_ns`, if it is of the station run, session and site `metadata` names (none when
+/// `metadata` names no [`STATION_RUN`]).
+fn same_run_part(
+    first: &Path,
+    metadata: &BTreeMap<String, String>,
+) -> Result<Option<(u32, String)>, RecordingError> {
+    if metadata.get(STATION_RUN).is_none_or(String::is_empty) {
+        return Ok(None);
+    }
+    for (n, path) in parts_on_disk(first)
+        .map_err(io_err(first))?
+        .into_iter()
+        .rev()
+    {
+        let meta = metadata_of(&head_of(&path).map_err(io_err(&path))?);
+        if meta.is_empty() {
+            // Cut before its metadata reached the disk: look at the part before.
+            continue;
+        }
+        let same = [STATION_RUN, "session", "site"]
+            .into_iter()
+            .all(|k| meta.get(k) == metadata.get(k));
+        return Ok(match meta.get("started_unix_ns") {
+            Some(started) if same => Some((n, started.clone())),
+            _ => None,
+        });
+    }
+    Ok(None)
+}
+
 /// The file being written, counting the bytes that go into it.
 struct Counted {
     file: BufWriter<File>,
@@ -549,6 +599,8 @@ pub struct Recorder {
     seq: u32,
     wall_minus_mono: i128,
     last_flush: Instant,
+    /// The part an earlier process wrote last, when this recorder continues its recording.
+    continued: Option<u32>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -681,6 +733,11 @@ impl Part {
         } else {
             None
         };
+        if !chunked {
+            // The part's metadata reaches the disk now, not at the first flush: a process killed
+            // before that must leave a part a successor recognises as its run's, not an empty file.
+            w.flush().map_err(mcap_err(&path))?;
+        }
         Ok(Self {
             w,
             path,
@@ -739,7 +796,7 @@ impl Recorder {
         metadata: BTreeMap<String, String>,
         rotation: Rotation,
     ) -> Result<Self, RecordingError> {
-        Self::create_with(path, metadata, rotation, None)
+        Self::create_with(path, metadata, rotation, None, false)
     }
 
     /// As [`Recorder::create`], and with Foxglove's `/tf`, `/scene` and `/log` channels showing
@@ -754,7 +811,26 @@ impl Recorder {
         rotation: Rotation,
         scene: Scene,
     ) -> Result<Self, RecordingError> {
-        Self::create_with(path, metadata, rotation, Some(scene))
+        Self::create_with(path, metadata, rotation, Some(scene), false)
+    }
+
+    /// As [`Recorder::create_with_scene`] (or [`Recorder::create`] without a scene), unless the
+    /// recording at `path` is one an earlier process of the same station run wrote: `metadata`
+    /// names a [`STATION_RUN`], and the newest part on disk that holds metadata names the same one
+    /// (and the same session and site). Then nothing is removed: the recording goes on in the part
+    /// after that one, as the same recording (its `started_unix_ns` kept), and
+    /// [`Recorder::continued`] says so. A new run of the station, or a recording made without a
+    /// station run, starts afresh.
+    ///
+    /// # Errors
+    /// As [`Recorder::create`]; a part on disk that cannot be read.
+    pub fn continue_or_create(
+        path: &Path,
+        metadata: BTreeMap<String, String>,
+        rotation: Rotation,
+        scene: Option<Scene>,
+    ) -> Result<Self, RecordingError> {
+        Self::create_with(path, metadata, rotation, scene, true)
     }
 
     fn create_with(
@@ -762,26 +838,48 @@ impl Recorder {
         mut metadata: BTreeMap<String, String>,
         rotation: Rotation,
         scene: Option<Scene>,
+        may_continue: bool,
     ) -> Result<Self, RecordingError> {
-        for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
-            if n > 0 {
-                std::fs::remove_file(&old).map_err(io_err(&old))?;
-            }
-        }
+        let earlier = if may_continue {
+            same_run_part(path, &metadata)?
+        } else {
+            None
+        };
         let wall = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as i128);
         let mono = i128::from(coop_rt::timer::monotonic_ns());
-        metadata.insert("started_unix_ns".into(), wall.to_string());
+        let number = match &earlier {
+            Some((n, started)) => {
+                // The parts after it hold no metadata (cut before any reached the disk): nothing
+                // of the recording is in them, and `read` could not read past them.
+                for (m, old) in parts_on_disk(path).map_err(io_err(path))? {
+                    if m > *n {
+                        std::fs::remove_file(&old).map_err(io_err(&old))?;
+                    }
+                }
+                metadata.insert("started_unix_ns".into(), started.clone());
+                n + 1
+            }
+            None => {
+                for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
+                    if n > 0 {
+                        std::fs::remove_file(&old).map_err(io_err(&old))?;
+                    }
+                }
+                metadata.insert("started_unix_ns".into(), wall.to_string());
+                0
+            }
+        };
         let site = scene
             .as_ref()
             .map(|s| s.site.clone())
             .or_else(|| metadata.get("site").cloned())
             .unwrap_or_default();
-        Ok(Self {
+        let r = Self {
             part: Part::create(
-                path.to_owned(),
-                0,
+                part_path(path, number),
+                number,
                 &metadata,
                 &TOPICS,
                 scene.is_some(),
@@ -796,7 +894,32 @@ impl Recorder {
             seq: 0,
             wall_minus_mono: wall - mono,
             last_flush: Instant::now(),
-        })
+            continued: earlier.map(|(n, _)| n),
+        };
+        r.remove_beyond_kept()?;
+        Ok(r)
+    }
+
+    /// When this recorder continues a recording an earlier process of its station run wrote
+    /// ([`Recorder::continue_or_create`]): the number of the part that process wrote last.
+    pub fn continued(&self) -> Option<u32> {
+        self.continued
+    }
+
+    /// Removes the oldest part beyond the ones kept, counting the one being written as the newest.
+    fn remove_beyond_kept(&self) -> Result<(), RecordingError> {
+        let number = self.part.number;
+        let keep = u32::try_from(self.rotation.keep_files).unwrap_or(u32::MAX);
+        if keep > 0 && number >= keep {
+            let oldest = part_path(&self.first, number - keep);
+            match std::fs::remove_file(&oldest) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(io_err(&oldest)(e));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
     }
 
     /// The file being written.
@@ -821,16 +944,7 @@ impl Recorder {
         )?;
         let mut done = std::mem::replace(&mut self.part, next);
         done.w.finish().map_err(mcap_err(&done.path))?;
-        let keep = u32::try_from(self.rotation.keep_files).unwrap_or(u32::MAX);
-        if keep > 0 && number >= keep {
-            let oldest = part_path(&self.first, number - keep);
-            match std::fs::remove_file(&oldest) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(io_err(&oldest)(e));
-                }
-                _ => {}
-            }
-        }
+        self.remove_beyond_kept()?;
         if let Some(s) = self.session.clone() {
             self.put(0, s.t_ns, &s)?;
         }
@@ -893,16 +1007,21 @@ impl Recorder {
     /// Writing failed.
     pub fn session(&mut self, m: &SessionMsg) -> Result<(), RecordingError> {
         self.rotate_if_full()?;
+        let first = self.session.is_none();
         self.session = Some(m.clone());
         self.put(0, m.t_ns, m)?;
-        self.put_log(
-            m.t_ns,
-            Level::Info,
-            format!(
+        let text = match self.continued {
+            Some(n) if first => format!(
+                "station {} recording again in session {} after its network process restarted: \
+                 part {} goes on from part {n}",
+                m.site, m.session, self.part.number
+            ),
+            _ => format!(
                 "station {} started in session {}: scenario {}, method {}, emulation {}",
                 m.site, m.session, m.scenario, m.method, m.emulation
             ),
-        )
+        };
+        self.put_log(m.t_ns, Level::Info, text)
     }
     /// A record from physics' trace ring: `/adoption` for a [`TraceRecord::ADOPTION`], else
     /// `/object` and `/tool` (a [`TraceRecord::SAMPLE`]); the same messages as [`Recorder::adoption`]
@@ -1084,10 +1203,23 @@ pub struct Recording {
     pub clock: Vec<ClockMsg>,
     /// Final counters, if the station stopped cleanly.
     pub status: Option<StatusMsg>,
+    /// The station's events, as `/log` holds them (with a scene only).
+    pub logs: Vec<LogLine>,
     /// A file ended early (no footer): the station did not finish it.
     pub truncated: bool,
     /// The files read, in order (the parts on disk).
     pub files: Vec<PathBuf>,
+}
+
+/// A `/log` line, read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogLine {
+    /// When, wall clock ns since the Unix epoch (the message's log time).
+    pub unix_ns: u64,
+    /// Foxglove's level.
+    pub level: Level,
+    /// What it says.
+    pub text: String,
 }
 
 /// Reads the recording whose first part is `first`: every part on disk in order, as one
@@ -1145,6 +1277,7 @@ pub fn read(first: &Path) -> Result<Recording, RecordingError> {
         r.presence.extend(p.presence);
         r.peers.extend(p.peers);
         r.clock.extend(p.clock);
+        r.logs.extend(p.logs);
         r.status = p.status.or(r.status);
         r.truncated |= p.truncated;
         r.files.push(path.clone());
@@ -1221,6 +1354,15 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Recording, RecordingError> {
             "/clock" => r.clock.push(serde_json::from_slice(data).map_err(e)?),
             "/status" => r.status = Some(serde_json::from_slice(data).map_err(e)?),
             "/published" => r.published.push(serde_json::from_slice(data).map_err(e)?),
+            "/log" => {
+                let l = <Log as foxglove::Decode>::decode(data)
+                    .map_err(|err| bad(format!("/log: {err}")))?;
+                r.logs.push(LogLine {
+                    unix_ns: m.log_time,
+                    level: Level::try_from(l.level).unwrap_or(Level::Unknown),
+                    text: l.message,
+                });
+            }
             _ => {}
         }
     }
@@ -1884,6 +2026,118 @@ mod tests {
                 .filter(|m| m.channel.topic == "/tf")
                 .count();
         assert!(tf > 0, "frames before the cut");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A network process killed mid-recording and restarted in the same station run: the new
+    /// recorder goes on in the next part and the recording reads as one, with what the killed one
+    /// got to the disk; a new run of the station starts afresh, and a part cut before its metadata
+    /// reached the disk is written over.
+    #[test]
+    fn the_same_station_run_continues_its_recording_and_a_new_run_starts_afresh() {
+        let dir = scratch("continue");
+        let path = dir.join("user1.mcap");
+        let meta = |run: &str| {
+            BTreeMap::from([
+                ("session".into(), "s".into()),
+                ("site".into(), "user1".into()),
+                (STATION_RUN.into(), run.into()),
+            ])
+        };
+        let scene = || Scene {
+            site: "user1".into(),
+            colour: scene::site_colour(0),
+            object: scene::Body::Box {
+                half: [0.02, 0.02, 0.02],
+            },
+            tool_radius_m: 0.005,
+            planes: Vec::new(),
+        };
+        let session = SessionMsg {
+            t_ns: 1,
+            session: "s".into(),
+            site: "user1".into(),
+            ..SessionMsg::default()
+        };
+        let sample = |k: u64| SampleMsg {
+            t_ns: 10 + 10 * k,
+            pos: [k as f64, 0.0, 0.0],
+            rot: [1.0, 0.0, 0.0, 0.0],
+            ..SampleMsg::default()
+        };
+        // (The Foxglove schemas alone take some 10 KiB of every part.)
+        let rotation = bytes_bound(64 << 10, 0);
+        let mut first = Recorder::continue_or_create(&path, meta("run-a"), rotation, Some(scene()))
+            .expect("create");
+        assert_eq!(first.continued(), None, "nothing to continue yet");
+        first.session(&session).expect("w");
+        for k in 0..1000 {
+            first.sample(&sample(k)).expect("w");
+        }
+        let killed_in = first.part.number;
+        assert!(
+            (2..10).contains(&killed_in),
+            "rotated a few times first: {killed_in}"
+        );
+        // Killed: nothing more is flushed, no footer written.
+        std::mem::forget(first);
+        let before = read(&path).expect("the killed process's parts read");
+        assert!(before.samples.len() >= 500, "{}", before.samples.len());
+
+        let mut second =
+            Recorder::continue_or_create(&path, meta("run-a"), rotation, Some(scene()))
+                .expect("continue");
+        assert_eq!(second.continued(), Some(killed_in));
+        assert_eq!(second.path(), part_path(&path, killed_in + 1));
+        second.session(&session).expect("w");
+        for k in 2000..2100 {
+            second.sample(&sample(k)).expect("w");
+        }
+        second.status(&StatusMsg::default()).expect("w");
+        let last = second.part.number;
+        second.finish().expect("finish");
+        let r = read(&path).expect("one recording");
+        assert_eq!(r.files.len() as u32, last + 1, "{:?}", files_in(&dir));
+        assert!(r.truncated, "the killed process's last part has no footer");
+        assert_eq!(
+            r.samples[..before.samples.len()],
+            before.samples[..],
+            "what the killed process wrote is all there"
+        );
+        let after: Vec<f64> = r.samples[before.samples.len()..]
+            .iter()
+            .map(|s| s.pos[0])
+            .collect();
+        assert_eq!(after, (2000..2100).map(|k| k as f64).collect::<Vec<_>>());
+        let texts: Vec<&str> = r.logs.iter().map(|l| l.text.as_str()).collect();
+        let again = format!(
+            "station user1 recording again in session s after its network process restarted: part {} goes on from part {killed_in}",
+            killed_in + 1
+        );
+        assert_eq!(
+            texts.first().copied(),
+            Some("station user1 started in session s: scenario , method , emulation ")
+        );
+        assert!(texts.contains(&again.as_str()), "{texts:?}");
+
+        // A part begun and killed before its metadata reached the disk is written over.
+        let empty = part_path(&path, last + 1);
+        File::create(&empty).expect("an empty part");
+        let third =
+            Recorder::continue_or_create(&path, meta("run-a"), rotation, None).expect("continue");
+        assert_eq!(third.continued(), Some(last));
+        assert_eq!(third.path(), empty);
+        third.finish().expect("finish");
+        assert_eq!(read(&path).expect("read").samples, r.samples);
+
+        // A new run of the station: afresh, the earlier run's parts gone.
+        let new_run =
+            Recorder::continue_or_create(&path, meta("run-b"), rotation, None).expect("create");
+        assert_eq!(new_run.continued(), None);
+        assert_eq!(new_run.path(), path);
+        new_run.finish().expect("finish");
+        assert_eq!(files_in(&dir), ["user1.mcap"]);
+        assert!(read(&path).expect("read").samples.is_empty());
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -305,6 +305,9 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             None
         },
         record: cfg.config.record.clone(),
+        // The supervisor that made this run's control block: a restarted network process
+        // continues the recording its predecessor in the same run wrote.
+        station_run: ctl.creator().map(|t| t.raw().to_string()),
         record_rotation: cfg.config.record_rotation(),
         emulation: net.emulate.then(|| coop_transport::network::Emulation {
             link: sc.network.clone(),

@@ -7,6 +7,7 @@ use std::time::Duration;
 use super::header::{OpenError, SegmentKind};
 use super::pod::TypeIdentity;
 use super::segment::{CreateError, RawSegment, SegmentName};
+use crate::process::ProcessToken;
 
 /// Marks a struct that processes share by reference in a segment.
 ///
@@ -92,6 +93,14 @@ impl<B: ShmShared> BlockSegment<B> {
     pub fn name(&self) -> &str {
         self.seg.map.name()
     }
+
+    /// Who created the segment, as its header records it (none if it names nobody). Of a
+    /// station's control block: that run's supervisor, which tells one run of a station from the
+    /// next even when the same pid comes back.
+    pub fn creator(&self) -> Option<ProcessToken> {
+        let f = self.seg.map.header_fields();
+        ProcessToken::new(u32::try_from(f.creator_pid).ok()?, f.creator_start_ticks)
+    }
 }
 
 impl<B: ShmShared> core::ops::Deref for BlockSegment<B> {
@@ -100,5 +109,23 @@ impl<B: ShmShared> core::ops::Deref for BlockSegment<B> {
         // SAFETY: the payload is exactly size_of::<B>() bytes, 128-byte aligned (checked at open/create); B
         // is valid for any bytes, shared only through atomics (ShmShared); the mapping outlives `self`.
         unsafe { &*(self.seg.map.payload() as *const B) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shm::stats::LoopStats;
+
+    #[test]
+    fn the_creator_is_who_created_it_as_every_opener_sees_it() {
+        let name = SegmentName::new(&format!("ut{}", std::process::id()), "block", "creator")
+            .expect("valid name");
+        let made = BlockSegment::<LoopStats>::create(&name).expect("create");
+        let opened = BlockSegment::<LoopStats>::open(&name, Duration::from_secs(1)).expect("open");
+        let me = ProcessToken::current();
+        assert_eq!(made.creator(), Some(me));
+        assert_eq!(opened.creator(), Some(me));
+        assert_ne!(me.start_ticks(), 0, "a start time, not only a pid");
     }
 }

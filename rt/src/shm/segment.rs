@@ -100,7 +100,7 @@ impl Mapping {
         // SAFETY: HEADER_LEN <= len, checked at create/open.
         unsafe { self.base().add(HEADER_LEN) }
     }
-    fn header_fields(&self) -> HeaderFields {
+    pub(crate) fn header_fields(&self) -> HeaderFields {
         let mut bytes = [0u8; HEADER_LEN];
         // SAFETY: HEADER_LEN bytes are mapped at base. A volatile copy: the creator may still be
         // writing while an opener polls (it then sees `ready != READY` and waits).

@@ -65,7 +65,7 @@ use live::Live;
 use presence::Presence;
 use publish::{Publish, TrackPublish};
 use receive::Receiver;
-use record::Recording;
+use record::{Events, Recording};
 
 /// What the network process needs.
 #[derive(Debug)]
@@ -95,6 +95,10 @@ pub struct NetworkArgs<'a> {
     pub tracks: Option<(Consumer<ToolTrack>, Producer<ToolTrack>)>,
     /// Recording file (its first part), if any.
     pub record: Option<PathBuf>,
+    /// Which run of the station this is (its control block's creator): a recording at `record`
+    /// that an earlier network process of the same run wrote is continued, not replaced (this
+    /// process was restarted); none, or another run's: a new recording.
+    pub station_run: Option<String>,
     /// When the recording goes on in its next part, and how many parts are kept.
     pub record_rotation: Rotation,
     /// Receive-side emulation, if any.
@@ -152,18 +156,23 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             .as_ref()
             .map_or("none".into(), Emulation::describe),
     };
+    let mut metadata = BTreeMap::from([
+        ("session".into(), ctx.session_name.to_owned()),
+        ("site".into(), site.clone()),
+        ("scenario".into(), a.scenario.clone()),
+        ("method".into(), a.method.clone()),
+        ("emulation".into(), ctx.emulation.clone()),
+    ]);
+    if let Some(run) = &a.station_run {
+        metadata.insert(crate::recording::STATION_RUN.into(), run.clone());
+    }
     let recording = Recording::create(
         a.record.as_deref(),
-        BTreeMap::from([
-            ("session".into(), ctx.session_name.to_owned()),
-            ("site".into(), site.clone()),
-            ("scenario".into(), a.scenario.clone()),
-            ("method".into(), a.method.clone()),
-            ("emulation".into(), ctx.emulation.clone()),
-        ]),
+        metadata,
         a.record_rotation,
         a.record_foxglove.then(|| a.scene.clone()),
     )?;
+    let events = Events::new(ctx.ctl, recording.continued());
     let view = match &a.live_view {
         Some(addr) => {
             let v = LiveView::start(addr)?;
@@ -222,6 +231,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             trace: a.trace,
             tracks,
             recording,
+            events,
             live,
             view,
             names,
@@ -256,6 +266,8 @@ struct Loop {
     tracks: Option<(TrackPublish, Consumer<ToolTrack>)>,
     trace: Consumer<TraceRecord>,
     recording: Recording,
+    /// The station events the control block shows, for the recording and the live view.
+    events: Events,
     /// The newest sample for live viewers.
     live: Live,
     /// The station's own live view, if it serves one.
@@ -395,7 +407,12 @@ impl Loop {
             v.offer(0, SampleMsg::from(t));
         }
         self.live.offer(newest, now);
-        self.recording.watch_servo(ctx.ctl, now);
+        for (level, text) in self.events.look(ctx.ctl) {
+            if let Some(v) = &self.view {
+                v.log(level, text.clone());
+            }
+            self.recording.write(|w| w.event(now, level, text));
+        }
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
             if let Some(v) = &self.view {

@@ -1,15 +1,18 @@
 //! The station's recording, from the network process: physics' trace ring drained into it, and
 //! what this process saw (states received and published, presence, clocks, the session, the final
-//! counters), with Foxglove's channels showing the site's [`Scene`] and its events (including the
-//! servo's display going stale and fresh again, watched in the control block). The recorder rotates
-//! its parts as the station's [`Rotation`] says. A write that fails (a full disk) stops the
-//! recording, not the station.
+//! counters), with Foxglove's channels showing the site's [`Scene`] and its events, some watched in
+//! the control block ([`Events`]: the servo's display going stale and fresh again, a child process
+//! restarted, a device safety limit acting). The recorder rotates its parts as the station's
+//! [`Rotation`] says; a network process restarted within the same station run continues the
+//! recording its predecessor wrote ([`Recorder::continue_or_create`]). A write that fails (a full
+//! disk) stops the recording, not the station.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use coop_rt::device::safety::Limit;
 use coop_rt::msg::TraceRecord;
-use coop_rt::shm::control::ControlBlock;
+use coop_rt::shm::control::{Child, ControlBlock, CHILDREN};
 use coop_rt::shm::Consumer;
 use coop_rt::sync::Ordering;
 use foxglove::messages::log::Level;
@@ -22,31 +25,34 @@ pub(super) struct Recording {
     recorder: Option<Recorder>,
     /// The first write error since the last [`Recording::stop_on_error`].
     err: Option<String>,
-    /// The servo's display was stale at the last look (none: not looked yet).
-    stale: Option<bool>,
 }
 
 impl Recording {
     /// Creates the recording at `path` (none: nothing is recorded) with its `metadata`, in parts
-    /// bounded by `rotation`, showing `scene` on the Foxglove channels (none: JSON channels only).
+    /// bounded by `rotation`, showing `scene` on the Foxglove channels (none: JSON channels only);
+    /// continues it instead when `metadata` names the station run whose earlier network process
+    /// wrote it.
     pub(super) fn create(
         path: Option<&Path>,
         metadata: BTreeMap<String, String>,
         rotation: Rotation,
         scene: Option<Scene>,
     ) -> Result<Self, NetworkError> {
-        let recorder = match (path, scene) {
-            (Some(p), Some(scene)) => {
-                Some(Recorder::create_with_scene(p, metadata, rotation, scene)?)
-            }
-            (Some(p), None) => Some(Recorder::create(p, metadata, rotation)?),
-            (None, _) => None,
+        let recorder = match path {
+            Some(p) => Some(Recorder::continue_or_create(p, metadata, rotation, scene)?),
+            None => None,
         };
         Ok(Self {
             recorder,
             err: None,
-            stale: None,
         })
+    }
+
+    /// Whether it continues what an earlier network process of this station run recorded.
+    pub(super) fn continued(&self) -> bool {
+        self.recorder
+            .as_ref()
+            .is_some_and(|r| r.continued().is_some())
     }
 
     /// Writes with `f`, remembering the first error.
@@ -71,27 +77,6 @@ impl Recording {
         newest
     }
 
-    /// Logs the servo's display going stale (its scale below 1: the newest object state is older
-    /// than the stale limit) and fresh again, as the control block shows it at `now`.
-    pub(super) fn watch_servo(&mut self, ctl: &ControlBlock, now: u64) {
-        let scale = f64::from_bits(ctl.servo.scale.load(Ordering::Relaxed));
-        let stale = scale < 1.0;
-        if self.stale == Some(stale) || (self.stale.is_none() && !stale) {
-            self.stale = Some(stale);
-            return;
-        }
-        self.stale = Some(stale);
-        let (level, text) = if stale {
-            (
-                Level::Warning,
-                format!("stale: the object state is past the stale limit; the force display ramps to zero (scale {scale:.2})"),
-            )
-        } else {
-            (Level::Info, "fresh: the force display is back".to_owned())
-        };
-        self.write(|w| w.event(now, level, text));
-    }
-
     /// After a failed write: says so once and stops recording.
     pub(super) fn stop_on_error(&mut self, site: &str) {
         if let Some(e) = self.err.take() {
@@ -109,5 +94,178 @@ impl Recording {
                 eprintln!("network {site}: finishing the recording: {e}");
             }
         }
+    }
+}
+
+/// The station events the control block shows, for `/log` and the live view: what was seen at the
+/// last look, so that each change is told once.
+pub(super) struct Events {
+    /// The servo's display was stale (none: not looked yet).
+    stale: Option<bool>,
+    /// Per child, the restarts already told.
+    restarts: [u64; CHILDREN],
+    /// Device safety episodes already told.
+    safety_episodes: u64,
+}
+
+impl Events {
+    /// Watching `ctl` from now on. A network process that continues its predecessor's recording
+    /// (`continued`) takes the servo's and physics' restarts and the safety episodes so far as
+    /// told (the predecessor told them); its own restart, and everything in a new recording, is
+    /// told at the first look.
+    pub(super) fn new(ctl: &ControlBlock, continued: bool) -> Self {
+        let mut restarts = [0; CHILDREN];
+        let mut safety_episodes = 0;
+        if continued {
+            for c in [Child::Servo, Child::Physics] {
+                restarts[c as usize] = ctl.child(c).restarts.load(Ordering::Relaxed);
+            }
+            safety_episodes = ctl.servo.safety_episodes.load(Ordering::Relaxed);
+        }
+        Self {
+            stale: None,
+            restarts,
+            safety_episodes,
+        }
+    }
+
+    /// What changed since the last look, as log lines: the servo's display going stale (its scale
+    /// below 1: the newest object state is older than the stale limit) and fresh again, a child
+    /// restarted by the supervisor, a device safety limit acting in a new episode.
+    pub(super) fn look(&mut self, ctl: &ControlBlock) -> Vec<(Level, String)> {
+        let mut told = Vec::new();
+        let scale = f64::from_bits(ctl.servo.scale.load(Ordering::Relaxed));
+        let stale = scale < 1.0;
+        if self.stale.is_some_and(|s| s != stale) || (self.stale.is_none() && stale) {
+            told.push(if stale {
+                (
+                    Level::Warning,
+                    format!("stale: the object state is past the stale limit; the force display ramps to zero (scale {scale:.2})"),
+                )
+            } else {
+                (Level::Info, "fresh: the force display is back".to_owned())
+            });
+        }
+        self.stale = Some(stale);
+        for c in Child::ALL {
+            let slot = ctl.child(c);
+            let n = slot.restarts.load(Ordering::Relaxed);
+            if n > self.restarts[c as usize] {
+                self.restarts[c as usize] = n;
+                let failure = slot.last_failure();
+                let why = if failure.is_empty() {
+                    String::new()
+                } else {
+                    format!(" after: {failure}")
+                };
+                told.push((
+                    Level::Warning,
+                    format!(
+                        "restart: the supervisor restarted the {} process (restart {n} of this station run){why}",
+                        c.name()
+                    ),
+                ));
+            }
+        }
+        // The servo stores the limit before the count: a new count comes with its limit.
+        let episodes = ctl.servo.safety_episodes.load(Ordering::Relaxed);
+        if episodes > self.safety_episodes {
+            self.safety_episodes = episodes;
+            let limit = Limit::from_code(ctl.servo.safety_limit.load(Ordering::Relaxed));
+            let (name, did) = limit.map_or(("(unknown)", "acted"), |l| {
+                (
+                    l.name(),
+                    if l.releases() {
+                        "released the device"
+                    } else {
+                        "clamped"
+                    },
+                )
+            });
+            told.push((
+                Level::Warning,
+                format!("safety limit {name} {did} ({episodes} episodes of any limit so far)"),
+            ));
+        }
+        told
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coop_rt::shm::{BlockSegment, SegmentName};
+
+    fn control(tag: &str) -> BlockSegment<ControlBlock> {
+        let name =
+            SegmentName::new(&format!("ut{}", std::process::id()), tag, "ctl").expect("valid name");
+        BlockSegment::create(&name).expect("control block")
+    }
+
+    fn texts(told: &[(Level, String)]) -> Vec<&str> {
+        told.iter().map(|t| t.1.as_str()).collect()
+    }
+
+    #[test]
+    fn restarts_and_safety_limits_are_told_once_each() {
+        let ctl = control("events");
+        ControlBlock::store_f64(&ctl.servo.scale, 1.0);
+        let mut ev = Events::new(&ctl, false);
+        assert!(ev.look(&ctl).is_empty(), "nothing happened yet");
+        let net = ctl.child(Child::Network);
+        net.set_last_failure("network (pid 42) was killed by SIGKILL");
+        net.restarts.store(1, Ordering::Relaxed);
+        ctl.servo
+            .safety_limit
+            .store(Limit::MaxForce.code(), Ordering::Relaxed);
+        ctl.servo.safety_episodes.store(1, Ordering::Relaxed);
+        let told = ev.look(&ctl);
+        assert_eq!(
+            texts(&told),
+            [
+                "restart: the supervisor restarted the network process (restart 1 of this station run) after: network (pid 42) was killed by SIGKILL",
+                "safety limit max_force_n clamped (1 episodes of any limit so far)",
+            ]
+        );
+        assert!(told.iter().all(|t| t.0 == Level::Warning));
+        // The clamp acting on (the same episode) is not told again.
+        ctl.servo.safety_at_ns.store(99, Ordering::Relaxed);
+        assert!(ev.look(&ctl).is_empty());
+        ctl.child(Child::Physics)
+            .restarts
+            .store(1, Ordering::Relaxed);
+        ctl.servo
+            .safety_limit
+            .store(Limit::Watchdog.code(), Ordering::Relaxed);
+        ctl.servo.safety_episodes.store(3, Ordering::Relaxed);
+        assert_eq!(
+            texts(&ev.look(&ctl)),
+            [
+                "restart: the supervisor restarted the physics process (restart 1 of this station run)",
+                "safety limit watchdog_ms released the device (3 episodes of any limit so far)",
+            ]
+        );
+        // A network process that continues the recording takes the others' restarts and the
+        // episodes so far as told, and tells its own restart.
+        let mut next = Events::new(&ctl, true);
+        assert_eq!(
+            texts(&next.look(&ctl)),
+            ["restart: the supervisor restarted the network process (restart 1 of this station run) after: network (pid 42) was killed by SIGKILL"]
+        );
+    }
+
+    #[test]
+    fn the_display_going_stale_and_fresh_is_told_but_not_a_fresh_start() {
+        let ctl = control("stale");
+        ControlBlock::store_f64(&ctl.servo.scale, 1.0);
+        let mut ev = Events::new(&ctl, false);
+        assert!(ev.look(&ctl).is_empty());
+        ControlBlock::store_f64(&ctl.servo.scale, 0.5);
+        let told = ev.look(&ctl);
+        assert_eq!(told.len(), 1);
+        assert!(told[0].1.starts_with("stale: "), "{told:?}");
+        assert!(ev.look(&ctl).is_empty(), "still stale: told once");
+        ControlBlock::store_f64(&ctl.servo.scale, 1.0);
+        assert_eq!(texts(&ev.look(&ctl)), ["fresh: the force display is back"]);
     }
 }
