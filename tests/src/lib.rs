@@ -59,6 +59,25 @@ pub fn wait_for<T>(what: &str, limit: Duration, mut f: impl FnMut() -> Result<T,
     }
 }
 
+/// `station status --json --config CFG` run by the `station` binary at `station`: the status as
+/// JSON.
+///
+/// # Panics
+/// The command cannot run, fails (its stderr is shown), or prints no JSON.
+pub fn station_status_json(station: &str, cfg: &std::path::Path) -> serde_json::Value {
+    let out = Command::new(station)
+        .args(["status", "--json", "--config"])
+        .arg(cfg)
+        .output()
+        .expect("station status");
+    assert!(
+        out.status.success(),
+        "station status: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("station status: JSON")
+}
+
 /// A child process that is SIGKILLed and reaped when dropped, so a failing test leaves no process.
 #[derive(Debug)]
 pub struct Reaped(pub Option<Child>);

@@ -112,17 +112,7 @@ fn start(tag: &str, contact: &str, world: [f64; 3], env: &[(&str, String)]) -> R
 impl Run {
     /// `station status --json`.
     fn status(&self) -> serde_json::Value {
-        let out = Command::new(STATION)
-            .args(["status", "--json", "--config"])
-            .arg(&self.cfg)
-            .output()
-            .expect("status");
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        serde_json::from_slice(&out.stdout).expect("status json")
+        coop_tests::station_status_json(STATION, &self.cfg)
     }
 
     /// `station status` as text.

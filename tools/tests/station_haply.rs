@@ -121,12 +121,7 @@ fn a_station_drives_a_haply_device_and_releases_it_when_the_service_vanishes() {
             && ControlBlock::load_f64(&ctl.servo.command_n) == 0.0)
             .then_some(())
     });
-    let out = Command::new(STATION)
-        .args(["status", "--json", "--config"])
-        .arg(&cfg)
-        .output()
-        .expect("status");
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("status json");
+    let v = coop_tests::station_status_json(STATION, &cfg);
     assert_eq!(v["servo"]["safety"]["limit"], "device fault", "{v}");
     assert_eq!(v["servo"]["safety"]["releases"], true);
     kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");

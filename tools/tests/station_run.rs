@@ -720,17 +720,7 @@ fn station_status_names_the_device_limit_that_acted_last() {
     wait_until("the force clamp to act", LIMIT, || {
         (ctl.servo.safety_limit.load(Ordering::Relaxed) != 0).then_some(())
     });
-    let out = Command::new(STATION)
-        .args(["status", "--json", "--config"])
-        .arg(&cfg)
-        .output()
-        .expect("status");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let v = coop_tests::station_status_json(STATION, &cfg);
     let s = &v["servo"]["safety"];
     assert_eq!(s["limit"], "max_force_n", "{v}");
     assert_eq!(s["releases"], false);
