@@ -849,28 +849,20 @@ impl Recorder {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as i128);
         let mono = i128::from(coop_rt::timer::monotonic_ns());
-        let number = match &earlier {
-            Some((n, started)) => {
-                // The parts after it hold no metadata (cut before any reached the disk): nothing
-                // of the recording is in them, and `read` could not read past them.
-                for (m, old) in parts_on_disk(path).map_err(io_err(path))? {
-                    if m > *n {
-                        std::fs::remove_file(&old).map_err(io_err(&old))?;
-                    }
-                }
-                metadata.insert("started_unix_ns".into(), started.clone());
-                n + 1
-            }
-            None => {
-                for (n, old) in parts_on_disk(path).map_err(io_err(path))? {
-                    if n > 0 {
-                        std::fs::remove_file(&old).map_err(io_err(&old))?;
-                    }
-                }
-                metadata.insert("started_unix_ns".into(), wall.to_string());
-                0
-            }
+        // Continuing: the parts after the earlier one hold no metadata (cut before any reached
+        // the disk), so nothing of the recording is in them and `read` could not read past them.
+        // Afresh: every part of an earlier recording goes (the first is written over).
+        let continued = earlier.as_ref().map(|(n, _)| *n);
+        let (number, started) = match earlier {
+            Some((n, started)) => (n + 1, started),
+            None => (0, wall.to_string()),
         };
+        for (m, old) in parts_on_disk(path).map_err(io_err(path))? {
+            if m > continued.unwrap_or(0) {
+                std::fs::remove_file(&old).map_err(io_err(&old))?;
+            }
+        }
+        metadata.insert("started_unix_ns".into(), started);
         let site = scene
             .as_ref()
             .map(|s| s.site.clone())
@@ -894,7 +886,7 @@ impl Recorder {
             seq: 0,
             wall_minus_mono: wall - mono,
             last_flush: Instant::now(),
-            continued: earlier.map(|(n, _)| n),
+            continued,
         };
         r.remove_beyond_kept()?;
         Ok(r)
