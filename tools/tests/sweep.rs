@@ -18,6 +18,17 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// `method` on the paper task at a constant `delay_ms` (the scenario's jitter) and `seed`: the run
+/// and its metrics against the reference.
+fn paper_at(method: MethodName, delay_ms: f64, seed: u64) -> (sim::RunResult, metrics::Metrics) {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = scenario_at(&base, delay_ms, seed).expect("valid");
+    let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    (r, m)
+}
+
 #[test]
 fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
     let o = Command::new(SIM)
@@ -255,11 +266,7 @@ fn eight_user_bench_scenario_has_everyone_touching() {
 /// corrections with their energy, and they never give a copy more than the users' work.
 #[test]
 fn coupled_does_the_task_at_50_ms_with_bounded_pulls() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
-    let sc = scenario_at(&base, 50.0, 1).expect("valid");
-    let r = sim::run(&sc, Mode::Distributed(MethodName::Coupled), &mut |_| {});
-    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    let m = metrics::compute(&sc, &r, &reference);
+    let (r, m) = paper_at(MethodName::Coupled, 50.0, 1);
     assert_eq!(m.method, "coupled");
     assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
     assert!(m.co_contact_samples > 100, "{}", m.co_contact_samples);
@@ -285,11 +292,7 @@ fn coupled_does_the_task_at_50_ms_with_bounded_pulls() {
 /// kinetic energy, several mJ): the accounting must tell the two apart, or this fails.
 #[test]
 fn timewarp_at_150_ms_agrees_and_its_rollbacks_inject_nothing() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
-    let sc = scenario_at(&base, 150.0, 1).expect("valid");
-    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
-    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    let m = metrics::compute(&sc, &r, &reference);
+    let (_, m) = paper_at(MethodName::Timewarp, 150.0, 1);
     assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
     assert_eq!(m.hash_mismatches, 0);
     assert!(m.co_contact_divergence_max_m < 0.010, "{m:?}");
