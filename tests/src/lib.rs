@@ -182,6 +182,23 @@ pub fn shm_entries(prefix: &str) -> Vec<String> {
         .unwrap_or_default()
 }
 
+/// One user pressing a disk against a wall: a one-site scenario (`name = "press"`, servo at
+/// 1 kHz) with the disk at rest at the origin on a table under g/3 and a wall at x = 4.5 cm, its
+/// user's `script` (TOML inline array of keyframes), `tables` added before the site (whole TOML
+/// tables: `[contact]`, `[display]`, …) and `site_fields` added to the site (TOML lines).
+pub fn press_scenario(tables: &str, site_fields: &str, script: &str) -> String {
+    format!(
+        "name = \"press\"\nduration_s = 600.0\n\
+         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
+         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
+         planes = [{{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }}, {{ normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }}]\n\
+         {tables}\
+         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
+         {site_fields}\
+         script = {script}\n"
+    )
+}
+
 /// Writes a station configuration for a test into `dir` and returns its path: the session, the
 /// station, no mlockall, no `/dev/cpu_dma_latency`, and both loops under SCHED_OTHER priority 0
 /// (parallel tests need no privilege and starve nothing; the loops still sleep to absolute

@@ -17,26 +17,13 @@ use coop_rt::device::safety::Limit;
 use coop_rt::shm::control::{ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::Ordering;
-use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
+use coop_tests::{press_scenario, shm_entries, station_config, unique_session, wait_until, Reaped};
 use fake_dhd::{record, Call, Fake};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
 const STATION: &str = env!("CARGO_BIN_EXE_station");
 const LIMIT: Duration = Duration::from_secs(60);
-
-/// A disk held against a wall at x = 4.5 cm, `contact` added to the scenario (TOML lines).
-fn scenario(contact: &str) -> String {
-    format!(
-        "name = \"press\"\nduration_s = 600.0\n\
-         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
-         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
-         planes = [{{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }}, {{ normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }}]\n\
-         {contact}\
-         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
-         script = [{{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }}]\n"
-    )
-}
 
 /// A running station on the fake DHD device, and what the test reads of it.
 struct Run {
@@ -58,7 +45,16 @@ fn start(tag: &str, contact: &str, world: [f64; 3], env: &[(&str, String)]) -> R
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-dhd-{session}"));
     std::fs::create_dir_all(&dir).expect("dir");
-    std::fs::write(dir.join("press.toml"), scenario(contact)).expect("scenario");
+    // A disk held against a wall at x = 4.5 cm, `contact` added to the scenario (TOML lines).
+    std::fs::write(
+        dir.join("press.toml"),
+        press_scenario(
+            contact,
+            "",
+            "[{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }]",
+        ),
+    )
+    .expect("scenario");
     let log = dir.join("dhd-calls.log");
     let lib = fake.lib.clone();
     let cfg = station_config(&dir, &session, "user1", |c| {

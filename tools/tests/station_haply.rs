@@ -13,7 +13,7 @@ use coop_rt::device::safety::Limit;
 use coop_rt::shm::control::{ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::{AtomicU64, Ordering};
-use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
+use coop_tests::{press_scenario, shm_entries, station_config, unique_session, wait_until, Reaped};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
@@ -77,12 +77,7 @@ fn a_station_drives_a_haply_device_and_releases_it_when_the_service_vanishes() {
     // pressing it there.
     std::fs::write(
         dir.join("press.toml"),
-        "name = \"press\"\nduration_s = 600.0\n\
-         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
-         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
-         planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\
-         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
-         script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }]\n",
+        press_scenario("", "", "[{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }]"),
     )
     .expect("scenario");
     let cfg = station_config(&dir, &session, "user1", |c| {

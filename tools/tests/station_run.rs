@@ -11,7 +11,7 @@ use std::time::Duration;
 use coop_rt::shm::control::{Child, ControlBlock, RunState};
 use coop_rt::shm::{BlockSegment, SegmentName};
 use coop_rt::sync::Ordering;
-use coop_tests::{shm_entries, station_config, unique_session, wait_until, Reaped};
+use coop_tests::{press_scenario, shm_entries, station_config, unique_session, wait_until, Reaped};
 use coop_transport::network::Tls;
 use coop_transport::recording::{self, SampleMsg};
 use nix::sys::signal::{kill, Signal};
@@ -413,13 +413,11 @@ fn while_physics_is_down_the_servo_force_ramps_to_zero_in_time() {
     // One user pressing a disk against a wall for the whole run.
     std::fs::write(
         dir.join("press.toml"),
-        "name = \"press\"\nduration_s = 600.0\n\
-         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
-         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
-         planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\
-         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
-         stale_limit_ms = 100.0\nstale_ramp_ms = 50.0\n\
-         script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
+        press_scenario(
+            "",
+            "stale_limit_ms = 100.0\nstale_ramp_ms = 50.0\n",
+            "[{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]",
+        ),
     )
     .expect("scenario");
     let cfg = station_config(&dir, &session, "user1", |c| {
@@ -699,13 +697,11 @@ fn station_status_names_the_device_limit_that_acted_last() {
     std::fs::create_dir_all(&dir).expect("dir");
     std::fs::write(
         dir.join("press.toml"),
-        "name = \"press\"\nduration_s = 600.0\n\
-         [display]\nenabled = true\n\
-         [object]\nstart_m = [0.0, 0.0, 0.0099]\n\
-         [world]\ngravity_m_per_s2 = [0.0, 0.0, -3.27]\n\
-         planes = [{ normal = [0.0, 0.0, 1.0], offset_m = 0.0 }, { normal = [-1.0, 0.0, 0.0], offset_m = -0.045 }]\n\
-         [[site]]\nname = \"user1\"\nservo_rate_hz = 1000.0\ndevice_base_m = [-0.3, -0.2, 0.0]\n\
-         script = [{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]\n",
+        press_scenario(
+            "[display]\nenabled = true\n",
+            "",
+            "[{ t_s = 0.0, target_m = [-0.12, 0.0, 0.01] }, { t_s = 0.5, target_m = [-0.035, 0.0, 0.01] }]",
+        ),
     )
     .expect("scenario");
     let rec = dir.join("user1.mcap");
