@@ -266,7 +266,19 @@ fn eight_user_bench_scenario_has_everyone_touching() {
 /// corrections with their energy, and they never give a copy more than the users' work.
 #[test]
 fn coupled_does_the_task_at_50_ms_with_bounded_pulls() {
-    let (r, m) = paper_at(MethodName::Coupled, 50.0, 1);
+    coupled_does_the_task_at(50.0, 1);
+}
+
+/// At 150 ms, seed 3, a tank of the follower's own work alone held user 2's copy back from user 1's
+/// push (its pulls scaled back 525 times, 6 of 12 phases): a pull may bring the copy up to the
+/// leader's accounted energy.
+#[test]
+fn coupled_does_the_task_at_150_ms_seed_3_pulled_up_to_the_leaders_energy() {
+    coupled_does_the_task_at(150.0, 3);
+}
+
+fn coupled_does_the_task_at(delay_ms: f64, seed: u64) {
+    let (r, m) = paper_at(MethodName::Coupled, delay_ms, seed);
     assert_eq!(m.method, "coupled");
     assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
     assert!(m.co_contact_samples > 100, "{}", m.co_contact_samples);

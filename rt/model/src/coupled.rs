@@ -13,11 +13,16 @@
 //!   the others pull their copy towards its reported state (dead-reckoned to now): on each of its
 //!   reports, the fraction Δ / (Δ + [`PULL_TIME_S`]) of the way, Δ the time since the last pull —
 //!   a first-order convergence with time constant [`PULL_TIME_S`].
-//! - **Energy-bounded** (PSPM-style set-position clipping): each pull may add at most what the
-//!   copy's tank holds ([`crate::tank::bound_gain`] scales it back along the way, counted); the tank
-//!   is filled by the users' positive work on this copy, drained by what pulls add and refilled by
-//!   what they take. So the pulls together can never give a copy more energy than its users gave
-//!   it. Along the normal of a plane the local copy rests on, the pull keeps the local contact (as
+//! - **Energy-bounded** (PSPM-style set-position clipping): a pull may bring the copy's energy up to
+//!   the leader's state's (that energy is accounted for: the leader's users gave it, at the leader's
+//!   site, under its own bound) plus what the copy's tank holds ([`crate::tank::bound_gain`] scales
+//!   it back along the way, counted); the tank is filled by the users' positive work on this copy,
+//!   drained by what pulls add beyond the leader's energy and refilled by what they take. So no pull
+//!   gives a copy more energy than some copy's users gave theirs. The leader's energy has to count:
+//!   a follower's copy, pulled ahead of the leader's tool played late on it, takes little of that
+//!   tool's work, so a tank of its own work alone stays empty and holds the copy back from the
+//!   leader's push for good (the paper task at 150 ms, seed 3: 525 pulls scaled back, user 2's
+//!   copy stopped short of its tool, 6 of 12 phases). Along the normal of a plane the local copy rests on, the pull keeps the local contact (as
 //!   `paper` does): transplanting another copy's micro-bounce would only pump the table's spring.
 
 use crate::body::{BodyState, Vec3};
@@ -298,15 +303,20 @@ impl Consistency for Coupled {
         self.last_pull_s = now_s;
         let alpha = since / (since + PULL_TIME_S);
         let full = crate::tank::blend(&copy.state, &target, alpha);
+        let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
+        // The leader's state is accounted for (its users gave it its energy, at its site): a pull
+        // may bring the copy up to it, plus what this copy's tank holds.
+        let budget = self.tank_j + (stored(&target) - stored(&copy.state)).max(0.0);
         let (new, clipped_j) =
-            match crate::tank::bound_gain(world, &copy.state, &full, self.tank_j, None) {
+            match crate::tank::bound_gain(world, &copy.state, &full, budget, None) {
                 Some((s, c)) => (s, c),
                 None => (full, 0.0),
             };
-        let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
-        // What a pull adds is drained; what it takes is returned (the tank never exceeds the users'
-        // positive work less what pulls added net).
-        self.tank_j = (self.tank_j - (stored(&new) - stored(&copy.state))).max(0.0);
+        // What a pull adds beyond the leader's energy is drained; what it takes is returned (the
+        // tank never exceeds the users' positive work less what pulls added net).
+        let beyond_leader = stored(&new) - stored(&copy.state).max(stored(&target));
+        let taken = (stored(&copy.state) - stored(&new)).max(0.0);
+        self.tank_j = (self.tank_j - beyond_leader.max(0.0) + taken).max(0.0);
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
