@@ -109,6 +109,13 @@ pub struct ToolContactState {
     anchor_body: Option<Vec3>,
 }
 
+impl ToolContactState {
+    /// Whether the tool touched the object at its last contact computation.
+    pub fn touching(&self) -> bool {
+        self.anchor_body.is_some()
+    }
+}
+
 /// The contact between a spherical tool tip (centre `tool_pos`, radius `tool_radius`, velocity
 /// `tool_vel`) and the object, updating the friction memory.
 #[allow(clippy::too_many_arguments)]
