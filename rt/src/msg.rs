@@ -10,6 +10,7 @@
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
+use coop_model::coupled::CoupledReport;
 use coop_model::method::{Report, MAX_SITES};
 use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
 use nalgebra::{Quaternion, UnitQuaternion};
@@ -280,7 +281,7 @@ pod_message! {
     /// physics): the model's [`Report`] in a fixed layout, with the sender's site index.
     #[derive(Debug, Clone, Copy, PartialEq, Default)]
     pub struct SiteReport {
-        /// 1 = a state (paper), 2 = a force (naive).
+        /// 1 = a state (paper), 2 = a force (naive), 4 = a `coupled` state ([`KIND_COUPLED`]).
         pub kind: u64,
         /// Sender's time, ns.
         pub t_ns: u64,
@@ -515,6 +516,11 @@ impl TraceRecord {
 
 const KIND_STATE: u64 = 1;
 const KIND_FORCE: u64 = 2;
+/// A `coupled` site's copy and its user's contact times (its tools go as a [`ToolTrack`]); the
+/// state fields are a state's, `included[0]` is when its user's current contact began and
+/// `included[1]` when its user last touched, s on its clock (−1: not touching, never), the other
+/// `included` 0. (3 is [`SiteReport::KIND_LOST`], never on the wire.)
+pub const KIND_COUPLED: u64 = 4;
 
 fn zero(xs: &[f64]) -> bool {
     xs.iter().all(|&x| x == 0.0)
@@ -571,9 +577,29 @@ impl SiteReport {
                 touching: u64::from(force.touching),
                 ..Self::default()
             },
-            // A timewarp report has no ring layout yet (stations refuse the method at
-            // configuration): kind 0, which every receiver refuses.
-            Report::Tools(_) | Report::Coupled(_) => Self {
+            Report::Coupled(ref c) => {
+                let (pos, rot, vel, ang_mom) = state_fields(&c.state);
+                let time = |t: f64| if t.is_finite() { t.max(0.0) } else { -1.0 };
+                let mut included = [0.0; MAX_SITES];
+                included[0] = time(c.touch_since_s);
+                included[1] = time(c.last_touch_s);
+                Self {
+                    kind: KIND_COUPLED,
+                    t_ns: ns(c.t_s),
+                    seq,
+                    site: site as u64,
+                    pos,
+                    rot,
+                    vel,
+                    ang_mom,
+                    accel: a3(c.accel),
+                    included,
+                    ..Self::default()
+                }
+            }
+            // Tools go as a `ToolTrack` (their own ring and key): kind 0, which every receiver
+            // refuses.
+            Report::Tools(_) => Self {
                 seq,
                 site: site as u64,
                 ..Self::default()
@@ -611,6 +637,35 @@ impl SiteReport {
                         accel: v3(self.accel),
                         included: self.included,
                     },
+                ))
+            }
+            KIND_COUPLED => {
+                let state = body_state(self.pos, self.rot, self.vel, self.ang_mom)?;
+                let time = |t: f64| (t == -1.0 || (0.0..=1e12).contains(&t)).then_some(t);
+                let (since, last) = (time(self.included[0])?, time(self.included[1])?);
+                (finite(&self.accel)
+                    && zero(&self.included[2..])
+                    && zero(&self.force)
+                    && zero(&self.point)
+                    && self.depth == 0.0
+                    && self.touching == 0)
+                    .then_some(())?;
+                Some((
+                    site,
+                    Report::Coupled(CoupledReport {
+                        tools: ToolReport {
+                            first_tick: 0,
+                            count: 0,
+                            positions: [[0; 3]; WINDOW_TICKS],
+                            confirmed_tick: 0,
+                            confirmed_hash: 0,
+                        },
+                        t_s,
+                        state,
+                        accel: v3(self.accel),
+                        touch_since_s: if since < 0.0 { f64::INFINITY } else { since },
+                        last_touch_s: if last < 0.0 { f64::NEG_INFINITY } else { last },
+                    }),
                 ))
             }
             KIND_FORCE => {
@@ -688,6 +743,38 @@ mod tests {
         let mut bad = SiteReport::new(1, 7, &r);
         bad.kind = 9;
         assert!(bad.report().is_none(), "unknown kind");
+        // A `coupled` state: its user's contact times survive, "not touching" and "never" too.
+        for (since, last) in [(1.25, 1.5), (f64::INFINITY, f64::NEG_INFINITY)] {
+            let c = Report::Coupled(CoupledReport {
+                tools: ToolReport {
+                    first_tick: 0,
+                    count: 0,
+                    positions: [[0; 3]; WINDOW_TICKS],
+                    confirmed_tick: 0,
+                    confirmed_hash: 0,
+                },
+                t_s: 3.0,
+                state,
+                accel: Vec3::new(0.0, 0.0, -3.27),
+                touch_since_s: since,
+                last_touch_s: last,
+            });
+            let laid = SiteReport::new(1, 8, &c);
+            assert_eq!(laid.kind, KIND_COUPLED);
+            assert_eq!(laid.report(), Some((1, c)));
+            let mut bad = laid;
+            bad.included[0] = -2.0;
+            assert!(
+                bad.report().is_none(),
+                "a contact time before 0 other than -1"
+            );
+            let mut bad = laid;
+            bad.included[5] = 1.0;
+            assert!(bad.report().is_none(), "an unused word not zero");
+            let mut bad = laid;
+            bad.force[0] = 1.0;
+            assert!(bad.report().is_none(), "a force field in a state");
+        }
         let f = Report::Force {
             t_s: 1.0,
             force: ContactForce {

@@ -289,7 +289,12 @@ impl PhysicsLoop {
                 .max(now_ns.saturating_sub(self.report_period_ns))
                 + self.report_period_ns;
             let report = self.method.report(&self.copy, &self.own, now_s);
-            if let Report::Tools(r) = &report {
+            let tools = match &report {
+                Report::Tools(r) => Some(r),
+                Report::Coupled(c) => Some(&c.tools),
+                _ => None,
+            };
+            if let Some(r) = tools {
                 // Tools go out as a track (its own ring and sequence), and only once the grid
                 // has begun (before, there is nothing of this site's to say).
                 if self.ticks.done > 0 {
@@ -300,7 +305,9 @@ impl PhysicsLoop {
                         self.tracks.drops += 1;
                     }
                 }
-            } else {
+            }
+            // `coupled` sends its state besides its track.
+            if !matches!(report, Report::Tools(_)) {
                 self.report_seq += 1;
                 if self
                     .reports

@@ -122,7 +122,7 @@ fn parse_seeds(s: &str) -> Result<u64, String> {
 }
 
 fn parse_method(s: &str) -> Result<MethodName, String> {
-    MethodName::SIMULATED
+    MethodName::ALL
         .into_iter()
         .find(|m| m.as_str() == s)
         .ok_or_else(|| format!("unknown method {s:?}: use naive, paper or timewarp"))
@@ -187,7 +187,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             let sc = scenario_file::load(&scenario)?;
             let reference = run_mode(&sc, Mode::Reference);
             let mut all = vec![metrics::compute(&sc, &reference, &reference)];
-            for method in MethodName::SIMULATED {
+            for method in MethodName::ALL {
                 let r = run_mode(&sc, Mode::Distributed(method));
                 print_rollbacks(&r);
                 let m = metrics::compute(&sc, &r, &reference);
@@ -215,7 +215,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         } => {
             let sc = scenario_file::load(&scenario)?;
             let methods = if methods.is_empty() {
-                MethodName::SIMULATED.to_vec()
+                MethodName::ALL.to_vec()
             } else {
                 methods
             };

@@ -107,7 +107,7 @@ fn no_method_delay_or_seed_of_the_sweep_blows_up() {
         sim::run(&sc, Mode::Reference, &mut |_| {})
     });
     let mut jobs = Vec::new();
-    for m in MethodName::SIMULATED {
+    for m in MethodName::ALL {
         for &d in &delays {
             for seed in 1..=3u64 {
                 jobs.push((m, d, seed, scenario_at(&base, d, seed).expect("valid")));

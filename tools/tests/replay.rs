@@ -211,7 +211,7 @@ fn recorded_hands_replay_identically_under_every_method_and_delay() {
     std::fs::write(dir.join("replay.toml"), text).expect("scenario");
     let replay = scenario_file::load(&dir.join("replay.toml")).expect("the replay scenario");
     let mut runs = 0;
-    for method in MethodName::SIMULATED {
+    for method in MethodName::ALL {
         for delay_ms in [0.0, 150.0] {
             let sc = coop_tools::sweep::scenario_at(&replay, delay_ms, 1).expect("scenario at");
             let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
@@ -239,6 +239,6 @@ fn recorded_hands_replay_identically_under_every_method_and_delay() {
             runs += 1;
         }
     }
-    assert_eq!(runs, 2 * MethodName::SIMULATED.len());
+    assert_eq!(runs, 2 * MethodName::ALL.len());
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -564,3 +564,49 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// Issue 12, item 7: the paper's task under `coupled` on real stations (tool tracks and states over
+/// zenoh, the remote tool played from the jitter buffer, pulls towards the site that touched first
+/// in the physics process): all six phases at both stations, each taking the other's tracks and
+/// states and pulling its copy, no rollback.
+#[test]
+fn coupled_on_real_stations_passes_every_phase() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = out_dir("coupled");
+    let v = run_json(session(
+        &["scenarios/paper.toml", "--method", "coupled"],
+        &out,
+    ));
+    let real = &v["methods"]["coupled"]["real"];
+    assert_eq!(
+        (
+            real["phases_passed"].as_u64(),
+            real["phases_total"].as_u64()
+        ),
+        (Some(12), Some(12)),
+        "six phases at each of the two stations: {real}"
+    );
+    let stations = v["methods"]["coupled"]["stations"]
+        .as_object()
+        .expect("stations");
+    assert_eq!(stations.len(), 2);
+    for (site, st) in stations {
+        let ph = &st["live"]["physics"];
+        let rb = &ph["rollback"];
+        assert!(
+            rb["ticks"].as_u64() > Some(10_000),
+            "{site} stepped the session's grid: {ph}"
+        );
+        assert!(
+            rb["tracks_received"].as_u64() > Some(100) && rb["tracks_rejected"] == 0,
+            "{site} took the other's tool tracks: {ph}"
+        );
+        assert!(
+            ph["remote_received"].as_u64() > Some(100) && ph["remote_rejected"] == 0,
+            "{site} took the other's states: {ph}"
+        );
+        assert!(ph["adoptions"].as_u64() > Some(0), "{site} pulled: {ph}");
+        assert_eq!(rb["rollbacks"], 0, "{site}: no rollback in coupled: {ph}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}

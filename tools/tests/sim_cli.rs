@@ -162,8 +162,8 @@ fn zero_delay_both_methods_match_the_reference() {
     let sc =
         scenario_file::load(&repo().join("scenarios/zero-delay.toml")).expect("zero-delay.toml");
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    // The two state-exchanging methods (`MethodName::ALL` also holds timewarp since stations run
-    // it: it predicts the partner's tool between reports, and the sweep tests judge it).
+    // The two state-exchanging methods (`MethodName::ALL` also holds timewarp and coupled: they
+    // predict or play the partner's tool late, and the sweep tests judge them).
     for method in [MethodName::Naive, MethodName::Paper] {
         let m = metrics::compute(
             &sc,
@@ -212,7 +212,7 @@ fn compare_prints_one_table_and_json() {
     // The reference and every simulated method (timewarp made it four).
     assert_eq!(
         v["methods"].as_array().map(Vec::len),
-        Some(1 + MethodName::SIMULATED.len())
+        Some(1 + MethodName::ALL.len())
     );
     assert!(v["methods"][1]["divergence_max_m"].as_f64().is_some());
     for m in v["methods"].as_array().expect("methods") {

@@ -47,7 +47,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     let rows = v["rows"].as_array().expect("rows");
-    assert_eq!(rows.len(), MethodName::SIMULATED.len() * 2, "{v}");
+    assert_eq!(rows.len(), MethodName::ALL.len() * 2, "{v}");
     for key in [
         "method",
         "delay_ms",
@@ -77,7 +77,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
             .unwrap_or_else(|| panic!("no row for {method} at {delay} ms: {v}"))
     };
     for delay in [0.0, 150.0] {
-        for m in MethodName::SIMULATED {
+        for m in MethodName::ALL {
             let r = row(m.as_str(), delay);
             assert_eq!(r["seed"], 1);
             assert_eq!(r["phases_total"], 12, "{r}");

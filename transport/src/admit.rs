@@ -13,7 +13,7 @@
 use coop_model::scenario::Scenario;
 use coop_model::timewarp::QUANTUM_M;
 use coop_model::MAX_SITES;
-use coop_rt::msg::{SiteReport, ToolTrack};
+use coop_rt::msg::{SiteReport, ToolTrack, KIND_COUPLED};
 use coop_rt::shm::control::Refused;
 
 use crate::wire::{decode, decode_track, DecodeError};
@@ -187,10 +187,11 @@ impl Bounds {
     /// clock now, in its own seconds, where it is known.
     fn implausible(
         &self,
+        site: usize,
         r: &SiteReport,
         now_of: impl Fn(usize) -> Option<f64>,
     ) -> Option<&'static str> {
-        if r.kind == 1 {
+        if r.kind == 1 || r.kind == KIND_COUPLED {
             if norm(r.pos) > self.extent_m {
                 return Some("position");
             }
@@ -206,8 +207,10 @@ impl Bounds {
             let window_s = self.future_ns as f64 * 1e-9;
             for (k, &t) in r.included.iter().enumerate() {
                 // -1: that site's user has not touched it; else a time on that site's clock, which
-                // cannot be later than that site's now.
-                let late = now_of(k).is_some_and(|now| t > now + window_s);
+                // cannot be later than that site's now. (`coupled`: its own user's contact times,
+                // on its own clock.)
+                let clock = if r.kind == KIND_COUPLED { site } else { k };
+                let late = now_of(clock).is_some_and(|now| t > now + window_s);
                 if !(t == -1.0 || (0.0..=1e12).contains(&t)) || late {
                     return Some("inclusion time");
                 }
@@ -315,12 +318,21 @@ impl Inbound {
             Some(now_ns.saturating_add_signed(off) as f64 * 1e-9)
         };
         let plausible = self.window(site, r.t_ns, now_ns).and_then(|()| {
-            match self.bounds.implausible(&r, now_of) {
+            match self.bounds.implausible(site, &r, now_of) {
                 Some(what) => Err(Refusal::Implausible { site, what }),
                 None => Ok(()),
             }
         });
         let resync = order(&mut self.seen[site], site, r.seq, r.t_ns, plausible)?;
+        if r.kind == KIND_COUPLED {
+            // Its user's contact times, like its time, on our clock (−1 stays: none).
+            let shift = offset_ns as f64 * 1e-9;
+            for t in &mut r.included[..2] {
+                if *t >= 0.0 {
+                    *t = (*t - shift).max(0.0);
+                }
+            }
+        }
         Ok(Admitted {
             site,
             report: r,
@@ -583,6 +595,30 @@ mod tests {
             .check("b", &encode(&r), now, &[Some(0), Some(1000 * S as i64)])
             .expect("taken");
         assert_eq!(a.report.t_ns, 10 * S);
+    }
+
+    #[test]
+    fn a_coupled_states_contact_times_are_read_on_our_clock_and_checked_on_its_senders() {
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], paper_bounds());
+        let mut r = sample();
+        r.kind = KIND_COUPLED;
+        r.included = [0.0; MAX_SITES];
+        r.included[0] = 1008.0; // its user's contact began 2 s before the state, its clock
+        r.included[1] = -1.0; // "never" stays
+        r.t_ns = 1000 * S + 10 * S; // their clock is 1000 s ahead of ours
+        let offsets = [Some(0), Some(1000 * S as i64)];
+        let a = rx.check("b", &encode(&r), 10 * S, &offsets).expect("taken");
+        assert_eq!(a.report.t_ns, 10 * S);
+        assert!((a.report.included[0] - 8.0).abs() < 1e-9, "{:?}", a.report);
+        assert_eq!(a.report.included[1], -1.0);
+        // A contact that begins after its sender's now is refused.
+        r.seq += 1;
+        r.included[0] = 1020.0;
+        assert_eq!(
+            rx.check("b", &encode(&r), 10 * S, &offsets)
+                .map_err(|e| e.reason()),
+            Err(Refused::Implausible)
+        );
     }
 
     #[test]

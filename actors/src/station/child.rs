@@ -201,7 +201,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     };
     let (sc, i) = (&cfg.scenario, cfg.site);
     let mut rings = rings;
-    if sc.method == MethodName::Timewarp {
+    if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
         rings.tracks_out =
             Some(Producer::open(&names.track_out, &opts).context("opening the track-out ring")?);
         rings.tracks_in =
@@ -214,10 +214,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
         // the confirmed state is the same bits everywhere only from the same start.
         MethodName::Timewarp => Box::new(sc.timewarp(i, &ObjectCopy::new(start))),
-        MethodName::Coupled => bail!(
-            "method {} runs in the simulator (`sim`) only so far",
-            sc.method.as_str()
-        ),
+        MethodName::Coupled => Box::new(sc.coupled(i)),
     };
     let step = period(sc.site[i].physics_rate_hz);
     let timing = PhysicsTiming {
@@ -230,8 +227,9 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     };
     // A restarted physics resumes from the newest state its predecessor published, not from the
     // scenario's start (the servo kept displaying that state; a jump back would be felt).
-    // (timewarp restarts from the start: its copy is a function of the tick and the inputs.)
-    let resumed = if sc.method == MethodName::Timewarp {
+    // (timewarp and coupled restart from the start and catch up on the session's tick grid:
+    // their copy is a function of the tick and the inputs, and their tick numbers are the grid's.)
+    let resumed = if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
         None
     } else {
         ctl.resume().and_then(|s| s.state())
@@ -296,7 +294,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
         remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
         trace: Consumer::open(&names.trace, &opts).context("opening the trace ring")?,
-        tracks: if sc.method == MethodName::Timewarp {
+        tracks: if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
             Some((
                 Consumer::open(&names.track_out, &opts).context("opening the track-out ring")?,
                 Producer::open(&names.track_in, &opts).context("opening the track-in ring")?,

@@ -360,14 +360,7 @@ impl StationConfig {
         if let Some(m) = self.method {
             scenario.method = m;
         }
-        if scenario.method == MethodName::Coupled {
-            bail!(
-                "method = {:?} (scenario {:?} or this file): runs in the simulator (`sim`) only so far; stations run naive, paper or timewarp",
-                scenario.method.as_str(),
-                scenario.name
-            );
-        }
-        if scenario.method == MethodName::Timewarp {
+        if matches!(scenario.method, MethodName::Timewarp | MethodName::Coupled) {
             // One tick grid for the session: every site steps at the same rate.
             let r0 = scenario.site[0].physics_rate_hz;
             if let Some((k, s)) = scenario
@@ -377,9 +370,10 @@ impl StationConfig {
                 .find(|(_, s)| s.physics_rate_hz != r0)
             {
                 bail!(
-                    "site[{k}].physics_rate_hz = {} (scenario {:?}): method timewarp steps every site on one tick grid, so every site's physics rate must equal site[0]'s ({r0} Hz)",
+                    "site[{k}].physics_rate_hz = {} (scenario {:?}): method {} steps every site on one tick grid, so every site's physics rate must equal site[0]'s ({r0} Hz)",
                     s.physics_rate_hz,
-                    scenario.name
+                    scenario.name,
+                    scenario.method.as_str()
                 );
             }
         }
@@ -752,32 +746,26 @@ mod tests {
     use super::*;
 
     #[test]
-    fn timewarp_needs_one_physics_rate_and_coupled_is_refused_by_name() {
-        let tw = StationConfig {
-            method: Some(MethodName::Timewarp),
-            ..StationConfig::default()
-        };
-        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
-        tw.clone()
-            .resolve_with(None, sc.clone())
-            .expect("the paper's sites share a physics rate");
-        sc.site[1].physics_rate_hz = 500.0;
-        let err = tw.resolve_with(None, sc).expect_err("two rates");
-        assert!(
-            format!("{err:#}").contains("site[1].physics_rate_hz = 500")
-                && format!("{err:#}").contains("must equal site[0]'s"),
-            "{err:#}"
-        );
-        let err = StationConfig {
-            method: Some(MethodName::Coupled),
-            ..StationConfig::default()
+    fn timewarp_and_coupled_need_one_physics_rate() {
+        for m in [MethodName::Timewarp, MethodName::Coupled] {
+            let c = StationConfig {
+                method: Some(m),
+                ..StationConfig::default()
+            };
+            let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
+            c.clone()
+                .resolve_with(None, sc.clone())
+                .expect("the paper's sites share a physics rate");
+            sc.site[1].physics_rate_hz = 500.0;
+            let err = c.resolve_with(None, sc).expect_err("two rates");
+            let err = format!("{err:#}");
+            assert!(
+                err.contains("site[1].physics_rate_hz = 500")
+                    && err.contains(&format!("method {} steps", m.as_str()))
+                    && err.contains("must equal site[0]'s"),
+                "{err}"
+            );
         }
-        .resolve(None)
-        .expect_err("coupled");
-        assert!(
-            format!("{err:#}").contains("method = \"coupled\""),
-            "{err:#}"
-        );
     }
 
     #[test]

@@ -131,6 +131,19 @@ impl Coupled {
         t.rem_euclid(self.received.len() as i64) as usize
     }
 
+    /// Keeps the tool positions of `tools` from `from` for their playout ticks.
+    fn take_tools(&mut self, from: usize, tools: &ToolReport) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        for (k, &q) in tools.positions[..tools.count.min(WINDOW_TICKS)]
+            .iter()
+            .enumerate()
+        {
+            let t = tools.first_tick + k as i64;
+            let i = self.slot(t);
+            self.received[i][from] = Some((t, q));
+        }
+    }
+
     /// The site that leads: the earliest current contact (ties: the lower index); when nobody
     /// touches, the one whose user touched last (its copy holds the newest push), as far as known.
     fn pick_leader(&mut self) {
@@ -265,21 +278,19 @@ impl Consistency for Coupled {
         msg: &Report,
         now_s: f64,
     ) -> Option<Adoption> {
-        let Report::Coupled(r) = msg else {
+        if from >= self.sites || from == self.me {
             return None;
+        }
+        let r = match msg {
+            // A station sends its tools as a track and its state apart (two rings, two keys).
+            Report::Tools(tools) => {
+                self.take_tools(from, tools);
+                return None;
+            }
+            Report::Coupled(r) if r.state.is_finite() => r,
+            _ => return None,
         };
-        if from >= self.sites || from == self.me || !r.state.is_finite() {
-            return None;
-        }
-        let tools = &r.tools;
-        for (k, &q) in tools.positions[..tools.count.min(WINDOW_TICKS)]
-            .iter()
-            .enumerate()
-        {
-            let t = tools.first_tick + k as i64;
-            let i = self.slot(t);
-            self.received[i][from] = Some((t, q));
-        }
+        self.take_tools(from, &r.tools);
         if r.t_s <= self.newest_from[from] {
             return None; // an older state than one taken: its tools are kept, not its state
         }

@@ -33,7 +33,7 @@ enum Command {
         /// and plots.
         #[arg(long, value_name = "DIR", default_value = "out/session")]
         out: PathBuf,
-        /// naive, paper, timewarp, or all (each, one session each).
+        /// naive, paper, timewarp, coupled, or all (each, one session each).
         #[arg(long, default_value = "all", value_parser = parse_methods)]
         method: Methods,
         /// Print JSON instead of the table.
@@ -194,8 +194,11 @@ fn parse_methods(s: &str) -> Result<Methods, String> {
         "naive" => Ok(Methods(vec![MethodName::Naive])),
         "paper" => Ok(Methods(vec![MethodName::Paper])),
         "timewarp" => Ok(Methods(vec![MethodName::Timewarp])),
+        "coupled" => Ok(Methods(vec![MethodName::Coupled])),
         "all" => Ok(Methods(MethodName::ALL.to_vec())),
-        _ => Err(format!("unknown method {s:?}: use naive, paper, timewarp or all (coupled runs in the simulator only so far)")),
+        _ => Err(format!(
+            "unknown method {s:?}: use naive, paper, timewarp, coupled or all"
+        )),
     }
 }
 
