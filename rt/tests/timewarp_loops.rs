@@ -1,15 +1,17 @@
-//! Two stations' physics loops running `timewarp` over real shared-memory rings, stepped with
+//! Two stations' physics loops running `timewarp` (and `coupled`) over real shared-memory rings, stepped with
 //! injected time on the session's tick grid (no sleeping, no timing assertions): each loop's own
 //! tool tracks go out through its track ring, the test carries them to the other loop's track ring
 //! 30 ms later (the network's part), the loops roll back where a received position differs from the
 //! prediction, both copies agree bit for bit at every confirmed frontier compared, and the
-//! physics steps, rollbacks included, allocate nothing.
+//! physics steps, rollbacks included, allocate nothing. `coupled` the same way, its states carried
+//! too: its pulls allocate nothing either, and the copies stay together.
 
 use std::collections::VecDeque;
 
 use coop_model::body::{BodyState, Vec3};
+use coop_model::method::Consistency;
 use coop_model::method::ObjectCopy;
-use coop_model::scenario::{Scenario, SiteSpec};
+use coop_model::scenario::{MethodName, Scenario, SiteSpec};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::shm::{Consumer, Producer, RingSegment, SegmentName};
@@ -33,8 +35,9 @@ struct Site {
     tool_in: Producer<ToolSample>,
     tracks_out: Consumer<ToolTrack>,
     tracks_in: Producer<ToolTrack>,
+    reports: Consumer<SiteReport>,
+    remote_in: Producer<SiteReport>,
     _objects: Consumer<ObjectSample>,
-    _reports: Consumer<SiteReport>,
     _segments: Segments,
 }
 
@@ -70,8 +73,8 @@ fn scenario() -> Scenario {
     sc
 }
 
-fn site(sc: &Scenario, i: usize) -> Site {
-    let tag = format!("s{i}");
+fn site(sc: &Scenario, i: usize, method: MethodName) -> Site {
+    let tag = format!("{}{i}", &method.as_str()[..2]);
     let tool = RingSegment::<ToolSample>::create(&name(&tag, "tool"), 64).expect("tool");
     let obj = RingSegment::<ObjectSample>::create(&name(&tag, "obj"), 64).expect("obj");
     let rep = RingSegment::<SiteReport>::create(&name(&tag, "rep"), 64).expect("rep");
@@ -79,9 +82,13 @@ fn site(sc: &Scenario, i: usize) -> Site {
     let tko = RingSegment::<ToolTrack>::create(&name(&tag, "tko"), 64).expect("tko");
     let tki = RingSegment::<ToolTrack>::create(&name(&tag, "tki"), 64).expect("tki");
     let copy = ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m)));
+    let method: Box<dyn Consistency> = match method {
+        MethodName::Coupled => Box::new(sc.coupled(i)),
+        _ => Box::new(sc.timewarp(i, &copy)),
+    };
     let mut physics = PhysicsLoop::new(
         i,
-        Box::new(sc.timewarp(i, &copy)),
+        method,
         sc.world(),
         copy,
         PhysicsRings {
@@ -107,8 +114,9 @@ fn site(sc: &Scenario, i: usize) -> Site {
         tool_in: tool.producer().expect("p"),
         tracks_out: tko.consumer().expect("c"),
         tracks_in: tki.producer().expect("p"),
+        reports: rep.consumer().expect("c"),
+        remote_in: rem.producer().expect("p"),
         _objects: obj.consumer().expect("c"),
-        _reports: rep.consumer().expect("c"),
         _segments: (tool, obj, rep, rem, tko, tki),
     }
 }
@@ -122,14 +130,16 @@ fn tool_at(i: usize, s: f64) -> Vec3 {
     Vec3::new(side * (0.045 - squeeze), carry, 0.01)
 }
 
-#[test]
-fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirmed_ticks() {
+/// Steps both sites from 50 ms before time 0 (the copies hold) to 1.5 s, a late period now and
+/// then, carrying tool tracks and site reports between them 30 ms late: the sites, the last step's
+/// time and the allocations the physics steps made.
+fn run(method: MethodName) -> ([Site; 2], u64, u64) {
     let sc = scenario();
-    let mut sites = [site(&sc, 0), site(&sc, 1)];
-    // Tracks in flight: (delivery time, to site, track).
+    let mut sites = [site(&sc, 0, method), site(&sc, 1, method)];
+    // In flight: (delivery time, to site, track or report).
     let mut wire: VecDeque<(u64, usize, ToolTrack)> = VecDeque::with_capacity(1024);
+    let mut states: VecDeque<(u64, usize, SiteReport)> = VecDeque::with_capacity(1024);
     let mut allocations = 0;
-    // 50 ms before time 0 (the copies hold), then 1.5 s, with a late period now and then.
     let mut now = EPOCH - 50 * MS;
     let end = EPOCH + 1500 * MS;
     let mut k = 0u64;
@@ -149,15 +159,28 @@ fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirme
             while let Ok(t) = s.tracks_out.pop() {
                 wire.push_back((now + DELAY_MS * MS, 1 - i, t));
             }
+            while let Ok(r) = s.reports.pop() {
+                states.push_back((now + DELAY_MS * MS, 1 - i, r));
+            }
         }
         while wire.front().is_some_and(|&(at, _, _)| at <= now) {
             let (_, to, t) = wire.pop_front().expect("front");
             sites[to].tracks_in.push(t).expect("track ring has room");
         }
+        while states.front().is_some_and(|&(at, _, _)| at <= now) {
+            let (_, to, r) = states.pop_front().expect("front");
+            sites[to].remote_in.push(r).expect("remote ring has room");
+        }
         k += 1;
         // Every 97th period is 3 ms late: the loop catches up on the grid.
         now += if k.is_multiple_of(97) { 3 * MS } else { MS };
     }
+    (sites, last, allocations)
+}
+
+#[test]
+fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirmed_ticks() {
+    let (sites, last, allocations) = run(MethodName::Timewarp);
     assert_eq!(
         allocations, 0,
         "physics steps (rollbacks included) allocated"
@@ -184,6 +207,40 @@ fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirme
             s.physics.copy().state.pos
         );
     }
+    let (a, b) = (sites[0].physics.copy().state, sites[1].physics.copy().state);
+    assert!(
+        (a.pos - b.pos).norm() < 0.01,
+        "the copies agree within 10 mm: {:?} vs {:?}",
+        a.pos,
+        b.pos
+    );
+}
+
+#[test]
+fn coupled_over_real_rings_pulls_without_allocating_and_keeps_the_copies_together() {
+    let (sites, last, allocations) = run(MethodName::Coupled);
+    assert_eq!(allocations, 0, "physics steps (pulls included) allocated");
+    for (i, s) in sites.iter().enumerate() {
+        let tr = s.physics.tracks;
+        assert_eq!(
+            s.physics.ticks(),
+            (last - EPOCH) / MS + 1,
+            "site {i}: {tr:?}"
+        );
+        assert!(
+            tr.received > 100 && tr.rejected == 0 && tr.drops == 0,
+            "{tr:?}"
+        );
+        assert!(
+            s.physics.copy().state.pos.y > 0.01,
+            "site {i}: the squeezed disk was carried: {:?}",
+            s.physics.copy().state.pos
+        );
+    }
+    assert!(
+        sites.iter().any(|s| s.physics.adoptions() > 10),
+        "the follower pulled its copy towards the leader's"
+    );
     let (a, b) = (sites[0].physics.copy().state, sites[1].physics.copy().state);
     assert!(
         (a.pos - b.pos).norm() < 0.01,
