@@ -49,7 +49,7 @@ pub enum Command {
         /// Output directory (created if missing).
         #[arg(long, value_name = "DIR")]
         out: PathBuf,
-        /// Method, overriding the scenario's: naive or paper.
+        /// Method, overriding the scenario's: naive, paper, timewarp or coupled.
         #[arg(long, value_parser = parse_method)]
         method: Option<MethodName>,
         /// Seed, overriding the scenario's.
@@ -78,7 +78,7 @@ pub enum Command {
         /// Seeds 1 to N (overriding the scenario's).
         #[arg(long, default_value_t = 1, value_parser = parse_seeds)]
         seeds: u64,
-        /// Methods, comma-separated (default: naive,paper,timewarp).
+        /// Methods, comma-separated (default: every one: naive,paper,timewarp,coupled).
         #[arg(long, value_delimiter = ',', value_parser = parse_method)]
         methods: Vec<MethodName>,
         /// Print JSON instead of a table.
@@ -125,7 +125,7 @@ fn parse_method(s: &str) -> Result<MethodName, String> {
     MethodName::ALL
         .into_iter()
         .find(|m| m.as_str() == s)
-        .ok_or_else(|| format!("unknown method {s:?}: use naive, paper or timewarp"))
+        .ok_or_else(|| format!("unknown method {s:?}: use naive, paper, timewarp or coupled"))
 }
 
 /// Runs one mode with a progress bar on a terminal.
