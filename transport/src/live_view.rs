@@ -18,7 +18,7 @@
 //! Loopback by default ([`DEFAULT_ADDR`]); any address can be given, port 0 picks a free one.
 
 use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -41,8 +41,9 @@ use crate::recording::{SampleMsg, Scene};
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
 /// Frames a viewer may be behind before it loses the next ones.
 const QUEUE: usize = 256;
-/// How long a viewer's thread waits for the viewer's requests before sending what is queued.
-const CLIENT_POLL: Duration = Duration::from_millis(5);
+/// How long a viewer's thread waits for frames before it looks at the viewer's requests (and its
+/// stop) anyway. While frames come (~60 Hz) it wakes for them only: it does not poll the viewer.
+const CLIENT_IDLE: Duration = Duration::from_millis(50);
 /// How often the listener looks for new viewers (and for its stop).
 const ACCEPT_POLL: Duration = Duration::from_millis(50);
 
@@ -475,7 +476,7 @@ fn serve(
     };
     let mut ws = tungstenite::accept_hdr(stream, check)
         .map_err(|e| tungstenite::Error::Io(std::io::Error::other(format!("handshake: {e}"))))?;
-    ws.get_ref().set_read_timeout(Some(CLIENT_POLL))?;
+    ws.get_ref().set_read_timeout(None)?;
     ws.get_ref()
         .set_write_timeout(Some(Duration::from_secs(2)))?;
     let b64 = base64::engine::general_purpose::STANDARD;
@@ -499,29 +500,44 @@ fn serve(
     }
     // Subscription id per channel id.
     let mut subs: Vec<(u32, u32)> = Vec::new();
-    let mut backlog: Vec<Frame> = Vec::new();
+    let mut pending: Vec<Frame> = Vec::new();
     while stop.load(Ordering::Relaxed) == 0 {
-        match ws.read() {
-            Ok(Message::Text(t)) => {
-                let had_log = subs.iter().any(|(c, _)| *c == LOG);
-                on_request(&t, &mut subs);
-                if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
-                    backlog = lock(history).clone();
+        // One wake per publishing turn (or per CLIENT_IDLE without frames): the frames, then
+        // whatever the viewer asked meanwhile (read without waiting), then one write and flush.
+        match frames.recv_timeout(CLIENT_IDLE) {
+            Ok(f) => pending.push(f),
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        pending.extend(std::iter::from_fn(|| frames.try_recv().ok()));
+        ws.get_ref().set_nonblocking(true)?;
+        let read = loop {
+            match ws.read() {
+                Ok(Message::Text(t)) => {
+                    let had_log = subs.iter().any(|(c, _)| *c == LOG);
+                    on_request(&t, &mut subs);
+                    if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
+                        // The events so far go first, before this turn's frames.
+                        let mut h = lock(history).clone();
+                        h.append(&mut pending);
+                        pending = h;
+                    }
                 }
+                Ok(Message::Close(_)) => break Ok(false),
+                Ok(_) => {}
+                Err(e) if would_block(&e) => break Ok(true),
+                Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
+                    break Ok(false)
+                }
+                Err(e) => break Err(e),
             }
-            Ok(Message::Close(_)) => return Ok(()),
-            Ok(_) => {}
-            Err(e) if would_block(&e) => {}
-            Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
-                return Ok(())
-            }
-            Err(e) => return Err(e),
+        };
+        ws.get_ref().set_nonblocking(false)?;
+        if !read? {
+            return Ok(());
         }
         let mut sent = false;
-        let queued = std::iter::from_fn(|| frames.try_recv().ok());
-        let mut pending: Vec<Frame> = std::mem::take(&mut backlog);
-        pending.extend(queued);
-        for f in pending {
+        for f in pending.drain(..) {
             let (channel, t_ns, data) = &*f;
             if let Some(&(_, sub)) = subs.iter().find(|(c, _)| c == channel) {
                 let mut m = Vec::with_capacity(13 + data.len());
