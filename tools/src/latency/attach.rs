@@ -143,7 +143,10 @@ fn histogram_between(
             over += v.count_at_value();
         } else {
             let n = v.count_at_value().saturating_sub(base.count_at(value));
-            w.saturating_record_n(value, n);
+            // Recording none would still move the window's min and max to `value`.
+            if n > 0 {
+                w.saturating_record_n(value, n);
+            }
         }
     }
     let over_before: u64 = base
@@ -260,5 +263,11 @@ mod tests {
         assert_eq!(w.count_at(9_000), 1);
         assert_eq!(w.count_at(400_000), 1);
         assert!(w.equivalent(w.max(), 400_000));
+        // A window without the lifetime's largest samples has its own maximum and minimum.
+        let later = hist(&[(10, 1), (20, 160), (7_000, 3), (9_000, 2), (400_000, 3)]);
+        let w = histogram_between(&later, &now);
+        assert_eq!(w.len(), 12);
+        assert!(w.equivalent(w.max(), 9_000));
+        assert_eq!(w.min(), 10);
     }
 }
