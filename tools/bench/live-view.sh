@@ -99,7 +99,9 @@ attach() {
 connected=false
 window_of() { # window_of CONDITION ROUND
   case "$1" in
-    viewer) $connected || tell connect ready; connected=true ;;
+    # The newest address: a network process restarted by the supervisor serves on a new port.
+    viewer) $connected || tell "connect $(grep -o 'ws://[0-9.:]*' "$work/live.log" | tail -1)" ready
+            connected=true ;;
     none) ! $connected || tell disconnect closed; connected=false ;;
   esac
   attach "$work/$1-$2.json"

@@ -2,12 +2,12 @@
 our code). One process for a whole benchmark, steered by commands on stdin, one a line, each
 answered by one line on stdout (and `started` once it is up):
 
-  connect     connect to URL (retrying until it is up, at most 20 s), subscribe to every advertised
-              channel, and answer `ready` once a message of every subscribed channel that sends
-              at ~60 Hz (/tf, /scene) has arrived: from then on the viewer is in its steady state
-  disconnect  close the connection; answer `closed`
-  quit        (or the end of stdin) print one JSON line, messages and bytes received per topic over
-              every connection, and exit
+  connect [U]  connect to U, or else URL (retrying until it is up, at most 20 s), subscribe to
+               every advertised channel, and answer `ready` once a message of every subscribed
+               channel that sends at ~60 Hz (/tf, /scene) has arrived: its steady state from then
+  disconnect   close the connection; answer `closed`
+  quit         (or the end of stdin) print one JSON line, messages and bytes received per topic
+               over every connection, and exit
 
 Between `connect` and `disconnect` it takes every message and decodes nothing but the frame
 headers. Its start-up (the interpreter, imports) happens once, before any measured window: a viewer
@@ -33,7 +33,8 @@ class Viewer:
         self.ws = None
         self.pump = None
 
-    async def connect(self):
+    async def connect(self, url=None):
+        self.url = url or self.url
         deadline = time.monotonic() + 20
         while True:
             try:
@@ -96,8 +97,8 @@ async def main(url):
     answer("started")  # imports done: nothing of the start-up is left for a measured window
     while True:
         line = (await stdin.readline()).decode().strip()
-        if line == "connect":
-            await v.connect()
+        if line.split()[:1] == ["connect"]:
+            await v.connect(*line.split()[1:2])
             answer("ready")
         elif line == "disconnect":
             await v.disconnect()
