@@ -96,6 +96,9 @@ attach() {
   taskset -c 0 "$target/release/latency" attach user1 --session "lv$$live" -D "${window}s" -q --json "$1" > /dev/null
   snap > "${1%.json}.after"
 }
+# One window, measured and not counted, first: the station's start-up (every process faulting in
+# and locking its memory, the recording's first parts) settles in it, not in round 1's windows.
+attach "$work/warm-up.json"
 connected=false
 window_of() { # window_of CONDITION ROUND
   case "$1" in
