@@ -102,8 +102,9 @@ attach "$work/warm-up.json"
 connected=false
 window_of() { # window_of CONDITION ROUND
   case "$1" in
-    # The newest address: a network process restarted by the supervisor serves on a new port.
-    viewer) $connected || tell "connect $(grep -o 'ws://[0-9.:]*' "$work/live.log" | tail -1)" ready
+    # Told every time: one whose connection a restarted network process dropped connects again,
+    # to the newest address (the new process serves on a new port).
+    viewer) tell "connect $(grep -o 'ws://[0-9.:]*' "$work/live.log" | tail -1)" ready
             connected=true ;;
     none) ! $connected || tell disconnect closed; connected=false ;;
   esac
@@ -124,9 +125,11 @@ station_pid=$!
 wait "$station_pid"; station_pid=
 
 echo "# load average after: $(cut -d' ' -f1-3 /proc/loadavg)"
+restarts=$(grep -c 'hung (no heartbeat)' "$work/live.log" || true)
+[ "$restarts" = 0 ] || echo "# the supervisor restarted the network process $restarts time(s) in the run (it hung on I/O): its restart and the viewer's reconnection fall in the windows around it"
 python3 - "$work" "$rounds" "$window" <<'PY'
 import glob, json, os, sys
-from mcap.reader import make_reader
+from mcap.reader import NonSeekingReader, make_reader
 work, rounds, window = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 def merged(cond, thread):
     """One loop's windows of a condition, as one: histograms and counters added."""
@@ -148,10 +151,23 @@ def per_minute(run):
     size, first, last = 0, None, None
     for f in sorted(glob.glob(f"{work}/{run}/user1*.mcap")):
         size += os.path.getsize(f)
-        with open(f, "rb") as fh:
-            for _, _, m in make_reader(fh).iter_messages(topics=["/object"]):
-                first = m.log_time if first is None else first
-                last = m.log_time
+        times = []
+        try:
+            with open(f, "rb") as fh:
+                times = [m.log_time for _, _, m in make_reader(fh).iter_messages(topics=["/object"])]
+        except Exception:
+            # A part whose writer was killed (a hung network process the supervisor restarted)
+            # has no summary: read it from the start up to where it ends.
+            with open(f, "rb") as fh:
+                try:
+                    for _, c, m in NonSeekingReader(fh).iter_messages(log_time_order=False):
+                        if c.topic == "/object":
+                            times.append(m.log_time)
+                except Exception:
+                    pass
+        for t in times:
+            first = t if first is None else first
+            last = t
     return size * 60e9 / max(1, last - first), (last - first) / 1e9
 def kernel(cond):
     """Per CPU over a condition's windows: busy % (user+nice+system+irq+softirq), steal %, NET_RX/s."""

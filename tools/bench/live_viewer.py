@@ -2,9 +2,10 @@
 our code). One process for a whole benchmark, steered by commands on stdin, one a line, each
 answered by one line on stdout (and `started` once it is up):
 
-  connect [U]  connect to U, or else URL (retrying until it is up, at most 20 s), subscribe to
-               every advertised channel, and answer `ready` once a message of every subscribed
-               channel that sends at ~60 Hz (/tf, /scene) has arrived: its steady state from then
+  connect [U]  unless still connected: connect to U, or else URL (retrying until it is up, at most
+               20 s), subscribe to every advertised channel, and answer `ready` once a message of
+               every subscribed channel that sends at ~60 Hz (/tf, /scene) has arrived: its steady
+               state from then
   disconnect   close the connection; answer `closed`
   quit         (or the end of stdin) print one JSON line, messages and bytes received per topic
                over every connection, and exit
@@ -34,6 +35,8 @@ class Viewer:
         self.pump = None
 
     async def connect(self, url=None):
+        if self.pump is not None and not self.pump.done():
+            return  # still connected and taking every message
         self.url = url or self.url
         deadline = time.monotonic() + 20
         while True:
