@@ -78,7 +78,9 @@ for _ in $(seq 400); do
 done
 [ -n "$url" ] || { echo "the station printed no live view address:" >&2; cat "$work/live.log" >&2; exit 1; }
 # The observers stay off the servo's CPU.
-coproc VIEWER { exec taskset -c 0 python3 "$root/tools/bench/live_viewer.py" "$url"; }
+# It reads the address from the station's log at each attempt to connect: a network process the
+# supervisor restarted serves on a new port.
+coproc VIEWER { exec taskset -c 0 python3 "$root/tools/bench/live_viewer.py" "@$work/live.log"; }
 viewer_pid=$VIEWER_PID
 read -r -t 30 started <&"${VIEWER[0]}" && [ "$started" = started ] || { echo "the viewer did not start" >&2; exit 1; }
 tell() { # tell COMMAND ANSWER: the viewer does COMMAND and must answer ANSWER
@@ -102,10 +104,8 @@ attach "$work/warm-up.json"
 connected=false
 window_of() { # window_of CONDITION ROUND
   case "$1" in
-    # Told every time: one whose connection a restarted network process dropped connects again,
-    # to the newest address (the new process serves on a new port).
-    viewer) tell "connect $(grep -o 'ws://[0-9.:]*' "$work/live.log" | tail -1)" ready
-            connected=true ;;
+    # Told every time: one whose connection a restarted network process dropped connects again.
+    viewer) tell connect ready; connected=true ;;
     none) ! $connected || tell disconnect closed; connected=false ;;
   esac
   attach "$work/$1-$2.json"

@@ -14,10 +14,13 @@ Between `connect` and `disconnect` it takes every message and decodes nothing bu
 headers. Its start-up (the interpreter, imports) happens once, before any measured window: a viewer
 that a researcher keeps open costs what it costs connected, not what starting Python costs.
 
-usage: live_viewer.py URL
+usage: live_viewer.py URL | @FILE
+  @FILE: the newest ws:// address in FILE (a station's log), read again at each attempt to connect:
+  a network process the supervisor restarted serves on a new port
 """
 import asyncio
 import json
+import re
 import struct
 import sys
 import time
@@ -42,16 +45,25 @@ class Viewer:
         while True:
             try:
                 self.ws = await websockets.connect(
-                    self.url, subprotocols=["foxglove.websocket.v1"], max_size=None
+                    self.address(), subprotocols=["foxglove.websocket.v1"], max_size=None
                 )
                 break
-            except OSError:
+            except (OSError, LookupError):
                 if time.monotonic() > deadline:
                     raise
                 await asyncio.sleep(0.05)
         ready = asyncio.get_running_loop().create_future()
         self.pump = asyncio.create_task(self.take(self.ws, ready))
         await asyncio.wait_for(ready, 20)
+
+    def address(self):
+        if not self.url.startswith("@"):
+            return self.url
+        with open(self.url[1:]) as f:
+            found = re.findall(r"ws://[0-9.:]+", f.read())
+        if not found:
+            raise LookupError(f"no ws:// address in {self.url[1:]} yet")
+        return found[-1]
 
     async def take(self, ws, ready):
         topics, seen = {}, set()
