@@ -9,7 +9,7 @@
 //! events on `/log`. Nothing that feeds it waits for a viewer: [`LiveView::offer`] only replaces
 //! the newest sample under a short lock (the publishing thread encodes and sends outside it), the
 //! stations' live key is put at background priority and dropped under congestion, and each viewer
-//! has its own thread and a bounded queue: a viewer too slow to take a frame loses it.
+//! has its own thread and a bounded queue of turns: a viewer too slow to take a turn loses it.
 //!
 //! The server is ours, small (the protocol's `serverInfo`, `advertise`, `subscribe`,
 //! `unsubscribe` and binary `messageData`, on `tungstenite`): the `foxglove` crate's server speaks
@@ -18,7 +18,7 @@
 //! Loopback by default ([`DEFAULT_ADDR`]); any address can be given, port 0 picks a free one.
 
 use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -39,10 +39,11 @@ use crate::recording::{SampleMsg, Scene};
 
 /// The WebSocket subprotocol spoken.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
-/// Frames a viewer may be behind before it loses the next ones.
-const QUEUE: usize = 256;
-/// How long a viewer's thread waits for the viewer's requests before sending what is queued.
-const CLIENT_POLL: Duration = Duration::from_millis(5);
+/// Turns a viewer may be behind before it loses the next ones.
+const QUEUE: usize = 64;
+/// How long a viewer's thread waits for frames before it looks at the viewer's requests (and its
+/// stop) anyway. While frames come (~60 Hz) it wakes for them only: it does not poll the viewer.
+const CLIENT_IDLE: Duration = Duration::from_millis(50);
 /// How often the listener looks for new viewers (and for its stop).
 const ACCEPT_POLL: Duration = Duration::from_millis(50);
 
@@ -63,6 +64,9 @@ const LOG: u32 = 3;
 
 /// One message for every viewer: channel, wall time (ns), protobuf bytes.
 type Frame = Arc<(u32, u64, Vec<u8>)>;
+/// A publishing turn's frames, queued to a viewer as one: its thread wakes once per turn and
+/// writes them in one flush (one loopback send, not one per frame).
+type Turn = Arc<[Frame]>;
 
 /// Where the live view listens unless told: loopback, Foxglove's usual port.
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
@@ -130,7 +134,7 @@ impl Shown {
 }
 
 /// The viewers' queues.
-type Viewers = Arc<Mutex<Vec<SyncSender<Frame>>>>;
+type Viewers = Arc<Mutex<Vec<SyncSender<Turn>>>>;
 /// The `/log` frames so far (the newest [`LOG_KEPT`]), sent to each viewer when it subscribes:
 /// events that happened before it connected are not lost to it.
 type LogHistory = Arc<Mutex<Vec<Frame>>>;
@@ -315,7 +319,7 @@ impl LiveView {
 
 /// The publishing thread: every [`PERIOD`], what arrived since the last turn.
 fn publish(
-    viewers: &Mutex<Vec<SyncSender<Frame>>>,
+    viewers: &Mutex<Vec<SyncSender<Turn>>>,
     history: &Mutex<Vec<Frame>>,
     shown: &Mutex<Shown>,
     stop: &AtomicU64,
@@ -382,10 +386,10 @@ fn publish(
         }
         out.extend(logs);
         if !out.is_empty() {
-            // A viewer that is gone is dropped; one that is behind loses these frames.
+            // A viewer that is gone is dropped; one that is behind loses this turn.
+            let turn: Turn = out.into();
             lock(viewers).retain(|q| {
-                out.iter()
-                    .all(|f| !matches!(q.try_send(f.clone()), Err(TrySendError::Disconnected(_))))
+                !matches!(q.try_send(turn.clone()), Err(TrySendError::Disconnected(_)))
             });
         }
         let now = Instant::now();
@@ -445,7 +449,7 @@ fn would_block(e: &tungstenite::Error) -> bool {
 /// then its subscriptions and the frames of the channels it subscribed to, until it leaves.
 fn serve(
     stream: TcpStream,
-    frames: &Receiver<Frame>,
+    frames: &Receiver<Turn>,
     history: &Mutex<Vec<Frame>>,
     stop: &AtomicU64,
 ) -> Result<(), tungstenite::Error> {
@@ -475,7 +479,7 @@ fn serve(
     };
     let mut ws = tungstenite::accept_hdr(stream, check)
         .map_err(|e| tungstenite::Error::Io(std::io::Error::other(format!("handshake: {e}"))))?;
-    ws.get_ref().set_read_timeout(Some(CLIENT_POLL))?;
+    ws.get_ref().set_read_timeout(None)?;
     ws.get_ref()
         .set_write_timeout(Some(Duration::from_secs(2)))?;
     let b64 = base64::engine::general_purpose::STANDARD;
@@ -499,29 +503,46 @@ fn serve(
     }
     // Subscription id per channel id.
     let mut subs: Vec<(u32, u32)> = Vec::new();
-    let mut backlog: Vec<Frame> = Vec::new();
+    let mut pending: Vec<Frame> = Vec::new();
     while stop.load(Ordering::Relaxed) == 0 {
-        match ws.read() {
-            Ok(Message::Text(t)) => {
-                let had_log = subs.iter().any(|(c, _)| *c == LOG);
-                on_request(&t, &mut subs);
-                if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
-                    backlog = lock(history).clone();
+        // One wake per publishing turn (or per CLIENT_IDLE without frames): the frames, then
+        // whatever the viewer asked meanwhile (read without waiting), then one write and flush.
+        match frames.recv_timeout(CLIENT_IDLE) {
+            Ok(t) => pending.extend(t.iter().cloned()),
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
+        }
+        for t in std::iter::from_fn(|| frames.try_recv().ok()) {
+            pending.extend(t.iter().cloned());
+        }
+        ws.get_ref().set_nonblocking(true)?;
+        let read = loop {
+            match ws.read() {
+                Ok(Message::Text(t)) => {
+                    let had_log = subs.iter().any(|(c, _)| *c == LOG);
+                    on_request(&t, &mut subs);
+                    if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
+                        // The events so far go first, before this turn's frames.
+                        let mut h = lock(history).clone();
+                        h.append(&mut pending);
+                        pending = h;
+                    }
                 }
+                Ok(Message::Close(_)) => break Ok(false),
+                Ok(_) => {}
+                Err(e) if would_block(&e) => break Ok(true),
+                Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
+                    break Ok(false)
+                }
+                Err(e) => break Err(e),
             }
-            Ok(Message::Close(_)) => return Ok(()),
-            Ok(_) => {}
-            Err(e) if would_block(&e) => {}
-            Err(tungstenite::Error::ConnectionClosed | tungstenite::Error::AlreadyClosed) => {
-                return Ok(())
-            }
-            Err(e) => return Err(e),
+        };
+        ws.get_ref().set_nonblocking(false)?;
+        if !read? {
+            return Ok(());
         }
         let mut sent = false;
-        let queued = std::iter::from_fn(|| frames.try_recv().ok());
-        let mut pending: Vec<Frame> = std::mem::take(&mut backlog);
-        pending.extend(queued);
-        for f in pending {
+        for f in pending.drain(..) {
             let (channel, t_ns, data) = &*f;
             if let Some(&(_, sub)) = subs.iter().find(|(c, _)| c == channel) {
                 let mut m = Vec::with_capacity(13 + data.len());

@@ -8,8 +8,15 @@
 use crate::shm::ShmShared;
 use crate::sync::{AtomicU64, Ordering};
 
-/// Linear 1 µs buckets: 0 µs up to `BUCKETS - 1` µs; slower samples go to the overflow count.
+/// Linear 1 µs buckets: 0 µs up to `BUCKETS - 1` µs; slower samples go to the 1 ms tail buckets.
 pub const BUCKETS: usize = 2000;
+/// Linear 1 ms tail buckets after the µs ones: `BUCKETS` µs up to `TAIL_END_US`; slower samples go to
+/// the overflow count. A stall of a few to tens of ms (a VM's vCPU taken away, a page fault) is
+/// measured here rather than guessed: a reader of a window (the difference of two snapshots) sees
+/// each tail sample at its own ms, not at the loop's lifetime maximum.
+pub const TAIL_BUCKETS: usize = 98;
+/// Where the tail buckets end, µs: `BUCKETS` µs plus `TAIL_BUCKETS` ms (100 ms).
+pub const TAIL_END_US: u64 = BUCKETS as u64 + 1_000 * TAIL_BUCKETS as u64;
 
 /// One histogram of durations in shared memory.
 #[derive(Debug)]
@@ -17,7 +24,9 @@ pub const BUCKETS: usize = 2000;
 pub struct SharedHistogram {
     /// Samples with `µs = i` in `buckets[i]`.
     pub buckets: [AtomicU64; BUCKETS],
-    /// Samples of `BUCKETS` µs or more.
+    /// Samples with `µs = BUCKETS + 1000 i ..< BUCKETS + 1000 (i + 1)` in `tail[i]`.
+    pub tail: [AtomicU64; TAIL_BUCKETS],
+    /// Samples of [`TAIL_END_US`] or more.
     pub overflow: AtomicU64,
     /// Smallest sample in ns (0 until the first sample; see `LoopStats::cycles`).
     pub min_ns: AtomicU64,
@@ -34,7 +43,13 @@ impl SharedHistogram {
     pub fn record(&self, ns: u64, first: bool) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let us = (ns / 1_000) as usize;
-        let cell = self.buckets.get(us).unwrap_or(&self.overflow);
+        let cell = match self.buckets.get(us) {
+            Some(c) => c,
+            None => self
+                .tail
+                .get((us - BUCKETS) / 1_000)
+                .unwrap_or(&self.overflow),
+        };
         bump(cell, 1);
         bump(&self.sum_ns, ns);
         if first || ns < self.min_ns.load(Ordering::Relaxed) {
@@ -45,15 +60,22 @@ impl SharedHistogram {
         }
     }
 
-    /// An hdrhistogram (in µs) of the buckets; overflow samples are recorded at the observed maximum.
+    /// An hdrhistogram (in µs) of the buckets; tail samples are recorded at their bucket's lower
+    /// end (a 1 ms resolution), overflow samples at the observed maximum (at least [`TAIL_END_US`]).
     pub fn to_hdr(&self) -> hdrhistogram::Histogram<u64> {
-        let max_us = (self.max_ns.load(Ordering::Relaxed) / 1_000).max(BUCKETS as u64);
+        let max_us = (self.max_ns.load(Ordering::Relaxed) / 1_000).max(TAIL_END_US);
         let mut h = hdrhistogram::Histogram::new_with_bounds(1, max_us.max(2), 3)
             .expect("bounds 1..max with 3 digits are valid");
         for (us, b) in self.buckets.iter().enumerate() {
             let n = b.load(Ordering::Relaxed);
             if n > 0 {
                 h.saturating_record_n(us as u64, n);
+            }
+        }
+        for (i, b) in self.tail.iter().enumerate() {
+            let n = b.load(Ordering::Relaxed);
+            if n > 0 {
+                h.saturating_record_n(BUCKETS as u64 + 1_000 * i as u64, n);
             }
         }
         let over = self.overflow.load(Ordering::Relaxed);
@@ -93,7 +115,7 @@ pub struct LoopStats {
 
 // SAFETY: repr(C), made only of AtomicU64 and arrays of them; all-zero and every bit pattern are valid.
 unsafe impl ShmShared for LoopStats {
-    const TYPE_NAME: &'static str = "coop.LoopStats.v1";
+    const TYPE_NAME: &'static str = "coop.LoopStats.v2";
 }
 
 impl LoopStats {
@@ -176,7 +198,7 @@ mod tests {
         let reader = BlockSegment::<LoopStats>::open(&name, Duration::from_secs(1)).expect("open");
         writer.set_period_ns(1_000_000);
         for i in 0..1000u64 {
-            // 1000 samples: 990 at 3.x µs, 9 at 40 µs, one at 5 ms (overflow).
+            // 1000 samples: 990 at 3.x µs, 9 at 40 µs, one at 5 ms (a tail bucket).
             let wake = match i {
                 0 => 5_000_000,
                 1..=9 => 40_000,
@@ -195,5 +217,39 @@ mod tests {
         assert_eq!(s.wake_us.value_at_quantile(0.995), 40);
         assert!(s.wake_us.equivalent(s.wake_us.max(), 5_000));
         assert_eq!(s.compute_us.value_at_quantile(0.5), 20);
+    }
+
+    #[test]
+    fn tail_samples_keep_their_ms_and_only_the_overflow_takes_the_maximum() {
+        let h = SharedHistogram {
+            buckets: std::array::from_fn(|_| AtomicU64::new(0)),
+            tail: std::array::from_fn(|_| AtomicU64::new(0)),
+            overflow: AtomicU64::new(0),
+            min_ns: AtomicU64::new(0),
+            max_ns: AtomicU64::new(0),
+            sum_ns: AtomicU64::new(0),
+        };
+        for (i, ns) in [
+            1_999_999,
+            2_000_000,
+            2_999_999,
+            22_500_000,
+            99_999_999,
+            250_000_000,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            h.record(ns, i == 0);
+        }
+        assert_eq!(h.buckets[1_999].load(Ordering::Relaxed), 1);
+        assert_eq!(h.tail[0].load(Ordering::Relaxed), 2);
+        assert_eq!(h.tail[20].load(Ordering::Relaxed), 1);
+        assert_eq!(h.tail[TAIL_BUCKETS - 1].load(Ordering::Relaxed), 1);
+        assert_eq!(h.overflow.load(Ordering::Relaxed), 1);
+        let hdr = h.to_hdr();
+        assert_eq!(hdr.len(), 6);
+        assert_eq!(hdr.count_between(22_000, 22_999), 1);
+        assert!(hdr.equivalent(hdr.max(), 250_000));
     }
 }

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use coop_rt::shm::control::{Child, ControlBlock};
 use coop_rt::shm::BlockSegment;
-use coop_rt::stats::LoopSnapshot;
+use coop_rt::stats::{LoopSnapshot, TAIL_END_US};
 use coop_rt::sync::Ordering;
 
 use super::report::us;
@@ -116,13 +116,47 @@ fn line(ctl: &ControlBlock, c: Child, i: usize, base: &LoopSnapshot, now: &LoopS
 /// `now` less `base`: the statistics of the window between them.
 fn window(now: LoopSnapshot, base: &LoopSnapshot) -> LoopSnapshot {
     let mut w = now.clone();
-    let _ = w.wake_us.subtract(&base.wake_us);
-    let _ = w.compute_us.subtract(&base.compute_us);
+    w.wake_us = histogram_between(&now.wake_us, &base.wake_us);
+    w.compute_us = histogram_between(&now.compute_us, &base.compute_us);
     w.cycles = now.cycles.saturating_sub(base.cycles);
     w.overruns = now.overruns.saturating_sub(base.overruns);
     w.wake_sum_ns = now.wake_sum_ns.saturating_sub(base.wake_sum_ns);
     w.wake_min_ns = w.wake_us.min() * 1_000;
     w.wake_max_ns = w.wake_us.max() * 1_000;
+    w
+}
+
+/// The samples recorded between `base` and `now` (two snapshots of one histogram). Below
+/// [`TAIL_END_US`] every value is a fixed bucket, so this is an exact difference. The overflow beyond
+/// it is recorded at the lifetime maximum, which may have grown in between: those are counted
+/// together and put at `now`'s maximum (hdrhistogram's `subtract` would fail there and keep the
+/// whole lifetime's overflow in the window).
+fn histogram_between(
+    now: &hdrhistogram::Histogram<u64>,
+    base: &hdrhistogram::Histogram<u64>,
+) -> hdrhistogram::Histogram<u64> {
+    let mut w = hdrhistogram::Histogram::new_from(now);
+    let mut over = 0;
+    for v in now.iter_recorded() {
+        let value = v.value_iterated_to();
+        if value >= TAIL_END_US {
+            over += v.count_at_value();
+        } else {
+            let n = v.count_at_value().saturating_sub(base.count_at(value));
+            // Recording none would still move the window's min and max to `value`.
+            if n > 0 {
+                w.saturating_record_n(value, n);
+            }
+        }
+    }
+    let over_before: u64 = base
+        .iter_recorded()
+        .filter(|v| v.value_iterated_to() >= TAIL_END_US)
+        .map(|v| v.count_at_value())
+        .sum();
+    if over > over_before {
+        w.saturating_record_n(now.max(), over - over_before);
+    }
     w
 }
 
@@ -202,4 +236,38 @@ fn print_roundtrip(ctl: &ControlBlock) -> serde_json::Value {
         rt.value_at_quantile(0.99)
     );
     serde_json::json!({ "samples": rt_count, "p50_us": rt.value_at_quantile(0.5), "p99_us": rt.value_at_quantile(0.99), "max_us": rt_max })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hist(samples: &[(u64, u64)]) -> hdrhistogram::Histogram<u64> {
+        let mut h = hdrhistogram::Histogram::new_with_bounds(1, 1_000_000, 3).expect("bounds");
+        for &(v, n) in samples {
+            h.record_n(v, n).expect("in range");
+        }
+        h
+    }
+
+    #[test]
+    fn a_window_holds_only_its_own_samples_even_when_the_maximum_grew() {
+        // Before the window: 100 at 20 us, 3 tail samples at 7 ms, 2 beyond the tail at 150 ms
+        // (the lifetime maximum then). In it: 50 at 20 us, one at 9 ms, one beyond at 400 ms.
+        let base = hist(&[(20, 100), (7_000, 3), (150_000, 2)]);
+        let now = hist(&[(20, 150), (7_000, 3), (9_000, 1), (400_000, 3)]);
+        let w = histogram_between(&now, &base);
+        assert_eq!(w.len(), 52);
+        assert_eq!(w.count_at(20), 50);
+        assert_eq!(w.count_at(7_000), 0);
+        assert_eq!(w.count_at(9_000), 1);
+        assert_eq!(w.count_at(400_000), 1);
+        assert!(w.equivalent(w.max(), 400_000));
+        // A window without the lifetime's largest samples has its own maximum and minimum.
+        let later = hist(&[(10, 1), (20, 160), (7_000, 3), (9_000, 2), (400_000, 3)]);
+        let w = histogram_between(&later, &now);
+        assert_eq!(w.len(), 12);
+        assert!(w.equivalent(w.max(), 9_000));
+        assert_eq!(w.min(), 10);
+    }
 }
