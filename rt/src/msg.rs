@@ -550,22 +550,7 @@ impl SiteReport {
                 state,
                 accel,
                 included,
-            } => {
-                let (pos, rot, vel, ang_mom) = state_fields(&state);
-                Self {
-                    kind: KIND_STATE,
-                    t_ns: ns(t_s),
-                    seq,
-                    site: site as u64,
-                    pos,
-                    rot,
-                    vel,
-                    ang_mom,
-                    accel: a3(accel),
-                    included,
-                    ..Self::default()
-                }
-            }
+            } => Self::state(KIND_STATE, site, seq, ns(t_s), &state, accel, included),
             Report::Force { t_s, force } => Self {
                 kind: KIND_FORCE,
                 t_ns: ns(t_s),
@@ -578,24 +563,19 @@ impl SiteReport {
                 ..Self::default()
             },
             Report::Coupled(ref c) => {
-                let (pos, rot, vel, ang_mom) = state_fields(&c.state);
                 let time = |t: f64| if t.is_finite() { t.max(0.0) } else { -1.0 };
                 let mut included = [0.0; MAX_SITES];
                 included[0] = time(c.touch_since_s);
                 included[1] = time(c.last_touch_s);
-                Self {
-                    kind: KIND_COUPLED,
-                    t_ns: ns(c.t_s),
+                Self::state(
+                    KIND_COUPLED,
+                    site,
                     seq,
-                    site: site as u64,
-                    pos,
-                    rot,
-                    vel,
-                    ang_mom,
-                    accel: a3(c.accel),
+                    ns(c.t_s),
+                    &c.state,
+                    c.accel,
                     included,
-                    ..Self::default()
-                }
+                )
             }
             // Tools go as a `ToolTrack` (their own ring and key): kind 0, which every receiver
             // refuses.
@@ -605,6 +585,44 @@ impl SiteReport {
                 ..Self::default()
             },
         }
+    }
+
+    /// A state of `kind` (1 or 4) laid out; the force fields zero.
+    fn state(
+        kind: u64,
+        site: usize,
+        seq: u64,
+        t_ns: u64,
+        state: &BodyState,
+        accel: Vec3,
+        included: [f64; MAX_SITES],
+    ) -> Self {
+        let (pos, rot, vel, ang_mom) = state_fields(state);
+        Self {
+            kind,
+            t_ns,
+            seq,
+            site: site as u64,
+            pos,
+            rot,
+            vel,
+            ang_mom,
+            accel: a3(accel),
+            included,
+            ..Self::default()
+        }
+    }
+
+    /// The state of a state kind (1 or 4): `None` unless it is valid, its acceleration finite and
+    /// the force fields, which are not a state's, zero as the sender lays them out.
+    fn state_part(&self) -> Option<BodyState> {
+        let state = body_state(self.pos, self.rot, self.vel, self.ang_mom)?;
+        (finite(&self.accel)
+            && zero(&self.force)
+            && zero(&self.point)
+            && self.depth == 0.0
+            && self.touching == 0)
+            .then_some(state)
     }
 
     /// The sender and the model's report, or `None` for an unknown kind, a site index out of range,
@@ -624,11 +642,8 @@ impl SiteReport {
         let t_s = self.t_ns as f64 * 1e-9;
         match self.kind {
             KIND_STATE => {
-                let state = body_state(self.pos, self.rot, self.vel, self.ang_mom)?;
-                (finite(&self.accel) && finite(&self.included)).then_some(())?;
-                // The force fields are not a state's: zero, as the sender lays them out.
-                (zero(&self.force) && zero(&self.point) && self.depth == 0.0 && self.touching == 0)
-                    .then_some(())?;
+                let state = self.state_part()?;
+                finite(&self.included).then_some(())?;
                 Some((
                     site,
                     Report::State {
@@ -640,26 +655,14 @@ impl SiteReport {
                 ))
             }
             KIND_COUPLED => {
-                let state = body_state(self.pos, self.rot, self.vel, self.ang_mom)?;
+                let state = self.state_part()?;
                 let time = |t: f64| (t == -1.0 || (0.0..=1e12).contains(&t)).then_some(t);
                 let (since, last) = (time(self.included[0])?, time(self.included[1])?);
-                (finite(&self.accel)
-                    && zero(&self.included[2..])
-                    && zero(&self.force)
-                    && zero(&self.point)
-                    && self.depth == 0.0
-                    && self.touching == 0)
-                    .then_some(())?;
+                zero(&self.included[2..]).then_some(())?;
                 Some((
                     site,
                     Report::Coupled(CoupledReport {
-                        tools: ToolReport {
-                            first_tick: 0,
-                            count: 0,
-                            positions: [[0; 3]; WINDOW_TICKS],
-                            confirmed_tick: 0,
-                            confirmed_hash: 0,
-                        },
+                        tools: ToolReport::NONE,
                         t_s,
                         state,
                         accel: v3(self.accel),
@@ -746,13 +749,7 @@ mod tests {
         // A `coupled` state: its user's contact times survive, "not touching" and "never" too.
         for (since, last) in [(1.25, 1.5), (f64::INFINITY, f64::NEG_INFINITY)] {
             let c = Report::Coupled(CoupledReport {
-                tools: ToolReport {
-                    first_tick: 0,
-                    count: 0,
-                    positions: [[0; 3]; WINDOW_TICKS],
-                    confirmed_tick: 0,
-                    confirmed_hash: 0,
-                },
+                tools: ToolReport::NONE,
                 t_s: 3.0,
                 state,
                 accel: Vec3::new(0.0, 0.0, -3.27),

@@ -93,6 +93,17 @@ pub struct ToolReport {
     pub confirmed_hash: u64,
 }
 
+impl ToolReport {
+    /// No positions and no confirmed frontier (a `coupled` state sent apart from its track).
+    pub const NONE: ToolReport = ToolReport {
+        first_tick: 0,
+        count: 0,
+        positions: [[0; 3]; WINDOW_TICKS],
+        confirmed_tick: 0,
+        confirmed_hash: 0,
+    };
+}
+
 /// What the method did, for status, recordings and benchmarks.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Stats {
