@@ -22,7 +22,8 @@
 //!   a follower's copy, pulled ahead of the leader's tool played late on it, takes little of that
 //!   tool's work, so a tank of its own work alone stays empty and holds the copy back from the
 //!   leader's push for good (the paper task at 150 ms, seed 3: 525 pulls scaled back, user 2's
-//!   copy stopped short of its tool, 6 of 12 phases). Along the normal of a plane the local copy rests on, the pull keeps the local contact (as
+//!   copy stopped short of its tool, 5 of 12 phases). Along the normal of a plane the local copy
+//!   rests on, the pull keeps the local contact (as
 //!   `paper` does): transplanting another copy's micro-bounce would only pump the table's spring.
 
 use crate::body::{BodyState, Vec3};
@@ -317,7 +318,8 @@ impl Consistency for Coupled {
         let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
         // The leader's state is accounted for (its users gave it its energy, at its site): a pull
         // may bring the copy up to it, plus what this copy's tank holds.
-        let budget = self.tank_j + (stored(&target) - stored(&copy.state)).max(0.0);
+        let (e_copy, e_leader) = (stored(&copy.state), stored(&target));
+        let budget = self.tank_j + (e_leader - e_copy).max(0.0);
         let (new, clipped_j) =
             match crate::tank::bound_gain(world, &copy.state, &full, budget, None) {
                 Some((s, c)) => (s, c),
@@ -325,8 +327,9 @@ impl Consistency for Coupled {
             };
         // What a pull adds beyond the leader's energy is drained; what it takes is returned (the
         // tank never exceeds the users' positive work less what pulls added net).
-        let beyond_leader = stored(&new) - stored(&copy.state).max(stored(&target));
-        let taken = (stored(&copy.state) - stored(&new)).max(0.0);
+        let e_new = stored(&new);
+        let beyond_leader = e_new - e_copy.max(e_leader);
+        let taken = (e_copy - e_new).max(0.0);
         self.tank_j = (self.tank_j - beyond_leader.max(0.0) + taken).max(0.0);
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
         let adoption = Adoption {
