@@ -20,6 +20,7 @@ pub mod acl;
 pub mod admit;
 pub mod keys;
 pub mod live_view;
+pub mod log;
 pub mod network;
 pub mod recording;
 pub mod router;
