@@ -59,6 +59,55 @@ pub fn wait_for<T>(what: &str, limit: Duration, mut f: impl FnMut() -> Result<T,
     }
 }
 
+/// A station's status in one line, for a wait's "last seen": its run state, each child's health
+/// and restarts (and last failure), the network's counts and peers, and what physics took.
+pub fn brief(s: &coop_actors::station::status::StationStatus) -> String {
+    let children = s
+        .children
+        .iter()
+        .map(|c| {
+            let failed = c
+                .last_failure
+                .as_deref()
+                .map_or(String::new(), |f| format!(" ({f})"));
+            format!("{} {} r{}{failed}", c.name, c.health, c.restarts)
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    let peers = s
+        .network
+        .peers
+        .iter()
+        .map(|p| {
+            format!(
+                "{}{}{} offset {}",
+                p.site,
+                if p.present { " present" } else { " absent" },
+                if p.lost { " lost" } else { "" },
+                p.clock_offset_us
+                    .map_or("unknown".to_owned(), |o| format!("{o:.0} µs"))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!(
+        "{} {}{} [{children}] network {{{}; published {} received {} rejected {} refused {:?} \
+         held for offset {}; peers: {peers}}} physics {{remote {} rejected {} adoptions {}}}",
+        s.station,
+        s.run_state,
+        if s.degraded { " degraded" } else { "" },
+        s.network.locators,
+        s.network.published,
+        s.network.received,
+        s.network.rejected,
+        s.network.refused,
+        s.network.held_for_offset,
+        s.physics.remote_received,
+        s.physics.remote_rejected,
+        s.physics.adoptions,
+    )
+}
+
 /// `station status --json --config CFG` run by the `station` binary at `station`: the status as
 /// JSON.
 ///
