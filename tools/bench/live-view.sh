@@ -12,9 +12,9 @@
 #   many, so that whatever else loads the machine (a VM's vCPU stalls of tens of ms land at random)
 #   weighs on both alike.
 # Prints the servo's wake-up p99 / p99.9 / max and overruns and physics' overruns over each
-# condition's windows, the ratio viewer/none (goal: servo p99.9 <= 1.1x, no more overruns), the
-# medians over the rounds of each window's figures, and the recording's size per minute of session
-# with and without the Foxglove channels. Per condition it also prints each CPU's busy %, steal %
+# condition's windows, the ratio viewer/none (goal: servo p99.9 and physics overruns <= 1.1x; and
+# no more servo overruns), the medians over the rounds of each window's figures, and the
+# recording's size per minute of session with and without the Foxglove channels. Per condition it also prints each CPU's busy %, steal %
 # and NET_RX softirqs/s over the windows: on a shared machine the ratio follows whatever else ran in
 # each window, and this shows how much that was.
 #
@@ -223,8 +223,12 @@ for cond in ("none", "viewer"):
 v = json.load(open(f"{work}/client.json"))
 msgs, size = v["messages"], sum(v["bytes"].values())
 print(f"# the viewer received {sum(msgs.values())} messages ({', '.join(f'{t} {n}' for t, n in sorted(msgs.items()))}), {size / 1e6:.2f} MB")
-met = ratio(b[2], a[2]) <= 1.1 and b[4] <= a[4] and b[5] <= a[5]
-print(f"# goal: with a viewer, servo p99.9 <= 1.1x none and no more overruns: {'met' if met else 'NOT met'}")
+# The issue's goal names the servo's wake-up p99.9 and physics' overruns; ours adds the servo's
+# overruns (a 20 ms vCPU stall is a dozen of them at 600 Hz, so one storm more or less decides it).
+met = ratio(b[2], a[2]) <= 1.1 and ratio(b[5], a[5]) <= 1.1
+print(f"# goal: with a viewer, servo p99.9 and physics overruns <= 1.1x none: {'met' if met else 'NOT met'}"
+      f" ({ratio(b[2], a[2]):.2f}x, {ratio(b[5], a[5]):.2f}x)")
+print(f"# and no more servo overruns: {'met' if b[4] <= a[4] else 'NOT met'} ({a[4]} -> {b[4]})")
 (on, on_s), (off, off_s) = per_minute("live"), per_minute("no-foxglove")
 print(f"# recording per minute of session: {off / 1e6:.2f} MB without the Foxglove channels ({off_s:.0f} s recorded), {on / 1e6:.2f} MB with them ({on_s:.0f} s recorded): {ratio(on, off):.2f}x")
 PY
