@@ -96,7 +96,7 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
     let status_file = dir.join("r1.json");
     let (mut router, resolved) = router(&ns.names[0], &dir, &certs);
 
-    let (a, b) = through_router(&dir, &session, &certs, &scenario);
+    let (a, b) = through_router(&dir, &session, &certs, &scenario, &dir, |_| {});
     let mut sa = start_station(&ns.names[1], &a);
     let mut sb = start_station(&ns.names[2], &b);
     let sites = ["user1".to_owned(), "user2".to_owned()];
@@ -368,7 +368,7 @@ fn stations_find_each_other_again_after_the_router_restarts() {
     let session = format!("nk{pid}");
     let certs = certs(&dir, &session);
     let (mut router1, resolved) = router(&ns.names[0], &dir, &certs);
-    let (a, b) = through_router(&dir, &session, &certs, &scenario);
+    let (a, b) = through_router(&dir, &session, &certs, &scenario, &dir, |_| {});
     let mut sa = start_station(&ns.names[1], &a);
     let mut sb = start_station(&ns.names[2], &b);
     let first = both_receiving_and_adopting(&session, &resolved, "through the router", None);
@@ -423,17 +423,26 @@ fn stations_find_each_other_again_after_the_router_restarts() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The two stations' configurations (in `dir`, recording there) for a session through router r1
-/// over mutual TLS: user1 reaches it at 192.0.2.1, user2 at 192.0.2.5.
-fn through_router(dir: &Path, session: &str, certs: &Path, scenario: &Path) -> (PathBuf, PathBuf) {
+/// The two stations' configurations (in `dir`, each recording `records/<site>.mcap`, then `edit`
+/// applied) for a session through router r1 over mutual TLS: user1 reaches it at 192.0.2.1,
+/// user2 at 192.0.2.5.
+fn through_router(
+    dir: &Path,
+    session: &str,
+    certs: &Path,
+    scenario: &Path,
+    records: &Path,
+    edit: impl Fn(&mut StationConfig),
+) -> (PathBuf, PathBuf) {
     let station = |me: &str, router_addr: &str| {
         let (cert, key) = (
             certs.join(format!("{me}.pem")),
             certs.join(format!("{me}.key")),
         );
         let (ca, acl) = (certs.join("ca.pem"), certs.join("acl.json5"));
-        let (record, scenario) = (dir.join(format!("{me}.mcap")), scenario.to_owned());
+        let (record, scenario) = (records.join(format!("{me}.mcap")), scenario.to_owned());
         let connect = format!("tls/{router_addr}:7447");
+        let edit = &edit;
         move |c: &mut StationConfig| {
             c.scenario = Some(scenario);
             c.record = Some(record);
@@ -447,6 +456,7 @@ fn through_router(dir: &Path, session: &str, certs: &Path, scenario: &Path) -> (
                 enable_mtls: true,
                 ..Tls::default()
             });
+            edit(c);
         }
     };
     (
@@ -720,33 +730,10 @@ fn session_run_attach_drives_stations_started_by_hand_whose_clocks_differ() {
         "{said}"
     );
 
-    let station = |me: &'static str, router_addr: &'static str| {
-        let (cert, k, ca, acl) = (
-            certs.join(format!("{me}.pem")),
-            certs.join(format!("{me}.key")),
-            certs.join("ca.pem"),
-            certs.join("acl.json5"),
-        );
-        let (record, scenario) = (records.join(format!("{me}.mcap")), scenario.clone());
-        move |c: &mut StationConfig| {
-            c.scenario = Some(scenario);
-            c.method = Some(MethodName::Paper);
-            c.start = StartMode::Session;
-            c.record = Some(record);
-            c.network.mode = Mode::Client;
-            c.network.connect = vec![format!("tls/{router_addr}:7447")];
-            c.network.access_control = Some(acl);
-            c.network.tls = Some(Tls {
-                root_ca_certificate: Some(ca),
-                connect_certificate: Some(cert),
-                connect_private_key: Some(k),
-                enable_mtls: true,
-                ..Tls::default()
-            });
-        }
-    };
-    let a = station_config(&dir, &session, "user1", station("user1", "192.0.2.1"));
-    let b = station_config(&dir, &session, "user2", station("user2", "192.0.2.5"));
+    let (a, b) = through_router(&dir, &session, &certs, &scenario, &records, |c| {
+        c.method = Some(MethodName::Paper);
+        c.start = StartMode::Session;
+    });
     // Started by hand, as on two machines: each in its namespace; user2's clock 1000 s ahead. The
     // duration only bounds them should the launcher never come: they stop at the session's end.
     let run = |cfg: &Path| {
