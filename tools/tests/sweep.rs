@@ -21,7 +21,17 @@ fn repo() -> PathBuf {
 /// `method` on the paper task at a constant `delay_ms` (the scenario's jitter) and `seed`: the run
 /// and its metrics against the reference.
 fn paper_at(method: MethodName, delay_ms: f64, seed: u64) -> (sim::RunResult, metrics::Metrics) {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    scenario_run("paper.toml", method, delay_ms, seed)
+}
+
+/// `method` on `scenarios/<file>` at a constant `delay_ms` and `seed`, as [`paper_at`].
+fn scenario_run(
+    file: &str,
+    method: MethodName,
+    delay_ms: f64,
+    seed: u64,
+) -> (sim::RunResult, metrics::Metrics) {
+    let base = scenario_file::load(&repo().join("scenarios").join(file)).expect(file);
     let sc = scenario_at(&base, delay_ms, seed).expect("valid");
     let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
@@ -342,4 +352,18 @@ fn timewarp_at_150_ms_agrees_and_its_rollbacks_inject_nothing() {
         m.correction_energy_j,
         m.correction_energy_gross_j
     );
+}
+
+/// The 3-D one (issue 12): two users lift the disk off the table (friction at the two tools alone
+/// holds it up), carry it through the air and set it down (`scenarios/lift.toml`). At a constant
+/// 200 ms `timewarp` does every phase at both sites, lift included, with confirmed states agreeing;
+/// `paper` (the object's state exchanged) loses the lift.
+#[test]
+fn timewarp_lifts_and_carries_the_disk_in_3d_at_200_ms() {
+    let (_, m) = scenario_run("lift.toml", MethodName::Timewarp, 200.0, 1);
+    assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
+    assert_eq!(m.hash_mismatches, 0);
+    assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
+    let (_, p) = scenario_run("lift.toml", MethodName::Paper, 200.0, 1);
+    assert!(p.phases_passed < p.phases_total, "{p:?}");
 }

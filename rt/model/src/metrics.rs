@@ -445,10 +445,11 @@ fn phase_happened(
         return false;
     }
     if p.lifted_m > 0.0 {
-        let rest = Vec3::from(sc.object.start_m).y;
+        // z is up (the scenarios' convention: the table is z = 0).
+        let rest = Vec3::from(sc.object.start_m).z;
         let top = window
             .iter()
-            .map(|&k| s.obj_pos[k].y)
+            .map(|&k| s.obj_pos[k].z)
             .fold(f64::NEG_INFINITY, f64::max);
         if top < rest + p.lifted_m {
             return false;
