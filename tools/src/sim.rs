@@ -56,10 +56,13 @@ pub enum Command {
         #[arg(long)]
         seed: Option<u64>,
     },
-    /// Run every method and the reference on the scenario; print one table.
+    /// Run every method (or those of --methods) and the reference on the scenario; print one table.
     Compare {
         /// Scenario file (TOML).
         scenario: PathBuf,
+        /// Methods, comma-separated (default: every one: naive,paper,timewarp,coupled).
+        #[arg(long, value_delimiter = ',', value_parser = parse_method)]
+        methods: Vec<MethodName>,
         /// Print the figures as JSON instead of a table.
         #[arg(long)]
         json: bool,
@@ -181,13 +184,15 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         }
         Command::Compare {
             scenario,
+            methods,
             json,
             out,
         } => {
+            let methods = chosen(methods)?;
             let sc = scenario_file::load(&scenario)?;
             let reference = run_mode(&sc, Mode::Reference);
             let mut all = vec![metrics::compute(&sc, &reference, &reference)];
-            for method in MethodName::ALL {
+            for method in methods {
                 let r = run_mode(&sc, Mode::Distributed(method));
                 print_rollbacks(&r);
                 let m = metrics::compute(&sc, &r, &reference);
@@ -213,12 +218,8 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             json,
             out,
         } => {
+            let methods = chosen(methods)?;
             let sc = scenario_file::load(&scenario)?;
-            let methods = if methods.is_empty() {
-                MethodName::ALL.to_vec()
-            } else {
-                methods
-            };
             crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
         }
         Command::Bench {
@@ -228,6 +229,22 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         } => crate::simbench::run(&scenario, json, quick)?,
     }
     Ok(())
+}
+
+/// The methods of `--methods`, every one if none is given; a method given twice is refused.
+fn chosen(methods: Vec<MethodName>) -> anyhow::Result<Vec<MethodName>> {
+    if methods.is_empty() {
+        return Ok(MethodName::ALL.to_vec());
+    }
+    for (k, m) in methods.iter().enumerate() {
+        if methods[..k].contains(m) {
+            anyhow::bail!(
+                "--methods: {} is given twice (each method runs once)",
+                m.as_str()
+            );
+        }
+    }
+    Ok(methods)
 }
 
 /// One line per site of a method that rolls back.

@@ -223,4 +223,38 @@ fn compare_prints_one_table_and_json() {
         out.lines().any(|l| l.contains("co-div")),
         "co-contact column missing:\n{out}"
     );
+    // --methods narrows it to those (the reference always runs: the error is against it).
+    let o = Command::new(SIM)
+        .args([
+            "compare",
+            "scenarios/space-box.toml",
+            "--methods",
+            "timewarp,paper",
+            "--json",
+        ])
+        .current_dir(repo())
+        .output()
+        .expect("sim");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let names: Vec<&str> = v["methods"]
+        .as_array()
+        .expect("methods")
+        .iter()
+        .filter_map(|m| m["method"].as_str())
+        .collect();
+    assert_eq!(names, ["reference", "timewarp", "paper"], "{v}");
+    for (args, needle) in [
+        ("naive,bogus", "unknown method \"bogus\""),
+        ("paper,paper", "paper is given twice"),
+    ] {
+        let o = Command::new(SIM)
+            .args(["compare", "scenarios/space-box.toml", "--methods", args])
+            .current_dir(repo())
+            .output()
+            .expect("sim");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args} accepted");
+        assert!(err.contains(needle), "{args}: {err}");
+    }
 }

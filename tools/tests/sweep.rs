@@ -132,6 +132,10 @@ fn sweep_refuses_bad_arguments_with_the_reason() {
         (&["--delays-ms", "0,-5"][..], "cannot be negative"),
         (&["--delays-ms", "abc"][..], "not a number"),
         (&["--seeds", "0"][..], "at least 1"),
+        (
+            &["--methods", "paper,timewarp,paper"][..],
+            "paper is given twice",
+        ),
         (&["--delays-ms", "20000"][..], "network.delay_min_ms"),
     ] {
         let o = Command::new(SIM)
