@@ -108,7 +108,27 @@ pub struct Scenario {
     pub phase: Vec<PhaseSpec>,
     /// Display continuity and passivity of every site's servo (issue 12, item 3).
     pub display: crate::display::DisplaySpec,
+    /// The `timewarp` method's settings.
+    pub timewarp: TimewarpSpec,
 }
+
+/// The `timewarp` method's settings (`[timewarp]`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct TimewarpSpec {
+    /// History kept for rollbacks, ms: a received tool position older than this cannot be undone
+    /// (it is counted as a fallback). 0 (the default): the largest delay, its jitter, the slowest
+    /// report period and 100 ms. Otherwise at least the first three, at most 10 s (one snapshot
+    /// per physics tick is kept, allocated at start).
+    pub horizon_ms: f64,
+}
+
+/// The longest `timewarp.horizon_ms`, ms.
+pub const MAX_HORIZON_MS: f64 = 10_000.0;
 
 /// The object.
 #[derive(Debug, Clone, PartialEq)]
@@ -281,6 +301,7 @@ impl Default for Scenario {
             site: Vec::new(),
             phase: Vec::new(),
             display: crate::display::DisplaySpec::default(),
+            timewarp: TimewarpSpec::default(),
         }
     }
 }
@@ -707,6 +728,7 @@ impl Scenario {
         }
         self.validate_stability()?;
         self.validate_start()?;
+        self.validate_horizon()?;
         for (i, p) in self.phase.iter().enumerate() {
             let at = |f: &str| format!("phase[{i}].{f}");
             if p.name.is_empty() {
@@ -727,6 +749,39 @@ impl Scenario {
             in_closed(&at("min_force_n"), p.min_force_n, 0.0, 1000.0)?;
             in_closed(&at("object_moves_m"), p.object_moves_m, 0.0, 100.0)?;
             in_closed(&at("lifted_m"), p.lifted_m, 0.0, 100.0)?;
+        }
+        Ok(())
+    }
+
+    /// The largest delay, its jitter and the slowest report period, s: how late a tool position
+    /// can arrive, the least history `timewarp` needs.
+    fn latest_arrival_s(&self) -> f64 {
+        let slowest = self
+            .site
+            .iter()
+            .map(|s| 1.0 / s.report_rate_hz)
+            .fold(0.0, f64::max);
+        (self.network.delay_max_ms + self.network.jitter_ms) * 1e-3 + slowest
+    }
+
+    /// `timewarp.horizon_ms`: 0 (derived), or covering [`Self::latest_arrival_s`], at most
+    /// [`MAX_HORIZON_MS`].
+    fn validate_horizon(&self) -> Result<(), ScenarioError> {
+        let h = self.timewarp.horizon_ms;
+        if h == 0.0 {
+            return Ok(());
+        }
+        let least_ms = self.latest_arrival_s() * 1e3;
+        if !(h.is_finite() && h >= least_ms && h <= MAX_HORIZON_MS) {
+            return Err(err(
+                "timewarp.horizon_ms",
+                h,
+                format!(
+                    "must cover the largest delay, its jitter and the slowest report period \
+                     ({least_ms:.1} ms) and be at most {MAX_HORIZON_MS} ms; 0 derives it \
+                     (that + 100 ms)"
+                ),
+            ));
         }
         Ok(())
     }
@@ -849,20 +904,15 @@ impl Scenario {
     }
 
     /// Site `i`'s `timewarp` method, starting from `copy`: the common tick is the physics step (every
-    /// site's must be the same), the horizon covers the largest delay and jitter, the slowest report
-    /// period and 100 ms.
+    /// site's must be the same), the horizon is `timewarp.horizon_ms`, or by default covers the
+    /// largest delay and jitter, the slowest report period and 100 ms.
     pub fn timewarp(
         &self,
         i: usize,
         copy: &crate::method::ObjectCopy,
     ) -> crate::timewarp::TimeWarp {
         let dt = 1.0 / self.site[i].physics_rate_hz;
-        let slowest = self
-            .site
-            .iter()
-            .map(|s| 1.0 / s.report_rate_hz)
-            .fold(0.0, f64::max);
-        let horizon_s = (self.network.delay_max_ms + self.network.jitter_ms) * 1e-3 + slowest + 0.1;
+        let horizon_s = self.timewarp_horizon_s();
         let mut radii = [0.0; MAX_SITES];
         for (r, s) in radii.iter_mut().zip(&self.site) {
             *r = s.tool_radius_m;
@@ -876,6 +926,16 @@ impl Scenario {
             (horizon_s / dt).ceil() as usize,
             copy,
         )
+    }
+
+    /// The `timewarp` history, s: `timewarp.horizon_ms`, or when 0 the latest a tool position can
+    /// arrive plus 100 ms.
+    pub fn timewarp_horizon_s(&self) -> f64 {
+        if self.timewarp.horizon_ms > 0.0 {
+            self.timewarp.horizon_ms * 1e-3
+        } else {
+            self.latest_arrival_s() + 0.1
+        }
     }
 
     /// Site `i`'s `coupled` method: remote tools are played the largest delay, its jitter and the

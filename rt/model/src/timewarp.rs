@@ -199,6 +199,11 @@ impl TimeWarp {
         self.stats
     }
 
+    /// Ticks of history kept (the horizon, at least [`WINDOW_TICKS`], and the current tick).
+    pub fn history_ticks(&self) -> usize {
+        self.slots.len()
+    }
+
     /// The horizon, ticks.
     fn len(&self) -> i64 {
         self.slots.len() as i64
@@ -540,6 +545,40 @@ mod tests {
         sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
         let w = sc.world();
         (sc, w)
+    }
+
+    /// The history kept is `[timewarp] horizon_ms`, or by default what the network can delay a
+    /// position by plus 100 ms; a horizon that does not cover that is refused.
+    #[test]
+    fn the_horizon_is_configured_or_covers_the_latest_arrival() {
+        let (mut sc, _) = paper_world();
+        for (name, x, base) in [("user1", -0.2, -0.3), ("user2", 0.2, 0.3)] {
+            sc.site.push(crate::scenario::SiteSpec {
+                name: name.into(),
+                device_base_m: [base, -0.2, 0.0],
+                script: vec![crate::scenario::KeyframeSpec {
+                    t_s: 0.0,
+                    target_m: [x, 0.0, 0.01],
+                }],
+                ..Default::default()
+            });
+        }
+        sc.network.delay_min_ms = 20.0;
+        sc.network.delay_max_ms = 200.0;
+        sc.network.jitter_ms = 10.0;
+        sc.site[0].report_rate_hz = 50.0; // 20 ms: 230 ms in all, + 100 ms
+        sc.validate().expect("default horizon");
+        let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        assert_eq!(sc.timewarp(0, &copy).history_ticks(), 331);
+        sc.timewarp.horizon_ms = 2000.0;
+        sc.validate().expect("a longer horizon");
+        assert_eq!(sc.timewarp(0, &copy).history_ticks(), 2001);
+        for bad in [229.0, -1.0, f64::NAN, 10_001.0] {
+            sc.timewarp.horizon_ms = bad;
+            let e = sc.validate().expect_err("refused");
+            assert_eq!(e.field, "timewarp.horizon_ms", "{e}");
+            assert!(e.rule.contains("230.0 ms"), "{e}");
+        }
     }
 
     /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
