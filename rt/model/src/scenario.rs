@@ -913,10 +913,7 @@ impl Scenario {
     ) -> crate::timewarp::TimeWarp {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let horizon_s = self.timewarp_horizon_s();
-        let mut radii = [0.0; MAX_SITES];
-        for (r, s) in radii.iter_mut().zip(&self.site) {
-            *r = s.tool_radius_m;
-        }
+        let radii = self.tool_radii();
         crate::timewarp::TimeWarp::new(
             i,
             self.site.len(),
@@ -926,6 +923,15 @@ impl Scenario {
             (horizon_s / dt).ceil() as usize,
             copy,
         )
+    }
+
+    /// Every site's tool radius, m, in site order (0 past the last site).
+    fn tool_radii(&self) -> [f64; MAX_SITES] {
+        let mut radii = [0.0; MAX_SITES];
+        for (r, s) in radii.iter_mut().zip(&self.site) {
+            *r = s.tool_radius_m;
+        }
+        radii
     }
 
     /// The `timewarp` history, s: `timewarp.horizon_ms`, or when 0 the latest a tool position can
@@ -942,16 +948,8 @@ impl Scenario {
     /// slowest report period late (when every position has arrived, short of a loss).
     pub fn coupled(&self, i: usize) -> crate::coupled::Coupled {
         let dt = 1.0 / self.site[i].physics_rate_hz;
-        let slowest = self
-            .site
-            .iter()
-            .map(|s| 1.0 / s.report_rate_hz)
-            .fold(0.0, f64::max);
-        let playout_s = (self.network.delay_max_ms + self.network.jitter_ms) * 1e-3 + slowest;
-        let mut radii = [0.0; MAX_SITES];
-        for (r, s) in radii.iter_mut().zip(&self.site) {
-            *r = s.tool_radius_m;
-        }
+        let playout_s = self.latest_arrival_s();
+        let radii = self.tool_radii();
         crate::coupled::Coupled::new(
             i,
             self.site.len(),
