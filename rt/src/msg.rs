@@ -299,7 +299,8 @@ pod_message! {
         pub ang_mom: [f64; 3],
         /// State: acceleration to dead-reckon with, m/s².
         pub accel: [f64; 3],
-        /// State: per site, time its impulses are included up to, s (sender's clock).
+        /// State: per site, time its impulses are included up to, s (sender's clock). Force:
+        /// word 0, the work the sender's user has given its copy, J.
         pub included: [f64; MAX_SITES],
         /// Force: force on the object, N.
         pub force: [f64; 3],
@@ -515,6 +516,8 @@ impl TraceRecord {
 }
 
 const KIND_STATE: u64 = 1;
+/// A `naive` site's contact force: the force fields, and `included[0]` the positive work its user
+/// has done on its own copy so far, J (finite, >= 0); the state fields and the other `included` 0.
 const KIND_FORCE: u64 = 2;
 /// A `coupled` site's copy and its user's contact times (its tools go as a [`ToolTrack`]); the
 /// state fields are a state's, `included[0]` is when its user's current contact began and
@@ -551,17 +554,26 @@ impl SiteReport {
                 accel,
                 included,
             } => Self::state(KIND_STATE, site, seq, ns(t_s), &state, accel, included),
-            Report::Force { t_s, force } => Self {
-                kind: KIND_FORCE,
-                t_ns: ns(t_s),
-                seq,
-                site: site as u64,
-                force: a3(force.force),
-                point: a3(force.point),
-                depth: force.depth,
-                touching: u64::from(force.touching),
-                ..Self::default()
-            },
+            Report::Force {
+                t_s,
+                force,
+                given_j,
+            } => {
+                let mut included = [0.0; MAX_SITES];
+                included[0] = given_j;
+                Self {
+                    kind: KIND_FORCE,
+                    t_ns: ns(t_s),
+                    seq,
+                    site: site as u64,
+                    force: a3(force.force),
+                    point: a3(force.point),
+                    depth: force.depth,
+                    touching: u64::from(force.touching),
+                    included,
+                    ..Self::default()
+                }
+            }
             Report::Coupled(ref c) => {
                 let time = |t: f64| if t.is_finite() { t.max(0.0) } else { -1.0 };
                 let mut included = [0.0; MAX_SITES];
@@ -674,13 +686,17 @@ impl SiteReport {
             KIND_FORCE => {
                 (finite(&self.force) && finite(&self.point) && self.depth.is_finite())
                     .then_some(())?;
-                // The state fields are not a force's: zero, as the sender lays them out.
+                // The state fields are not a force's: zero, as the sender lays them out; but
+                // `included[0]`, the work the sender's user has given its copy (finite, >= 0).
+                let given_j = self.included[0];
                 (zero(&self.pos)
                     && zero(&self.rot)
                     && zero(&self.vel)
                     && zero(&self.ang_mom)
                     && zero(&self.accel)
-                    && zero(&self.included)
+                    && zero(&self.included[1..])
+                    && given_j.is_finite()
+                    && given_j >= 0.0
                     && self.touching <= 1)
                     .then_some(())?;
                 let force = ContactForce {
@@ -690,7 +706,14 @@ impl SiteReport {
                     touching: self.touching != 0,
                     slipping: false,
                 };
-                Some((site, Report::Force { t_s, force }))
+                Some((
+                    site,
+                    Report::Force {
+                        t_s,
+                        force,
+                        given_j,
+                    },
+                ))
             }
             _ => None,
         }
@@ -781,11 +804,22 @@ mod tests {
                 touching: true,
                 slipping: false,
             },
+            given_j: 0.25,
         };
-        assert!(matches!(
-            SiteReport::new(0, 1, &f).report(),
-            Some((0, Report::Force { .. }))
-        ));
+        let laid = SiteReport::new(0, 1, &f);
+        assert_eq!(laid.report(), Some((0, f)));
+        for (given, why) in [
+            (-1.0, "negative"),
+            (f64::NAN, "NaN"),
+            (f64::INFINITY, "infinite"),
+        ] {
+            let mut bad = laid;
+            bad.included[0] = given;
+            assert!(bad.report().is_none(), "a {why} given work");
+        }
+        let mut bad = laid;
+        bad.included[1] = 1.0;
+        assert!(bad.report().is_none(), "an unused word of a force not zero");
     }
 
     #[test]

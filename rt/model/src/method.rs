@@ -68,6 +68,13 @@ pub struct EnergyAccount {
     /// The users' work on this copy counted only where positive, step by step (own and remote), J:
     /// what the users can have given it at most (the bound of [`crate::tank`]'s checks).
     pub users_positive_j: f64,
+    /// The work of the forces [`integrate`] counts as own, only where positive, step by step, J
+    /// (`naive`, `paper`: the own user's, what it has given this copy, which a `naive` report
+    /// carries; `timewarp`: every user's, all computed here).
+    pub own_positive_j: f64,
+    /// Work received forces would have done on this copy beyond what their users had given their
+    /// own copies, denied by `naive`'s no-gain bound, J.
+    pub remote_denied_j: f64,
 }
 
 /// One site's copy of the object.
@@ -129,6 +136,9 @@ pub enum Report {
         t_s: f64,
         /// The contact.
         force: ContactForce,
+        /// The sender's user's positive work on the sender's copy so far, J
+        /// ([`EnergyAccount::own_positive_j`]): at most what this force may do on a receiver's.
+        given_j: f64,
     },
     /// `timewarp`: the sender's tool positions on the tick grid, and its confirmed frontier.
     Tools(crate::timewarp::ToolReport),
@@ -244,6 +254,7 @@ pub fn integrate(
     copy.energy.own_j += w_own;
     copy.energy.remote_j += w_remote;
     copy.energy.users_positive_j += w_own.max(0.0) + w_remote.max(0.0);
+    copy.energy.own_positive_j += w_own.max(0.0);
     copy.energy.env_j += work(2);
     copy.passive_accel = supported_gravity(world, &next);
     copy.env_touching = touching;
@@ -354,11 +365,69 @@ fn push_out_of_environment(world: &World, s: &mut BodyState) {
 }
 
 /// Eq. 8 across the network: own force plus the latest received forces; forces are exchanged.
-#[derive(Debug, Clone, Default)]
+///
+/// No gain: a received force is another user's push on *their* copy, and it may do on this one at
+/// most the positive work that user has done on theirs. Each report carries that work up to its
+/// time (`given_j`); this copy keeps how much positive work each site's forces did here over time,
+/// and when a report shows that by its time they had done more here than there (beyond
+/// [`NAIVE_SLACK_J`] and [`NAIVE_SLACK_FRACTION`] of it: the copies differ, so do the works), that
+/// site's force may do no more positive work until its user gives more (what it was denied is
+/// counted in [`EnergyAccount::remote_denied_j`]). So a copy gains at most what the users gave
+/// plus what a force can do while its report is on the way. Without it a user holding their copy
+/// still (a squeeze, a lift: no work there) pushes a copy that has left their grasp for as long as
+/// they hold: on `lift.toml`'s open table a real station's naive copy flew 613 m (481 J). Forces
+/// that take energy (resist the motion) always apply.
+#[derive(Debug, Clone)]
 pub struct Naive {
     remote: [Option<(f64, ContactForce)>; MAX_SITES],
     /// Per site: when it was lost (its force fades out over [`LOST_FADE_S`] from then).
     lost_at: [Option<f64>; MAX_SITES],
+    /// Per site: the positive work its forces have done on this copy, J.
+    spent_j: [f64; MAX_SITES],
+    /// Per site: whether its forces did more here than its user gave (as of its newest report).
+    overdrawn: [bool; MAX_SITES],
+    /// `spent_j` after each physics step, with the copy's time: a ring of [`NAIVE_HISTORY`],
+    /// written at `next`.
+    history: Box<[(f64, [f64; MAX_SITES])]>,
+    next: usize,
+}
+
+/// Physics steps of `naive`'s spent-work history (4 s at 1 kHz: a report older than that is
+/// compared with the oldest kept, which can only understate what was spent by its time).
+pub const NAIVE_HISTORY: usize = 4096;
+/// How much more work a received force may have done here than its user gave there, J...
+pub const NAIVE_SLACK_J: f64 = 1e-3;
+/// ...plus this fraction of what was given.
+pub const NAIVE_SLACK_FRACTION: f64 = 0.1;
+
+impl Default for Naive {
+    fn default() -> Self {
+        Self {
+            remote: [None; MAX_SITES],
+            lost_at: [None; MAX_SITES],
+            spent_j: [0.0; MAX_SITES],
+            overdrawn: [false; MAX_SITES],
+            history: vec![(f64::NEG_INFINITY, [0.0; MAX_SITES]); NAIVE_HISTORY].into_boxed_slice(),
+            next: 0,
+        }
+    }
+}
+
+impl Naive {
+    /// What site `k`'s forces had done here by the copy's time `t_s` (the last step at or before
+    /// it; 0 before the first).
+    fn spent_by(&self, k: usize, t_s: f64) -> f64 {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let n = self.history.len();
+        // Newest first: reports are recent.
+        for back in 1..=n {
+            let (t, spent) = self.history[(self.next + n - back) % n];
+            if t <= t_s {
+                return spent[k];
+            }
+        }
+        0.0
+    }
 }
 
 impl Consistency for Naive {
@@ -371,8 +440,11 @@ impl Consistency for Naive {
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let mut users = [ContactForce::default(); MAX_SITES + 1];
+        let mut sites = [0usize; MAX_SITES + 1];
         users[0] = *own;
         let mut n = 1;
+        let before = copy.state;
+        let omega = before.omega(&world.mass);
         for (k, slot) in self.remote.iter_mut().enumerate() {
             let Some((_, f)) = slot else { continue };
             let mut f = *f;
@@ -385,10 +457,27 @@ impl Consistency for Naive {
                 }
                 f.force *= left.min(1.0);
             }
+            // The no-gain bound (see the type's docs): an overdrawn site's force does no
+            // positive work.
+            let power = f.force.dot(&before.vel) + f.wrench(before.pos).torque.dot(&omega);
+            if self.overdrawn[k] && power > 0.0 {
+                copy.energy.remote_denied_j += power * dt;
+                continue;
+            }
             users[n] = f;
+            sites[n] = k;
             n += 1;
         }
         integrate(world, copy, &users[..n], 1, dt);
+        // What each received force did (the step's mean motion, as `integrate` counts work).
+        let dx = copy.state.pos - before.pos;
+        let omega_mid = (omega + copy.state.omega(&world.mass)) * 0.5;
+        for (f, &k) in users[1..n].iter().zip(&sites[1..n]) {
+            let w = f.force.dot(&dx) + f.wrench(before.pos).torque.dot(&omega_mid) * dt;
+            self.spent_j[k] += w.max(0.0);
+        }
+        self.history[self.next] = (copy.time_s, self.spent_j);
+        self.next = (self.next + 1) % self.history.len();
     }
     fn peer_lost(&mut self, from: usize, now_s: f64) {
         if let Some(at) = self.lost_at.get_mut(from) {
@@ -397,10 +486,11 @@ impl Consistency for Naive {
             }
         }
     }
-    fn report(&self, _copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report {
+    fn report(&self, copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report {
         Report::Force {
             t_s: now_s,
             force: *own,
+            given_j: copy.energy.own_positive_j,
         }
     }
     fn receive(
@@ -411,10 +501,22 @@ impl Consistency for Naive {
         msg: &Report,
         _now: f64,
     ) -> Option<Adoption> {
-        if let (Report::Force { t_s, force }, Some(slot)) = (msg, self.remote.get_mut(from)) {
+        if let (
+            Report::Force {
+                t_s,
+                force,
+                given_j,
+            },
+            Some(slot),
+        ) = (msg, self.remote.get_mut(from))
+        {
             if slot.is_none_or(|(t, _)| *t_s > t) {
                 *slot = Some((*t_s, *force));
                 self.lost_at[from] = None; // heard again
+                let spent = self.spent_by(from, *t_s);
+                // A NaN gives nothing.
+                let given = if given_j.is_finite() { *given_j } else { 0.0 };
+                self.overdrawn[from] = spent > given * (1.0 + NAIVE_SLACK_FRACTION) + NAIVE_SLACK_J;
             }
         }
         None
@@ -653,6 +755,7 @@ mod tests {
         let msg = Report::Force {
             t_s: 0.0,
             force: push,
+            given_j: 0.0,
         };
         naive.receive(&w, &mut copy, 1, &msg, 0.0);
         assert_eq!(naive.remote_force().x, 1.0);
@@ -677,10 +780,73 @@ mod tests {
             &Report::Force {
                 t_s: 0.3,
                 force: push,
+                given_j: 0.0,
             },
             0.3,
         );
         assert_eq!(naive.remote_force().x, 1.0);
+    }
+
+    /// `naive`'s no-gain bound: a received force does on this copy at most the work its user did
+    /// on their own (`given_j`, plus the slack), takes energy freely, and applies unchanged while
+    /// it fits.
+    #[test]
+    fn a_received_force_gives_at_most_what_its_user_gave() {
+        // Weightless: the push acts along the line through the centre of mass, no torque.
+        let w = World {
+            gravity: Vec3::zeros(),
+            ..world()
+        };
+        let push = |x: f64| ContactForce {
+            force: Vec3::new(x, 0.0, 0.0),
+            point: Vec3::new(0.0, 1.0, 0.0),
+            depth: 1e-3,
+            touching: true,
+            slipping: false,
+        };
+        // A free copy (1 m above the plane) pushed by a remote 1 N whose user has given
+        // `given_j` (reported every 10 ms, at once).
+        let run = |vel: Vec3, force: f64, given_j: f64, steps: usize| {
+            let mut naive = Naive::default();
+            let start = BodyState {
+                vel,
+                ..BodyState::at_rest(Vec3::new(0.0, 1.0, 0.0))
+            };
+            let mut copy = ObjectCopy::new(start);
+            for k in 0..steps {
+                if k % 10 == 0 {
+                    let now = copy.time_s;
+                    let msg = Report::Force {
+                        t_s: now,
+                        force: push(force),
+                        given_j,
+                    };
+                    naive.receive(&w, &mut copy, 1, &msg, now);
+                }
+                naive.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+            }
+            let e = |s: &BodyState| s.mechanical_energy(&w.mass, w.gravity);
+            (e(&copy.state) - e(&start), copy)
+        };
+        let given = 1e-2;
+        let most = given * (1.0 + NAIVE_SLACK_FRACTION) + NAIVE_SLACK_J;
+        let (gain, copy) = run(Vec3::zeros(), 1.0, given, 2000);
+        // At most one report period (10 ms at up to 0.2 m/s) beyond it.
+        assert!(gain <= most + 2e-3, "gained {gain} J, {given} J given");
+        assert!(gain > given, "the given work is used: {gain} J");
+        assert!(copy.energy.remote_denied_j > 0.0);
+        // Ample: Eq. 8 unchanged, 1 N on 0.1 kg for 0.1 s.
+        let (_, copy) = run(Vec3::zeros(), 1.0, 10.0, 100);
+        assert!(
+            (copy.state.vel.x - 1.0).abs() < 0.01,
+            "{}",
+            copy.state.vel.x
+        );
+        assert_eq!(copy.energy.remote_denied_j, 0.0);
+        // Taking energy needs nothing given: a copy at 1 m/s stopped by a 1 N brake in 0.1 s.
+        let (gain, copy) = run(Vec3::new(1.0, 0.0, 0.0), -1.0, 0.0, 100);
+        assert!(copy.state.vel.x.abs() < 0.01, "{}", copy.state.vel.x);
+        assert!(gain < -0.04, "{gain}");
     }
 
     fn world() -> World {

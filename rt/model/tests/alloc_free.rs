@@ -114,6 +114,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
                 &Report::Force {
                     t_s: now,
                     force: own,
+                    given_j: 0.01,
                 },
                 now,
             );
