@@ -440,7 +440,8 @@ impl Consistency for Naive {
     fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let mut users = [ContactForce::default(); MAX_SITES + 1];
-        let mut sites = [0usize; MAX_SITES + 1];
+        // Per received force: its site and its torque about the centre of mass at the step's start.
+        let mut sites = [(0usize, Vec3::zeros()); MAX_SITES + 1];
         users[0] = *own;
         let mut n = 1;
         let before = copy.state;
@@ -459,21 +460,22 @@ impl Consistency for Naive {
             }
             // The no-gain bound (see the type's docs): an overdrawn site's force does no
             // positive work.
-            let power = f.force.dot(&before.vel) + f.wrench(before.pos).torque.dot(&omega);
+            let torque = f.wrench(before.pos).torque;
+            let power = f.force.dot(&before.vel) + torque.dot(&omega);
             if self.overdrawn[k] && power > 0.0 {
                 copy.energy.remote_denied_j += power * dt;
                 continue;
             }
             users[n] = f;
-            sites[n] = k;
+            sites[n] = (k, torque);
             n += 1;
         }
         integrate(world, copy, &users[..n], 1, dt);
         // What each received force did (the step's mean motion, as `integrate` counts work).
         let dx = copy.state.pos - before.pos;
         let omega_mid = (omega + copy.state.omega(&world.mass)) * 0.5;
-        for (f, &k) in users[1..n].iter().zip(&sites[1..n]) {
-            let w = f.force.dot(&dx) + f.wrench(before.pos).torque.dot(&omega_mid) * dt;
+        for (f, &(k, torque)) in users[1..n].iter().zip(&sites[1..n]) {
+            let w = f.force.dot(&dx) + torque.dot(&omega_mid) * dt;
             self.spent_j[k] += w.max(0.0);
         }
         self.history[self.next] = (copy.time_s, self.spent_j);

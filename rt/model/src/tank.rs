@@ -167,15 +167,17 @@ pub fn bound_gain(
     // is where the correction put the object against the tool, not energy the object has (a
     // sender's state adopted onto a squeezing tool would otherwise fund a throw with it).
     let limit_object = stored_energy(world, base) + budget;
-    let fits =
-        |s: &BodyState| energy(world, s, tool) <= limit && stored_energy(world, s) <= limit_object;
-    let e_full = energy(world, full, tool);
+    let fits = |s: &BodyState| {
+        let object = stored_energy(world, s);
+        object <= limit_object && object + tool.map_or(0.0, |t| t.energy(world, s)) <= limit
+    };
     if fits(full) {
         return None;
     }
     if !full.is_finite() {
         return Some((*base, f64::INFINITY));
     }
+    let e_full = energy(world, full, tool);
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     for _ in 0..BISECTIONS {
         let mid = 0.5 * (lo + hi);
