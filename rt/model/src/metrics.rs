@@ -16,6 +16,14 @@
 //!   site's copy. A passive method delivers no more than the others did (less what friction takes).
 //!   The reference run shows the integrator's own balance (≈ 0).
 //! - **Phases**: per site, whether each task phase of the scenario happened as that site saw it.
+//!   Contact is judged in the phase's window. So is the object's motion (`object_moves_m`,
+//!   `lifted_m`) at a site whose user is among the phase's actors (its `contact` users) or that has
+//!   no actors; at an *observer* site (another user acts) the motion may show as late as the
+//!   earliest that site can know of it: the window's end plus the largest one-way delay, its
+//!   jitter and the slowest actor's report period ([`observer_lag_s`]). No site can see a far
+//!   user's push before the push's news arrives: at a constant 500 ms the paper task's push ends
+//!   its window 175 ms after user 1's tool meets the disk, 325 ms before any method can tell
+//!   user 2. The reference run (one world) has no observers.
 //! - **Co-contact divergence**: the divergence over only the samples at which two or more users
 //!   touch the object (each site's `touching` flag: its own user on its own copy) — when the copies
 //!   disagreeing is felt as two users pulling at different objects. NaN if that never happens.
@@ -423,9 +431,15 @@ fn phase_happened(
     let window: Vec<usize> = (0..run.t.len())
         .filter(|&k| run.t[k] >= p.from_s && run.t[k] <= p.to_s)
         .collect();
-    let (Some(&first), Some(&last)) = (window.first(), window.last()) else {
+    let Some(&first) = window.first() else {
         return false;
     };
+    // The object's motion, as late as this site can know of it.
+    let lag = observer_lag_s(sc, run, i, p);
+    let moved: Vec<usize> = (first..run.t.len())
+        .take_while(|&k| run.t[k] <= p.to_s + lag)
+        .collect();
+    let last = moved.last().copied().unwrap_or(first);
     if p.contact.contains(me) {
         if !window.iter().any(|&k| s.touching[k]) {
             return false;
@@ -447,7 +461,7 @@ fn phase_happened(
     if p.lifted_m > 0.0 {
         // z is up (the scenarios' convention: the table is z = 0).
         let rest = Vec3::from(sc.object.start_m).z;
-        let top = window
+        let top = moved
             .iter()
             .map(|&k| s.obj_pos[k].z)
             .fold(f64::NEG_INFINITY, f64::max);
@@ -456,4 +470,99 @@ fn phase_happened(
         }
     }
     true
+}
+
+/// How much later than the phase's window site `i`'s copy may show the object's motion: 0 at an
+/// actor's site (one of the phase's `contact` users), in a phase without actors, and in the
+/// reference run (one world); elsewhere the largest one-way delay and its jitter, plus the slowest
+/// actor's report period, s. See the module docs ("Phases").
+pub fn observer_lag_s(
+    sc: &Scenario,
+    run: &RunResult,
+    i: usize,
+    p: &crate::scenario::PhaseSpec,
+) -> f64 {
+    if run.mode == crate::sim::Mode::Reference
+        || p.contact.is_empty()
+        || p.contact.contains(&sc.site[i].name)
+    {
+        return 0.0;
+    }
+    let slowest_actor = sc
+        .site
+        .iter()
+        .filter(|s| p.contact.contains(&s.name))
+        .map(|s| 1.0 / s.report_rate_hz)
+        .fold(0.0, f64::max);
+    (sc.network.delay_max_ms + sc.network.jitter_ms) / 1e3 + slowest_actor
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::{PhaseSpec, SiteSpec};
+    use crate::sim::{Mode, SiteTrace};
+
+    /// Two sites 500 ms apart; user 1 pushes in 0.5–1.05 s. Site 2's copy moves 2 cm at `moves_at`.
+    fn push_seen_at(moves_at: f64, mode: Mode) -> (Scenario, RunResult) {
+        let mut sc = Scenario::default();
+        for name in ["user1", "user2"] {
+            sc.site.push(SiteSpec {
+                name: name.into(),
+                report_rate_hz: 20.0,
+                ..SiteSpec::default()
+            });
+        }
+        sc.network.delay_min_ms = 500.0;
+        sc.network.delay_max_ms = 500.0;
+        sc.network.jitter_ms = 10.0;
+        sc.phase.push(PhaseSpec {
+            name: "push".into(),
+            from_s: 0.5,
+            to_s: 1.05,
+            contact: vec!["user1".into()],
+            no_contact: vec!["user2".into()],
+            object_moves_m: 0.02,
+            ..PhaseSpec::default()
+        });
+        let t: Vec<f64> = (0..400).map(|k| f64::from(k) * 0.005).collect();
+        let trace = |moves_at: f64, touching: bool| SiteTrace {
+            obj_pos: t
+                .iter()
+                .map(|&s| Vec3::new(if s >= moves_at { 0.03 } else { 0.0 }, 0.0, 0.01))
+                .collect(),
+            f_desired: vec![Vec3::new(1.0, 0.0, 0.0); t.len()],
+            touching: vec![touching; t.len()],
+            ..SiteTrace::default()
+        };
+        let run = RunResult {
+            mode,
+            sites: vec![trace(0.9, true), trace(moves_at, false)],
+            t,
+            adoptions: Vec::new(),
+            energy: Vec::new(),
+            mech_energy: Vec::new(),
+            messages: (0, 0, 0),
+            rollback: Vec::new(),
+            force_steps: Vec::new(),
+        };
+        (sc, run)
+    }
+
+    /// A far site sees a push when its news can arrive, not sooner: the push phase holds at the
+    /// observer if its copy moves within the delay, jitter and a report period after the window,
+    /// and fails if it moves later, or at all in the reference run (one world, no news to wait for).
+    #[test]
+    fn an_observer_may_see_the_motion_one_delay_late() {
+        let paper = Mode::Distributed(crate::scenario::MethodName::Paper);
+        let (sc, run) = push_seen_at(1.5, paper);
+        assert!((observer_lag_s(&sc, &run, 1, &sc.phase[0]) - 0.56).abs() < 1e-9);
+        assert_eq!(observer_lag_s(&sc, &run, 0, &sc.phase[0]), 0.0);
+        assert!(phase_happened(&sc, &run, 1, &sc.phase[0]));
+        assert!(phase_happened(&sc, &run, 0, &sc.phase[0]));
+        let (sc, run) = push_seen_at(1.65, paper);
+        assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
+        let (sc, run) = push_seen_at(1.5, Mode::Reference);
+        assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
+    }
 }

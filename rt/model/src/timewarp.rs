@@ -45,7 +45,7 @@ pub const REACH_VELOCITY_TICKS: i64 = 10;
 /// `v·τ` (τ this many ticks, 0.3 s at 1 kHz; rational, not exponential: only `+ − × ÷`). Over a
 /// delay a free tool crosses, this shows a push in the copy before the pushing tool's positions
 /// arrive, so a far user feels the pushed object arrive when it does: the paper task at a constant
-/// 300 ms passes all 12 phases with it, 9 without.
+/// 300 ms passes all 12 phases with it, 10 without (seeds 1–3).
 pub const REACH_TIME_TICKS: i64 = 300;
 /// How long a reach is predicted before the tool is held, ticks.
 pub const REACH_TICKS: i64 = 1000;
