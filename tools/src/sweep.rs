@@ -32,6 +32,8 @@ pub struct Row {
     pub phases_passed: usize,
     /// Task phases checked, summed over sites.
     pub phases_total: usize,
+    /// The phases that did not happen, as `site:phase`, in site and phase order.
+    pub phases_failed: Vec<String>,
     /// Largest divergence while two or more users touch, m (null: they never do).
     pub co_contact_divergence_max_m: f64,
     /// RMS divergence while two or more users touch, m (null: they never do).
@@ -81,6 +83,16 @@ impl Row {
             seed,
             phases_passed: m.phases_passed,
             phases_total: m.phases_total,
+            phases_failed: m
+                .sites
+                .iter()
+                .flat_map(|s| {
+                    s.phases
+                        .iter()
+                        .filter(|(_, ok)| !ok)
+                        .map(move |(p, _)| format!("{}:{p}", s.name))
+                })
+                .collect(),
             co_contact_divergence_max_m: m.co_contact_divergence_max_m,
             co_contact_divergence_rms_m: m.co_contact_divergence_rms_m,
             error_vs_reference_rms_m: m
@@ -233,7 +245,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}  missed phases",
         "method",
         "delay",
         "seed",
@@ -274,7 +286,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}  {}",
             r.method,
             r.delay_ms,
             r.seed,
@@ -290,12 +302,17 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             r.bounded_corrections,
             r.rollbacks_per_s,
             r.rollback_depth_p99_ticks,
-            r.hash_mismatches
+            r.hash_mismatches,
+            if r.phases_failed.is_empty() {
+                "-".to_string()
+            } else {
+                r.phases_failed.join(" ")
+            }
         );
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; missed phases = site:phase",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

@@ -64,6 +64,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "seed",
         "phases_passed",
         "phases_total",
+        "phases_failed",
         "co_contact_divergence_max_m",
         "co_contact_divergence_rms_m",
         "error_vs_reference_rms_m",
@@ -91,6 +92,14 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
             let r = row(m.as_str(), delay);
             assert_eq!(r["seed"], 1);
             assert_eq!(r["phases_total"], 12, "{r}");
+            // Each missed phase is named, as site:phase.
+            let failed = r["phases_failed"].as_array().expect("list");
+            let passed = r["phases_passed"].as_u64().expect("number");
+            assert_eq!(failed.len() as u64, 12 - passed, "{r}");
+            for f in failed {
+                let f = f.as_str().expect("string");
+                assert!(f.starts_with("user1:") || f.starts_with("user2:"), "{f}");
+            }
         }
         let tw = row("timewarp", delay);
         assert_eq!(tw["phases_passed"], 12, "timewarp at {delay} ms: {tw}");
