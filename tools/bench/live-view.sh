@@ -165,9 +165,13 @@ def per_minute(run):
                             times.append(m.log_time)
                 except Exception:
                     pass
-        for t in times:
-            first = t if first is None else first
-            last = t
+        # Parts sort by name, not by time (a long run's rotated parts): the span is from the
+        # earliest message of any part to the latest.
+        if times:
+            first = min(times) if first is None else min(first, min(times))
+            last = max(times) if last is None else max(last, max(times))
+    if first is None:
+        return 0.0, 0.0
     return size * 60e9 / max(1, last - first), (last - first) / 1e9
 def kernel(cond):
     """Per CPU over a condition's windows: busy % (user+nice+system+irq+softirq), steal %, NET_RX/s."""
