@@ -536,15 +536,9 @@ mod tests {
             ..SiteTrace::default()
         };
         let run = RunResult {
-            mode,
             sites: vec![trace(0.9, true), trace(moves_at, false)],
             t,
-            adoptions: Vec::new(),
-            energy: Vec::new(),
-            mech_energy: Vec::new(),
-            messages: (0, 0, 0),
-            rollback: Vec::new(),
-            force_steps: Vec::new(),
+            ..RunResult::empty(mode)
         };
         (sc, run)
     }

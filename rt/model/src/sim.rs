@@ -143,6 +143,23 @@ pub struct RunResult {
     pub force_steps: Vec<ForceSteps>,
 }
 
+impl RunResult {
+    /// A run of `mode` with nothing recorded yet.
+    pub fn empty(mode: Mode) -> Self {
+        Self {
+            mode,
+            t: Vec::new(),
+            sites: Vec::new(),
+            adoptions: Vec::new(),
+            energy: Vec::new(),
+            mech_energy: Vec::new(),
+            messages: (0, 0, 0),
+            rollback: Vec::new(),
+            force_steps: Vec::new(),
+        }
+    }
+}
+
 /// A message in flight.
 #[derive(Debug, Clone, Copy)]
 struct InFlight {
@@ -263,15 +280,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
     let period_sample = period_ns(scenario.sample_rate_hz);
     let mut next_sample = 0u64;
     let mut result = RunResult {
-        mode,
-        t: Vec::new(),
         sites: vec![SiteTrace::default(); n],
-        adoptions: Vec::new(),
-        energy: Vec::new(),
-        mech_energy: Vec::new(),
-        messages: (0, 0, 0),
-        rollback: Vec::new(),
-        force_steps: Vec::new(),
+        ..RunResult::empty(mode)
     };
     let e0 = start.mechanical_energy(&world.mass, world.gravity);
     let mut next_progress = 0u64;
