@@ -436,10 +436,10 @@ fn phase_happened(
     };
     // The object's motion, as late as this site can know of it.
     let lag = observer_lag_s(sc, run, i, p);
-    let moved: Vec<usize> = (first..run.t.len())
+    let last = (first..run.t.len())
         .take_while(|&k| run.t[k] <= p.to_s + lag)
-        .collect();
-    let last = moved.last().copied().unwrap_or(first);
+        .last()
+        .unwrap_or(first);
     if p.contact.contains(me) {
         if !window.iter().any(|&k| s.touching[k]) {
             return false;
@@ -461,9 +461,8 @@ fn phase_happened(
     if p.lifted_m > 0.0 {
         // z is up (the scenarios' convention: the table is z = 0).
         let rest = Vec3::from(sc.object.start_m).z;
-        let top = moved
-            .iter()
-            .map(|&k| s.obj_pos[k].z)
+        let top = (first..=last)
+            .map(|k| s.obj_pos[k].z)
             .fold(f64::NEG_INFINITY, f64::max);
         if top < rest + p.lifted_m {
             return false;
