@@ -14,7 +14,8 @@
 # Prints the servo's wake-up p99 / p99.9 / max and overruns and physics' overruns over each
 # condition's windows, the ratio viewer/none (goal: servo p99.9 and physics overruns <= 1.1x; and
 # no more servo overruns), the medians over the rounds of each window's figures, and the
-# recording's size per minute of session with and without the Foxglove channels. Per condition it also prints each CPU's busy %, steal %
+# recording's size per minute of session with and without the Foxglove channels, and how large a
+# ratio noise alone gives (the rounds' two windows swapped at random). Per condition it also prints each CPU's busy %, steal %
 # and NET_RX softirqs/s over the windows: on a shared machine the ratio follows whatever else ran in
 # each window, and this shows how much that was.
 #
@@ -27,7 +28,7 @@ while [ $# -gt 0 ]; do
     --quick) duration=3; rounds=1 ;;
     --duration) duration="$2"; shift ;;
     --rounds) rounds="$2"; shift ;;
-    -h|--help) sed -n '2,24p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0 ;;
     *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
@@ -233,6 +234,38 @@ met = ratio(b[2], a[2]) <= 1.1 and ratio(b[5], a[5]) <= 1.1
 print(f"# goal: with a viewer, servo p99.9 and physics overruns <= 1.1x none: {'met' if met else 'NOT met'}"
       f" ({ratio(b[2], a[2]):.2f}x, {ratio(b[5], a[5]):.2f}x)")
 print(f"# and no more servo overruns: {'met' if b[4] <= a[4] else 'NOT met'} ({a[4]} -> {b[4]})")
+# How large a ratio the machine's noise alone gives: the two windows of each round swapped at
+# random (a paired permutation test, 2000 draws, fixed seed). The share of draws whose ratio is at
+# least the one measured is the chance that noise alone gives a ratio that large (p); the 5-95 %
+# range of the drawn ratios is the noise band a viewer's cost must stand out of.
+import random
+def window_figures(cond):
+    out = []
+    for r in range(1, rounds + 1):
+        t = json.load(open(f"{work}/{cond}-{r}.json"))["thread"]
+        out.append(({int(k): v for k, v in t["0"]["histogram_us"].items()}, t["1"]["overruns"]))
+    return out
+wn, wv = window_figures("none"), window_figures("viewer")
+def pooled(ws):
+    h = {}
+    for hist, _ in ws:
+        for k, v in hist.items():
+            h[k] = h.get(k, 0) + v
+    return pct(h, 0.999), sum(o for _, o in ws)
+rng, draws = random.Random(1), []
+for _ in range(2000):
+    a_side, b_side = [], []
+    for x, y in zip(wn, wv):
+        if rng.random() < 0.5:
+            x, y = y, x
+        a_side.append(x); b_side.append(y)
+    (pa, oa), (pb, ob) = pooled(a_side), pooled(b_side)
+    draws.append((ratio(pb, pa), ratio(ob, oa)))
+for k, name, measured in ((0, "servo p99.9", ratio(b[2], a[2])), (1, "physics overruns", ratio(b[5], a[5]))):
+    xs = sorted(d[k] for d in draws)
+    p = sum(x >= measured for x in xs) / len(xs)
+    print(f"# noise alone (the rounds' windows swapped at random): {name} ratio 5-95 % {xs[len(xs) // 20]:.2f}-{xs[len(xs) * 19 // 20]:.2f}x;"
+          f" measured {measured:.2f}x, p = {p:.2f} ({'outside the noise' if p < 0.05 else 'within the noise'})")
 (on, on_s), (off, off_s) = per_minute("live"), per_minute("no-foxglove")
 print(f"# recording per minute of session: {off / 1e6:.2f} MB without the Foxglove channels ({off_s:.0f} s recorded), {on / 1e6:.2f} MB with them ({on_s:.0f} s recorded): {ratio(on, off):.2f}x")
 PY
