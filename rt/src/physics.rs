@@ -403,6 +403,8 @@ impl PhysicsLoop {
             set(&r.fallbacks, st.fallbacks);
             set(&r.hash_checks, st.hash_checks);
             set(&r.hash_mismatches, st.hash_mismatches);
+            set(&r.unfelt_contact_ticks, st.unfelt_contact_ticks);
+            set(&r.phantom_contact_ticks, st.phantom_contact_ticks);
         }
         set(&r.tracks_received, self.tracks.received);
         set(&r.tracks_rejected, self.tracks.rejected);

@@ -252,14 +252,16 @@ fn print_rollbacks(r: &RunResult) {
     for (i, st) in r.rollback.iter().enumerate() {
         if let Some(st) = st {
             eprintln!(
-                "# {} site {i}: {} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched",
+                "# {} site {i}: {} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched; confirmed contact never shown live {} ticks, shown live and taken back {} ticks",
                 r.mode.name(),
                 st.rollbacks,
                 st.resimulated_ticks,
                 st.max_depth,
                 st.fallbacks,
                 st.hash_checks,
-                st.hash_mismatches
+                st.hash_mismatches,
+                st.unfelt_contact_ticks,
+                st.phantom_contact_ticks
             );
         }
     }

@@ -73,6 +73,10 @@ pub struct Row {
     pub rollback_depth_p99_ticks: u64,
     /// Confirmed-state hash mismatches, all sites.
     pub hash_mismatches: u64,
+    /// Contact the users were never shown live though the confirmed history has it, all sites, ms.
+    pub unfelt_contact_ms: f64,
+    /// Contact the users were shown live that the confirmed history took back, all sites, ms.
+    pub phantom_contact_ms: f64,
 }
 
 impl Row {
@@ -115,6 +119,8 @@ impl Row {
             resimulated_ticks_per_s: m.resimulated_ticks_per_s,
             rollback_depth_p99_ticks: m.rollback_depth_p99_ticks,
             hash_mismatches: m.hash_mismatches,
+            unfelt_contact_ms: m.unfelt_contact_ms,
+            phantom_contact_ms: m.phantom_contact_ms,
         }
     }
 }
@@ -245,7 +251,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}  missed phases",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}  missed phases",
         "method",
         "delay",
         "seed",
@@ -261,11 +267,12 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "bound",
         "rollback",
         "depth",
-        "hash"
+        "hash",
+        "unfelt/phant"
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}",
         "",
         "ms",
         "",
@@ -281,12 +288,13 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "count",
         "per s",
         "p99 ticks",
-        "miss"
+        "miss",
+        "ms"
     );
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}  {}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}{:>14}  {}",
             r.method,
             r.delay_ms,
             r.seed,
@@ -303,6 +311,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             r.rollbacks_per_s,
             r.rollback_depth_p99_ticks,
             r.hash_mismatches,
+            format!("{:.0}/{:.0}", r.unfelt_contact_ms, r.phantom_contact_ms),
             if r.phases_failed.is_empty() {
                 "-".to_string()
             } else {
@@ -312,7 +321,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; missed phases = site:phase",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; unfelt/phant = confirmed contact time a user was never shown live / contact time shown live that the confirmed history took back, all sites (timewarp); missed phases = site:phase",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

@@ -77,6 +77,8 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "rollbacks_per_s",
         "rollback_depth_p99_ticks",
         "hash_mismatches",
+        "unfelt_contact_ms",
+        "phantom_contact_ms",
     ] {
         for r in rows {
             assert!(r.get(key).is_some(), "{key} missing in {r}");
@@ -99,6 +101,11 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
             for f in failed {
                 let f = f.as_str().expect("string");
                 assert!(f.starts_with("user1:") || f.starts_with("user2:"), "{f}");
+            }
+            // Only a method that rolls back can show a contact and take it back.
+            if m != MethodName::Timewarp {
+                assert_eq!(r["unfelt_contact_ms"], 0.0, "{r}");
+                assert_eq!(r["phantom_contact_ms"], 0.0, "{r}");
             }
         }
         let tw = row("timewarp", delay);

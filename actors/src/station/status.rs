@@ -260,6 +260,10 @@ pub struct RollbackStatus {
     pub track_drops: u64,
     /// Physics periods that caught up more than one tick.
     pub late_periods: u64,
+    /// Confirmed ticks of own contact never shown live.
+    pub unfelt_contact_ticks: u64,
+    /// Ticks of own contact shown live that the confirmed history took back.
+    pub phantom_contact_ticks: u64,
 }
 
 impl RollbackStatus {
@@ -281,6 +285,8 @@ impl RollbackStatus {
             tracks_rejected: l(&r.tracks_rejected),
             track_drops: l(&r.track_drops),
             late_periods: l(&r.late_periods),
+            unfelt_contact_ticks: l(&r.unfelt_contact_ticks),
+            phantom_contact_ticks: l(&r.phantom_contact_ticks),
         })
     }
 }
@@ -289,7 +295,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up",
+            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks, shown and taken back {} ticks",
             self.ticks,
             self.rollbacks,
             self.resimulated_ticks,
@@ -301,7 +307,9 @@ impl std::fmt::Display for RollbackStatus {
             self.tracks_received,
             self.tracks_rejected,
             self.track_drops,
-            self.late_periods
+            self.late_periods,
+            self.unfelt_contact_ticks,
+            self.phantom_contact_ticks
         )
     }
 }

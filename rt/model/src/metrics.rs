@@ -46,6 +46,12 @@
 //! - **Rollbacks**: per site, rollbacks and re-simulated ticks per simulated second; over all
 //!   sites, the 99th percentile of rollback depth (from [`crate::histogram::DepthHistogram`]) and
 //!   confirmed-state hash mismatches. 0 for methods that do not roll back.
+//! - **Unfelt and phantom contact** (`timewarp`): per site, the confirmed time in which the own
+//!   user's tool touched the object while the copy had shown no contact when it first simulated
+//!   that moment (the news of a remote push that brought the object came after the user had lived
+//!   through it: a rollback cannot replay a contact to a hand that has moved on), and the confirmed
+//!   time in which it did not touch while the copy had shown contact (a prediction taken back).
+//!   What rolling back costs the user's feel, in ms; 0 for methods that do not roll back.
 
 use crate::body::Vec3;
 use crate::scenario::Scenario;
@@ -114,6 +120,12 @@ pub struct SiteMetrics {
     pub rollbacks: u64,
     /// Ticks this site re-simulated.
     pub resimulated_ticks: u64,
+    /// Confirmed time in which this site's user touched the object but its copy had shown no
+    /// contact live, ms (0 for methods that do not roll back).
+    pub unfelt_contact_ms: f64,
+    /// Confirmed time in which this site's user did not touch the object but its copy had shown
+    /// contact live (a prediction the confirmed history took back), ms.
+    pub phantom_contact_ms: f64,
 }
 
 /// A run's figures.
@@ -184,6 +196,12 @@ pub struct Metrics {
     pub rollback_depth_max_ticks: u64,
     /// Confirmed-state hash mismatches, all sites.
     pub hash_mismatches: u64,
+    /// Contact a user was never shown live though the confirmed history has it, summed over the
+    /// sites, ms ([`SiteMetrics::unfelt_contact_ms`]).
+    pub unfelt_contact_ms: f64,
+    /// Contact a user was shown live that the confirmed history took back, summed over the sites,
+    /// ms ([`SiteMetrics::phantom_contact_ms`]).
+    pub phantom_contact_ms: f64,
     /// Per site.
     pub sites: Vec<SiteMetrics>,
 }
@@ -336,6 +354,10 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
                 rollbacks: tw.rollbacks,
                 resimulated_ticks: tw.resimulated_ticks,
+                unfelt_contact_ms: tw.unfelt_contact_ticks as f64 * 1e3
+                    / scenario.site[i].physics_rate_hz,
+                phantom_contact_ms: tw.phantom_contact_ticks as f64 * 1e3
+                    / scenario.site[i].physics_rate_hz,
             }
         })
         .collect();
@@ -393,6 +415,8 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         rollback_depth_p99_ticks: depths.quantile(0.99).map_or(0, |d| d.min(depth_max)),
         rollback_depth_max_ticks: depth_max,
         hash_mismatches: mismatches,
+        unfelt_contact_ms: sites.iter().map(|s| s.unfelt_contact_ms).sum(),
+        phantom_contact_ms: sites.iter().map(|s| s.phantom_contact_ms).sum(),
         divergence_max_m: divs.iter().copied().fold(0.0, f64::max),
         divergence_rms_m: rms(divs.iter().copied()),
         divergence_after_contact_m: after,

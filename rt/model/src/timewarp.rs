@@ -19,6 +19,10 @@
 //! a receiver that has confirmed the same tick compares ([`Stats::hash_checks`],
 //! [`Stats::hash_mismatches`]), so a divergence of confirmed state is never silent.
 //!
+//! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
+//! touched the object though the copy had shown no contact when it first simulated them
+//! ([`Stats::unfelt_contact_ticks`]), and the other way round ([`Stats::phantom_contact_ticks`]).
+//!
 //! Determinism: the forces are summed in site order whatever site computes them, every input is an
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
 //! same platform gives the same bits; see the crate docs on transcendental functions).
@@ -121,6 +125,14 @@ pub struct Stats {
     pub hash_mismatches: u64,
     /// Every rollback's depth, ticks (for percentiles).
     pub depths: crate::histogram::DepthHistogram,
+    /// Confirmed ticks in which the own tool touched the object but had not when the tick was
+    /// first simulated (live): contact the user was never shown, because the news of it (a remote
+    /// push that brought the object) came after the user had lived through it.
+    pub unfelt_contact_ticks: u64,
+    /// Confirmed ticks in which the own tool did not touch the object but had when the tick was
+    /// first simulated: contact the user was shown that the confirmed history took back (a
+    /// prediction's).
+    pub phantom_contact_ticks: u64,
 }
 
 /// One tick's record: the state at its start, and the inputs used in it.
@@ -132,6 +144,10 @@ struct Slot {
     inputs: [Quantized; MAX_SITES],
     /// Per site: whether `inputs` held a received (true) or predicted (false) position.
     known: [bool; MAX_SITES],
+    /// Whether the own tool touched the object in this tick's first (live) simulation...
+    felt: bool,
+    /// ...and in its latest.
+    touched: bool,
 }
 
 /// The `timewarp` method of one site.
@@ -155,6 +171,8 @@ pub struct TimeWarp {
     dirty_from: Option<i64>,
     own: Quantized,
     stats: Stats,
+    /// The first confirmed tick not yet compared, live against confirmed contact.
+    tallied_until: i64,
 }
 
 impl TimeWarp {
@@ -176,6 +194,8 @@ impl TimeWarp {
             contacts: [ToolContactState::default(); MAX_SITES],
             inputs: [UNKNOWN; MAX_SITES],
             known: [false; MAX_SITES],
+            felt: false,
+            touched: false,
         };
         Self {
             me,
@@ -191,6 +211,7 @@ impl TimeWarp {
             dirty_from: None,
             own: [0; 3],
             stats: Stats::default(),
+            tallied_until: 0,
         }
     }
 
@@ -306,6 +327,8 @@ impl TimeWarp {
             contacts: self.contacts,
             inputs: [[0; 3]; MAX_SITES],
             known: [false; MAX_SITES],
+            felt: false,
+            touched: false,
         };
         let mut users = [ContactForce::default(); MAX_SITES];
         for (j, user) in users.iter_mut().enumerate().take(self.sites) {
@@ -340,6 +363,13 @@ impl TimeWarp {
             );
         }
         let i = self.idx(t);
+        slot.touched = users[self.me].touching;
+        // A re-simulation keeps what the first simulation of the tick showed.
+        slot.felt = if self.slots[i].tick == t {
+            self.slots[i].felt
+        } else {
+            slot.touched
+        };
         self.slots[i] = slot;
         // Summed in site order, the same at every site: all users count as "own" here.
         integrate(world, copy, &users[..self.sites], self.sites, self.dt);
@@ -380,6 +410,23 @@ impl TimeWarp {
         self.stats.max_depth = self.stats.max_depth.max(depth);
         self.stats.depths.record(depth);
         depth
+    }
+
+    /// Compares, for every tick confirmed since the last call, the own contact of its confirmed
+    /// simulation with that of its first ([`Stats::unfelt_contact_ticks`],
+    /// [`Stats::phantom_contact_ticks`]). A confirmed tick is never simulated again.
+    fn tally(&mut self) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let upto = self.confirmed_tick().min(self.now_tick);
+        let oldest = self.now_tick - self.len() + 1;
+        for t in self.tallied_until.max(oldest)..upto {
+            let s = &self.slots[self.idx(t)];
+            if s.tick == t {
+                self.stats.unfelt_contact_ticks += u64::from(s.touched && !s.felt);
+                self.stats.phantom_contact_ticks += u64::from(s.felt && !s.touched);
+            }
+        }
+        self.tallied_until = self.tallied_until.max(upto);
     }
 
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
@@ -423,6 +470,7 @@ impl Consistency for TimeWarp {
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         self.tick(world, copy);
+        self.tally();
     }
     fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
@@ -511,6 +559,7 @@ impl Consistency for TimeWarp {
                 }
             }
         }
+        self.tally();
         adoption
     }
     fn timewarp_stats(&self) -> Option<Stats> {
@@ -634,6 +683,67 @@ mod tests {
             copy.state.pos
         );
         let _ = other;
+    }
+
+    /// A remote tool knocks the disk into the own, resting tool. Learned a delay late, that
+    /// contact is over before the copy can show it: its confirmed ticks count as unfelt. Learned
+    /// before each tick is simulated, everything shown live is what was confirmed.
+    #[test]
+    fn a_contact_learned_too_late_to_show_counts_as_unfelt() {
+        let run = |delay: i64| {
+            let (sc, w) = paper_world();
+            let copy0 = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+            let mut radii = [0.0; MAX_SITES];
+            radii[..2].fill(0.005);
+            let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy0);
+            let mut copy = copy0;
+            // In 0.1 s from x = -0.1 to -0.03 (into the disk's rim at -0.04), then back.
+            let remote = |k: i64| {
+                let s = k as f64 * 1e-3;
+                let x = if s < 0.1 {
+                    -0.1 + 0.7 * s
+                } else {
+                    (-0.03 - 0.7 * (s - 0.1)).max(-0.1)
+                };
+                quantize(Vec3::new(x, 0.0, 0.01))
+            };
+            let mut touched = false;
+            for k in 0..1000i64 {
+                // The own tool rests 15 mm right of the disk's rim.
+                tw.own_tool(Vec3::new(0.06, 0.0, 0.01));
+                let first = k - delay;
+                if first >= 0 && (delay == 0 || k % 10 == 0) {
+                    let count = if delay == 0 { 1 } else { 10 };
+                    let mut r = ToolReport {
+                        first_tick: (first - count as i64 + 1).max(0),
+                        count: 0,
+                        positions: [[0; 3]; WINDOW_TICKS],
+                        confirmed_tick: 0,
+                        confirmed_hash: 0,
+                    };
+                    for t in r.first_tick..=first {
+                        r.positions[r.count] = remote(t);
+                        r.count += 1;
+                    }
+                    tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+                }
+                tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+                touched |= tw.contacts[0].touching();
+            }
+            (tw.stats(), touched)
+        };
+        let (prompt, prompt_touched) = run(0);
+        assert!(prompt_touched, "the knocked disk reached the own tool");
+        assert_eq!(
+            (prompt.unfelt_contact_ticks, prompt.phantom_contact_ticks),
+            (0, 0),
+            "{prompt:?}"
+        );
+        let (late, _) = run(300);
+        assert!(
+            late.unfelt_contact_ticks > 0,
+            "the contact the copy learned of 0.3 s late: {late:?}"
+        );
     }
 
     #[test]

@@ -438,6 +438,12 @@ pub struct RollbackShared {
     pub late_periods: AtomicU64,
     /// Ticks of the session's grid stepped.
     pub ticks: AtomicU64,
+    /// Confirmed ticks the own tool touched the object in but had not when first simulated
+    /// (contact the user was never shown).
+    pub unfelt_contact_ticks: AtomicU64,
+    /// Confirmed ticks the own tool did not touch the object in but had when first simulated
+    /// (contact shown to the user that the confirmed history took back).
+    pub phantom_contact_ticks: AtomicU64,
 }
 
 /// What the network process writes.
@@ -519,7 +525,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v11";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v12";
 }
 
 impl ControlBlock {

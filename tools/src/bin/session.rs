@@ -156,7 +156,7 @@ enum Command {
 /// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
 /// and a rolling-back method's rollbacks and hash checks.
 fn print_station_loops(v: &serde_json::Value) {
-    println!("# stations: method  site  physics overruns  compute p99 us  rollbacks  depth max/p99 ticks  fallbacks  hash checks  mismatches");
+    println!("# stations: method  site  physics overruns  compute p99 us  rollbacks  depth max/p99 ticks  fallbacks  hash checks  mismatches  unfelt/phantom ticks");
     for (m, r) in v["methods"].as_object().into_iter().flatten() {
         for (site, st) in r["stations"].as_object().into_iter().flatten() {
             let live = &st["live"];
@@ -169,7 +169,7 @@ fn print_station_loops(v: &serde_json::Value) {
                 }
             };
             println!(
-                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}",
+                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>20}",
                 or_dash(&live["overruns_during_session"]["physics"]),
                 or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
                 or_dash(&rb["rollbacks"]),
@@ -181,6 +181,11 @@ fn print_station_loops(v: &serde_json::Value) {
                 or_dash(&rb["fallbacks"]),
                 or_dash(&rb["hash_checks"]),
                 or_dash(&rb["hash_mismatches"]),
+                if rb.is_null() {
+                    "-".to_owned()
+                } else {
+                    format!("{}/{}", rb["unfelt_contact_ticks"], rb["phantom_contact_ticks"])
+                },
             );
         }
     }
