@@ -596,6 +596,20 @@ mod tests {
         (sc, w)
     }
 
+    /// Site 0 of two 5 mm tools, 1 kHz, 600 ticks of history, the disk at rest at the origin on
+    /// the table: the method, its copy and the world.
+    fn two_tools_on_a_disk() -> (TimeWarp, ObjectCopy, World) {
+        let (sc, w) = paper_world();
+        let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        (
+            TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy),
+            copy,
+            w,
+        )
+    }
+
     /// The history kept is `[timewarp] horizon_ms`, or by default what the network can delay a
     /// position by plus 100 ms; a horizon that does not cover that is refused.
     #[test]
@@ -634,12 +648,7 @@ mod tests {
     /// depth up to 50 ticks, on every tick) always arrives at the same bits.
     #[test]
     fn a_forced_rollback_on_every_tick_gives_the_same_bits() {
-        let (sc, w) = paper_world();
-        let copy0 = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
-        let mut radii = [0.0; MAX_SITES];
-        radii[..2].fill(0.005);
-        let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy0);
-        let mut copy = copy0;
+        let (mut tw, mut copy, w) = two_tools_on_a_disk();
         let mut other = [0i32; 3];
         for k in 0..1500i64 {
             let s = k as f64 * 1e-3;
@@ -691,12 +700,7 @@ mod tests {
     #[test]
     fn a_contact_learned_too_late_to_show_counts_as_unfelt() {
         let run = |delay: i64| {
-            let (sc, w) = paper_world();
-            let copy0 = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
-            let mut radii = [0.0; MAX_SITES];
-            radii[..2].fill(0.005);
-            let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy0);
-            let mut copy = copy0;
+            let (mut tw, mut copy, w) = two_tools_on_a_disk();
             // In 0.1 s from x = -0.1 to -0.03 (into the disk's rim at -0.04), then back.
             let remote = |k: i64| {
                 let s = k as f64 * 1e-3;
