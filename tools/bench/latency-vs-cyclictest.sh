@@ -21,7 +21,7 @@ while [ $# -gt 0 ]; do
     --duration) duration="$2"; shift ;;
     --rounds) rounds="$2"; shift ;;
     --cpu) cpu="$2"; shift ;;
-    -h|--help) sed -n '2,13p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^[^#]/{/^#/p}' "$0"; exit 0 ;;
     *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
   esac
   shift

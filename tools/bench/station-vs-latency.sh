@@ -13,7 +13,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --quick) duration=3 ;;
     --duration) duration="$2"; shift ;;
-    -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^[^#]/{/^#/p}' "$0"; exit 0 ;;
     *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
   esac
   shift
