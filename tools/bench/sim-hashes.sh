@@ -1,13 +1,24 @@
 #!/usr/bin/env bash
-# Hashes every simulator output for every committed scenario and method: sim-hashes.sh SIM_BINARY
+# Hashes every simulator output for every committed scenario under the two methods that predate
+# the tool exchange (naive, paper), and each scenario's `sim compare` table: run it with the binary
+# before and after a change and diff the lists to show the change leaves those figures unchanged.
+#
+# Usage: tools/bench/sim-hashes.sh SIM_BINARY   (from the repository's top: reads scenarios/*.toml)
 set -euo pipefail
-sim=$1; out=$(mktemp -d)
+case "${1:-}" in
+  -h|--help) sed -n '2,/^[^#]/{/^#/p}' "$0"; exit 0 ;;
+  "") echo "missing SIM_BINARY (see --help)" >&2; exit 2 ;;
+esac
+sim=$1
+[ -x "$sim" ] || { echo "SIM_BINARY $sim: not an executable file" >&2; exit 2; }
+compgen -G "scenarios/*.toml" > /dev/null || { echo "no scenarios/*.toml here: run it from the repository's top" >&2; exit 2; }
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
 for sc in scenarios/*.toml; do
   for m in naive paper; do
-    d=$out/$(basename $sc .toml)-$m
+    d=$out/$(basename "$sc" .toml)-$m
     "$sim" run "$sc" --method $m --out "$d" >/dev/null
-    (cd "$d" && for f in $(ls | sort); do printf '%s  %s\n' "$(sha256sum < "$f" | cut -c1-16)" "$(basename $sc .toml)/$m/$f"; done)
+    (cd "$d" && for f in $(ls | sort); do printf '%s  %s\n' "$(sha256sum < "$f" | cut -c1-16)" "$(basename "$sc" .toml)/$m/$f"; done)
   done
-  printf '%s  %s\n' "$("$sim" compare "$sc" | sha256sum | cut -c1-16)" "$(basename $sc .toml)/compare.txt"
+  printf '%s  %s\n' "$("$sim" compare "$sc" | sha256sum | cut -c1-16)" "$(basename "$sc" .toml)/compare.txt"
 done
-rm -rf "$out"
