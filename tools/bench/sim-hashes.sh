@@ -9,8 +9,9 @@ case "${1:-}" in
   -h|--help) sed -n '2,/^[^#]/{/^#/p}' "$0"; exit 0 ;;
   "") echo "missing SIM_BINARY (see --help)" >&2; exit 2 ;;
 esac
-sim=$1
-[ -x "$sim" ] || { echo "SIM_BINARY $sim: not an executable file" >&2; exit 2; }
+[ $# -eq 1 ] || { echo "one argument, SIM_BINARY, expected; got $# (see --help)" >&2; exit 2; }
+sim=$(command -v -- "$1") && [ -f "$sim" ] && [ -x "$sim" ] ||
+  { echo "SIM_BINARY $1: not an executable file (a path, or a name on PATH)" >&2; exit 2; }
 compgen -G "scenarios/*.toml" > /dev/null || { echo "no scenarios/*.toml here: run it from the repository's top" >&2; exit 2; }
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT

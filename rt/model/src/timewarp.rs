@@ -22,6 +22,10 @@
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
 //! touched the object though the copy had shown no contact when it first simulated them
 //! ([`Stats::unfelt_contact_ticks`]), and the other way round ([`Stats::phantom_contact_ticks`]).
+//! "Shown" is the physics' contact at the tick's first simulation, not the force the servo
+//! displayed (a station that catches up several ticks in one period simulates some it never
+//! displays), and a tick that leaves the history before it is confirmed (a partner silent for
+//! longer than the horizon, a fallback) is not compared.
 //!
 //! Determinism: the forces are summed in site order whatever site computes them, every input is an
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
