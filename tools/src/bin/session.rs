@@ -156,7 +156,19 @@ enum Command {
 /// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
 /// and a rolling-back method's rollbacks and hash checks.
 fn print_station_loops(v: &serde_json::Value) {
-    println!("# stations: method  site  physics overruns  compute p99 us  rollbacks  depth max/p99 ticks  fallbacks  hash checks  mismatches  unfelt/phantom ticks");
+    println!(
+        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>20}",
+        "method",
+        "site",
+        "physics overruns",
+        "compute p99 us",
+        "rollbacks",
+        "depth max/p99 ticks",
+        "fallbacks",
+        "hash checks",
+        "mismatches",
+        "unfelt/phantom ticks"
+    );
     for (m, r) in v["methods"].as_object().into_iter().flatten() {
         for (site, st) in r["stations"].as_object().into_iter().flatten() {
             let live = &st["live"];
