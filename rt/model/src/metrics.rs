@@ -301,6 +301,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
             let (e0, e1) = run.mech_energy[i];
             let steps = run.force_steps.get(i).copied().unwrap_or_default();
             let tw = run.rollback.get(i).copied().flatten().unwrap_or_default();
+            let ms = |ticks: u64| ticks as f64 * 1e3 / scenario.site[i].physics_rate_hz;
             SiteMetrics {
                 name: scenario.site[i].name.clone(),
                 error_vs_reference_rms_m: rms(errs.clone()),
@@ -354,10 +355,8 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
                 rollbacks: tw.rollbacks,
                 resimulated_ticks: tw.resimulated_ticks,
-                unfelt_contact_ms: tw.unfelt_contact_ticks as f64 * 1e3
-                    / scenario.site[i].physics_rate_hz,
-                phantom_contact_ms: tw.phantom_contact_ticks as f64 * 1e3
-                    / scenario.site[i].physics_rate_hz,
+                unfelt_contact_ms: ms(tw.unfelt_contact_ticks),
+                phantom_contact_ms: ms(tw.phantom_contact_ticks),
             }
         })
         .collect();

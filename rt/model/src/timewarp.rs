@@ -418,7 +418,8 @@ impl TimeWarp {
 
     /// Compares, for every tick confirmed since the last call, the own contact of its confirmed
     /// simulation with that of its first ([`Stats::unfelt_contact_ticks`],
-    /// [`Stats::phantom_contact_ticks`]). A confirmed tick is never simulated again.
+    /// [`Stats::phantom_contact_ticks`]). A confirmed tick is never simulated again. Called where
+    /// the frontier moves, on receiving; not per tick.
     fn tally(&mut self) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let upto = self.confirmed_tick().min(self.now_tick);
@@ -474,7 +475,6 @@ impl Consistency for TimeWarp {
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         self.tick(world, copy);
-        self.tally();
     }
     fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions

@@ -180,24 +180,24 @@ fn print_station_loops(v: &serde_json::Value) {
                     x.to_string()
                 }
             };
+            // Two of the rollback figures as "a/b" ("-": the method does not roll back).
+            let pair = |a: &str, b: &str| {
+                if rb.is_null() {
+                    "-".to_owned()
+                } else {
+                    format!("{}/{}", rb[a], rb[b])
+                }
+            };
             println!(
                 "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>20}",
                 or_dash(&live["overruns_during_session"]["physics"]),
                 or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
                 or_dash(&rb["rollbacks"]),
-                if rb.is_null() {
-                    "-".to_owned()
-                } else {
-                    format!("{}/{}", rb["max_depth"], rb["depth_p99"])
-                },
+                pair("max_depth", "depth_p99"),
                 or_dash(&rb["fallbacks"]),
                 or_dash(&rb["hash_checks"]),
                 or_dash(&rb["hash_mismatches"]),
-                if rb.is_null() {
-                    "-".to_owned()
-                } else {
-                    format!("{}/{}", rb["unfelt_contact_ticks"], rb["phantom_contact_ticks"])
-                },
+                pair("unfelt_contact_ticks", "phantom_contact_ticks"),
             );
         }
     }
