@@ -332,7 +332,7 @@ pod_message! {
     /// What a `timewarp` site reports besides (instead of) a state: its own tool's quantized
     /// positions at the last ticks of the session's tick grid, and its confirmed frontier with the
     /// hash of its state there (the model's [`ToolReport`] in a fixed layout). Physics → network
-    /// (own), network → physics (remote). 3 128 bytes, copied, never boxed.
+    /// (own), network → physics (remote). 3 192 bytes, copied, never boxed.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ToolTrack {
         /// Sender's time of the report, ns (CLOCK_MONOTONIC of the sender).
@@ -349,16 +349,19 @@ pod_message! {
         pub confirmed_tick: u64,
         /// FNV-1a 64 of the sender's state at the start of `confirmed_tick` (0: none kept).
         pub confirmed_hash: u64,
+        /// Per site `j`, 1 + the first tick of `j`'s positions the sender lacks though it holds
+        /// later ones (reports lost for longer than the window), for `j` to send again; 0: none.
+        pub need: [u64; MAX_SITES],
         /// Positions in quanta, tick `first_tick + k` at coordinates `3k..3k+3`; coordinate `c`
         /// is the i32 in bits `32 (c % 2) ..` of word `c / 2` (little end first); unused ones 0.
         pub positions: [u64; TRACK_POSITION_WORDS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3128);
-// SAFETY: repr(C), only u64 fields and an array of them (3128 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3192);
+// SAFETY: repr(C), only u64 fields and arrays of them (3192 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for ToolTrack {
-    const TYPE_NAME: &'static str = "coop.ToolTrack.v1";
+    const TYPE_NAME: &'static str = "coop.ToolTrack.v2";
 }
 
 impl Default for ToolTrack {
@@ -371,6 +374,7 @@ impl Default for ToolTrack {
             count: 0,
             confirmed_tick: 0,
             confirmed_hash: 0,
+            need: [0; MAX_SITES],
             positions: [0; TRACK_POSITION_WORDS],
         }
     }
@@ -389,6 +393,7 @@ impl ToolTrack {
             count: count as u64,
             confirmed_tick: r.confirmed_tick.max(0) as u64,
             confirmed_hash: r.confirmed_hash,
+            need: r.need.map(|t| if t < 0 { 0 } else { t as u64 + 1 }),
             ..Self::default()
         };
         for (c, &v) in r.positions[..count].iter().flatten().enumerate() {
@@ -403,7 +408,7 @@ impl ToolTrack {
     }
 
     /// The sender and the model's report, or `None` for a site out of range, more than
-    /// [`WINDOW_TICKS`] positions, a tick beyond [`MAX_TRACK_TICK`], a confirmed frontier past the
+    /// [`WINDOW_TICKS`] positions, a tick (or one asked for) beyond [`MAX_TRACK_TICK`], a confirmed frontier past the
     /// last tick sent (a sender cannot know inputs of ticks it has not simulated), a coordinate
     /// beyond [`MAX_QUANTIZED`], or a nonzero unused coordinate. The one validation of a track:
     /// the wire's decode and physics' ring → model conversion both apply it (see
@@ -415,6 +420,10 @@ impl ToolTrack {
             .filter(|&c| c <= WINDOW_TICKS)?;
         let end = self.first_tick.checked_add(self.count)?;
         (end <= MAX_TRACK_TICK && self.confirmed_tick <= end).then_some(())?;
+        self.need
+            .iter()
+            .all(|&n| n <= MAX_TRACK_TICK)
+            .then_some(())?;
         let used = 3 * count;
         for c in 0..3 * WINDOW_TICKS {
             let v = i64::from(self.coordinate(c));
@@ -428,6 +437,7 @@ impl ToolTrack {
             positions: [[0; 3]; WINDOW_TICKS],
             confirmed_tick: self.confirmed_tick as i64,
             confirmed_hash: self.confirmed_hash,
+            need: self.need.map(|n| n as i64 - 1),
         };
         for (k, p) in r.positions[..count].iter_mut().enumerate() {
             *p = [
@@ -876,6 +886,7 @@ mod tests {
             positions: [[0; 3]; WINDOW_TICKS],
             confirmed_tick: 990,
             confirmed_hash: 0xdead_beef,
+            need: [950, -1, -1, -1, -1, -1, -1, 7],
         };
         r.positions[0] = [-4500, 0, 1000];
         r.positions[1] = [i32::MIN + 147_483_648, -1, 2_000_000_000];
@@ -909,6 +920,7 @@ mod tests {
         );
         assert!(bad(&|b| b.first_tick = MAX_TRACK_TICK).is_none(), "tick");
         assert!(bad(&|b| b.first_tick = u64::MAX).is_none(), "tick overflow");
+        assert!(bad(&|b| b.need[3] = MAX_TRACK_TICK + 1).is_none(), "need");
         assert!(
             bad(&|b| b.confirmed_tick = 1004).is_none(),
             "frontier ahead"
@@ -925,6 +937,6 @@ mod tests {
             bad(&|b| b.count = 2).is_none(),
             "a dropped position is unused, not zero"
         );
-        assert_eq!(ToolTrack::WORDS * 8, 3128);
+        assert_eq!(ToolTrack::WORDS * 8, 3192);
     }
 }

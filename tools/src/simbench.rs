@@ -100,6 +100,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
             positions: [q; WINDOW_TICKS],
             confirmed_tick: 0,
             confirmed_hash: 0,
+            need: [-1; coop_model::method::MAX_SITES],
         })
     };
     let mut copy = ObjectCopy::new(start);

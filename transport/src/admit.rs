@@ -118,6 +118,10 @@ pub struct Bounds {
 
 /// The default window ahead of now: offsets are estimated to within half a round trip.
 pub const FUTURE_NS: u64 = 100_000_000;
+/// How far a tool track's last tick may lie before the newest taken from its site: the longest
+/// `timewarp` history (10 s) at the fastest physics (20 kHz). A track sent again for a receiver's
+/// gap ([`coop_model::timewarp::ToolReport::need`]) is older than the newest, never by more.
+pub const MAX_TRACK_REWIND_TICKS: u64 = 200_000;
 
 impl Bounds {
     /// The bounds of `sc`'s world. The age limit is `max_age_ms` if given, else the largest delay
@@ -436,8 +440,9 @@ impl Inbound {
     /// [`Inbound::check`] for a tool track (`tool/<key_site>`): decoded and validated
     /// ([`crate::wire::decode_track`]), its site the key's, its time readable and in the window,
     /// every position inside the world's extent, its sequence newer than any track taken from
-    /// that site (tracks have their own sequence, apart from states'), and its last tick not
-    /// before the last tick of the newest track taken (ticks only move forward on the grid).
+    /// that site (tracks have their own sequence, apart from states'), and its last tick not more
+    /// than [`MAX_TRACK_REWIND_TICKS`] before the last tick of the newest track taken (a track
+    /// sent again for a receiver's gap is older than the newest, never by more than a history).
     ///
     /// # Errors
     /// [`Refusal`], counted by the same reasons as states'; nothing changes then.
@@ -467,7 +472,7 @@ impl Inbound {
                     what: "tool position",
                 });
             }
-            if end_tick < self.track_ticks[site] {
+            if end_tick.saturating_add(MAX_TRACK_REWIND_TICKS) < self.track_ticks[site] {
                 return Err(Refusal::Implausible {
                     site,
                     what: "tool track tick",
@@ -742,6 +747,7 @@ mod tests {
             positions: [[-4500, 0, 1000]; WINDOW_TICKS],
             confirmed_tick: 90,
             confirmed_hash: 5,
+            need: [-1; coop_model::method::MAX_SITES],
         };
         let mut r = r;
         r.positions[10..].fill([0; 3]);
@@ -773,30 +779,48 @@ mod tests {
         // A replay.
         let e = inb.check_track("user2", &track(1, 100, &r), now, &clocks);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Stale));
-        // Ticks going back.
-        let e = inb.check_track("user2", &track(3, 50, &r), now, &clocks);
-        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
+        // Ticks going back, as a gap sent again does: taken (a history's worth at most).
+        inb.check_track("user2", &track(3, 50, &r), now, &clocks)
+            .expect("a gap's positions sent again");
+        inb.check_track("user2", &track(4, 300_000, &r), now, &clocks)
+            .expect("ticks on");
+        let e = inb.check_track(
+            "user2",
+            &track(5, 300_000 - MAX_TRACK_REWIND_TICKS as i64 - 11, &r),
+            now,
+            &clocks,
+        );
+        assert_eq!(
+            e.map_err(|e| e.reason()),
+            Err(Refused::Implausible),
+            "back past any history"
+        );
         // A tool 10 km away.
         let mut far = r;
         far.positions[3] = [1_000_000_000, 0, 0];
-        let e = inb.check_track("user2", &track(4, 110, &far), now, &clocks);
+        let e = inb.check_track("user2", &track(6, 300_010, &far), now, &clocks);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
         // Malformed: a count past the window.
-        let mut bytes = track(5, 110, &r);
+        let mut bytes = track(7, 300_010, &r);
         bytes[1 + 32..1 + 40].copy_from_slice(&(WINDOW_TICKS as u64 + 1).to_le_bytes());
         let e = inb.check_track("user2", &bytes, now, &clocks);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Contents));
         // Too old.
-        let e = inb.check_track("user2", &track(6, 110, &r), now + 10_000_000_000, &clocks);
+        let e = inb.check_track(
+            "user2",
+            &track(8, 300_010, &r),
+            now + 10_000_000_000,
+            &clocks,
+        );
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::TooOld));
         // No offset known.
-        let e = inb.check_track("user2", &track(7, 110, &r), now, &[Some(0), None]);
+        let e = inb.check_track("user2", &track(9, 300_010, &r), now, &[Some(0), None]);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::NoOffset));
         // Nothing refused moved anything: the next genuine one is taken.
         let a = inb
-            .check_track("user2", &track(8, 110, &r), now, &clocks)
+            .check_track("user2", &track(10, 300_010, &r), now, &clocks)
             .expect("the next genuine track");
-        assert_eq!(a.track.seq, 8);
+        assert_eq!(a.track.seq, 10);
         // States and tracks keep separate sequences.
         let state = SiteReport {
             t_ns: 1_000_000_000,

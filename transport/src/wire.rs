@@ -13,9 +13,10 @@
 //!
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
 //!
-//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 2` then
+//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 3` then
 //! [`ToolTrack::to_words`], exactly [`TRACK_ENCODED_LEN`] bytes, on its own key (`tool/<site>`).
-//! Version 2 adds this message and changes nothing else: a state is still version 1, byte for
+//! Version 2 added this message and changed nothing else; version 3 added the track's `need` (a
+//! receiver asking for positions lost in a gap). A state is still version 1, byte for
 //! byte, so a version-1 reader still reads states (and refuses a track by its version byte,
 //! should it subscribe to its key). [`TRACK_PINNED`] ties the track's layout to the doc as
 //! [`PINNED`] does the state's.
@@ -31,12 +32,12 @@ pub const VERSION: u8 = 1;
 pub const PINNED: (u8, u64) = (1, 0xfbfded3318dbe2b7);
 /// Bytes of an encoded report.
 pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
-/// The wire version that added tool tracks (and the version byte a track carries). States are
-/// still [`VERSION`].
-pub const TRACK_VERSION: u8 = 2;
+/// The version byte a tool track carries (2 added tracks, 3 added their `need`). States are still
+/// [`VERSION`].
+pub const TRACK_VERSION: u8 = 3;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (2, 0x73a7a41cef742147);
+pub const TRACK_PINNED: (u8, u64) = (3, 0x8aaab0c192555c40);
 /// Bytes of an encoded tool track.
 pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
@@ -360,21 +361,34 @@ mod tests {
             positions: [[0; 3]; WINDOW_TICKS],
             confirmed_tick: 480,
             confirmed_hash: 77,
+            need: [-1; coop_model::method::MAX_SITES],
         };
         for (k, p) in r.positions[..20].iter_mut().enumerate() {
             *p = [-4500 + k as i32, 3, 1000];
         }
+        r.need[0] = 470;
         let t = ToolTrack::new(1, 3, 99, &r);
         let bytes = encode_track(&t);
         assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
-        assert_eq!(TRACK_ENCODED_LEN, 3129, "docs/wire.md says 3129 bytes");
-        assert_eq!(bytes[0], 2);
-        // Where docs/wire.md puts them: site in word 2, the first x in the low half of word 7.
+        assert_eq!(TRACK_ENCODED_LEN, 3193, "docs/wire.md says 3193 bytes");
+        assert_eq!(bytes[0], 3);
+        // Where docs/wire.md puts them: site in word 2, `need` of site 0 (1 + the tick) in word 7,
+        // none (0) for site 1 in word 8, the first x in the low half of word 15.
         assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 56..1 + 60], (-4500i32).to_le_bytes());
+        assert_eq!(&bytes[1 + 56..1 + 64], 471u64.to_le_bytes());
+        assert_eq!(&bytes[1 + 64..1 + 72], 0u64.to_le_bytes());
+        assert_eq!(&bytes[1 + 120..1 + 124], (-4500i32).to_le_bytes());
         assert_eq!(decode_track(&bytes), Ok(t));
+        assert_eq!(
+            t.report().map(|(_, r2)| r2),
+            Some(coop_model::method::Report::Tools(r))
+        );
+        // A version-2 track (no `need`) is refused by its version.
+        let mut v2 = bytes.clone();
+        v2[0] = 2;
+        assert_eq!(decode_track(&v2), Err(DecodeError::Version { found: 2 }));
         // A version-1 reader refuses a track by its version; a track reader refuses a state.
-        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 2 }));
+        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 3 }));
         assert_eq!(
             decode_track(&encode(&sample())),
             Err(DecodeError::Version { found: 1 })

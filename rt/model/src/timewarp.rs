@@ -6,7 +6,9 @@
 //! the tool's position at that tick, quantized to [`QUANTUM_M`] so every site uses the same bits: the
 //! own tool as measured, a remote one from its received trajectory, and beyond the last received
 //! tick a bounded prediction and then a hold. A site reports the own
-//! tool's positions of the last [`WINDOW_TICKS`] ticks (so one lost report loses nothing).
+//! tool's positions of the last [`WINDOW_TICKS`] ticks (so a few lost reports lose nothing). When
+//! more is lost in a row, the receiver holds later positions but not the gap's: it asks for the
+//! gap ([`ToolReport::need`]) and the sender sends the window from there in every other report.
 //!
 //! The copy's full state (body, momenta, environment friction memory, every tool's friction
 //! memory) is kept for every tick of the horizon. When a received position differs from what was
@@ -99,6 +101,9 @@ pub struct ToolReport {
     pub confirmed_tick: i64,
     /// The hash of its state at the start of that tick (0: none kept).
     pub confirmed_hash: u64,
+    /// Per site `j`: the first tick of `j`'s positions the sender lacks though it holds later
+    /// ones (reports lost in a row for longer than the window), for `j` to send again; -1: none.
+    pub need: [i64; MAX_SITES],
 }
 
 impl ToolReport {
@@ -109,6 +114,7 @@ impl ToolReport {
         positions: [[0; 3]; WINDOW_TICKS],
         confirmed_tick: 0,
         confirmed_hash: 0,
+        need: [-1; MAX_SITES],
     };
 }
 
@@ -121,7 +127,8 @@ pub struct Stats {
     pub resimulated_ticks: u64,
     /// The deepest rollback, ticks.
     pub max_depth: u64,
-    /// Received positions older than the horizon (could not be undone).
+    /// Received positions older than the horizon (could not be undone), and gaps of lost
+    /// reports that left the horizon before their sender repaired them (never known).
     pub fallbacks: u64,
     /// Confirmed-frontier hashes compared with the sender's.
     pub hash_checks: u64,
@@ -168,8 +175,15 @@ pub struct TimeWarp {
     now_tick: i64,
     /// Per site: received positions with their ticks (ring like `slots`).
     received: Box<[[Received; MAX_SITES]]>,
-    /// Per site: the newest tick whose position is known (-1: none).
+    /// Per site: the tick up to which every position is known (-1: none); a gap (reports lost
+    /// for longer than the window) holds it back until the sender repairs it.
     known_until: [i64; MAX_SITES],
+    /// Per site: the newest tick whose position is known (-1: none).
+    newest: [i64; MAX_SITES],
+    /// Per site: the first own tick it last asked for again ([`ToolReport::need`]; -1: none).
+    asked: [i64; MAX_SITES],
+    /// Whether the last report repaired a gap (repairs alternate with the newest window).
+    repaired_last: std::cell::Cell<bool>,
     contacts: [ToolContactState; MAX_SITES],
     /// The oldest tick a received position changed since the last rollback.
     dirty_from: Option<i64>,
@@ -211,6 +225,9 @@ impl TimeWarp {
             now_tick: 0,
             received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
             known_until: [-1; MAX_SITES],
+            newest: [-1; MAX_SITES],
+            asked: [-1; MAX_SITES],
+            repaired_last: std::cell::Cell::new(false),
             contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
@@ -264,7 +281,12 @@ impl TimeWarp {
         if let Some(q) = self.received_at(j, t) {
             return (q, true);
         }
-        let last = self.known_until[j];
+        // In a gap, predicted on from before it (as it was live); past the newest, from that.
+        let last = if t < self.newest[j] {
+            self.known_until[j]
+        } else {
+            self.newest[j]
+        };
         let Some(p) = self.received_at(j, last) else {
             // Nothing known yet (or only what left the horizon): where it was last used.
             let prev = &self.slots[self.idx(t - 1)];
@@ -478,15 +500,33 @@ impl Consistency for TimeWarp {
     }
     fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
-        let first = (end - WINDOW_TICKS as i64).max(0);
+        let window = (end - WINDOW_TICKS as i64).max(0);
+        // A peer that lost more than a window of reports asked for the first tick it lacks: every
+        // other report sends the window from there instead (while it is still kept), so the
+        // newest positions keep flowing and the peer's frontier can pass the gap.
+        let oldest = (end - self.len() + 1).max(0);
+        let repair = (0..self.sites)
+            .filter(|&j| j != self.me)
+            .map(|j| self.asked[j])
+            .filter(|&t| t >= oldest && t < window)
+            .min()
+            .filter(|_| !self.repaired_last.get());
+        self.repaired_last.set(repair.is_some());
+        let first = repair.unwrap_or(window);
         let mut r = ToolReport {
             first_tick: first,
-            count: (end - first) as usize,
+            count: (end - first).min(WINDOW_TICKS as i64) as usize,
             positions: [[0; 3]; WINDOW_TICKS],
             confirmed_tick: self.confirmed_tick(),
             confirmed_hash: 0,
+            need: [-1; MAX_SITES],
         };
-        for (k, t) in (first..end).enumerate() {
+        for j in (0..self.sites).filter(|&j| j != self.me) {
+            if self.newest[j] > self.known_until[j] {
+                r.need[j] = self.known_until[j] + 1;
+            }
+        }
+        for (k, t) in (first..first + r.count as i64).enumerate() {
             r.positions[k] = self.slots[self.idx(t)].inputs[self.me];
         }
         r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
@@ -506,10 +546,11 @@ impl Consistency for TimeWarp {
         if from >= self.sites || from == self.me {
             return None;
         }
+        self.asked[from] = r.need[self.me];
         let oldest = self.now_tick - self.len() + 1;
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
             let t = r.first_tick + k as i64;
-            if t <= self.known_until[from] {
+            if t <= self.known_until[from] || self.received_at(from, t) == Some(q) {
                 continue;
             }
             if t < oldest {
@@ -525,10 +566,25 @@ impl Consistency for TimeWarp {
                 self.dirty_from = Some(self.dirty_from.map_or(t, |d| d.min(t)));
             }
         }
-        let end = r.first_tick + r.count as i64 - 1;
-        self.known_until[from] = self.known_until[from].max(end);
-        // Ticks past the newest known are predicted again from it: one simulated with another
-        // prediction is re-simulated too, so the copy is always what the inputs known now give
+        if r.count > 0 {
+            let end = r.first_tick + r.count as i64 - 1;
+            self.newest[from] = self.newest[from].max(end);
+        }
+        // Every position up to the frontier is known: a gap holds it back (the sender is asked
+        // for it), and one that left the history can never be filled: given up, counted.
+        let k = &mut self.known_until[from];
+        if *k + 1 < oldest && self.newest[from] >= oldest {
+            self.stats.fallbacks += 1;
+            *k = oldest - 1;
+        }
+        while *k < self.newest[from]
+            && self.received[(*k + 1).rem_euclid(self.slots.len() as i64) as usize][from]
+                .is_some_and(|(tick, _)| tick == *k + 1)
+        {
+            *k += 1;
+        }
+        // Ticks not all known (a gap's, and past the newest) are predicted again: one simulated
+        // with another prediction is re-simulated too, so the copy is always what the inputs known now give
         // (and a re-simulation arrives at the same bits).
         for t in (self.known_until[from] + 1).max(oldest)..self.now_tick {
             let s = &self.slots[self.idx(t)];
@@ -637,6 +693,11 @@ mod tests {
         sc.validate().expect("default horizon");
         let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
         assert_eq!(sc.timewarp(0, &copy).history_ticks(), 331);
+        // With loss, 11 reports lost in a row (0.3¹² < 10⁻⁶) and a round trip more: + 450 ms.
+        sc.network.loss = 0.3;
+        assert_eq!(sc.losses_in_a_row(), 11);
+        assert_eq!(sc.timewarp(0, &copy).history_ticks(), 781);
+        sc.network.loss = 0.0;
         sc.timewarp.horizon_ms = 2000.0;
         sc.validate().expect("a longer horizon");
         assert_eq!(sc.timewarp(0, &copy).history_ticks(), 2001);
@@ -667,6 +728,7 @@ mod tests {
                     positions: [[0; 3]; WINDOW_TICKS],
                     confirmed_tick: 0,
                     confirmed_hash: 0,
+                    need: [-1; MAX_SITES],
                 };
                 for j in 0..10 {
                     let t = (k - 40 + j) as f64 * 1e-3;
@@ -728,6 +790,7 @@ mod tests {
                         positions: [[0; 3]; WINDOW_TICKS],
                         confirmed_tick: 0,
                         confirmed_hash: 0,
+                        need: [-1; MAX_SITES],
                     };
                     for t in r.first_tick..=first {
                         r.positions[r.count] = remote(t);
@@ -751,6 +814,80 @@ mod tests {
         assert!(
             late.unfelt_contact_ticks > 0,
             "the contact the copy learned of 0.3 s late: {late:?}"
+        );
+    }
+
+    /// Two sites, 100 ticks apart, reporting every 20 ticks. Site 1's tool sweeps into the disk
+    /// while 400 ticks of its reports are lost (more than a report's window of 256): site 0 holds
+    /// later positions and not the gap's, so its frontier waits there and it asks for the gap
+    /// (`need`); site 1 sends the gap again and the confirmed states agree to the bit. Without the
+    /// request (the window alone) site 0 would confirm ticks simulated with a prediction of the
+    /// sweep, and every later hash would differ.
+    #[test]
+    fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
+        let (sc, w) = paper_world();
+        let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut sites = [0, 1].map(|i| {
+            (
+                TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 1000, &start),
+                start,
+            )
+        });
+        // Site 0's tool rests left of the disk; site 1's sweeps from the right into its rim
+        // (x = 0.04) between ticks 900 and 1300, then back.
+        let tool = |i: usize, k: i64| {
+            let s = k as f64 * 1e-3;
+            let x = if i == 0 {
+                -0.06
+            } else if s < 0.9 {
+                0.08
+            } else if s < 1.3 {
+                0.08 - 0.1 * (s - 0.9)
+            } else {
+                (0.04 + 0.1 * (s - 1.3)).min(0.08)
+            };
+            Vec3::new(x, 0.0, 0.01)
+        };
+        let delay = 100;
+        let lost = |from: usize, k: i64| from == 1 && (1150..1550).contains(&k);
+        let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+        let mut asked = false;
+        for k in 0..3000i64 {
+            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+                for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                    tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+                }
+                tw.own_tool(tool(i, k));
+                tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+            }
+            in_flight.retain(|m| m.0 > k);
+            if k % 20 == 0 {
+                for (i, (tw, copy)) in sites.iter().enumerate() {
+                    let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                    if let Report::Tools(t) = &r {
+                        asked |= i == 0 && t.need[1] >= 0;
+                    }
+                    if !lost(i, k) {
+                        in_flight.push((k + delay, i, r));
+                    }
+                }
+            }
+        }
+        let [(a, _), (b, _)] = &sites;
+        assert!(asked, "site 0 asked for the gap");
+        let moved = start.state.pos.x - sites[1].1.state.pos.x;
+        assert!(moved > 1e-3, "the sweep pushed the disk {moved} m");
+        for (name, st) in [("site 0", a.stats()), ("site 1", b.stats())] {
+            assert!(st.hash_checks > 50, "{name} compared: {st:?}");
+            assert_eq!(st.hash_mismatches, 0, "{name}: {st:?}");
+            assert_eq!(st.fallbacks, 0, "{name}: {st:?}");
+        }
+        assert_eq!(
+            a.confirmed_tick(),
+            b.confirmed_tick(),
+            "both confirmed to the last report"
         );
     }
 
