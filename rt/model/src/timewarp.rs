@@ -251,6 +251,11 @@ impl TimeWarp {
         self.slots.len() as i64
     }
 
+    /// The oldest tick whose record is still kept.
+    fn oldest_kept(&self) -> i64 {
+        (self.now_tick - self.len() + 1).max(0)
+    }
+
     fn idx(&self, tick: i64) -> usize {
         tick.rem_euclid(self.len()) as usize
     }
@@ -414,7 +419,7 @@ impl TimeWarp {
     /// Restores the copy to tick `from` and simulates again to where it was.
     fn rollback(&mut self, world: &World, copy: &mut ObjectCopy, from: i64) -> u64 {
         let to = self.now_tick;
-        let oldest = (to - self.len() + 1).max(0);
+        let oldest = self.oldest_kept();
         let from = from.max(oldest);
         if from >= to {
             return 0;
@@ -445,7 +450,7 @@ impl TimeWarp {
     fn tally(&mut self) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let upto = self.confirmed_tick().min(self.now_tick);
-        let oldest = self.now_tick - self.len() + 1;
+        let oldest = self.oldest_kept();
         for t in self.tallied_until.max(oldest)..upto {
             let s = &self.slots[self.idx(t)];
             if s.tick == t {
@@ -504,7 +509,7 @@ impl Consistency for TimeWarp {
         // A peer that lost more than a window of reports asked for the first tick it lacks: every
         // other report sends the window from there instead (while it is still kept), so the
         // newest positions keep flowing and the peer's frontier can pass the gap.
-        let oldest = (end - self.len() + 1).max(0);
+        let oldest = self.oldest_kept();
         let repair = (0..self.sites)
             .filter(|&j| j != self.me)
             .map(|j| self.asked[j])
@@ -547,10 +552,10 @@ impl Consistency for TimeWarp {
             return None;
         }
         self.asked[from] = r.need[self.me];
-        let oldest = self.now_tick - self.len() + 1;
+        let oldest = self.oldest_kept();
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
             let t = r.first_tick + k as i64;
-            if t <= self.known_until[from] || self.received_at(from, t) == Some(q) {
+            if t <= self.known_until[from] {
                 continue;
             }
             if t < oldest {
@@ -572,17 +577,15 @@ impl Consistency for TimeWarp {
         }
         // Every position up to the frontier is known: a gap holds it back (the sender is asked
         // for it), and one that left the history can never be filled: given up, counted.
-        let k = &mut self.known_until[from];
-        if *k + 1 < oldest && self.newest[from] >= oldest {
+        let mut k = self.known_until[from];
+        if k + 1 < oldest && self.newest[from] >= oldest {
             self.stats.fallbacks += 1;
-            *k = oldest - 1;
+            k = oldest - 1;
         }
-        while *k < self.newest[from]
-            && self.received[(*k + 1).rem_euclid(self.slots.len() as i64) as usize][from]
-                .is_some_and(|(tick, _)| tick == *k + 1)
-        {
-            *k += 1;
+        while k < self.newest[from] && self.received_at(from, k + 1).is_some() {
+            k += 1;
         }
+        self.known_until[from] = k;
         // Ticks not all known (a gap's, and past the newest) are predicted again: one simulated
         // with another prediction is re-simulated too, so the copy is always what the inputs known now give
         // (and a re-simulation arrives at the same bits).
