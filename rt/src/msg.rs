@@ -9,10 +9,10 @@
 #![allow(unsafe_code)] // the five `unsafe impl ShmPod` below, each with its SAFETY argument
 
 use coop_model::body::{BodyState, Vec3};
-use coop_model::contact::ContactForce;
+use coop_model::contact::{ContactForce, EnvContactState, ToolContactState, MAX_PLANES};
 use coop_model::coupled::CoupledReport;
 use coop_model::method::{Report, MAX_SITES};
-use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
+use coop_model::timewarp::{Snapshot, ToolReport, WINDOW_TICKS};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
@@ -332,7 +332,7 @@ pod_message! {
     /// What a `timewarp` site reports besides (instead of) a state: its own tool's quantized
     /// positions at the last ticks of the session's tick grid, and its confirmed frontier with the
     /// hash of its state there (the model's [`ToolReport`] in a fixed layout). Physics → network
-    /// (own), network → physics (remote). 3 192 bytes, copied, never boxed.
+    /// (own), network → physics (remote). 3 656 bytes, copied, never boxed.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ToolTrack {
         /// Sender's time of the report, ns (CLOCK_MONOTONIC of the sender).
@@ -352,16 +352,32 @@ pod_message! {
         /// Per site `j`, 1 + the first tick of `j`'s positions the sender lacks though it holds
         /// later ones (reports lost for longer than the window), for `j` to send again; 0: none.
         pub need: [u64; MAX_SITES],
+        /// Bit `j`: the sender's confirmed state differs from site `j`'s (below the sender), and it
+        /// asks `j` for its state (the `state_*` words); bits 8 and up are 0.
+        pub need_state: u64,
+        /// 1: the `state_*` words hold the sender's state at the start of `confirmed_tick`, sent
+        /// while a site asks for it; 0: they are all 0.
+        pub has_state: u64,
+        /// The object: centre of mass (m), orientation (w, x, y, z), velocity (m/s), angular
+        /// momentum (kg·m²/s).
+        pub state_body: [f64; 13],
+        /// Bit `p` (`p` < 6): plane `p`'s friction stick point is in `state_env`; bit 8 + `j`:
+        /// site `j`'s tool's is in `state_tools`. The points of clear bits are 0.
+        pub state_anchors: u64,
+        /// Per plane, its friction stick point, world, m.
+        pub state_env: [f64; 3 * MAX_PLANES],
+        /// Per site, its tool's friction stick point on the object, body coordinates, m.
+        pub state_tools: [f64; 3 * MAX_SITES],
         /// Positions in quanta, tick `first_tick + k` at coordinates `3k..3k+3`; coordinate `c`
         /// is the i32 in bits `32 (c % 2) ..` of word `c / 2` (little end first); unused ones 0.
         pub positions: [u64; TRACK_POSITION_WORDS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3192);
-// SAFETY: repr(C), only u64 fields and arrays of them (3192 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3656);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (3656 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for ToolTrack {
-    const TYPE_NAME: &'static str = "coop.ToolTrack.v2";
+    const TYPE_NAME: &'static str = "coop.ToolTrack.v3";
 }
 
 impl Default for ToolTrack {
@@ -375,6 +391,12 @@ impl Default for ToolTrack {
             confirmed_tick: 0,
             confirmed_hash: 0,
             need: [0; MAX_SITES],
+            need_state: 0,
+            has_state: 0,
+            state_body: [0.0; 13],
+            state_anchors: 0,
+            state_env: [0.0; 3 * MAX_PLANES],
+            state_tools: [0.0; 3 * MAX_SITES],
             positions: [0; TRACK_POSITION_WORDS],
         }
     }
@@ -394,8 +416,34 @@ impl ToolTrack {
             confirmed_tick: r.confirmed_tick.max(0) as u64,
             confirmed_hash: r.confirmed_hash,
             need: r.need.map(|t| if t < 0 { 0 } else { t as u64 + 1 }),
+            need_state: u64::from(r.need_state),
             ..Self::default()
         };
+        if let Some(snap) = r.state.filter(|s| s.tick == r.confirmed_tick) {
+            let (pos, rot, vel, ang_mom) = state_fields(&snap.state);
+            out.has_state = 1;
+            for (k, v) in pos
+                .iter()
+                .chain(&rot)
+                .chain(&vel)
+                .chain(&ang_mom)
+                .enumerate()
+            {
+                out.state_body[k] = *v;
+            }
+            for (p, a) in snap.env.anchors().iter().enumerate() {
+                if let Some(a) = a {
+                    out.state_anchors |= 1 << p;
+                    out.state_env[3 * p..3 * p + 3].copy_from_slice(a.as_slice());
+                }
+            }
+            for (j, c) in snap.contacts.iter().enumerate() {
+                if let Some(a) = c.anchor() {
+                    out.state_anchors |= 1 << (8 + j);
+                    out.state_tools[3 * j..3 * j + 3].copy_from_slice(a.as_slice());
+                }
+            }
+        }
         for (c, &v) in r.positions[..count].iter().flatten().enumerate() {
             out.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
         }
@@ -424,6 +472,8 @@ impl ToolTrack {
             .iter()
             .all(|&n| n <= MAX_TRACK_TICK)
             .then_some(())?;
+        let need_state = u8::try_from(self.need_state).ok()?;
+        let state = self.snapshot()?;
         let used = 3 * count;
         for c in 0..3 * WINDOW_TICKS {
             let v = i64::from(self.coordinate(c));
@@ -438,6 +488,8 @@ impl ToolTrack {
             confirmed_tick: self.confirmed_tick as i64,
             confirmed_hash: self.confirmed_hash,
             need: self.need.map(|n| n as i64 - 1),
+            need_state,
+            state,
         };
         for (k, p) in r.positions[..count].iter_mut().enumerate() {
             *p = [
@@ -447,6 +499,77 @@ impl ToolTrack {
             ];
         }
         Some((site, Report::Tools(r)))
+    }
+
+    /// The carried state: `Some(None)` for none (every `state_*` word 0), `Some(Some(_))` for a
+    /// valid one (finite, a unit quaternion up to rounding, kept to the bit), `None` for garbage.
+    fn snapshot(&self) -> Option<Option<Snapshot>> {
+        let words = || {
+            self.state_body
+                .iter()
+                .chain(&self.state_env)
+                .chain(&self.state_tools)
+        };
+        let valid_bits = ((1u64 << MAX_PLANES) - 1) | (((1u64 << MAX_SITES) - 1) << 8);
+        match self.has_state {
+            0 => (self.state_anchors == 0 && words().all(|w| w.to_bits() == 0)).then_some(None),
+            1 => {
+                if self.state_anchors & !valid_bits != 0 || !words().all(|w| w.is_finite()) {
+                    return None;
+                }
+                let b = &self.state_body;
+                let q = Quaternion::new(b[3], b[4], b[5], b[6]);
+                if (q.norm() - 1.0).abs() > 1e-6 {
+                    return None;
+                }
+                let state = BodyState {
+                    pos: Vec3::new(b[0], b[1], b[2]),
+                    // The sender's bits: the adopting site must hash to the same.
+                    rot: UnitQuaternion::new_unchecked(q),
+                    vel: Vec3::new(b[7], b[8], b[9]),
+                    ang_mom: Vec3::new(b[10], b[11], b[12]),
+                };
+                let bit = |k: usize| self.state_anchors & (1 << k) != 0;
+                // A point of a clear bit is 0 (its bits: not even -0).
+                let point = |w: &[f64], k: usize, set: bool| {
+                    let v = Vec3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
+                    (set || v.iter().all(|x| x.to_bits() == 0)).then_some(set.then_some(v))
+                };
+                let mut env = [None; MAX_PLANES];
+                for (p, a) in env.iter_mut().enumerate() {
+                    *a = point(&self.state_env, p, bit(p))?;
+                }
+                let mut contacts = [ToolContactState::default(); MAX_SITES];
+                for (j, c) in contacts.iter_mut().enumerate() {
+                    *c = ToolContactState::from_anchor(point(&self.state_tools, j, bit(8 + j))?);
+                }
+                Some(Some(Snapshot {
+                    tick: self.confirmed_tick as i64,
+                    state,
+                    env: EnvContactState::from_anchors(env),
+                    contacts,
+                }))
+            }
+            _ => None,
+        }
+    }
+
+    /// The carried state's largest point (object centre, stick points) from the origin (m), its
+    /// speed (m/s) and its angular momentum (kg·m²/s); zeros when none is carried. For
+    /// plausibility checks.
+    pub fn state_magnitudes(&self) -> (f64, f64, f64) {
+        let norm3 = |w: &[f64]| (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+        let extent = self
+            .state_env
+            .chunks(3)
+            .chain(self.state_tools.chunks(3))
+            .map(norm3)
+            .fold(norm3(&self.state_body[..3]), f64::max);
+        (
+            extent,
+            norm3(&self.state_body[7..10]),
+            norm3(&self.state_body[10..13]),
+        )
     }
 
     /// The largest magnitude of a filled coordinate, in quanta (for plausibility checks).
@@ -887,6 +1010,7 @@ mod tests {
             confirmed_tick: 990,
             confirmed_hash: 0xdead_beef,
             need: [950, -1, -1, -1, -1, -1, -1, 7],
+            ..ToolReport::NONE
         };
         r.positions[0] = [-4500, 0, 1000];
         r.positions[1] = [i32::MIN + 147_483_648, -1, 2_000_000_000];
@@ -937,6 +1061,6 @@ mod tests {
             bad(&|b| b.count = 2).is_none(),
             "a dropped position is unused, not zero"
         );
-        assert_eq!(ToolTrack::WORDS * 8, 3192);
+        assert_eq!(ToolTrack::WORDS * 8, 3656);
     }
 }

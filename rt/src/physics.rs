@@ -403,6 +403,7 @@ impl PhysicsLoop {
             set(&r.fallbacks, st.fallbacks);
             set(&r.hash_checks, st.hash_checks);
             set(&r.hash_mismatches, st.hash_mismatches);
+            set(&r.adopted_states, st.adopted_states);
             set(&r.unfelt_contact_ticks, st.unfelt_contact_ticks);
             set(&r.phantom_contact_ticks, st.phantom_contact_ticks);
         }

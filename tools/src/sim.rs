@@ -252,7 +252,7 @@ fn print_rollbacks(r: &RunResult) {
     for (i, st) in r.rollback.iter().enumerate() {
         if let Some(st) = st {
             eprintln!(
-                "# {} site {i}: {} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched; confirmed contact never shown live {} ticks, shown live and taken back {} ticks",
+                "# {} site {i}: {} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched, {} confirmed states adopted; confirmed contact never shown live {} ticks, shown live and taken back {} ticks",
                 r.mode.name(),
                 st.rollbacks,
                 st.resimulated_ticks,
@@ -260,6 +260,7 @@ fn print_rollbacks(r: &RunResult) {
                 st.fallbacks,
                 st.hash_checks,
                 st.hash_mismatches,
+                st.adopted_states,
                 st.unfelt_contact_ticks,
                 st.phantom_contact_ticks
             );

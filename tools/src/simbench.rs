@@ -98,9 +98,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
             first_tick,
             count,
             positions: [q; WINDOW_TICKS],
-            confirmed_tick: 0,
-            confirmed_hash: 0,
-            need: [-1; coop_model::method::MAX_SITES],
+            ..ToolReport::NONE
         })
     };
     let mut copy = ObjectCopy::new(start);

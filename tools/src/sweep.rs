@@ -73,6 +73,8 @@ pub struct Row {
     pub rollback_depth_p99_ticks: u64,
     /// Confirmed-state hash mismatches, all sites.
     pub hash_mismatches: u64,
+    /// Confirmed states adopted after they differed, all sites.
+    pub adopted_states: u64,
     /// Contact the users were never shown live though the confirmed history has it, all sites, ms.
     pub unfelt_contact_ms: f64,
     /// Contact the users were shown live that the confirmed history took back, all sites, ms.
@@ -119,6 +121,7 @@ impl Row {
             resimulated_ticks_per_s: m.resimulated_ticks_per_s,
             rollback_depth_p99_ticks: m.rollback_depth_p99_ticks,
             hash_mismatches: m.hash_mismatches,
+            adopted_states: m.adopted_states,
             unfelt_contact_ms: m.unfelt_contact_ms,
             phantom_contact_ms: m.phantom_contact_ms,
         }

@@ -561,6 +561,8 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
             "{site} compared confirmed frontiers: {rb}"
         );
         assert_eq!(rb["hash_mismatches"], 0, "{site}: {rb}");
+        // Nothing diverged, so nothing was adopted (and the count is in the status).
+        assert_eq!(rb["adopted_states"], 0, "{site}: {rb}");
         // What rolling back cost the user's feel is in the status too (its amount follows the
         // machine's timing, so only that it is there).
         assert!(

@@ -77,6 +77,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "rollbacks_per_s",
         "rollback_depth_p99_ticks",
         "hash_mismatches",
+        "adopted_states",
         "unfelt_contact_ms",
         "phantom_contact_ms",
     ] {

@@ -472,6 +472,17 @@ impl Inbound {
                     what: "tool position",
                 });
             }
+            // A confirmed state sent for a site to adopt: within the world, as a state must be.
+            let (extent, speed, ang_mom) = t.state_magnitudes();
+            for (what, v, max) in [
+                ("state position", extent, self.bounds.extent_m),
+                ("state velocity", speed, self.bounds.speed_m_per_s),
+                ("state angular momentum", ang_mom, self.bounds.ang_mom),
+            ] {
+                if v > max {
+                    return Err(Refusal::Implausible { site, what });
+                }
+            }
             if end_tick.saturating_add(MAX_TRACK_REWIND_TICKS) < self.track_ticks[site] {
                 return Err(Refusal::Implausible {
                     site,
@@ -748,6 +759,7 @@ mod tests {
             confirmed_tick: 90,
             confirmed_hash: 5,
             need: [-1; coop_model::method::MAX_SITES],
+            ..ToolReport::NONE
         };
         let mut r = r;
         r.positions[10..].fill([0; 3]);
@@ -821,6 +833,29 @@ mod tests {
             .check_track("user2", &track(10, 300_010, &r), now, &clocks)
             .expect("the next genuine track");
         assert_eq!(a.track.seq, 10);
+        // A confirmed state carried for a site to adopt: taken where a state would be, refused
+        // where a state would be (faster than anything in the world can go).
+        let with_state = |vel: f64| {
+            let mut w = r;
+            w.state = Some(coop_model::timewarp::Snapshot {
+                tick: 300_000,
+                state: coop_model::body::BodyState {
+                    vel: coop_model::body::Vec3::new(vel, 0.0, 0.0),
+                    ..coop_model::body::BodyState::at_rest(coop_model::body::Vec3::new(
+                        0.0, 0.0, 0.01,
+                    ))
+                },
+                env: Default::default(),
+                contacts: Default::default(),
+            });
+            w
+        };
+        let a = inb
+            .check_track("user2", &track(11, 300_010, &with_state(0.5)), now, &clocks)
+            .expect("a plausible state");
+        assert_eq!(a.track.has_state, 1);
+        let e = inb.check_track("user2", &track(12, 300_010, &with_state(1e5)), now, &clocks);
+        assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
         // States and tracks keep separate sequences.
         let state = SiteReport {
             t_ns: 1_000_000_000,

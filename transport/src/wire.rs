@@ -13,10 +13,11 @@
 //!
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
 //!
-//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 3` then
+//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 4` then
 //! [`ToolTrack::to_words`], exactly [`TRACK_ENCODED_LEN`] bytes, on its own key (`tool/<site>`).
 //! Version 2 added this message and changed nothing else; version 3 added the track's `need` (a
-//! receiver asking for positions lost in a gap). A state is still version 1, byte for
+//! receiver asking for positions lost in a gap); version 4 the confirmed state a site whose
+//! confirmed history diverged asks for and adopts. A state is still version 1, byte for
 //! byte, so a version-1 reader still reads states (and refuses a track by its version byte,
 //! should it subscribe to its key). [`TRACK_PINNED`] ties the track's layout to the doc as
 //! [`PINNED`] does the state's.
@@ -34,10 +35,10 @@ pub const PINNED: (u8, u64) = (1, 0xfbfded3318dbe2b7);
 pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
 /// The version byte a tool track carries (2 added tracks, 3 added their `need`). States are still
 /// [`VERSION`].
-pub const TRACK_VERSION: u8 = 3;
+pub const TRACK_VERSION: u8 = 4;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (3, 0x8aaab0c192555c40);
+pub const TRACK_PINNED: (u8, u64) = (4, 0xd6c6c2436f903f19);
 /// Bytes of an encoded tool track.
 pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
@@ -362,6 +363,7 @@ mod tests {
             confirmed_tick: 480,
             confirmed_hash: 77,
             need: [-1; coop_model::method::MAX_SITES],
+            ..ToolReport::NONE
         };
         for (k, p) in r.positions[..20].iter_mut().enumerate() {
             *p = [-4500 + k as i32, 3, 1000];
@@ -370,25 +372,82 @@ mod tests {
         let t = ToolTrack::new(1, 3, 99, &r);
         let bytes = encode_track(&t);
         assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
-        assert_eq!(TRACK_ENCODED_LEN, 3193, "docs/wire.md says 3193 bytes");
-        assert_eq!(bytes[0], 3);
+        assert_eq!(TRACK_ENCODED_LEN, 3657, "docs/wire.md says 3657 bytes");
+        assert_eq!(bytes[0], 4);
         // Where docs/wire.md puts them: site in word 2, `need` of site 0 (1 + the tick) in word 7,
-        // none (0) for site 1 in word 8, the first x in the low half of word 15.
+        // none (0) for site 1 in word 8, no state (word 16), the first x in the low half of
+        // word 73.
         assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
         assert_eq!(&bytes[1 + 56..1 + 64], 471u64.to_le_bytes());
         assert_eq!(&bytes[1 + 64..1 + 72], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 120..1 + 124], (-4500i32).to_le_bytes());
+        assert_eq!(&bytes[1 + 128..1 + 136], 0u64.to_le_bytes());
+        assert_eq!(&bytes[1 + 584..1 + 588], (-4500i32).to_le_bytes());
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
             Some(coop_model::method::Report::Tools(r))
         );
-        // A version-2 track (no `need`) is refused by its version.
-        let mut v2 = bytes.clone();
-        v2[0] = 2;
-        assert_eq!(decode_track(&v2), Err(DecodeError::Version { found: 2 }));
+        // A confirmed state, asked for by site 1 (bit 1 of `need_state`, word 15), goes to the bit:
+        // the adopting site hashes it to the sender's `confirmed_hash`.
+        let mut body =
+            coop_model::body::BodyState::at_rest(coop_model::body::Vec3::new(0.01, -0.02, 0.01));
+        body.rot = nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
+        body.vel.x = -1.0 / 3.0;
+        let mut anchors = [None; coop_model::contact::MAX_PLANES];
+        anchors[2] = Some(coop_model::body::Vec3::new(-0.25, 0.0, 1e-3));
+        let mut contacts =
+            [coop_model::contact::ToolContactState::default(); coop_model::method::MAX_SITES];
+        contacts[1] = coop_model::contact::ToolContactState::from_anchor(Some(
+            coop_model::body::Vec3::new(0.04, 0.0, -0.0),
+        ));
+        let snap = coop_model::timewarp::Snapshot {
+            tick: 480,
+            state: body,
+            env: coop_model::contact::EnvContactState::from_anchors(anchors),
+            contacts,
+        };
+        let with_state = ToolReport {
+            need_state: 0b10,
+            state: Some(snap),
+            confirmed_hash: coop_model::timewarp::hash_state(&body),
+            ..r
+        };
+        let ts = ToolTrack::new(1, 4, 99, &with_state);
+        let bs = encode_track(&ts);
+        assert_eq!(&bs[1 + 120..1 + 128], 2u64.to_le_bytes());
+        assert_eq!(&bs[1 + 128..1 + 136], 1u64.to_le_bytes());
+        assert_eq!(
+            decode_track(&bs)
+                .ok()
+                .and_then(|t| t.report())
+                .map(|(_, r2)| r2),
+            Some(coop_model::method::Report::Tools(with_state))
+        );
+        // A state that is not one: a stick point without its bit, or a bit without a state.
+        let mut stray = ts;
+        stray.state_env[0] = 1.0;
+        assert_eq!(
+            decode_track(&encode_track(&stray)),
+            Err(DecodeError::Invalid)
+        );
+        let mut stray = t;
+        stray.state_anchors = 1;
+        assert_eq!(
+            decode_track(&encode_track(&stray)),
+            Err(DecodeError::Invalid)
+        );
+        let mut stray = ts;
+        stray.state_body[3] = 2.0;
+        assert_eq!(
+            decode_track(&encode_track(&stray)),
+            Err(DecodeError::Invalid)
+        );
+        // A version-3 track (no state) is refused by its version.
+        let mut v3 = bytes.clone();
+        v3[0] = 3;
+        assert_eq!(decode_track(&v3), Err(DecodeError::Version { found: 3 }));
         // A version-1 reader refuses a track by its version; a track reader refuses a state.
-        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 3 }));
+        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 4 }));
         assert_eq!(
             decode_track(&encode(&sample())),
             Err(DecodeError::Version { found: 1 })

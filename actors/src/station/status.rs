@@ -252,6 +252,8 @@ pub struct RollbackStatus {
     pub hash_checks: u64,
     /// ... that differed.
     pub hash_mismatches: u64,
+    /// Confirmed states adopted from a lower-numbered site after they differed.
+    pub adopted_states: u64,
     /// Remote tool tracks taken, rejected; own tracks dropped (ring full).
     pub tracks_received: u64,
     /// See `tracks_received`.
@@ -281,6 +283,7 @@ impl RollbackStatus {
             fallbacks: l(&r.fallbacks),
             hash_checks: l(&r.hash_checks),
             hash_mismatches: l(&r.hash_mismatches),
+            adopted_states: l(&r.adopted_states),
             tracks_received: l(&r.tracks_received),
             tracks_rejected: l(&r.tracks_rejected),
             track_drops: l(&r.track_drops),
@@ -295,7 +298,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks, shown and taken back {} ticks",
+            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks, shown and taken back {} ticks",
             self.ticks,
             self.rollbacks,
             self.resimulated_ticks,
@@ -304,6 +307,7 @@ impl std::fmt::Display for RollbackStatus {
             self.fallbacks,
             self.hash_checks,
             self.hash_mismatches,
+            self.adopted_states,
             self.tracks_received,
             self.tracks_rejected,
             self.track_drops,

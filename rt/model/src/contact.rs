@@ -114,6 +114,18 @@ impl ToolContactState {
     pub fn touching(&self) -> bool {
         self.anchor_body.is_some()
     }
+
+    /// The stick point, body coordinates (`None`: not touching): what a snapshot carries.
+    pub fn anchor(&self) -> Option<Vec3> {
+        self.anchor_body
+    }
+
+    /// The memory whose stick point is `anchor` (from a snapshot).
+    pub fn from_anchor(anchor: Option<Vec3>) -> Self {
+        Self {
+            anchor_body: anchor,
+        }
+    }
 }
 
 /// The contact between a spherical tool tip (centre `tool_pos`, radius `tool_radius`, velocity
@@ -187,6 +199,16 @@ impl EnvContactState {
         for a in self.anchors.iter_mut().flatten() {
             *a += delta;
         }
+    }
+
+    /// The stick points, per plane (`None`: not touching): what a snapshot carries.
+    pub fn anchors(&self) -> [Option<Vec3>; MAX_PLANES] {
+        self.anchors
+    }
+
+    /// The memory with these stick points (from a snapshot).
+    pub fn from_anchors(anchors: [Option<Vec3>; MAX_PLANES]) -> Self {
+        Self { anchors }
     }
 }
 

@@ -255,10 +255,7 @@ impl Consistency for Coupled {
         let mut tools = ToolReport {
             first_tick: first,
             count: (end - first) as usize,
-            positions: [[0; 3]; WINDOW_TICKS],
-            confirmed_tick: 0,
-            confirmed_hash: 0,
-            need: [-1; crate::method::MAX_SITES],
+            ..ToolReport::NONE
         };
         for (k, t) in (first..end).enumerate() {
             tools.positions[k] = self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize];

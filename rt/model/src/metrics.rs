@@ -196,6 +196,8 @@ pub struct Metrics {
     pub rollback_depth_max_ticks: u64,
     /// Confirmed-state hash mismatches, all sites.
     pub hash_mismatches: u64,
+    /// Confirmed states adopted from a lower-numbered site after they differed, all sites.
+    pub adopted_states: u64,
     /// Contact a user was never shown live though the confirmed history has it, summed over the
     /// sites, ms ([`SiteMetrics::unfelt_contact_ms`]).
     pub unfelt_contact_ms: f64,
@@ -376,7 +378,9 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
     let mut depths = crate::histogram::DepthHistogram::default();
     let mut depth_max = 0;
     let mut mismatches = 0;
+    let mut adopted = 0;
     for st in run.rollback.iter().flatten() {
+        adopted += st.adopted_states;
         depths.merge(&st.depths);
         depth_max = depth_max.max(st.max_depth);
         mismatches += st.hash_mismatches;
@@ -414,6 +418,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         rollback_depth_p99_ticks: depths.quantile(0.99).map_or(0, |d| d.min(depth_max)),
         rollback_depth_max_ticks: depth_max,
         hash_mismatches: mismatches,
+        adopted_states: adopted,
         unfelt_contact_ms: sites.iter().map(|s| s.unfelt_contact_ms).sum(),
         phantom_contact_ms: sites.iter().map(|s| s.phantom_contact_ms).sum(),
         divergence_max_m: divs.iter().copied().fold(0.0, f64::max),

@@ -21,6 +21,15 @@
 //! a receiver that has confirmed the same tick compares ([`Stats::hash_checks`],
 //! [`Stats::hash_mismatches`]), so a divergence of confirmed state is never silent.
 //!
+//! A divergence heals: confirmed states differ only where a site never knew an input (a link down
+//! for longer than the horizon: a fallback), and then no rollback can repair them. A site whose
+//! confirmed state differs from a lower-numbered site's asks it for its state
+//! ([`ToolReport::need_state`]); that site sends its full confirmed state ([`Snapshot`]: body,
+//! momenta, every friction memory) with its reports while asked, and the asking site adopts it at
+//! that tick and re-simulates to now ([`Stats::adopted_states`]): the paper's adoption of a received
+//! state, at the confirmed frontier. The lowest-numbered site's history is the one kept, so sites
+//! that all disagree still converge on one.
+//!
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
 //! touched the object though the copy had shown no contact when it first simulated them
 //! ([`Stats::unfelt_contact_ticks`]), and the other way round ([`Stats::phantom_contact_ticks`]).
@@ -34,7 +43,9 @@
 //! same platform gives the same bits; see the crate docs on transcendental functions).
 
 use crate::body::{BodyState, Vec3};
-use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::contact::{
+    tool_contact, ContactForce, ContactParams, EnvContactState, ToolContactState,
+};
 use crate::method::{integrate, Adoption, Consistency, ObjectCopy, Report, World, MAX_SITES};
 
 /// The quantum of a tool position on the wire and in the physics, m (0.01 mm).
@@ -88,6 +99,20 @@ pub fn position(q: Quantized) -> Vec3 {
     )
 }
 
+/// A site's full state at the start of one of its confirmed ticks: what a site whose confirmed
+/// history diverged from it adopts (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Snapshot {
+    /// The tick.
+    pub tick: i64,
+    /// The object.
+    pub state: BodyState,
+    /// The environment's friction memory.
+    pub env: EnvContactState,
+    /// Every tool's friction memory.
+    pub contacts: [ToolContactState; MAX_SITES],
+}
+
 /// What a timewarp site reports: its tool's recent positions, and its confirmed frontier's hash.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolReport {
@@ -104,6 +129,11 @@ pub struct ToolReport {
     /// Per site `j`: the first tick of `j`'s positions the sender lacks though it holds later
     /// ones (reports lost in a row for longer than the window), for `j` to send again; -1: none.
     pub need: [i64; MAX_SITES],
+    /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` below the sender), and
+    /// it asks `j` for [`ToolReport::state`].
+    pub need_state: u8,
+    /// The sender's state at `confirmed_tick`, sent while a higher-numbered site asks for it.
+    pub state: Option<Snapshot>,
 }
 
 impl ToolReport {
@@ -115,6 +145,8 @@ impl ToolReport {
         confirmed_tick: 0,
         confirmed_hash: 0,
         need: [-1; MAX_SITES],
+        need_state: 0,
+        state: None,
     };
 }
 
@@ -144,6 +176,9 @@ pub struct Stats {
     /// first simulated: contact the user was shown that the confirmed history took back (a
     /// prediction's).
     pub phantom_contact_ticks: u64,
+    /// Confirmed states adopted from a lower-numbered site whose confirmed history differed
+    /// (after a fallback): see the module docs.
+    pub adopted_states: u64,
 }
 
 /// One tick's record: the state at its start, and the inputs used in it.
@@ -184,6 +219,11 @@ pub struct TimeWarp {
     asked: [i64; MAX_SITES],
     /// Whether the last report repaired a gap (repairs alternate with the newest window).
     repaired_last: std::cell::Cell<bool>,
+    /// Per lower-numbered site: its confirmed state differed from ours at the last comparison, and
+    /// we ask it for that state.
+    want_state: [bool; MAX_SITES],
+    /// Per higher-numbered site: it asks for our confirmed state.
+    state_asked: [bool; MAX_SITES],
     contacts: [ToolContactState; MAX_SITES],
     /// The oldest tick a received position changed since the last rollback.
     dirty_from: Option<i64>,
@@ -228,6 +268,8 @@ impl TimeWarp {
             newest: [-1; MAX_SITES],
             asked: [-1; MAX_SITES],
             repaired_last: std::cell::Cell::new(false),
+            want_state: [false; MAX_SITES],
+            state_asked: [false; MAX_SITES],
             contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
@@ -461,6 +503,40 @@ impl TimeWarp {
         self.tallied_until = self.tallied_until.max(upto);
     }
 
+    /// Adopts the state `r` carries (its sender's at its confirmed frontier, which this site has
+    /// confirmed too) at that tick and re-simulates to now; `None` if it carries none, or one
+    /// that is not the state its hash names.
+    fn resync(&mut self, world: &World, copy: &mut ObjectCopy, r: &ToolReport) -> Option<Adoption> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let snap = r
+            .state
+            .filter(|s| s.tick == r.confirmed_tick && hash_state(&s.state) == r.confirmed_hash)?;
+        let i = self.idx(snap.tick);
+        if self.slots[i].tick != snap.tick {
+            return None;
+        }
+        let before = *copy;
+        self.slots[i].copy.state = snap.state;
+        self.slots[i].copy.env = snap.env;
+        self.slots[i].contacts = snap.contacts;
+        if snap.tick == self.now_tick {
+            copy.state = snap.state;
+            copy.env = snap.env;
+            self.contacts = snap.contacts;
+        } else {
+            self.rollback(world, copy, snap.tick);
+        }
+        self.stats.adopted_states += 1;
+        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        Some(Adoption {
+            jump: before.state.pos - copy.state.pos,
+            energy_j: e(&copy.state) - e(&before.state),
+            work_j: 0.0,
+            age_s: (self.now_tick - snap.tick) as f64 * self.dt,
+            clipped_j: 0.0,
+        })
+    }
+
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
     fn hash_at(&self, t: i64) -> Option<u64> {
         let s = &self.slots[self.idx(t)];
@@ -525,7 +601,22 @@ impl Consistency for TimeWarp {
             confirmed_tick: self.confirmed_tick(),
             confirmed_hash: 0,
             need: [-1; MAX_SITES],
+            need_state: 0,
+            state: None,
         };
+        for (j, &want) in self.want_state.iter().enumerate() {
+            r.need_state |= u8::from(want) << j;
+        }
+        if self.state_asked.iter().any(|&a| a) {
+            let t = r.confirmed_tick;
+            let s = &self.slots[self.idx(t)];
+            r.state = (s.tick == t).then_some(Snapshot {
+                tick: t,
+                state: s.copy.state,
+                env: s.copy.env,
+                contacts: s.contacts,
+            });
+        }
         for j in (0..self.sites).filter(|&j| j != self.me) {
             if self.newest[j] > self.known_until[j] {
                 r.need[j] = self.known_until[j] + 1;
@@ -552,6 +643,7 @@ impl Consistency for TimeWarp {
             return None;
         }
         self.asked[from] = r.need[self.me];
+        self.state_asked[from] = from > self.me && r.need_state & (1 << self.me) != 0;
         let oldest = self.oldest_kept();
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
             let t = r.first_tick + k as i64;
@@ -617,8 +709,22 @@ impl Consistency for TimeWarp {
         if r.confirmed_hash != 0 && r.confirmed_tick <= self.confirmed_tick() {
             if let Some(h) = self.hash_at(r.confirmed_tick) {
                 self.stats.hash_checks += 1;
-                if h != r.confirmed_hash {
-                    self.stats.hash_mismatches += 1;
+                let differs = h != r.confirmed_hash;
+                self.stats.hash_mismatches += u64::from(differs);
+                if from < self.me {
+                    self.want_state[from] = differs;
+                    if differs {
+                        if let Some(a) = self.resync(world, copy, r) {
+                            adoption = Some(adoption.map_or(a, |b| Adoption {
+                                jump: a.jump + b.jump,
+                                energy_j: a.energy_j + b.energy_j,
+                                work_j: a.work_j + b.work_j,
+                                age_s: a.age_s.max(b.age_s),
+                                clipped_j: 0.0,
+                            }));
+                            self.want_state[from] = false;
+                        }
+                    }
                 }
             }
         }
@@ -732,6 +838,7 @@ mod tests {
                     confirmed_tick: 0,
                     confirmed_hash: 0,
                     need: [-1; MAX_SITES],
+                    ..ToolReport::NONE
                 };
                 for j in 0..10 {
                     let t = (k - 40 + j) as f64 * 1e-3;
@@ -794,6 +901,7 @@ mod tests {
                         confirmed_tick: 0,
                         confirmed_hash: 0,
                         need: [-1; MAX_SITES],
+                        ..ToolReport::NONE
                     };
                     for t in r.first_tick..=first {
                         r.positions[r.count] = remote(t);
@@ -820,44 +928,29 @@ mod tests {
         );
     }
 
-    /// Two sites, 100 ticks apart, reporting every 20 ticks. Site 1's tool sweeps into the disk
-    /// while 400 ticks of its reports are lost (more than a report's window of 256): site 0 holds
-    /// later positions and not the gap's, so its frontier waits there and it asks for the gap
-    /// (`need`); site 1 sends the gap again and the confirmed states agree to the bit. Without the
-    /// request (the window alone) site 0 would confirm ticks simulated with a prediction of the
-    /// sweep, and every later hash would differ.
-    #[test]
-    fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
+    /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, for `ticks` ticks: site i's
+    /// tool at `tool(i, k)`, a report every 20 ticks arriving `delay` ticks later unless
+    /// `lost(from, k)`; `seen(i, report, k)` sees every report sent.
+    fn two_sites(
+        history: usize,
+        ticks: i64,
+        tool: impl Fn(usize, i64) -> Vec3,
+        delay: i64,
+        lost: impl Fn(usize, i64) -> bool,
+        mut seen: impl FnMut(usize, &ToolReport, i64, &[(TimeWarp, ObjectCopy); 2]),
+    ) -> [(TimeWarp, ObjectCopy); 2] {
         let (sc, w) = paper_world();
         let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut sites = [0, 1].map(|i| {
             (
-                TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 1000, &start),
+                TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start),
                 start,
             )
         });
-        // Site 0's tool rests left of the disk; site 1's sweeps from the right into its rim
-        // (x = 0.04) between ticks 900 and 1300, then back.
-        let tool = |i: usize, k: i64| {
-            let s = k as f64 * 1e-3;
-            let x = if i == 0 {
-                -0.06
-            } else if s < 0.9 {
-                0.08
-            } else if s < 1.3 {
-                0.08 - 0.1 * (s - 0.9)
-            } else {
-                (0.04 + 0.1 * (s - 1.3)).min(0.08)
-            };
-            Vec3::new(x, 0.0, 0.01)
-        };
-        let delay = 100;
-        let lost = |from: usize, k: i64| from == 1 && (1150..1550).contains(&k);
         let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
-        let mut asked = false;
-        for k in 0..3000i64 {
+        for k in 0..ticks {
             for (i, (tw, copy)) in sites.iter_mut().enumerate() {
                 for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
                     tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
@@ -867,10 +960,11 @@ mod tests {
             }
             in_flight.retain(|m| m.0 > k);
             if k % 20 == 0 {
-                for (i, (tw, copy)) in sites.iter().enumerate() {
+                for i in 0..2 {
+                    let (tw, copy) = &sites[i];
                     let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
                     if let Report::Tools(t) = &r {
-                        asked |= i == 0 && t.need[1] >= 0;
+                        seen(i, t, k, &sites);
                     }
                     if !lost(i, k) {
                         in_flight.push((k + delay, i, r));
@@ -878,9 +972,43 @@ mod tests {
                 }
             }
         }
+        sites
+    }
+
+    /// Site 1's tool sweeps from the right into the disk's rim (x = 0.04) between ticks 900 and
+    /// 1300, then back; site 0's rests left of the disk.
+    fn sweep_into_the_disk(i: usize, k: i64) -> Vec3 {
+        let s = k as f64 * 1e-3;
+        let x = match (i, s) {
+            (0, _) => -0.06,
+            (_, s) if s < 0.9 => 0.08,
+            (_, s) if s < 1.3 => 0.08 - 0.1 * (s - 0.9),
+            (_, s) => (0.04 + 0.1 * (s - 1.3)).min(0.08),
+        };
+        Vec3::new(x, 0.0, 0.01)
+    }
+
+    /// Two sites, 100 ticks apart, reporting every 20 ticks. Site 1's tool sweeps into the disk
+    /// while 400 ticks of its reports are lost (more than a report's window of 256): site 0 holds
+    /// later positions and not the gap's, so its frontier waits there and it asks for the gap
+    /// (`need`); site 1 sends the gap again and the confirmed states agree to the bit. Without the
+    /// request (the window alone) site 0 would confirm ticks simulated with a prediction of the
+    /// sweep, and every later hash would differ.
+    #[test]
+    fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
+        let start_x = 0.0;
+        let mut asked = false;
+        let sites = two_sites(
+            1000,
+            3000,
+            sweep_into_the_disk,
+            100,
+            |from, k| from == 1 && (1150..1550).contains(&k),
+            |i, t, _, _| asked |= i == 0 && t.need[1] >= 0,
+        );
         let [(a, _), (b, _)] = &sites;
         assert!(asked, "site 0 asked for the gap");
-        let moved = start.state.pos.x - sites[1].1.state.pos.x;
+        let moved = start_x - sites[1].1.state.pos.x;
         assert!(moved > 1e-3, "the sweep pushed the disk {moved} m");
         for (name, st) in [("site 0", a.stats()), ("site 1", b.stats())] {
             assert!(st.hash_checks > 50, "{name} compared: {st:?}");
@@ -892,6 +1020,55 @@ mod tests {
             b.confirmed_tick(),
             "both confirmed to the last report"
         );
+    }
+
+    /// A link down for longer than the history: site 0 never learns part of site 1's sweep into
+    /// the disk (a fallback), so their confirmed states differ; site 1 asks site 0 (the lower
+    /// number) for its state, adopts it, and from then on they agree again.
+    #[test]
+    fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
+        let mut asked = false;
+        let mut mismatches_at = [0u64; 2];
+        // Site 1 → site 0 is down for 1.2 s, twice the history.
+        let sites = two_sites(
+            600,
+            4000,
+            sweep_into_the_disk,
+            50,
+            |from, k| from == 1 && (1000..2200).contains(&k),
+            |i, t, k, sites| {
+                asked |= i == 1 && t.need_state == 1;
+                if k == 3000 {
+                    mismatches_at[i] = sites[i].0.stats().hash_mismatches;
+                }
+            },
+        );
+        let [(a, ca), (b, cb)] = &sites;
+        let (sa, sb) = (a.stats(), b.stats());
+        assert!(
+            sa.fallbacks > 0,
+            "site 0 lost part of site 1's sweep: {sa:?}"
+        );
+        assert!(
+            sa.hash_mismatches + sb.hash_mismatches > 0,
+            "the divergence was seen: {sa:?} {sb:?}"
+        );
+        assert!(asked, "site 1 asked site 0 for its state");
+        assert_eq!(
+            (sa.adopted_states, sb.adopted_states > 0),
+            (0, true),
+            "{sa:?} {sb:?}"
+        );
+        assert_eq!(
+            [sa.hash_mismatches, sb.hash_mismatches],
+            mismatches_at,
+            "no mismatch in the last second"
+        );
+        assert!(sb.hash_checks > mismatches_at[1] + 20, "{sb:?}");
+        let t = a.confirmed_tick().min(b.confirmed_tick());
+        assert!(t > 3900, "both confirmed to the last report: {t}");
+        assert_eq!(a.hash_at(t), b.hash_at(t));
+        assert_eq!(ca.state, cb.state, "the copies are the same bits");
     }
 
     #[test]

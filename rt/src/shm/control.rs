@@ -428,6 +428,8 @@ pub struct RollbackShared {
     pub hash_checks: AtomicU64,
     /// ... that differed: the sites' confirmed states are not the same bits.
     pub hash_mismatches: AtomicU64,
+    /// Confirmed states adopted from a lower-numbered site whose confirmed history differed.
+    pub adopted_states: AtomicU64,
     /// Remote tool tracks taken from the ring.
     pub tracks_received: AtomicU64,
     /// ... that did not convert (a foreign writer of the ring), or named this site.
@@ -525,7 +527,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v12";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v13";
 }
 
 impl ControlBlock {

@@ -154,10 +154,10 @@ enum Command {
 
 /// Per method and station, from the statuses read just before the end: physics overruns during
 /// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
-/// and a rolling-back method's rollbacks and hash checks.
+/// and a rolling-back method's rollbacks, hash checks and confirmed states adopted.
 fn print_station_loops(v: &serde_json::Value) {
     println!(
-        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>20}",
+        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}",
         "method",
         "site",
         "physics overruns",
@@ -167,6 +167,7 @@ fn print_station_loops(v: &serde_json::Value) {
         "fallbacks",
         "hash checks",
         "mismatches",
+        "adopted",
         "unfelt/phantom ticks"
     );
     for (m, r) in v["methods"].as_object().into_iter().flatten() {
@@ -189,7 +190,7 @@ fn print_station_loops(v: &serde_json::Value) {
                 }
             };
             println!(
-                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>20}",
+                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}",
                 or_dash(&live["overruns_during_session"]["physics"]),
                 or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
                 or_dash(&rb["rollbacks"]),
@@ -197,6 +198,7 @@ fn print_station_loops(v: &serde_json::Value) {
                 or_dash(&rb["fallbacks"]),
                 or_dash(&rb["hash_checks"]),
                 or_dash(&rb["hash_mismatches"]),
+                or_dash(&rb["adopted_states"]),
                 pair("unfelt_contact_ticks", "phantom_contact_ticks"),
             );
         }
