@@ -325,6 +325,8 @@ unsafe impl ShmPod for SiteReport {
 pub const TRACK_POSITION_WORDS: usize = WINDOW_TICKS * 3 / 2;
 /// The largest tick a track may name: 2⁴⁰ ticks are 35 years at 1 kHz (a larger one is garbage).
 pub const MAX_TRACK_TICK: u64 = 1 << 40;
+/// The most restarts a track may name (a larger count is garbage).
+pub const MAX_INCARNATION: u64 = 1 << 32;
 /// The largest magnitude of a quantized coordinate ([`coop_model::timewarp::quantize`]'s clamp).
 pub const MAX_QUANTIZED: i64 = 2_000_000_000;
 
@@ -332,7 +334,7 @@ pod_message! {
     /// What a `timewarp` site reports besides (instead of) a state: its own tool's quantized
     /// positions at the last ticks of the session's tick grid, and its confirmed frontier with the
     /// hash of its state there (the model's [`ToolReport`] in a fixed layout). Physics → network
-    /// (own), network → physics (remote). 3 656 bytes, copied, never boxed.
+    /// (own), network → physics (remote). 3 664 bytes, copied, never boxed.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ToolTrack {
         /// Sender's time of the report, ns (CLOCK_MONOTONIC of the sender).
@@ -352,9 +354,12 @@ pod_message! {
         /// Per site `j`, 1 + the first tick of `j`'s positions the sender lacks though it holds
         /// later ones (reports lost for longer than the window), for `j` to send again; 0: none.
         pub need: [u64; MAX_SITES],
-        /// Bit `j`: the sender's confirmed state differs from site `j`'s (below the sender), and it
-        /// asks `j` for its state (the `state_*` words); bits 8 and up are 0.
+        /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender),
+        /// and it asks `j` for its state (the `state_*` words); bits 8 and up are 0.
         pub need_state: u64,
+        /// How often the sender's physics restarted (0: never); sites are ordered by it, then by
+        /// index, and adopt the state of one before them. At most 2³².
+        pub incarnation: u64,
         /// 1: the `state_*` words hold the sender's state at the start of `confirmed_tick`, sent
         /// while a site asks for it; 0: they are all 0.
         pub has_state: u64,
@@ -373,8 +378,8 @@ pod_message! {
         pub positions: [u64; TRACK_POSITION_WORDS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3656);
-// SAFETY: repr(C), only u64 and f64 fields and arrays of them (3656 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3664);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (3664 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for ToolTrack {
     const TYPE_NAME: &'static str = "coop.ToolTrack.v3";
@@ -392,6 +397,7 @@ impl Default for ToolTrack {
             confirmed_hash: 0,
             need: [0; MAX_SITES],
             need_state: 0,
+            incarnation: 0,
             has_state: 0,
             state_body: [0.0; 13],
             state_anchors: 0,
@@ -417,6 +423,7 @@ impl ToolTrack {
             confirmed_hash: r.confirmed_hash,
             need: r.need.map(|t| if t < 0 { 0 } else { t as u64 + 1 }),
             need_state: u64::from(r.need_state),
+            incarnation: r.incarnation,
             ..Self::default()
         };
         if let Some(snap) = r.state.filter(|s| s.tick == r.confirmed_tick) {
@@ -473,6 +480,7 @@ impl ToolTrack {
             .all(|&n| n <= MAX_TRACK_TICK)
             .then_some(())?;
         let need_state = u8::try_from(self.need_state).ok()?;
+        (self.incarnation <= MAX_INCARNATION).then_some(())?;
         let state = self.snapshot()?;
         let used = 3 * count;
         for c in 0..3 * WINDOW_TICKS {
@@ -489,6 +497,7 @@ impl ToolTrack {
             confirmed_hash: self.confirmed_hash,
             need: self.need.map(|n| n as i64 - 1),
             need_state,
+            incarnation: self.incarnation,
             state,
         };
         for (k, p) in r.positions[..count].iter_mut().enumerate() {
@@ -1050,6 +1059,11 @@ mod tests {
             "frontier ahead"
         );
         assert!(
+            bad(&|b| b.incarnation = MAX_INCARNATION + 1).is_none(),
+            "restarts"
+        );
+        assert!(bad(&|b| b.need_state = 256).is_none(), "need_state");
+        assert!(
             bad(&|b| b.positions[0] = u64::from(i32::MIN as u32)).is_none(),
             "range"
         );
@@ -1061,6 +1075,6 @@ mod tests {
             bad(&|b| b.count = 2).is_none(),
             "a dropped position is unused, not zero"
         );
-        assert_eq!(ToolTrack::WORDS * 8, 3656);
+        assert_eq!(ToolTrack::WORDS * 8, 3664);
     }
 }

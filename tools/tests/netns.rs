@@ -140,10 +140,10 @@ fn partition_scenario() -> String {
     )
 }
 
-/// The partition tests' two stations, user 1 in `ns.names[0]` (listening on 192.0.2.1) and user 2
-/// in `ns.names[1]` (connecting to it), in session `session`, on [`partition_scenario`] (written to
-/// `dir`, with their recordings), running `method` (`None`: the scenario's) for `duration_s`.
-fn start_partition_pair(
+/// Two stations, user 1 in `ns.names[0]` (listening on 192.0.2.1) and user 2 in `ns.names[1]`
+/// (connecting to it), in session `session`, on [`partition_scenario`] (written to `dir`, with
+/// their recordings), running `method` (`None`: the scenario's) for `duration_s`.
+fn start_pair(
     ns: &Namespaces,
     dir: &std::path::Path,
     session: &str,
@@ -209,7 +209,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     };
     let dir = std::env::temp_dir().join(format!("coop-partition-{pid}"));
     let session = format!("np{pid}");
-    let (mut sa, mut sb) = start_partition_pair(&ns, &dir, &session, None, 18);
+    let (mut sa, mut sb) = start_pair(&ns, &dir, &session, None, 18);
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
     let limit = Duration::from_secs(60);
@@ -299,6 +299,67 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+type Rollback = coop_actors::station::status::RollbackStatus;
+
+/// After one of two stations adopted the other's confirmed state: once each has made `settle`
+/// more comparisons (the tracks in flight that still name the old history), 40 more at each with
+/// no mismatch. Returns both stations' figures then.
+fn agree_after_adopting(
+    rollback: impl Fn(&str) -> Option<Rollback>,
+    settle: u64,
+    limit: Duration,
+) -> (Rollback, Rollback) {
+    let both = || Some((rollback("user1")?, rollback("user2")?));
+    let now = wait_until("both stations' status", limit, both);
+    let more = |base: &(Rollback, Rollback), n: u64| {
+        let (x, y) = both()?;
+        (x.hash_checks >= base.0.hash_checks + n && y.hash_checks >= base.1.hash_checks + n)
+            .then_some((x, y))
+    };
+    let settled = wait_until("the comparisons of the tracks in flight", limit, || {
+        more(&now, settle)
+    });
+    let after = wait_until("40 more comparisons at each", limit, || more(&settled, 40));
+    assert_eq!(
+        (after.0.hash_mismatches, after.1.hash_mismatches),
+        (settled.0.hash_mismatches, settled.1.hash_mismatches),
+        "no mismatch after the adoption: {} / {}",
+        after.0,
+        after.1
+    );
+    after
+}
+
+/// Once both stations stopped (cleanly): where their recorded copies ended, which must be within
+/// 0.1 mm of each other.
+fn copies_end_together(
+    stations: [&mut Reaped; 2],
+    dir: &std::path::Path,
+    limit: Duration,
+) -> ([f64; 3], [f64; 3]) {
+    for s in stations {
+        let st = s
+            .wait_timeout(limit)
+            .expect("stopped at the end of its duration");
+        assert!(st.success(), "a station stopped cleanly: {st}");
+    }
+    let last = |me: &str| {
+        coop_transport::recording::read(&dir.join(format!("{me}.mcap")))
+            .expect("recording")
+            .samples
+            .last()
+            .expect("samples")
+            .pos
+    };
+    let (pa, pb) = (last("user1"), last("user2"));
+    let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
+    assert!(
+        apart < 1e-4,
+        "the copies ended {apart} m apart: {pa:?} vs {pb:?}"
+    );
+    (pa, pb)
+}
+
 /// The same 5 s partition under `timewarp`: longer than the history, so the station that never
 /// learnt user 1's push made during it (user 2) confirms a history without it, and the stations'
 /// confirmed states differ. User 2's station asks user 1's (the lower number) for its confirmed
@@ -317,7 +378,7 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
     };
     let dir = std::env::temp_dir().join(format!("coop-heal-{pid}"));
     let session = format!("nh{pid}");
-    let (mut sa, mut sb) = start_partition_pair(
+    let (mut sa, mut sb) = start_pair(
         &ns,
         &dir,
         &session,
@@ -356,53 +417,98 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
         healed.hash_mismatches > 0,
         "the confirmed states differed first: {healed}"
     );
-    // User 2's tracks sent before it adopted still name its old history: once those are in,
-    // 40 more comparisons at each station, none of them a mismatch.
-    let c1 = rollback("user1").expect("status").hash_checks;
-    let settled = wait_until(
-        "user 1's comparisons of the tracks in flight",
-        limit,
-        || {
-            let (x, y) = (rollback("user1")?, rollback("user2")?);
-            (x.hash_checks >= c1 + 5).then_some((x, y))
-        },
-    );
-    let after = wait_until("40 more comparisons at each", limit, || {
-        let (x, y) = (rollback("user1")?, rollback("user2")?);
-        (x.hash_checks >= settled.0.hash_checks + 40 && y.hash_checks >= settled.1.hash_checks + 40)
-            .then_some((x, y))
-    });
-    assert_eq!(
-        (after.0.hash_mismatches, after.1.hash_mismatches),
-        (settled.0.hash_mismatches, settled.1.hash_mismatches),
-        "no mismatch after the adoption: {} / {}",
-        after.0,
-        after.1
-    );
+    // User 2's tracks sent before it adopted still name its old history.
+    let after = agree_after_adopting(rollback, 5, limit);
     assert_eq!(
         after.0.adopted_states, 0,
         "user 1 (the lowest) adopts nothing"
     );
     eprintln!("healed: user1 {}\nhealed: user2 {}", after.0, after.1);
-    for s in [&mut sa, &mut sb] {
-        let st = s
-            .wait_timeout(limit)
-            .expect("stopped at the end of its duration");
-        assert!(st.success(), "a station stopped cleanly: {st}");
-    }
-    let rec = |me: &str| {
-        coop_transport::recording::read(&dir.join(format!("{me}.mcap"))).expect("recording")
-    };
-    let last = |r: &coop_transport::recording::Recording| r.samples.last().expect("samples").pos;
-    let (pa, pb) = (last(&rec("user1")), last(&rec("user2")));
-    let apart = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt();
+    let (pa, _) = copies_end_together([&mut sa, &mut sb], &dir, limit);
     assert!(
         pa[0] > 0.095,
         "user1's second push moved the disk on from x = 0.089 m: {pa:?}"
     );
+    drop(ns);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A physics process killed mid-session under `timewarp`: the supervisor restarts it, and it
+/// rebuilds its history from tick 0 without the inputs it had taken (user 1's push is gone from
+/// it). It is the restarted one (`incarnation` 1) that yields: user 1's station adopts user 2's
+/// confirmed state, never the other way round, and both copies end where the push put the disk.
+/// (With sites ordered by index alone, user 2 would have adopted the rebuilt history and the disk
+/// would have jumped back to its start.)
+#[test]
+fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
+    let pid = std::process::id();
+    let tag = format!("{pid}r");
+    let ns = match setup(&tag) {
+        Ok(ns) => ns,
+        Err(why) => {
+            eprintln!("SKIPPED a_restarted_timewarp_physics_adopts_the_others_confirmed_state: ip netns is not permitted here ({why})");
+            return;
+        }
+    };
+    let dir = std::env::temp_dir().join(format!("coop-restart-{pid}"));
+    let session = format!("nr{pid}");
+    let (mut sa, mut sb) = start_pair(
+        &ns,
+        &dir,
+        &session,
+        Some(coop_model::scenario::MethodName::Timewarp),
+        16,
+    );
+    let sites = ["user1".to_owned(), "user2".to_owned()];
+    let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
+    let rollback = |me: &str| status(me).and_then(|s| s.physics.rollback);
+    let limit = Duration::from_secs(60);
+    // After user 1's first push (0.5-1.4 s: the disk slides to x = 0.089 m) and before its second.
+    let physics = wait_until("the first push over, both comparing", limit, || {
+        let (x, y) = (rollback("user1")?, rollback("user2")?);
+        let s = status("user1")?;
+        let p = s.children.iter().find(|c| c.name == "physics")?.pid;
+        (x.ticks > 3000 && x.hash_checks > 20 && y.hash_checks > 20).then_some(p)
+    });
     assert!(
-        apart < 1e-4,
-        "the copies ended {apart} m apart: {pa:?} vs {pb:?}"
+        rollback("user1").is_some_and(|x| x.ticks < 5000),
+        "killed before the second push (6 s)"
+    );
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(physics as i32),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .expect("SIGKILL user 1's physics");
+    let healed = wait_until(
+        "user 1's restarted physics to adopt user 2's state",
+        limit,
+        || {
+            let x = rollback("user1")?;
+            (x.adopted_states > 0).then_some(x)
+        },
+    );
+    assert!(
+        status("user1").is_some_and(|s| s
+            .children
+            .iter()
+            .any(|c| c.name == "physics" && c.restarts > 0)),
+        "the supervisor restarted user 1's physics"
+    );
+    // Then they agree, and user 2 adopted nothing.
+    let after = agree_after_adopting(rollback, 5, limit);
+    assert_eq!(
+        after.1.adopted_states, 0,
+        "user 2 adopted nothing: {}",
+        after.1
+    );
+    eprintln!(
+        "restart healed: user1 {}\nrestart healed: user2 {}",
+        after.0, after.1
+    );
+    let (pa, pb) = copies_end_together([&mut sa, &mut sb], &dir, limit);
+    assert!(
+        pa[0] > 0.05 && pb[0] > 0.05,
+        "the disk stayed where user 1's pushes put it: {pa:?} {pb:?} ({healed})"
     );
     drop(ns);
     let _ = std::fs::remove_dir_all(&dir);

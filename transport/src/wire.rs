@@ -38,7 +38,7 @@ pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
 pub const TRACK_VERSION: u8 = 4;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (4, 0xd6c6c2436f903f19);
+pub const TRACK_PINNED: (u8, u64) = (4, 0x62f4320376a44081);
 /// Bytes of an encoded tool track.
 pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
@@ -372,23 +372,24 @@ mod tests {
         let t = ToolTrack::new(1, 3, 99, &r);
         let bytes = encode_track(&t);
         assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
-        assert_eq!(TRACK_ENCODED_LEN, 3657, "docs/wire.md says 3657 bytes");
+        assert_eq!(TRACK_ENCODED_LEN, 3665, "docs/wire.md says 3665 bytes");
         assert_eq!(bytes[0], 4);
         // Where docs/wire.md puts them: site in word 2, `need` of site 0 (1 + the tick) in word 7,
-        // none (0) for site 1 in word 8, no state (word 16), the first x in the low half of
-        // word 73.
+        // none (0) for site 1 in word 8, no state (word 17), the first x in the low half of
+        // word 74.
         assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
         assert_eq!(&bytes[1 + 56..1 + 64], 471u64.to_le_bytes());
         assert_eq!(&bytes[1 + 64..1 + 72], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 128..1 + 136], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 584..1 + 588], (-4500i32).to_le_bytes());
+        assert_eq!(&bytes[1 + 136..1 + 144], 0u64.to_le_bytes());
+        assert_eq!(&bytes[1 + 592..1 + 596], (-4500i32).to_le_bytes());
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
             Some(coop_model::method::Report::Tools(r))
         );
-        // A confirmed state, asked for by site 1 (bit 1 of `need_state`, word 15), goes to the bit:
-        // the adopting site hashes it to the sender's `confirmed_hash`.
+        // A confirmed state, asked for by site 1 (bit 1 of `need_state`, word 15) from a sender
+        // restarted 3 times (word 16), goes to the bit: the adopting site hashes it to the
+        // sender's `confirmed_hash`.
         let mut body =
             coop_model::body::BodyState::at_rest(coop_model::body::Vec3::new(0.01, -0.02, 0.01));
         body.rot = nalgebra::UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
@@ -408,6 +409,7 @@ mod tests {
         };
         let with_state = ToolReport {
             need_state: 0b10,
+            incarnation: 3,
             state: Some(snap),
             confirmed_hash: coop_model::timewarp::hash_state(&body),
             ..r
@@ -415,7 +417,8 @@ mod tests {
         let ts = ToolTrack::new(1, 4, 99, &with_state);
         let bs = encode_track(&ts);
         assert_eq!(&bs[1 + 120..1 + 128], 2u64.to_le_bytes());
-        assert_eq!(&bs[1 + 128..1 + 136], 1u64.to_le_bytes());
+        assert_eq!(&bs[1 + 128..1 + 136], 3u64.to_le_bytes());
+        assert_eq!(&bs[1 + 136..1 + 144], 1u64.to_le_bytes());
         assert_eq!(
             decode_track(&bs)
                 .ok()

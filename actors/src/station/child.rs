@@ -213,7 +213,13 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
         // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
         // the confirmed state is the same bits everywhere only from the same start.
-        MethodName::Timewarp => Box::new(sc.timewarp(i, &ObjectCopy::new(start))),
+        // A restarted one rebuilt its history without what it missed: it yields (see
+        // `coop_model::timewarp`'s docs on healing).
+        MethodName::Timewarp => {
+            let mut tw = sc.timewarp(i, &ObjectCopy::new(start));
+            tw.set_incarnation(ctl.physics.starts.fetch_add(1, Ordering::Relaxed));
+            Box::new(tw)
+        }
         MethodName::Coupled => Box::new(sc.coupled(i)),
     };
     let step = period(sc.site[i].physics_rate_hz);

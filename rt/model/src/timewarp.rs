@@ -22,12 +22,14 @@
 //! [`Stats::hash_mismatches`]), so a divergence of confirmed state is never silent.
 //!
 //! A divergence heals: confirmed states differ only where a site never knew an input (a link down
-//! for longer than the horizon: a fallback), and then no rollback can repair them. A site whose
-//! confirmed state differs from a lower-numbered site's asks it for its state
-//! ([`ToolReport::need_state`]); that site sends its full confirmed state ([`Snapshot`]: body,
-//! momenta, every friction memory) with its reports while asked, and the asking site adopts it at
-//! that tick and re-simulates to now ([`Stats::adopted_states`]): the paper's adoption of a received
-//! state, at the confirmed frontier. The lowest-numbered site's history is the one kept, so sites
+//! for longer than the horizon: a fallback; a restarted physics, which rebuilt its history without
+//! what it had missed), and then no rollback can repair them. A site whose confirmed state differs
+//! from that of a site *before* it asks that site for its state ([`ToolReport::need_state`]); that
+//! site sends its full confirmed state ([`Snapshot`]: body, momenta, every friction memory) with
+//! its reports while asked, and the asking site adopts it at that tick and re-simulates to now
+//! ([`Stats::adopted_states`]): the paper's adoption of a received state, at the confirmed
+//! frontier. Sites are ordered by how often their physics restarted ([`ToolReport::incarnation`]:
+//! a restarted one yields), then by number; the first site's history is the one kept, so sites
 //! that all disagree still converge on one.
 //!
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
@@ -129,10 +131,13 @@ pub struct ToolReport {
     /// Per site `j`: the first tick of `j`'s positions the sender lacks though it holds later
     /// ones (reports lost in a row for longer than the window), for `j` to send again; -1: none.
     pub need: [i64; MAX_SITES],
-    /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` below the sender), and
+    /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender), and
     /// it asks `j` for [`ToolReport::state`].
     pub need_state: u8,
-    /// The sender's state at `confirmed_tick`, sent while a higher-numbered site asks for it.
+    /// How often the sender's physics restarted (0: never). Sites are ordered by it, then by
+    /// number: a site adopts the confirmed state of one before it (see the module docs).
+    pub incarnation: u64,
+    /// The sender's state at `confirmed_tick`, sent while a site after it asks for it.
     pub state: Option<Snapshot>,
 }
 
@@ -146,6 +151,7 @@ impl ToolReport {
         confirmed_hash: 0,
         need: [-1; MAX_SITES],
         need_state: 0,
+        incarnation: 0,
         state: None,
     };
 }
@@ -176,8 +182,8 @@ pub struct Stats {
     /// first simulated: contact the user was shown that the confirmed history took back (a
     /// prediction's).
     pub phantom_contact_ticks: u64,
-    /// Confirmed states adopted from a lower-numbered site whose confirmed history differed
-    /// (after a fallback): see the module docs.
+    /// Confirmed states adopted from a site before this one whose confirmed history differed
+    /// (after a fallback or a restart): see the module docs.
     pub adopted_states: u64,
 }
 
@@ -219,11 +225,13 @@ pub struct TimeWarp {
     asked: [i64; MAX_SITES],
     /// Whether the last report repaired a gap (repairs alternate with the newest window).
     repaired_last: std::cell::Cell<bool>,
-    /// Per lower-numbered site: its confirmed state differed from ours at the last comparison, and
-    /// we ask it for that state.
+    /// Per site before this one: its confirmed state differed from ours at the last comparison,
+    /// and we ask it for that state.
     want_state: [bool; MAX_SITES],
-    /// Per higher-numbered site: it asks for our confirmed state.
+    /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
+    /// How often this site's physics restarted ([`ToolReport::incarnation`]).
+    incarnation: u64,
     contacts: [ToolContactState; MAX_SITES],
     /// The oldest tick a received position changed since the last rollback.
     dirty_from: Option<i64>,
@@ -270,12 +278,19 @@ impl TimeWarp {
             repaired_last: std::cell::Cell::new(false),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
+            incarnation: 0,
             contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
             stats: Stats::default(),
             tallied_until: 0,
         }
+    }
+
+    /// This site's physics restarted `n` times before this one: it yields to the sites that did
+    /// not (see the module docs).
+    pub fn set_incarnation(&mut self, n: u64) {
+        self.incarnation = n;
     }
 
     /// What it did so far.
@@ -602,6 +617,7 @@ impl Consistency for TimeWarp {
             confirmed_hash: 0,
             need: [-1; MAX_SITES],
             need_state: 0,
+            incarnation: self.incarnation,
             state: None,
         };
         for (j, &want) in self.want_state.iter().enumerate() {
@@ -643,7 +659,7 @@ impl Consistency for TimeWarp {
             return None;
         }
         self.asked[from] = r.need[self.me];
-        self.state_asked[from] = from > self.me && r.need_state & (1 << self.me) != 0;
+        self.state_asked[from] = r.need_state & (1 << self.me) != 0;
         let oldest = self.oldest_kept();
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
             let t = r.first_tick + k as i64;
@@ -711,7 +727,7 @@ impl Consistency for TimeWarp {
                 self.stats.hash_checks += 1;
                 let differs = h != r.confirmed_hash;
                 self.stats.hash_mismatches += u64::from(differs);
-                if from < self.me {
+                if (r.incarnation, from) < (self.incarnation, self.me) {
                     self.want_state[from] = differs;
                     if differs {
                         if let Some(a) = self.resync(world, copy, r) {
@@ -928,11 +944,14 @@ mod tests {
         );
     }
 
-    /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, for `ticks` ticks: site i's
-    /// tool at `tool(i, k)`, a report every 20 ticks arriving `delay` ticks later unless
-    /// `lost(from, k)`; `seen(i, report, k)` sees every report sent.
+    /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics restarted
+    /// `incarnation[i]` times, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
+    /// ticks arriving `delay` ticks later unless `lost(from, k)`; `seen(i, report, k)` sees every
+    /// report sent.
+    #[allow(clippy::too_many_arguments)]
     fn two_sites(
         history: usize,
+        incarnation: [u64; 2],
         ticks: i64,
         tool: impl Fn(usize, i64) -> Vec3,
         delay: i64,
@@ -944,10 +963,9 @@ mod tests {
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut sites = [0, 1].map(|i| {
-            (
-                TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start),
-                start,
-            )
+            let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start);
+            tw.set_incarnation(incarnation[i]);
+            (tw, start)
         });
         let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
         for k in 0..ticks {
@@ -1000,6 +1018,7 @@ mod tests {
         let mut asked = false;
         let sites = two_sites(
             1000,
+            [0, 0],
             3000,
             sweep_into_the_disk,
             100,
@@ -1024,51 +1043,57 @@ mod tests {
 
     /// A link down for longer than the history: site 0 never learns part of site 1's sweep into
     /// the disk (a fallback), so their confirmed states differ; site 1 asks site 0 (the lower
-    /// number) for its state, adopts it, and from then on they agree again.
+    /// number) for its state, adopts it, and from then on they agree again. A site whose physics
+    /// restarted comes after one whose did not: then site 0 adopts site 1's.
     #[test]
     fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
-        let mut asked = false;
-        let mut mismatches_at = [0u64; 2];
-        // Site 1 → site 0 is down for 1.2 s, twice the history.
-        let sites = two_sites(
-            600,
-            4000,
-            sweep_into_the_disk,
-            50,
-            |from, k| from == 1 && (1000..2200).contains(&k),
-            |i, t, k, sites| {
-                asked |= i == 1 && t.need_state == 1;
-                if k == 3000 {
-                    mismatches_at[i] = sites[i].0.stats().hash_mismatches;
-                }
-            },
-        );
-        let [(a, ca), (b, cb)] = &sites;
-        let (sa, sb) = (a.stats(), b.stats());
-        assert!(
-            sa.fallbacks > 0,
-            "site 0 lost part of site 1's sweep: {sa:?}"
-        );
-        assert!(
-            sa.hash_mismatches + sb.hash_mismatches > 0,
-            "the divergence was seen: {sa:?} {sb:?}"
-        );
-        assert!(asked, "site 1 asked site 0 for its state");
-        assert_eq!(
-            (sa.adopted_states, sb.adopted_states > 0),
-            (0, true),
-            "{sa:?} {sb:?}"
-        );
-        assert_eq!(
-            [sa.hash_mismatches, sb.hash_mismatches],
-            mismatches_at,
-            "no mismatch in the last second"
-        );
-        assert!(sb.hash_checks > mismatches_at[1] + 20, "{sb:?}");
-        let t = a.confirmed_tick().min(b.confirmed_tick());
-        assert!(t > 3900, "both confirmed to the last report: {t}");
-        assert_eq!(a.hash_at(t), b.hash_at(t));
-        assert_eq!(ca.state, cb.state, "the copies are the same bits");
+        // Site 1 adopts site 0's state; with site 0's physics restarted once, the other way round.
+        for (incarnation, adopter) in [([0, 0], 1), ([1, 0], 0)] {
+            let mut asked = false;
+            let mut mismatches_at = [0u64; 2];
+            // Site 1 → site 0 is down for 1.2 s, twice the history.
+            let sites = two_sites(
+                600,
+                incarnation,
+                4000,
+                sweep_into_the_disk,
+                50,
+                |from, k| from == 1 && (1000..2200).contains(&k),
+                |i, t, k, sites| {
+                    asked |= i == adopter && t.need_state == 1 << (1 - adopter);
+                    if k == 3000 {
+                        mismatches_at[i] = sites[i].0.stats().hash_mismatches;
+                    }
+                },
+            );
+            let [(a, ca), (b, cb)] = &sites;
+            let st = [a.stats(), b.stats()];
+            let why = format!("{incarnation:?}: {:?} {:?}", st[0], st[1]);
+            assert!(
+                st[0].fallbacks > 0,
+                "site 0 lost part of site 1's sweep: {why}"
+            );
+            assert!(
+                st[0].hash_mismatches + st[1].hash_mismatches > 0,
+                "the divergence was seen: {why}"
+            );
+            assert!(asked, "site {adopter} asked the other for its state: {why}");
+            assert!(st[adopter].adopted_states > 0, "{why}");
+            assert_eq!(st[1 - adopter].adopted_states, 0, "{why}");
+            assert_eq!(
+                [st[0].hash_mismatches, st[1].hash_mismatches],
+                mismatches_at,
+                "no mismatch in the last second: {why}"
+            );
+            assert!(st[1].hash_checks > mismatches_at[1] + 20, "{why}");
+            let t = a.confirmed_tick().min(b.confirmed_tick());
+            assert!(t > 3900, "both confirmed to the last report: {t}");
+            assert_eq!(a.hash_at(t), b.hash_at(t));
+            assert_eq!(ca.state, cb.state, "the copies are the same bits");
+            // Who adopted decides where the disk is: with site 0's state it was never swept.
+            let swept = ca.state.pos.x < -1e-3;
+            assert_eq!(swept, adopter == 0, "{:?}", ca.state.pos);
+        }
     }
 
     #[test]
