@@ -325,8 +325,6 @@ unsafe impl ShmPod for SiteReport {
 pub const TRACK_POSITION_WORDS: usize = WINDOW_TICKS * 3 / 2;
 /// The largest tick a track may name: 2⁴⁰ ticks are 35 years at 1 kHz (a larger one is garbage).
 pub const MAX_TRACK_TICK: u64 = 1 << 40;
-/// The most restarts a track may name (a larger count is garbage).
-pub const MAX_INCARNATION: u64 = 1 << 32;
 /// The largest magnitude of a quantized coordinate ([`coop_model::timewarp::quantize`]'s clamp).
 pub const MAX_QUANTIZED: i64 = 2_000_000_000;
 
@@ -357,9 +355,9 @@ pod_message! {
         /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender),
         /// and it asks `j` for its state (the `state_*` words); bits 8 and up are 0.
         pub need_state: u64,
-        /// How often the sender's physics restarted (0: never); sites are ordered by it, then by
-        /// index, and adopt the state of one before them. At most 2³².
-        pub incarnation: u64,
+        /// The session tick at which the sender's physics process started (0: from the session's
+        /// start); sites are ordered by it, then by index, and adopt the state of one before them.
+        pub started_tick: u64,
         /// 1: the `state_*` words hold the sender's state at the start of `confirmed_tick`, sent
         /// while a site asks for it; 0: they are all 0.
         pub has_state: u64,
@@ -397,7 +395,7 @@ impl Default for ToolTrack {
             confirmed_hash: 0,
             need: [0; MAX_SITES],
             need_state: 0,
-            incarnation: 0,
+            started_tick: 0,
             has_state: 0,
             state_body: [0.0; 13],
             state_anchors: 0,
@@ -423,7 +421,7 @@ impl ToolTrack {
             confirmed_hash: r.confirmed_hash,
             need: r.need.map(|t| if t < 0 { 0 } else { t as u64 + 1 }),
             need_state: u64::from(r.need_state),
-            incarnation: r.incarnation,
+            started_tick: r.started_tick,
             ..Self::default()
         };
         if let Some(snap) = r.state.filter(|s| s.tick == r.confirmed_tick) {
@@ -463,9 +461,12 @@ impl ToolTrack {
     }
 
     /// The sender and the model's report, or `None` for a site out of range, more than
-    /// [`WINDOW_TICKS`] positions, a tick (or one asked for) beyond [`MAX_TRACK_TICK`], a confirmed frontier past the
-    /// last tick sent (a sender cannot know inputs of ticks it has not simulated), a coordinate
-    /// beyond [`MAX_QUANTIZED`], or a nonzero unused coordinate. The one validation of a track:
+    /// [`WINDOW_TICKS`] positions, a tick (or one asked for) beyond [`MAX_TRACK_TICK`], a confirmed
+    /// frontier past the last tick sent, a coordinate beyond [`MAX_QUANTIZED`], a nonzero unused
+    /// coordinate, or a carried state that is not one. (The frontier rule also refuses a track
+    /// that repairs a receiver's gap once the sender's frontier has passed the repaired window:
+    /// see the issue note; relaxed, such repairs re-simulate a whole history at every other
+    /// report.) The one validation of a track:
     /// the wire's decode and physics' ring → model conversion both apply it (see
     /// [`SiteReport::report`] for why both).
     pub fn report(&self) -> Option<(usize, Report)> {
@@ -480,7 +481,7 @@ impl ToolTrack {
             .all(|&n| n <= MAX_TRACK_TICK)
             .then_some(())?;
         let need_state = u8::try_from(self.need_state).ok()?;
-        (self.incarnation <= MAX_INCARNATION).then_some(())?;
+        (self.started_tick <= MAX_TRACK_TICK).then_some(())?;
         let state = self.snapshot()?;
         let used = 3 * count;
         for c in 0..3 * WINDOW_TICKS {
@@ -497,7 +498,7 @@ impl ToolTrack {
             confirmed_hash: self.confirmed_hash,
             need: self.need.map(|n| n as i64 - 1),
             need_state,
-            incarnation: self.incarnation,
+            started_tick: self.started_tick,
             state,
         };
         for (k, p) in r.positions[..count].iter_mut().enumerate() {
@@ -1059,8 +1060,8 @@ mod tests {
             "frontier ahead"
         );
         assert!(
-            bad(&|b| b.incarnation = MAX_INCARNATION + 1).is_none(),
-            "restarts"
+            bad(&|b| b.started_tick = MAX_TRACK_TICK + 1).is_none(),
+            "start tick"
         );
         assert!(bad(&|b| b.need_state = 256).is_none(), "need_state");
         assert!(

@@ -8,6 +8,11 @@ use std::time::Duration;
 
 use coop_tests::{ip, station_config, wait_until, Namespaces, Reaped, StationConfig};
 
+/// The tests run one pair of stations at a time: two pairs of debug-build stations (a `timewarp`
+/// one re-simulating hundreds of ticks per rollback) overload a 2-core machine together, and one
+/// pair's stations then never reached the session's time 0 within a minute.
+static ONE_PAIR_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Two namespaces `coopA<tag>`, `coopB<tag>` joined by veth `cva<tag>`–`cvb<tag>` (tests running at
 /// once use different tags).
 fn setup(tag: &str) -> Result<Namespaces, String> {
@@ -31,6 +36,7 @@ fn setup(tag: &str) -> Result<Namespaces, String> {
 
 #[test]
 fn two_stations_in_separate_network_namespaces_talk_over_tcp() {
+    let _one = ONE_PAIR_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let pid = std::process::id();
     let ns = match setup(&format!("{pid}t")) {
         Ok(ns) => ns,
@@ -115,9 +121,9 @@ fn two_stations_in_separate_network_namespaces_talk_over_tcp() {
 }
 
 /// The partition tests' task: user 1 pushes the disk before the partition (0.5 s) and again
-/// during it (6 s: the first push slid it to x = 0.089 m, out of user 2's way, and the second
-/// reaches it there); user 2 stays away. 16 s.
-fn partition_scenario() -> String {
+/// during it (at `second_s`: the first push slid it to x = 0.089 m, out of user 2's way, and the
+/// second reaches it there); user 2 stays away. `second_s` + 10 s long.
+fn partition_scenario(second_s: f64) -> String {
     let push = |t: f64| {
         format!(
             "{{ t_s = {a}, target_m = [-0.20, 0.0, 0.01] }}, {{ t_s = {b}, target_m = [{x}, 0.0, 0.01] }}, \
@@ -130,28 +136,29 @@ fn partition_scenario() -> String {
     };
     coop_tests::paper_with_scripts(
         "partition",
-        16.0,
+        second_s + 10.0,
         &format!(
             "[{{ t_s = 0.0, target_m = [-0.20, 0.0, 0.01] }}, {}, {}]",
             push(0.5),
-            push(6.0)
+            push(second_s)
         ),
         "[{ t_s = 0.0, target_m = [0.20, -0.10, 0.01] }]",
     )
 }
 
 /// Two stations, user 1 in `ns.names[0]` (listening on 192.0.2.1) and user 2 in `ns.names[1]`
-/// (connecting to it), in session `session`, on [`partition_scenario`] (written to `dir`, with
-/// their recordings), running `method` (`None`: the scenario's) for `duration_s`.
+/// (connecting to it), in session `session`, on [`partition_scenario`] with the second push at
+/// `second_s` (written to `dir`, with their recordings), running `method` (`None`: the
+/// scenario's) for `duration_s`.
 fn start_pair(
     ns: &Namespaces,
     dir: &std::path::Path,
     session: &str,
-    method: Option<coop_model::scenario::MethodName>,
+    (method, second_s): (Option<coop_model::scenario::MethodName>, f64),
     duration_s: u32,
 ) -> (Reaped, Reaped) {
     std::fs::create_dir_all(dir).expect("dir");
-    std::fs::write(dir.join("partition.toml"), partition_scenario()).expect("scenario");
+    std::fs::write(dir.join("partition.toml"), partition_scenario(second_s)).expect("scenario");
     let net = |me: &'static str, listen: &'static str, connect: Option<&'static str>| {
         let record = dir.join(format!("{me}.mcap"));
         move |c: &mut StationConfig| {
@@ -198,6 +205,7 @@ fn start_pair(
 /// old were adopted within a second of the link coming back and the loss went unnoticed.
 #[test]
 fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoined() {
+    let _one = ONE_PAIR_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let pid = std::process::id();
     let tag = format!("{pid}p");
     let ns = match setup(&tag) {
@@ -209,7 +217,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     };
     let dir = std::env::temp_dir().join(format!("coop-partition-{pid}"));
     let session = format!("np{pid}");
-    let (mut sa, mut sb) = start_pair(&ns, &dir, &session, None, 18);
+    let (mut sa, mut sb) = start_pair(&ns, &dir, &session, (None, 6.0), 18);
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
     let limit = Duration::from_secs(60);
@@ -367,6 +375,7 @@ fn copies_end_together(
 /// their copies end together. Before, they disagreed for the rest of the session.
 #[test]
 fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_confirmed_state() {
+    let _one = ONE_PAIR_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let pid = std::process::id();
     let tag = format!("{pid}w");
     let ns = match setup(&tag) {
@@ -382,8 +391,8 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
         &ns,
         &dir,
         &session,
-        Some(coop_model::scenario::MethodName::Timewarp),
-        30,
+        (Some(coop_model::scenario::MethodName::Timewarp), 16.0),
+        42,
     );
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let rollback = |me: &str| {
@@ -394,25 +403,40 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
     let limit = Duration::from_secs(60);
     wait_until("both stations comparing confirmed states", limit, || {
         let (x, y) = (rollback("user1")?, rollback("user2")?);
-        (x.hash_checks > 20 && y.hash_checks > 20).then_some(())
+        (x.hash_checks > 0 && y.hash_checks > 0).then_some(())
     });
     let link = format!("cva{tag}");
     ip(&["-n", &ns.names[0], "link", "set", &link, "down"]).expect("link down");
     let down_at = rollback("user1").map_or(0, |x| x.ticks);
     assert!(
-        down_at < 5500,
-        "the link went down at tick {down_at}, after user 1's second push began (6000)"
+        down_at < 15_500,
+        "the link went down at tick {down_at}, after user 1's second push began (16000)"
     );
-    // Past user 1's second push (6.0–6.9 s of the session, ticks of 1 ms) and far past the
+    // Past user 1's second push (16.0–16.9 s of the session, ticks of 1 ms) and far past the
     // history (0.66 s).
     wait_until("user 1's push made during the partition", limit, || {
-        (rollback("user1")?.ticks > 7500).then_some(())
+        (rollback("user1")?.ticks > 17_500).then_some(())
     });
     ip(&["-n", &ns.names[0], "link", "set", &link, "up"]).expect("link up");
-    let healed = wait_until("user 2 to adopt user 1's confirmed state", limit, || {
-        let y = rollback("user2")?;
-        (y.adopted_states > 0).then_some(y)
-    });
+    // (The last figures seen are in the message if it never comes: the stations may be gone.)
+    let deadline = std::time::Instant::now() + limit;
+    let mut last = (None, None);
+    let healed = loop {
+        let now = (rollback("user1"), rollback("user2"));
+        if let Some(y) = now.1.filter(|y| y.adopted_states > 0) {
+            break y;
+        }
+        if now.0.is_some() && now.1.is_some() {
+            last = now;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out waiting for user 2 to adopt user 1's confirmed state; last seen:\nuser 1 {:?}\nuser 2 {:?}",
+            last.0,
+            last.1
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
     assert!(
         healed.hash_mismatches > 0,
         "the confirmed states differed first: {healed}"
@@ -435,12 +459,14 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
 
 /// A physics process killed mid-session under `timewarp`: the supervisor restarts it, and it
 /// rebuilds its history from tick 0 without the inputs it had taken (user 1's push is gone from
-/// it). It is the restarted one (`incarnation` 1) that yields: user 1's station adopts user 2's
+/// it). It is the restarted one (its `started_tick` the latest) that yields: user 1's station adopts user 2's
 /// confirmed state, never the other way round, and both copies end where the push put the disk.
 /// (With sites ordered by index alone, user 2 would have adopted the rebuilt history and the disk
-/// would have jumped back to its start.)
+/// would have jumped back to its start: checked, this test then times out waiting for the
+/// adoption.)
 #[test]
 fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
+    let _one = ONE_PAIR_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let pid = std::process::id();
     let tag = format!("{pid}r");
     let ns = match setup(&tag) {
@@ -456,24 +482,23 @@ fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
         &ns,
         &dir,
         &session,
-        Some(coop_model::scenario::MethodName::Timewarp),
-        16,
+        (Some(coop_model::scenario::MethodName::Timewarp), 10.0),
+        36,
     );
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
     let rollback = |me: &str| status(me).and_then(|s| s.physics.rollback);
     let limit = Duration::from_secs(60);
-    // After user 1's first push (0.5-1.4 s: the disk slides to x = 0.089 m) and before its second.
+    // After user 1's first push (0.5-1.4 s: the disk slides to x = 0.089 m); the rebuilt history
+    // lacks it (and the second, at 10 s, if that came before the kill).
     let physics = wait_until("the first push over, both comparing", limit, || {
         let (x, y) = (rollback("user1")?, rollback("user2")?);
         let s = status("user1")?;
         let p = s.children.iter().find(|c| c.name == "physics")?.pid;
-        (x.ticks > 3000 && x.hash_checks > 20 && y.hash_checks > 20).then_some(p)
+        (x.ticks > 3000 && x.hash_checks > 0 && y.hash_checks > 0).then_some(p)
     });
-    assert!(
-        rollback("user1").is_some_and(|x| x.ticks < 5000),
-        "killed before the second push (6 s)"
-    );
+    // (Stations started apart may have healed a start-up divergence already: count from here.)
+    let user2_adopted = rollback("user2").map_or(0, |y| y.adopted_states);
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(physics as i32),
         nix::sys::signal::Signal::SIGKILL,
@@ -497,8 +522,8 @@ fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
     // Then they agree, and user 2 adopted nothing.
     let after = agree_after_adopting(rollback, 5, limit);
     assert_eq!(
-        after.1.adopted_states, 0,
-        "user 2 adopted nothing: {}",
+        after.1.adopted_states, user2_adopted,
+        "user 2 adopted nothing after the kill: {}",
         after.1
     );
     eprintln!(

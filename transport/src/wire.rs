@@ -38,7 +38,7 @@ pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
 pub const TRACK_VERSION: u8 = 4;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (4, 0x62f4320376a44081);
+pub const TRACK_PINNED: (u8, u64) = (4, 0xcc8d2d2e31536b04);
 /// Bytes of an encoded tool track.
 pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
@@ -409,7 +409,7 @@ mod tests {
         };
         let with_state = ToolReport {
             need_state: 0b10,
-            incarnation: 3,
+            started_tick: 3,
             state: Some(snap),
             confirmed_hash: coop_model::timewarp::hash_state(&body),
             ..r

@@ -213,11 +213,20 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
         // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
         // the confirmed state is the same bits everywhere only from the same start.
-        // A restarted one rebuilt its history without what it missed: it yields (see
-        // `coop_model::timewarp`'s docs on healing).
+        // One started more than a history after the session's time 0 (a restart, a late
+        // station) rebuilds its history without the positions the others no longer keep: it
+        // yields to the sites that were there (see `coop_model::timewarp`'s docs on healing).
+        // Stations started together, a few hundred ms apart, are all there from the start.
         MethodName::Timewarp => {
             let mut tw = sc.timewarp(i, &ObjectCopy::new(start));
-            tw.set_incarnation(ctl.physics.starts.fetch_add(1, Ordering::Relaxed));
+            let tick_ns = u64::try_from(period(sc.site[i].physics_rate_hz).as_nanos())
+                .unwrap_or(1_000_000)
+                .max(1);
+            let tick = ctl
+                .epoch()
+                .map_or(0, |epoch| monotonic_ns().saturating_sub(epoch) / tick_ns);
+            let kept = tw.history_ticks() as u64;
+            tw.set_started_tick(if tick < kept { 0 } else { tick });
             Box::new(tw)
         }
         MethodName::Coupled => Box::new(sc.coupled(i)),

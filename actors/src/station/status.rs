@@ -252,7 +252,7 @@ pub struct RollbackStatus {
     pub hash_checks: u64,
     /// ... that differed.
     pub hash_mismatches: u64,
-    /// Confirmed states adopted from a lower-numbered site after they differed.
+    /// Confirmed states adopted from a site before this one after they differed.
     pub adopted_states: u64,
     /// Remote tool tracks taken, rejected; own tracks dropped (ring full).
     pub tracks_received: u64,

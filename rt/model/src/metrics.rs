@@ -196,7 +196,7 @@ pub struct Metrics {
     pub rollback_depth_max_ticks: u64,
     /// Confirmed-state hash mismatches, all sites.
     pub hash_mismatches: u64,
-    /// Confirmed states adopted from a lower-numbered site after they differed, all sites.
+    /// Confirmed states adopted from a site before this one (`timewarp`) after they differed, all sites.
     pub adopted_states: u64,
     /// Contact a user was never shown live though the confirmed history has it, summed over the
     /// sites, ms ([`SiteMetrics::unfelt_contact_ms`]).

@@ -909,7 +909,7 @@ impl Scenario {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let horizon_s = self.timewarp_horizon_s();
         let radii = self.tool_radii();
-        crate::timewarp::TimeWarp::new(
+        let mut tw = crate::timewarp::TimeWarp::new(
             i,
             self.site.len(),
             dt,
@@ -917,7 +917,19 @@ impl Scenario {
             radii,
             (horizon_s / dt).ceil() as usize,
             copy,
-        )
+        );
+        // Every user pressing the object into one plane with all the device's force, and its
+        // weight: per plane at most that force's depth, ½ F² / K each.
+        let press = self
+            .site
+            .iter()
+            .map(|s| s.controller.max_force_n)
+            .sum::<f64>()
+            + self.object.mass_kg * Vec3::from(self.world.gravity_m_per_s2).norm();
+        let k = self.environment_contact.stiffness_n_per_m;
+        let planes = self.world.planes.len().max(1) as f64;
+        tw.set_max_spring_energy(planes * 0.5 * press * press / k);
+        tw
     }
 
     /// Every site's tool radius, m, in site order (0 past the last site).

@@ -22,15 +22,18 @@
 //! [`Stats::hash_mismatches`]), so a divergence of confirmed state is never silent.
 //!
 //! A divergence heals: confirmed states differ only where a site never knew an input (a link down
-//! for longer than the horizon: a fallback; a restarted physics, which rebuilt its history without
-//! what it had missed), and then no rollback can repair them. A site whose confirmed state differs
-//! from that of a site *before* it asks that site for its state ([`ToolReport::need_state`]); that
-//! site sends its full confirmed state ([`Snapshot`]: body, momenta, every friction memory) with
-//! its reports while asked, and the asking site adopts it at that tick and re-simulates to now
-//! ([`Stats::adopted_states`]): the paper's adoption of a received state, at the confirmed
-//! frontier. Sites are ordered by how often their physics restarted ([`ToolReport::incarnation`]:
-//! a restarted one yields), then by number; the first site's history is the one kept, so sites
-//! that all disagree still converge on one.
+//! for longer than the horizon: a fallback; a physics process that started after the session did,
+//! restarted or late, which rebuilt its history without what came before it), and then no
+//! rollback can repair them. A site whose confirmed state differs from that of a site *before* it
+//! asks that site for its state ([`ToolReport::need_state`]); that site sends its full confirmed
+//! state ([`Snapshot`]: body, momenta, every friction memory) with its reports while asked, and
+//! the asking site adopts it at that tick and re-simulates to now ([`Stats::adopted_states`]):
+//! the paper's adoption of a received state, at the confirmed frontier. Sites are ordered by the
+//! tick their physics process started at ([`ToolReport::started_tick`]: the newest yields), then
+//! by number; the first site's history is the one kept, so sites that all disagree still converge
+//! on one. A state that puts the object deeper into the environment than all the users' forces
+//! together could ([`TimeWarp::set_max_spring_energy`]) is not adopted: the mismatches go on,
+//! counted.
 //!
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
 //! touched the object though the copy had shown no contact when it first simulated them
@@ -115,6 +118,9 @@ pub struct Snapshot {
     pub contacts: [ToolContactState; MAX_SITES],
 }
 
+// `ToolReport::need_state` has a bit per site.
+const _: () = assert!(MAX_SITES <= 8);
+
 /// What a timewarp site reports: its tool's recent positions, and its confirmed frontier's hash.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolReport {
@@ -134,9 +140,10 @@ pub struct ToolReport {
     /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender), and
     /// it asks `j` for [`ToolReport::state`].
     pub need_state: u8,
-    /// How often the sender's physics restarted (0: never). Sites are ordered by it, then by
-    /// number: a site adopts the confirmed state of one before it (see the module docs).
-    pub incarnation: u64,
+    /// The session tick at which the sender's physics process started (0: at the session's start;
+    /// later: a restart, a late station). Sites are ordered by it, then by number: a site adopts
+    /// the confirmed state of one before it (see the module docs).
+    pub started_tick: u64,
     /// The sender's state at `confirmed_tick`, sent while a site after it asks for it.
     pub state: Option<Snapshot>,
 }
@@ -151,7 +158,7 @@ impl ToolReport {
         confirmed_hash: 0,
         need: [-1; MAX_SITES],
         need_state: 0,
-        incarnation: 0,
+        started_tick: 0,
         state: None,
     };
 }
@@ -230,8 +237,10 @@ pub struct TimeWarp {
     want_state: [bool; MAX_SITES],
     /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
-    /// How often this site's physics restarted ([`ToolReport::incarnation`]).
-    incarnation: u64,
+    /// The tick this site's physics process started at ([`ToolReport::started_tick`]).
+    started_tick: u64,
+    /// The most environment-spring energy an adopted state may hold, J.
+    max_spring_j: f64,
     contacts: [ToolContactState; MAX_SITES],
     /// The oldest tick a received position changed since the last rollback.
     dirty_from: Option<i64>,
@@ -278,7 +287,8 @@ impl TimeWarp {
             repaired_last: std::cell::Cell::new(false),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
-            incarnation: 0,
+            started_tick: 0,
+            max_spring_j: f64::INFINITY,
             contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
@@ -287,10 +297,17 @@ impl TimeWarp {
         }
     }
 
-    /// This site's physics restarted `n` times before this one: it yields to the sites that did
-    /// not (see the module docs).
-    pub fn set_incarnation(&mut self, n: u64) {
-        self.incarnation = n;
+    /// This site's physics process started at session tick `tick` (a restart, a late station):
+    /// it yields to the sites that started before it (see the module docs).
+    pub fn set_started_tick(&mut self, tick: u64) {
+        self.started_tick = tick;
+    }
+
+    /// An adopted state may put the object into the environment's penalty springs with at most
+    /// `joules` (what every user pressing it with all the device's force could; a deeper one is
+    /// not adopted).
+    pub fn set_max_spring_energy(&mut self, joules: f64) {
+        self.max_spring_j = joules;
     }
 
     /// What it did so far.
@@ -527,26 +544,28 @@ impl TimeWarp {
             .state
             .filter(|s| s.tick == r.confirmed_tick && hash_state(&s.state) == r.confirmed_hash)?;
         let i = self.idx(snap.tick);
-        if self.slots[i].tick != snap.tick {
+        // A kept slot is a simulated tick (the current one is not kept yet: hash_at checked).
+        if self.slots[i].tick != snap.tick
+            || crate::tank::spring_energy(world, &snap.state) > self.max_spring_j
+        {
             return None;
         }
         let before = *copy;
-        self.slots[i].copy.state = snap.state;
-        self.slots[i].copy.env = snap.env;
-        self.slots[i].contacts = snap.contacts;
-        if snap.tick == self.now_tick {
-            copy.state = snap.state;
-            copy.env = snap.env;
-            self.contacts = snap.contacts;
-        } else {
-            self.rollback(world, copy, snap.tick);
-        }
-        self.stats.adopted_states += 1;
         let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let slot = &mut self.slots[i];
+        // The jump is energy no force of the history accounts for.
+        slot.copy.energy.adoption_j += e(&snap.state) - e(&slot.copy.state);
+        slot.copy.state = snap.state;
+        slot.copy.env = snap.env;
+        slot.contacts = snap.contacts;
+        self.rollback(world, copy, snap.tick);
+        self.stats.adopted_states += 1;
+        // Every force's work so far, as the re-simulated account has it (as in `receive`).
+        let w = |c: &ObjectCopy| c.energy.own_j + c.energy.remote_j + c.energy.env_j;
         Some(Adoption {
             jump: before.state.pos - copy.state.pos,
             energy_j: e(&copy.state) - e(&before.state),
-            work_j: 0.0,
+            work_j: w(copy) - w(&before),
             age_s: (self.now_tick - snap.tick) as f64 * self.dt,
             clipped_j: 0.0,
         })
@@ -617,7 +636,7 @@ impl Consistency for TimeWarp {
             confirmed_hash: 0,
             need: [-1; MAX_SITES],
             need_state: 0,
-            incarnation: self.incarnation,
+            started_tick: self.started_tick,
             state: None,
         };
         for (j, &want) in self.want_state.iter().enumerate() {
@@ -727,25 +746,36 @@ impl Consistency for TimeWarp {
                 self.stats.hash_checks += 1;
                 let differs = h != r.confirmed_hash;
                 self.stats.hash_mismatches += u64::from(differs);
-                if (r.incarnation, from) < (self.incarnation, self.me) {
-                    self.want_state[from] = differs;
-                    if differs {
-                        if let Some(a) = self.resync(world, copy, r) {
-                            adoption = Some(adoption.map_or(a, |b| Adoption {
-                                jump: a.jump + b.jump,
-                                energy_j: a.energy_j + b.energy_j,
-                                work_j: a.work_j + b.work_j,
-                                age_s: a.age_s.max(b.age_s),
-                                clipped_j: 0.0,
-                            }));
-                            self.want_state[from] = false;
-                        }
+                // Asked for while it differs from a site before this one (and no longer when the
+                // order changes: a restart moves a site back).
+                let earlier = (r.started_tick, from) < (self.started_tick, self.me);
+                self.want_state[from] = earlier && differs;
+                if earlier && differs {
+                    if let Some(a) = self.resync(world, copy, r) {
+                        adoption = Some(adoption.map_or(a, |b| Adoption {
+                            jump: a.jump + b.jump,
+                            energy_j: a.energy_j + b.energy_j,
+                            work_j: a.work_j + b.work_j,
+                            age_s: a.age_s.max(b.age_s),
+                            clipped_j: 0.0,
+                        }));
+                        self.want_state[from] = false;
                     }
                 }
             }
         }
         self.tally();
         adoption
+    }
+    fn peer_lost(&mut self, from: usize, _now_s: f64) {
+        // A silent site neither asks for our state nor sends its own: ask again once it is back.
+        if let (Some(asked), Some(want)) = (
+            self.state_asked.get_mut(from),
+            self.want_state.get_mut(from),
+        ) {
+            *asked = false;
+            *want = false;
+        }
     }
     fn timewarp_stats(&self) -> Option<Stats> {
         Some(self.stats)
@@ -944,14 +974,14 @@ mod tests {
         );
     }
 
-    /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics restarted
-    /// `incarnation[i]` times, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
+    /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at
+    /// tick `started_tick[i]`, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
     /// ticks arriving `delay` ticks later unless `lost(from, k)`; `seen(i, report, k)` sees every
     /// report sent.
     #[allow(clippy::too_many_arguments)]
     fn two_sites(
         history: usize,
-        incarnation: [u64; 2],
+        started_tick: [u64; 2],
         ticks: i64,
         tool: impl Fn(usize, i64) -> Vec3,
         delay: i64,
@@ -964,7 +994,7 @@ mod tests {
         radii[..2].fill(0.005);
         let mut sites = [0, 1].map(|i| {
             let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start);
-            tw.set_incarnation(incarnation[i]);
+            tw.set_started_tick(started_tick[i]);
             (tw, start)
         });
         let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
@@ -1044,17 +1074,17 @@ mod tests {
     /// A link down for longer than the history: site 0 never learns part of site 1's sweep into
     /// the disk (a fallback), so their confirmed states differ; site 1 asks site 0 (the lower
     /// number) for its state, adopts it, and from then on they agree again. A site whose physics
-    /// restarted comes after one whose did not: then site 0 adopts site 1's.
+    /// started later (a restart) comes after one that was there: then site 0 adopts site 1's.
     #[test]
     fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
-        // Site 1 adopts site 0's state; with site 0's physics restarted once, the other way round.
-        for (incarnation, adopter) in [([0, 0], 1), ([1, 0], 0)] {
+        // Site 1 adopts site 0's state; with site 0's physics started at tick 1, the other way round.
+        for (started_tick, adopter) in [([0, 0], 1), ([1, 0], 0)] {
             let mut asked = false;
             let mut mismatches_at = [0u64; 2];
             // Site 1 → site 0 is down for 1.2 s, twice the history.
             let sites = two_sites(
                 600,
-                incarnation,
+                started_tick,
                 4000,
                 sweep_into_the_disk,
                 50,
@@ -1068,7 +1098,7 @@ mod tests {
             );
             let [(a, ca), (b, cb)] = &sites;
             let st = [a.stats(), b.stats()];
-            let why = format!("{incarnation:?}: {:?} {:?}", st[0], st[1]);
+            let why = format!("{started_tick:?}: {:?} {:?}", st[0], st[1]);
             assert!(
                 st[0].fallbacks > 0,
                 "site 0 lost part of site 1's sweep: {why}"
@@ -1094,6 +1124,47 @@ mod tests {
             let swept = ca.state.pos.x < -1e-3;
             assert_eq!(swept, adopter == 0, "{:?}", ca.state.pos);
         }
+    }
+
+    /// A state that would put the disk deeper into the table than every user's force could is
+    /// not adopted (it would be released as kinetic energy); one at rest on it is.
+    #[test]
+    fn a_state_deep_in_the_table_is_not_adopted() {
+        let (_, w) = paper_world();
+        let mut sites = two_sites(
+            600,
+            [0, 0],
+            500,
+            |_, _| Vec3::new(0.2, 0.0, 0.01),
+            10,
+            |_, _| false,
+            |_, _, _, _| {},
+        );
+        let [(a, ca), (b, cb)] = &mut sites;
+        b.set_max_spring_energy(0.05);
+        let Report::Tools(mut r) = a.report(ca, &ContactForce::default(), 0.5) else {
+            panic!("a track");
+        };
+        assert!(r.confirmed_tick > 400, "{}", r.confirmed_tick);
+        let offer = |r: &mut ToolReport, z: f64| {
+            let state = BodyState::at_rest(Vec3::new(0.001, 0.0, z));
+            r.confirmed_hash = hash_state(&state);
+            r.state = Some(Snapshot {
+                tick: r.confirmed_tick,
+                state,
+                env: EnvContactState::default(),
+                contacts: [ToolContactState::default(); MAX_SITES],
+            });
+        };
+        // 5 cm into the table: ½ · 3000 N/m · (0.05 m)² ≈ 3.75 J of spring.
+        offer(&mut r, 0.01 - 0.05);
+        b.receive(&w, cb, 0, &Report::Tools(r), 0.5);
+        assert_eq!(b.stats().adopted_states, 0, "{:?}", b.stats());
+        assert!(b.stats().hash_mismatches > 0);
+        offer(&mut r, 0.01);
+        b.receive(&w, cb, 0, &Report::Tools(r), 0.5);
+        assert_eq!(b.stats().adopted_states, 1, "{:?}", b.stats());
+        assert_eq!(b.hash_at(r.confirmed_tick), Some(r.confirmed_hash));
     }
 
     #[test]

@@ -398,9 +398,6 @@ pub struct PhysicsShared {
     /// The last report sequence number, so a restarted physics continues the sequence (a receiver
     /// ignores sequence numbers it has seen).
     pub report_seq: AtomicU64,
-    /// Physics processes started in this station (the first is 0): a restarted one yields in
-    /// `timewarp`'s healing of a diverged confirmed state (`ToolReport::incarnation`).
-    pub starts: AtomicU64,
     /// When the last report was made (the step's wake time, ns), and the report period: the network
     /// process wakes just after the next one instead of polling.
     pub last_report_ns: AtomicU64,
@@ -431,7 +428,7 @@ pub struct RollbackShared {
     pub hash_checks: AtomicU64,
     /// ... that differed: the sites' confirmed states are not the same bits.
     pub hash_mismatches: AtomicU64,
-    /// Confirmed states adopted from a lower-numbered site whose confirmed history differed.
+    /// Confirmed states adopted from a site before this one whose confirmed history differed.
     pub adopted_states: AtomicU64,
     /// Remote tool tracks taken from the ring.
     pub tracks_received: AtomicU64,
@@ -530,7 +527,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v14";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v13";
 }
 
 impl ControlBlock {
