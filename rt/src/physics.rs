@@ -270,7 +270,8 @@ impl PhysicsLoop {
             .push(ObjectSample::new(
                 now_ns,
                 self.seq,
-                &self.copy.state,
+                // What the user is shown: the copy, or a missed contact replayed (timewarp).
+                &self.method.shown(&self.copy),
                 self.adoptions,
                 self.own_t_ns,
             ))
@@ -406,6 +407,7 @@ impl PhysicsLoop {
             set(&r.adopted_states, st.adopted_states);
             set(&r.unfelt_contact_ticks, st.unfelt_contact_ticks);
             set(&r.phantom_contact_ticks, st.phantom_contact_ticks);
+            set(&r.replays, st.replays);
         }
         set(&r.tracks_received, self.tracks.received);
         set(&r.tracks_rejected, self.tracks.rejected);
@@ -418,7 +420,8 @@ impl PhysicsLoop {
     pub fn report_seq(&self) -> u64 {
         self.report_seq
     }
-    /// The state last sent to the servo, as sent.
+    /// The copy's state now, as a sample (what a restarted physics resumes from: the copy, not
+    /// what the user is shown).
     pub fn object_sample(&self, now_ns: u64) -> ObjectSample {
         ObjectSample::new(
             now_ns,

@@ -236,3 +236,59 @@ fn coupled_over_real_rings_pulls_without_allocating_and_keeps_the_copies_togethe
         "the follower pulled its copy towards the leader's"
     );
 }
+
+/// A knock learned of 300 ms late, replayed to a hand still where the knock found it: the receive
+/// that rolls back and starts the replay, the ticks that advance it and the state shown to the
+/// servo allocate nothing (the method alone: the loops above carry no such knock).
+#[test]
+fn a_missed_contact_is_replayed_without_allocating() {
+    use coop_model::contact::ContactForce;
+    use coop_model::method::Report;
+    use coop_model::timewarp::{quantize, ToolReport};
+    const LATE: i64 = 300;
+    let mut sc = scenario();
+    sc.network.delay_min_ms = LATE as f64;
+    sc.network.delay_max_ms = LATE as f64;
+    let world = sc.world();
+    let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut tw = sc.timewarp(0, &copy);
+    // Site 1's tool sweeps into the disk's rim from the left (0.1 s), then back; site 0's rests
+    // 15 mm right of the rim.
+    let remote = |k: i64| {
+        let s = k as f64 * 1e-3;
+        let x = if s < 0.1 {
+            -0.1 + 0.7 * s
+        } else {
+            (-0.03 - 0.7 * (s - 0.1)).max(-0.1)
+        };
+        quantize(Vec3::new(x, 0.0, 0.01))
+    };
+    let mut allocations = 0;
+    let mut shown_apart = 0;
+    for k in 0..1000i64 {
+        let first = k - LATE;
+        let report = (first >= 0 && k % 10 == 0).then(|| {
+            let mut r = ToolReport {
+                first_tick: (first - 9).max(0),
+                ..ToolReport::NONE
+            };
+            for t in r.first_tick..=first {
+                r.positions[r.count] = remote(t);
+                r.count += 1;
+            }
+            Report::Tools(r)
+        });
+        allocations += allocations_during(|| {
+            tw.own_tool(Vec3::new(0.06, 0.0, 0.01));
+            if let Some(r) = &report {
+                tw.receive(&world, &mut copy, 1, r, k as f64 * 1e-3);
+            }
+            tw.physics_step(&world, &mut copy, &ContactForce::default(), 1e-3);
+            shown_apart += u32::from(tw.shown(&copy) != copy.state);
+        });
+    }
+    let st = tw.stats();
+    assert_eq!(st.replays, 1, "the knock was replayed: {st:?}");
+    assert!(shown_apart > 0, "the replay showed the history");
+    assert_eq!(allocations, 0, "the replay allocated");
+}

@@ -79,6 +79,8 @@ pub struct Row {
     pub unfelt_contact_ms: f64,
     /// Contact the users were shown live that the confirmed history took back, all sites, ms.
     pub phantom_contact_ms: f64,
+    /// Missed contacts replayed to the users from the confirmed history, all sites.
+    pub replays: u64,
 }
 
 impl Row {
@@ -124,6 +126,7 @@ impl Row {
             adopted_states: m.adopted_states,
             unfelt_contact_ms: m.unfelt_contact_ms,
             phantom_contact_ms: m.phantom_contact_ms,
+            replays: m.replays,
         }
     }
 }

@@ -566,7 +566,9 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
         // What rolling back cost the user's feel is in the status too (its amount follows the
         // machine's timing, so only that it is there).
         assert!(
-            rb["unfelt_contact_ticks"].is_u64() && rb["phantom_contact_ticks"].is_u64(),
+            rb["unfelt_contact_ticks"].is_u64()
+                && rb["phantom_contact_ticks"].is_u64()
+                && rb["replays"].is_u64(),
             "{site}: {rb}"
         );
     }

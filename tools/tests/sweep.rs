@@ -80,6 +80,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "adopted_states",
         "unfelt_contact_ms",
         "phantom_contact_ms",
+        "replays",
     ] {
         for r in rows {
             assert!(r.get(key).is_some(), "{key} missing in {r}");
@@ -107,6 +108,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
             if m != MethodName::Timewarp {
                 assert_eq!(r["unfelt_contact_ms"], 0.0, "{r}");
                 assert_eq!(r["phantom_contact_ms"], 0.0, "{r}");
+                assert_eq!(r["replays"], 0, "{r}");
             }
         }
         let tw = row("timewarp", delay);
@@ -345,6 +347,24 @@ fn timewarp_at_300_ms_shows_the_far_user_the_push_in_time() {
     assert_eq!(m.hash_mismatches, 0);
     assert!(m.co_contact_divergence_max_m < 0.010, "{m:?}");
     assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
+}
+
+/// At a constant 500 ms user 1's push reaches user 2's waiting tool (about 1.1 s) before any
+/// news of it can (about 1.3 s): the confirmed history has the disk knock the tool and bounce off
+/// 6 mm, a contact user 2 never felt live. User 2's hand is still there, so the contact is
+/// replayed to it from the confirmed history (seed 1 missed the catch without the replay).
+#[test]
+fn timewarp_at_500_ms_replays_the_catch_user_2_missed() {
+    let (r, m) = paper_at(MethodName::Timewarp, 500.0, 1);
+    assert!(m.sites[1].replays >= 1, "{m:?}");
+    assert!(m.sites[1].unfelt_contact_ms > 0.0, "{m:?}");
+    assert_eq!(m.phases_passed, m.phases_total, "{:?}", m.sites[1].phases);
+    assert_eq!(m.hash_mismatches, 0);
+    assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
+    // The replay is what user 2 was shown, not user 2's copy: the copies still end together.
+    let end = r.t.len() - 1;
+    let apart = (r.sites[0].obj_pos[end] - r.sites[1].obj_pos[end]).norm();
+    assert!(apart < 1e-3, "the copies end {apart} m apart");
 }
 
 /// `timewarp` on the paper task at 150 ms with 30 % of the reports lost (seed 1): the default

@@ -266,6 +266,8 @@ pub struct RollbackStatus {
     pub unfelt_contact_ticks: u64,
     /// Ticks of own contact shown live that the confirmed history took back.
     pub phantom_contact_ticks: u64,
+    /// Missed own contacts replayed to the user.
+    pub replays: u64,
 }
 
 impl RollbackStatus {
@@ -290,6 +292,7 @@ impl RollbackStatus {
             late_periods: l(&r.late_periods),
             unfelt_contact_ticks: l(&r.unfelt_contact_ticks),
             phantom_contact_ticks: l(&r.phantom_contact_ticks),
+            replays: l(&r.replays),
         })
     }
 }
@@ -298,7 +301,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks, shown and taken back {} ticks",
+            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks",
             self.ticks,
             self.rollbacks,
             self.resimulated_ticks,
@@ -313,6 +316,7 @@ impl std::fmt::Display for RollbackStatus {
             self.track_drops,
             self.late_periods,
             self.unfelt_contact_ticks,
+            self.replays,
             self.phantom_contact_ticks
         )
     }

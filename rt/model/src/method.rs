@@ -200,6 +200,11 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn timewarp_stats(&self) -> Option<crate::timewarp::Stats> {
         None
     }
+    /// The object state the own user is shown (the servo renders against it): the copy's,
+    /// unless the method replays a contact the user missed ([`crate::timewarp::TimeWarp::shown_state`]).
+    fn shown(&self, copy: &ObjectCopy) -> crate::body::BodyState {
+        copy.state
+    }
 }
 
 /// How long a lost site's influence takes to fade to nothing, s.

@@ -49,7 +49,8 @@
 //! - **Unfelt and phantom contact** (`timewarp`): per site, the confirmed time in which the own
 //!   user's tool touched the object while the copy had shown no contact when it first simulated
 //!   that moment (the news of a remote push that brought the object came after the user had lived
-//!   through it: a rollback cannot replay a contact to a hand that has moved on), and the confirmed
+//!   through it; `timewarp` replays such a contact late to a hand still where it was, never to
+//!   one that has moved on, and counts it in [`SiteMetrics::replays`]), and the confirmed
 //!   time in which it did not touch while the copy had shown contact (a prediction taken back).
 //!   What rolling back costs the user's feel, in ms; 0 for methods that do not roll back.
 
@@ -126,6 +127,8 @@ pub struct SiteMetrics {
     /// Confirmed time in which this site's user did not touch the object but its copy had shown
     /// contact live (a prediction the confirmed history took back), ms.
     pub phantom_contact_ms: f64,
+    /// Missed contacts replayed to this site's user from the confirmed history.
+    pub replays: u64,
 }
 
 /// A run's figures.
@@ -204,6 +207,8 @@ pub struct Metrics {
     /// Contact a user was shown live that the confirmed history took back, summed over the sites,
     /// ms ([`SiteMetrics::phantom_contact_ms`]).
     pub phantom_contact_ms: f64,
+    /// Missed contacts replayed to the users, all sites ([`SiteMetrics::replays`]).
+    pub replays: u64,
     /// Per site.
     pub sites: Vec<SiteMetrics>,
 }
@@ -359,6 +364,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 resimulated_ticks: tw.resimulated_ticks,
                 unfelt_contact_ms: ms(tw.unfelt_contact_ticks),
                 phantom_contact_ms: ms(tw.phantom_contact_ticks),
+                replays: tw.replays,
             }
         })
         .collect();
@@ -421,6 +427,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         adopted_states: adopted,
         unfelt_contact_ms: sites.iter().map(|s| s.unfelt_contact_ms).sum(),
         phantom_contact_ms: sites.iter().map(|s| s.phantom_contact_ms).sum(),
+        replays: sites.iter().map(|s| s.replays).sum(),
         divergence_max_m: divs.iter().copied().fold(0.0, f64::max),
         divergence_rms_m: rms(divs.iter().copied()),
         divergence_after_contact_m: after,

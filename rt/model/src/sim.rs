@@ -370,6 +370,12 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     s.plant.grip_force + noise
                 };
                 let copy = if reference { &shared } else { &s.copy };
+                // What the user is shown: the copy, or a missed contact replayed (timewarp).
+                let shown = if reference {
+                    shared.state
+                } else {
+                    s.method.shown(copy)
+                };
                 let (tool_pos, tool_vel) = match &s.replay {
                     Some(r) => r.at(ns_to_s(t)),
                     None => {
@@ -386,7 +392,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                         dt_s: ns_to_s(s.period_servo),
                         tool_pos,
                         tool_vel,
-                        object: &copy.state,
+                        object: &shown,
                         object_time_s: copy.time_s,
                         adopted: !s.pending_adoptions.is_empty(),
                         stopping: false,

@@ -43,6 +43,18 @@
 //! displays), and a tick that leaves the history before it is confirmed (a partner silent for
 //! longer than the horizon, a fallback) is not compared.
 //!
+//! A contact the user missed is replayed to them, late, when their hand is still where it was:
+//! a rollback whose re-simulation has the own tool touching the object in ticks that showed no
+//! contact live ([`REPLAY_MIN_TICKS`] or more), while the tool touches nothing now and is within
+//! [`REPLAY_REACH_M`] of where it was then, makes [`TimeWarp::shown_state`] (what the servo
+//! renders against) the re-simulated history from [`REPLAY_LEAD_TICKS`] before the contact on,
+//! [`REPLAY_SPEED`] times as fast and at the history's own pace into and through the contact,
+//! until it reaches the copy ([`Stats::replays`]). The user feels the knock the confirmed history
+//! says they got, as hard as it was, instead of the object appearing where the knock left it:
+//! at a constant 500 ms the paper task's disk knocks user 2's waiting tool 0.2 s before any news of
+//! the push can reach user 2. The copy, its confirmed state and every site's physics are
+//! untouched; a contact of the live copy, or the hand moving away, ends a replay at once.
+//!
 //! Determinism: the forces are summed in site order whatever site computes them, every input is an
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
 //! same platform gives the same bits; see the crate docs on transcendental functions).
@@ -75,6 +87,22 @@ pub const REACH_VELOCITY_TICKS: i64 = 10;
 pub const REACH_TIME_TICKS: i64 = 300;
 /// How long a reach is predicted before the tool is held, ticks.
 pub const REACH_TICKS: i64 = 1000;
+
+/// A contact the own user missed (see [`TimeWarp::shown_state`]) is replayed at this many times
+/// its speed (the contact itself at its own) until the display catches up with the copy: a
+/// replay of `d` ticks of history ends about `d / (REPLAY_SPEED - 1)` ticks later (250 ms after
+/// a 500 ms delay's news).
+pub const REPLAY_SPEED: i64 = 3;
+/// A replay slows to the history's own pace this many ticks before a contact in it, so the
+/// object meets the hand as fast as it did (no harder).
+pub const REPLAY_SLOW_TICKS: i64 = 10;
+/// A replay starts this many ticks before the missed contact, so the user sees the object come.
+pub const REPLAY_LEAD_TICKS: i64 = 40;
+/// A replay starts only while the own tool is within this of where the missed contact had it,
+/// and ends when it moves farther: the history replayed is one in which the hand was there, m.
+pub const REPLAY_REACH_M: f64 = 0.002;
+/// ... and only for a missed contact of at least this many ticks.
+pub const REPLAY_MIN_TICKS: u64 = 3;
 
 /// A tool position on the tick grid, in quanta.
 pub type Quantized = [i32; 3];
@@ -192,6 +220,8 @@ pub struct Stats {
     /// Confirmed states adopted from a site before this one whose confirmed history differed
     /// (after a fallback or a restart): see the module docs.
     pub adopted_states: u64,
+    /// Missed contacts replayed to the own user ([`TimeWarp::shown`]).
+    pub replays: u64,
 }
 
 /// One tick's record: the state at its start, and the inputs used in it.
@@ -248,6 +278,10 @@ pub struct TimeWarp {
     stats: Stats,
     /// The first confirmed tick not yet compared, live against confirmed contact.
     tallied_until: i64,
+    /// A missed contact being replayed: the tick shown, and the own tool's position then.
+    replay: Option<(i64, Quantized)>,
+    /// Missed contacts before this tick were replayed (or passed over): not again.
+    replayed_until: i64,
 }
 
 impl TimeWarp {
@@ -294,6 +328,8 @@ impl TimeWarp {
             own: [0; 3],
             stats: Stats::default(),
             tallied_until: 0,
+            replay: None,
+            replayed_until: 0,
         }
     }
 
@@ -571,6 +607,87 @@ impl TimeWarp {
         })
     }
 
+    /// After a rollback from `from`: when the re-simulated history has the own tool touching the
+    /// object where the live simulation had not (a contact the user missed: the news of a remote
+    /// push came after the object had reached the hand), the tool touches nothing now, and it is
+    /// still where it was then, the user is shown that history from a little before the contact
+    /// on, sped up ([`REPLAY_SPEED`]), until it catches up with the copy.
+    fn replay_missed_contact(&mut self, from: i64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if self.replay.is_some() || self.contacts[self.me].touching() {
+            return;
+        }
+        let start = from.max(self.replayed_until).max(self.oldest_kept());
+        let mut first = None;
+        let mut missed = 0;
+        for t in start..self.now_tick {
+            let s = &self.slots[self.idx(t)];
+            if s.tick == t && s.touched && !s.felt {
+                first = first.or(Some(t));
+                missed += 1;
+            }
+        }
+        let Some(first) = first.filter(|_| missed >= REPLAY_MIN_TICKS) else {
+            return;
+        };
+        let then = self.slots[self.idx(first)].inputs[self.me];
+        self.replayed_until = self.now_tick;
+        if (position(self.own) - position(then)).norm() > REPLAY_REACH_M {
+            return;
+        }
+        self.replay = Some(((first - REPLAY_LEAD_TICKS).max(start), then));
+        self.stats.replays += 1;
+    }
+
+    /// One live tick on: a replay advances [`REPLAY_SPEED`] ticks, and ends once it reaches the
+    /// copy, when the own tool touches the copy (the user feels what is now), or when the tool
+    /// has moved away from where the replayed history had it.
+    fn advance_replay(&mut self) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let Some((mut t, then)) = self.replay else {
+            return;
+        };
+        // Fast up to the contact, at its own pace into and through it (the user feels the
+        // contact as the history had it, not harder).
+        t += self.replay_speed(t);
+        let kept = self.slots[self.idx(t)].tick == t;
+        let away = (position(self.own) - position(then)).norm() > REPLAY_REACH_M;
+        self.replay = (t < self.now_tick && kept && !away && !self.contacts[self.me].touching())
+            .then_some((t, then));
+    }
+
+    /// How many ticks of history a live tick replays from tick `t` on: one while the own tool
+    /// touches the object in it or is about to ([`REPLAY_SLOW_TICKS`]), [`REPLAY_SPEED`]
+    /// otherwise.
+    fn replay_speed(&self, t: i64) -> i64 {
+        let near = (t..=t + REPLAY_SLOW_TICKS).any(|u| {
+            let s = &self.slots[self.idx(u)];
+            s.tick == u && s.touched
+        });
+        if near {
+            1
+        } else {
+            REPLAY_SPEED
+        }
+    }
+
+    /// The object state the own user is shown: the copy's, or during a replay of a missed contact
+    /// the history's at the replayed tick, its velocities at the replay's speed (so the display
+    /// sees the motion it shows).
+    pub fn shown_state(&self, copy: &ObjectCopy) -> BodyState {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        match self.replay {
+            Some((t, _)) if self.slots[self.idx(t)].tick == t => {
+                let mut s = self.slots[self.idx(t)].copy.state;
+                let k = self.replay_speed(t) as f64;
+                s.vel *= k;
+                s.ang_mom *= k;
+                s
+            }
+            _ => copy.state,
+        }
+    }
+
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
     fn hash_at(&self, t: i64) -> Option<u64> {
         let s = &self.slots[self.idx(t)];
@@ -612,6 +729,7 @@ impl Consistency for TimeWarp {
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         self.tick(world, copy);
+        self.advance_replay();
     }
     fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
@@ -727,6 +845,7 @@ impl Consistency for TimeWarp {
         if let Some(from_tick) = self.dirty_from.take() {
             let before = *copy;
             if self.rollback(world, copy, from_tick) > 0 {
+                self.replay_missed_contact(from_tick);
                 let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
                 // Every force's work so far, as the copy's account has it (restored with the
                 // snapshot and re-accumulated by the re-simulation).
@@ -779,6 +898,9 @@ impl Consistency for TimeWarp {
     }
     fn timewarp_stats(&self) -> Option<Stats> {
         Some(self.stats)
+    }
+    fn shown(&self, copy: &ObjectCopy) -> BodyState {
+        self.shown_state(copy)
     }
 }
 
@@ -921,57 +1043,119 @@ mod tests {
     /// before each tick is simulated, everything shown live is what was confirmed.
     #[test]
     fn a_contact_learned_too_late_to_show_counts_as_unfelt() {
-        let run = |delay: i64| {
-            let (mut tw, mut copy, w) = two_tools_on_a_disk();
-            // In 0.1 s from x = -0.1 to -0.03 (into the disk's rim at -0.04), then back.
-            let remote = |k: i64| {
-                let s = k as f64 * 1e-3;
-                let x = if s < 0.1 {
-                    -0.1 + 0.7 * s
-                } else {
-                    (-0.03 - 0.7 * (s - 0.1)).max(-0.1)
-                };
-                quantize(Vec3::new(x, 0.0, 0.01))
-            };
-            let mut touched = false;
-            for k in 0..1000i64 {
-                // The own tool rests 15 mm right of the disk's rim.
-                tw.own_tool(Vec3::new(0.06, 0.0, 0.01));
-                let first = k - delay;
-                if first >= 0 && (delay == 0 || k % 10 == 0) {
-                    let count = if delay == 0 { 1 } else { 10 };
-                    let mut r = ToolReport {
-                        first_tick: (first - count as i64 + 1).max(0),
-                        count: 0,
-                        positions: [[0; 3]; WINDOW_TICKS],
-                        confirmed_tick: 0,
-                        confirmed_hash: 0,
-                        need: [-1; MAX_SITES],
-                        ..ToolReport::NONE
-                    };
-                    for t in r.first_tick..=first {
-                        r.positions[r.count] = remote(t);
-                        r.count += 1;
-                    }
-                    tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
-                }
-                tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
-                touched |= tw.contacts[0].touching();
-            }
-            (tw.stats(), touched)
-        };
-        let (prompt, prompt_touched) = run(0);
-        assert!(prompt_touched, "the knocked disk reached the own tool");
+        let rest = |_| Vec3::new(0.06, 0.0, 0.01);
+        let prompt = knock(0, rest);
+        assert!(prompt.touched, "the knocked disk reached the own tool");
         assert_eq!(
-            (prompt.unfelt_contact_ticks, prompt.phantom_contact_ticks),
+            (
+                prompt.stats.unfelt_contact_ticks,
+                prompt.stats.phantom_contact_ticks
+            ),
             (0, 0),
-            "{prompt:?}"
+            "{:?}",
+            prompt.stats
         );
-        let (late, _) = run(300);
+        let late = knock(300, rest);
         assert!(
-            late.unfelt_contact_ticks > 0,
-            "the contact the copy learned of 0.3 s late: {late:?}"
+            late.stats.unfelt_contact_ticks > 0,
+            "the contact the copy learned of 0.3 s late: {:?}",
+            late.stats
         );
+    }
+
+    /// A contact the own user missed is shown late, replayed from the confirmed history, while
+    /// the hand is still where the contact had it; not once it has moved on.
+    #[test]
+    fn a_missed_contact_is_replayed_to_a_hand_still_there() {
+        let rest = |_| Vec3::new(0.06, 0.0, 0.01);
+        let prompt = knock(0, rest);
+        assert_eq!(
+            prompt.stats.replays, 0,
+            "nothing missed: {:?}",
+            prompt.stats
+        );
+        assert!(prompt.shown_touching_ticks > 0 && prompt.shown_was_copy);
+        let late = knock(300, rest);
+        assert_eq!(late.stats.replays, 1, "{:?}", late.stats);
+        assert!(
+            !late.shown_was_copy,
+            "the replay showed the history, not the copy"
+        );
+        assert!(
+            late.shown_touching_ticks > 0,
+            "the replayed disk met the hand: {:?}",
+            late.stats
+        );
+        assert!(late.ends_on_copy, "the replay caught up with the copy");
+        // The hand moved 5 mm away between the contact and its news: nothing is replayed.
+        let moved = knock(300, |k| {
+            Vec3::new(if k < 250 { 0.06 } else { 0.065 }, 0.0, 0.01)
+        });
+        assert!(moved.stats.unfelt_contact_ticks > 0, "{:?}", moved.stats);
+        assert_eq!(moved.stats.replays, 0, "{:?}", moved.stats);
+        assert!(moved.shown_was_copy && moved.ends_on_copy);
+    }
+
+    /// What [`knock`] saw.
+    struct Knock {
+        stats: Stats,
+        /// The copy touched the own tool at some tick.
+        touched: bool,
+        /// Ticks at which the shown object touched the own tool.
+        shown_touching_ticks: u64,
+        /// The shown object was always the copy.
+        shown_was_copy: bool,
+        /// ... and was at the end.
+        ends_on_copy: bool,
+    }
+
+    /// Site 0 of [`two_tools_on_a_disk`], its tool at `own(k)`; site 1's tool knocks the disk
+    /// towards it (from x = -0.1 into the disk's rim at -0.04 in 0.1 s, then back), its
+    /// positions arriving `delay` ticks late, 10 to a report (each one at once at 0).
+    fn knock(delay: i64, own: impl Fn(i64) -> Vec3) -> Knock {
+        let (mut tw, mut copy, w) = two_tools_on_a_disk();
+        let remote = |k: i64| {
+            let s = k as f64 * 1e-3;
+            let x = if s < 0.1 {
+                -0.1 + 0.7 * s
+            } else {
+                (-0.03 - 0.7 * (s - 0.1)).max(-0.1)
+            };
+            quantize(Vec3::new(x, 0.0, 0.01))
+        };
+        let mut out = Knock {
+            stats: Stats::default(),
+            touched: false,
+            shown_touching_ticks: 0,
+            shown_was_copy: true,
+            ends_on_copy: false,
+        };
+        for k in 0..1000i64 {
+            tw.own_tool(own(k));
+            let first = k - delay;
+            if first >= 0 && (delay == 0 || k % 10 == 0) {
+                let count = if delay == 0 { 1 } else { 10 };
+                let mut r = ToolReport {
+                    first_tick: (first - count as i64 + 1).max(0),
+                    ..ToolReport::NONE
+                };
+                for t in r.first_tick..=first {
+                    r.positions[r.count] = remote(t);
+                    r.count += 1;
+                }
+                tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+            }
+            tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+            out.touched |= tw.contacts[0].touching();
+            let shown = tw.shown_state(&copy);
+            out.shown_was_copy &= shown == copy.state;
+            // The rim (0.04 m) meets the tool (0.005 m) in the plane.
+            let gap = (own(k) - shown.pos).xy().norm() - 0.045;
+            out.shown_touching_ticks += u64::from(gap < 0.0);
+            out.ends_on_copy = shown == copy.state;
+        }
+        out.stats = tw.stats();
+        out
     }
 
     /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at

@@ -446,6 +446,8 @@ pub struct RollbackShared {
     /// Confirmed ticks the own tool did not touch the object in but had when first simulated
     /// (contact shown to the user that the confirmed history took back).
     pub phantom_contact_ticks: AtomicU64,
+    /// Missed own contacts replayed to the user from the confirmed history.
+    pub replays: AtomicU64,
 }
 
 /// What the network process writes.
@@ -527,7 +529,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v13";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v15";
 }
 
 impl ControlBlock {
