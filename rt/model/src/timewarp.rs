@@ -751,11 +751,16 @@ impl Consistency for TimeWarp {
             .filter(|_| !self.repaired_last.get());
         self.repaired_last.set(repair.is_some());
         let first = repair.unwrap_or(window);
+        let count = (end - first).min(WINDOW_TICKS as i64);
         let mut r = ToolReport {
             first_tick: first,
-            count: (end - first).min(WINDOW_TICKS as i64) as usize,
+            count: count as usize,
             positions: [[0; 3]; WINDOW_TICKS],
-            confirmed_tick: self.confirmed_tick(),
+            // A repair's window ends before the frontier: the frontier (and its hash and state)
+            // is given at the window's end, a tick the sender has confirmed too, so that no
+            // report names a frontier past the last position it carries (the wire's rule,
+            // `coop_rt::msg::ToolTrack::report`: a station refused every repair before).
+            confirmed_tick: self.confirmed_tick().min(first + count),
             confirmed_hash: 0,
             need: [-1; MAX_SITES],
             need_state: 0,
