@@ -89,6 +89,10 @@ struct Ticks {
     done: u64,
     /// Tool tracks sent.
     seq: u64,
+    /// Join the grid where the session is at the first step, not at tick 0.
+    join: bool,
+    /// The tick it joined at (0: at the start).
+    joined: u64,
 }
 
 /// A physics loop's clock: its fixed step, its report period, and when it starts (ns).
@@ -181,6 +185,15 @@ impl PhysicsLoop {
         self.ticks.origin_ns.get_or_insert(origin_ns);
     }
 
+    /// For a method on the session's tick grid: this loop joins the grid at the tick its first
+    /// step falls in (its copy is the state there), not at tick 0: a restarted or late physics
+    /// process starts where the session is instead of re-simulating it from its start (at most
+    /// [`MAX_CATCH_UP_TICKS`] extra ticks a period: a restart ten minutes in took 75 s to catch
+    /// up, showing the user the session's past). Before the first step; nothing off the grid.
+    pub fn join_late(&mut self) {
+        self.ticks.join = self.ticks.on_grid && self.ticks.done == 0;
+    }
+
     /// Ticks of the session's grid stepped so far (methods that step on it).
     pub fn ticks(&self) -> u64 {
         self.ticks.done
@@ -203,6 +216,13 @@ impl PhysicsLoop {
         };
         // Ticks whose start has come: 0 ..= (now - origin) / period.
         let due = (now_ns - origin) / self.period_ns.max(1) + 1;
+        if std::mem::take(&mut self.ticks.join) {
+            // Joining late: the copy is the state at the start of the current tick.
+            self.ticks.done = due - 1;
+            self.ticks.joined = self.ticks.done;
+            self.method
+                .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
+        }
         let behind = due.saturating_sub(self.ticks.done);
         if behind > 1 {
             // Late (an overrun, a stall): catch up at most MAX_CATCH_UP_TICKS extra per period,
@@ -414,6 +434,7 @@ impl PhysicsLoop {
         set(&r.track_drops, self.tracks.drops);
         set(&r.late_periods, self.tracks.late_periods);
         set(&r.ticks, self.ticks.done);
+        set(&r.joined_tick, self.ticks.joined);
     }
 
     /// The last report sequence number used.

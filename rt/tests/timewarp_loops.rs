@@ -74,7 +74,12 @@ fn scenario() -> Scenario {
 }
 
 fn site(sc: &Scenario, i: usize, method: MethodName) -> Site {
-    let tag = format!("{}{i}", &method.as_str()[..2]);
+    site_tagged(sc, i, method, "")
+}
+
+/// [`site`], its segments' names tagged with `extra` too (tests run at once in one process).
+fn site_tagged(sc: &Scenario, i: usize, method: MethodName, extra: &str) -> Site {
+    let tag = format!("{}{i}{extra}", &method.as_str()[..2]);
     let tool = RingSegment::<ToolSample>::create(&name(&tag, "tool"), 64).expect("tool");
     let obj = RingSegment::<ObjectSample>::create(&name(&tag, "obj"), 64).expect("obj");
     let rep = RingSegment::<SiteReport>::create(&name(&tag, "rep"), 64).expect("rep");
@@ -291,4 +296,34 @@ fn a_missed_contact_is_replayed_without_allocating() {
     assert_eq!(st.replays, 1, "the knock was replayed: {st:?}");
     assert!(shown_apart > 0, "the replay showed the history");
     assert_eq!(allocations, 0, "the replay allocated");
+}
+
+/// A physics loop that joins the session late (a restart, a late station) steps from the tick
+/// its first step falls in, not from tick 0: one tick at its first step, none of the 5 s before.
+#[test]
+fn a_late_physics_loop_joins_the_grid_where_the_session_is() {
+    let sc = scenario();
+    for method in [MethodName::Timewarp, MethodName::Coupled] {
+        let mut s = site_tagged(&sc, 0, method, "j");
+        s.physics.join_late();
+        let now = EPOCH + 5000 * MS + MS / 2;
+        let p = tool_at(0, 5.0);
+        let sample = ToolSample {
+            t_ns: now,
+            tool_pos: [p.x, p.y, p.z],
+            ..ToolSample::default()
+        };
+        s.tool_in.push(sample).expect("tool ring has room");
+        let allocations = allocations_during(|| s.physics.step(now));
+        assert_eq!(allocations, 0, "{method:?}: joining allocated");
+        assert_eq!(
+            s.physics.ticks(),
+            5001,
+            "{method:?}: tick 5000 stepped, and only it"
+        );
+        assert_eq!(
+            s.physics.tracks.late_periods, 0,
+            "{method:?}: nothing to catch up"
+        );
+    }
 }

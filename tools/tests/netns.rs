@@ -458,8 +458,10 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
 }
 
 /// A physics process killed mid-session under `timewarp`: the supervisor restarts it, and it
-/// rebuilds its history from tick 0 without the inputs it had taken (user 1's push is gone from
-/// it). It is the restarted one (its `started_tick` the latest) that yields: user 1's station adopts user 2's
+/// joins the session's tick grid where it is now, from the last state its predecessor published
+/// (not re-simulating the session from tick 0, which took a period per 9 ticks and showed the
+/// user the session's past), without the history and friction memory it had. It is the restarted
+/// one (its `started_tick` the latest) that yields: user 1's station adopts user 2's
 /// confirmed state, never the other way round, and both copies end where the push put the disk.
 /// (With sites ordered by index alone, user 2 would have adopted the rebuilt history and the disk
 /// would have jumped back to its start: checked, this test then times out waiting for the
@@ -491,11 +493,11 @@ fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
     let limit = Duration::from_secs(60);
     // After user 1's first push (0.5-1.4 s: the disk slides to x = 0.089 m); the rebuilt history
     // lacks it (and the second, at 10 s, if that came before the kill).
-    let physics = wait_until("the first push over, both comparing", limit, || {
+    let (physics, killed_at) = wait_until("the first push over, both comparing", limit, || {
         let (x, y) = (rollback("user1")?, rollback("user2")?);
         let s = status("user1")?;
         let p = s.children.iter().find(|c| c.name == "physics")?.pid;
-        (x.ticks > 3000 && x.hash_checks > 0 && y.hash_checks > 0).then_some(p)
+        (x.ticks > 3000 && x.hash_checks > 0 && y.hash_checks > 0).then_some((p, x.ticks))
     });
     // (Stations started apart may have healed a start-up divergence already: count from here.)
     let user2_adopted = rollback("user2").map_or(0, |y| y.adopted_states);
@@ -518,6 +520,12 @@ fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
             .iter()
             .any(|c| c.name == "physics" && c.restarts > 0)),
         "the supervisor restarted user 1's physics"
+    );
+    // It joined the grid where the session was, not at tick 0.
+    assert!(
+        healed.joined_tick > killed_at,
+        "user 1's restarted physics joined at tick {} (killed at {killed_at})",
+        healed.joined_tick
     );
     // Then they agree, and user 2 adopted nothing.
     let after = agree_after_adopting(rollback, 5, limit);

@@ -208,29 +208,39 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             Some(Consumer::open(&names.track_in, &opts).context("opening the track-in ring")?);
     }
     let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
+    // The session's tick now, for methods on its grid (0 before its time 0 is known).
+    let tick_ns = u64::try_from(period(sc.site[i].physics_rate_hz).as_nanos())
+        .unwrap_or(1_000_000)
+        .max(1);
+    let tick_now = ctl
+        .epoch()
+        .map_or(0, |epoch| monotonic_ns().saturating_sub(epoch) / tick_ns);
+    // A physics process on the grid that starts more than this many ticks after the session's
+    // time 0 (a restart, a late station) joins the grid where it is now, from the newest state
+    // its predecessor published, instead of re-simulating the session from its start.
+    let mut join_after = u64::MAX;
     let method: Box<dyn Consistency> = match sc.method {
         MethodName::Naive => Box::<Naive>::default(),
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
         // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
         // the confirmed state is the same bits everywhere only from the same start.
         // One started more than a history after the session's time 0 (a restart, a late
-        // station) rebuilds its history without the positions the others no longer keep: it
-        // yields to the sites that were there (see `coop_model::timewarp`'s docs on healing).
-        // Stations started together, a few hundred ms apart, are all there from the start.
+        // station) has no history before it and cannot have the positions the others no longer
+        // keep: it yields to the sites that were there (see `coop_model::timewarp`'s docs on
+        // healing), adopting a confirmed state of theirs. Stations started together, a few
+        // hundred ms apart, are all there from the start.
         MethodName::Timewarp => {
             let mut tw = sc.timewarp(i, &ObjectCopy::new(start));
-            let tick_ns = u64::try_from(period(sc.site[i].physics_rate_hz).as_nanos())
-                .unwrap_or(1_000_000)
-                .max(1);
-            let tick = ctl
-                .epoch()
-                .map_or(0, |epoch| monotonic_ns().saturating_sub(epoch) / tick_ns);
-            let kept = tw.history_ticks() as u64;
-            tw.set_started_tick(if tick < kept { 0 } else { tick });
+            join_after = tw.history_ticks() as u64;
+            tw.set_started_tick(if tick_now < join_after { 0 } else { tick_now });
             Box::new(tw)
         }
-        MethodName::Coupled => Box::new(sc.coupled(i)),
+        MethodName::Coupled => {
+            join_after = coop_model::timewarp::WINDOW_TICKS as u64;
+            Box::new(sc.coupled(i))
+        }
     };
+    let join = (tick_now >= join_after).then_some(tick_now);
     let step = period(sc.site[i].physics_rate_hz);
     let timing = PhysicsTiming {
         period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
@@ -241,10 +251,11 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         report_seq: ctl.physics.report_seq.load(Ordering::Relaxed),
     };
     // A restarted physics resumes from the newest state its predecessor published, not from the
-    // scenario's start (the servo kept displaying that state; a jump back would be felt).
-    // (timewarp and coupled restart from the start and catch up on the session's tick grid:
-    // their copy is a function of the tick and the inputs, and their tick numbers are the grid's.)
-    let resumed = if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
+    // scenario's start (the servo kept displaying that state; a jump back would be felt). On the
+    // grid (timewarp, coupled) only when it joins the grid late; started with the session, it
+    // steps from tick 0 like every other site.
+    let on_grid = matches!(sc.method, MethodName::Timewarp | MethodName::Coupled);
+    let resumed = if on_grid && join.is_none() {
         None
     } else {
         ctl.resume().and_then(|s| s.state())
@@ -255,8 +266,17 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             cfg.name
         );
     }
+    if let Some(tick) = join {
+        eprintln!(
+            "station physics {}: joining the session's tick grid where it is (about tick {tick})",
+            cfg.name
+        );
+    }
     let copy = ObjectCopy::new(resumed.unwrap_or(start));
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
+    if join.is_some() {
+        physics.join_late();
+    }
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;
     ctl.physics

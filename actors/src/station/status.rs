@@ -268,6 +268,9 @@ pub struct RollbackStatus {
     pub phantom_contact_ticks: u64,
     /// Missed own contacts replayed to the user.
     pub replays: u64,
+    /// The grid tick physics joined at (0: at the session's start; later: a restart, a late
+    /// station, where the session was).
+    pub joined_tick: u64,
 }
 
 impl RollbackStatus {
@@ -293,6 +296,7 @@ impl RollbackStatus {
             unfelt_contact_ticks: l(&r.unfelt_contact_ticks),
             phantom_contact_ticks: l(&r.phantom_contact_ticks),
             replays: l(&r.replays),
+            joined_tick: l(&r.joined_tick),
         })
     }
 }
@@ -301,8 +305,9 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks, {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks",
+            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks",
             self.ticks,
+            self.joined_tick,
             self.rollbacks,
             self.resimulated_ticks,
             self.max_depth,

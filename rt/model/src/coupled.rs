@@ -67,6 +67,8 @@ pub struct Coupled {
     radii: [f64; MAX_SITES],
     playout_ticks: i64,
     now_tick: i64,
+    /// The tick this site started stepping at (0, or where a restarted physics joined the grid).
+    origin_tick: i64,
     /// Received positions with their ticks, tick `t` at `t % len`.
     received: Box<[[Received; MAX_SITES]]>,
     /// Own positions of the last ticks (tick `t` at `t % WINDOW_TICKS`).
@@ -108,6 +110,7 @@ impl Coupled {
             radii,
             playout_ticks: playout_ticks as i64,
             now_tick: 0,
+            origin_tick: 0,
             received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
             own_hist: vec![[0; 3]; WINDOW_TICKS].into_boxed_slice(),
             own: [0; 3],
@@ -174,6 +177,10 @@ impl Coupled {
 impl Consistency for Coupled {
     fn name(&self) -> &'static str {
         "coupled"
+    }
+    fn start_at_tick(&mut self, tick: i64) {
+        self.now_tick = tick.max(0);
+        self.origin_tick = self.now_tick;
     }
     fn own_tool(&mut self, tool_pos: Vec3) {
         self.own = quantize(tool_pos);
@@ -251,7 +258,7 @@ impl Consistency for Coupled {
     }
     fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
         let end = self.now_tick;
-        let first = (end - WINDOW_TICKS as i64).max(0);
+        let first = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         let mut tools = ToolReport {
             first_tick: first,
             count: (end - first) as usize,

@@ -23,7 +23,8 @@
 //!
 //! A divergence heals: confirmed states differ only where a site never knew an input (a link down
 //! for longer than the horizon: a fallback; a physics process that started after the session did,
-//! restarted or late, which rebuilt its history without what came before it), and then no
+//! restarted or late, which joins the grid where the session is ([`Consistency::start_at_tick`])
+//! with no history before it), and then no
 //! rollback can repair them. A site whose confirmed state differs from that of a site *before* it
 //! asks that site for its state ([`ToolReport::need_state`]); that site sends its full confirmed
 //! state ([`Snapshot`]: body, momenta, every friction memory) with its reports while asked, and
@@ -262,6 +263,8 @@ pub struct TimeWarp {
     newest: [i64; MAX_SITES],
     /// Per site: the first own tick it last asked for again ([`ToolReport::need`]; -1: none).
     asked: [i64; MAX_SITES],
+    /// Per site: the gap its frontier waits at was given up (counted once).
+    given_up: [bool; MAX_SITES],
     /// Whether the last report repaired a gap (repairs alternate with the newest window).
     repaired_last: std::cell::Cell<bool>,
     /// Per site before this one: its confirmed state differed from ours at the last comparison,
@@ -284,6 +287,9 @@ pub struct TimeWarp {
     replay: Option<(i64, Quantized)>,
     /// Missed contacts before this tick were replayed (or passed over): not again.
     replayed_until: i64,
+    /// The tick this site's history starts at (0, or where a restarted physics joined the grid:
+    /// [`Consistency::start_at_tick`]).
+    origin_tick: i64,
 }
 
 impl TimeWarp {
@@ -320,6 +326,7 @@ impl TimeWarp {
             known_until: [-1; MAX_SITES],
             newest: [-1; MAX_SITES],
             asked: [-1; MAX_SITES],
+            given_up: [false; MAX_SITES],
             repaired_last: std::cell::Cell::new(false),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
@@ -332,6 +339,7 @@ impl TimeWarp {
             tallied_until: 0,
             replay: None,
             replayed_until: 0,
+            origin_tick: 0,
         }
     }
 
@@ -365,7 +373,7 @@ impl TimeWarp {
 
     /// The oldest tick whose record is still kept.
     fn oldest_kept(&self) -> i64 {
-        (self.now_tick - self.len() + 1).max(0)
+        (self.now_tick - self.len() + 1).max(self.origin_tick)
     }
 
     fn idx(&self, tick: i64) -> usize {
@@ -738,7 +746,8 @@ impl Consistency for TimeWarp {
     }
     fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
-        let window = (end - WINDOW_TICKS as i64).max(0);
+                                 // (Nothing before the tick this site's history starts at: it was not here.)
+        let window = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         // A peer that lost more than a window of reports asked for the first tick it lacks: every
         // other report sends the window from there instead (while it is still kept), so the
         // newest positions keep flowing and the peer's frontier can pass the gap.
@@ -831,15 +840,19 @@ impl Consistency for TimeWarp {
             self.newest[from] = self.newest[from].max(end);
         }
         // Every position up to the frontier is known: a gap holds it back (the sender is asked
-        // for it), and one that left the history can never be filled: given up, counted.
+        // for it), and one that left the history can never be filled: given up, counted once
+        // (while the rest of it leaves the history, report by report, it is the same gap).
         let mut k = self.known_until[from];
         if k + 1 < oldest && self.newest[from] >= oldest {
-            self.stats.fallbacks += 1;
+            self.stats.fallbacks += u64::from(!self.given_up[from]);
+            self.given_up[from] = true;
             k = oldest - 1;
         }
+        let pinned = k;
         while k < self.newest[from] && self.received_at(from, k + 1).is_some() {
             k += 1;
         }
+        self.given_up[from] &= k == pinned;
         self.known_until[from] = k;
         // Ticks not all known (a gap's, and past the newest) are predicted again: one simulated
         // with another prediction is re-simulated too, so the copy is always what the inputs known now give
@@ -911,6 +924,19 @@ impl Consistency for TimeWarp {
     }
     fn shown(&self, copy: &ObjectCopy) -> BodyState {
         self.shown_state(copy)
+    }
+    fn start_at_tick(&mut self, tick: i64) {
+        let tick = tick.max(0);
+        self.now_tick = tick;
+        self.origin_tick = tick;
+        self.tallied_until = tick;
+        self.replayed_until = tick;
+        // No position before the history's start is needed (none is simulated here): the
+        // others' are taken from `tick` on, and those before it are neither gaps nor fallbacks.
+        for j in (0..self.sites).filter(|&j| j != self.me) {
+            self.known_until[j] = tick - 1;
+            self.newest[j] = tick - 1;
+        }
     }
 }
 
@@ -1166,6 +1192,78 @@ mod tests {
         }
         out.stats = tw.stats();
         out
+    }
+
+    /// A physics process that joins the grid late (a restart, a late station) starts where the
+    /// session is, not at tick 0, from a copy that is not the session's: it never simulates a
+    /// tick before the one it joined at, sends no positions from before it, adopts the earlier
+    /// site's confirmed state, and the two agree from then on.
+    #[test]
+    fn a_site_joining_the_grid_late_starts_there_and_adopts() {
+        let (sc, w) = paper_world();
+        let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let new = |i| TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start);
+        // Site 1 pushes the disk (ticks 900-1300), its physics dies at 1500 and a new one joins
+        // the grid at 2000 from the scenario's start.
+        let (crash, join) = (1500, 2000);
+        let mut sites = [(new(0), start), (new(1), start)];
+        let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+        let down = |i: usize, k: i64| i == 1 && (crash..join).contains(&k);
+        for k in 0..4000 {
+            if k == join {
+                let mut b = new(1);
+                b.set_started_tick(join as u64);
+                b.start_at_tick(join);
+                sites[1] = (b, start);
+            }
+            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+                if down(i, k) {
+                    continue;
+                }
+                for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                    tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+                }
+                tw.own_tool(sweep_into_the_disk(i, k));
+                tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+            }
+            in_flight.retain(|m| m.0 > k);
+            if k % 20 == 0 {
+                for (i, (tw, copy)) in sites.iter().enumerate() {
+                    if down(i, k) {
+                        continue;
+                    }
+                    let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                    if let Report::Tools(t) = &r {
+                        assert!(
+                            i == 0 || k < crash || t.first_tick >= join,
+                            "{}",
+                            t.first_tick
+                        );
+                    }
+                    in_flight.push((k + 30, i, r));
+                }
+            }
+        }
+        let [(a, ca), (b, _)] = &sites;
+        assert!(ca.state.pos.x < -0.002, "site 1 pushed the disk");
+        assert!(
+            b.slots.iter().all(|s| s.tick == i64::MIN || s.tick >= join),
+            "nothing simulated before the join"
+        );
+        let st = b.stats();
+        assert!(st.hash_mismatches > 0 && st.adopted_states >= 1, "{st:?}");
+        // Positions from before it joined are not counted as ones it could not undo.
+        assert_eq!(st.fallbacks, 0, "{st:?}");
+        let t = a.confirmed_tick().min(b.confirmed_tick()) - 1;
+        assert!(t > 3500, "both confirmed to near the end: {t}");
+        assert_eq!(
+            a.hash_at(t),
+            b.hash_at(t),
+            "the same confirmed state at {t}"
+        );
+        assert_eq!(a.stats().adopted_states, 0, "{:?}", a.stats());
     }
 
     /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at

@@ -448,6 +448,9 @@ pub struct RollbackShared {
     pub phantom_contact_ticks: AtomicU64,
     /// Missed own contacts replayed to the user from the confirmed history.
     pub replays: AtomicU64,
+    /// The grid tick this physics process joined at (0: with the session, at its start; later:
+    /// a restarted or late one, where the session was).
+    pub joined_tick: AtomicU64,
 }
 
 /// What the network process writes.
