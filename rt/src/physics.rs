@@ -7,7 +7,7 @@
 use coop_model::contact::ContactForce;
 use coop_model::method::{Consistency, ObjectCopy, World};
 
-use coop_model::body::Vec3;
+use coop_model::body::{BodyState, Vec3};
 use coop_model::method::Report;
 
 use crate::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack, TraceRecord};
@@ -89,8 +89,9 @@ struct Ticks {
     done: u64,
     /// Tool tracks sent.
     seq: u64,
-    /// Join the grid where the session is at the first step, not at tick 0.
-    join: bool,
+    /// Join the grid where the session is at the first step (if that is at least this tick),
+    /// from this state (`None`: the copy given), not at tick 0.
+    join: Option<(u64, Option<BodyState>)>,
     /// The tick it joined at (0: at the start).
     joined: u64,
 }
@@ -185,13 +186,17 @@ impl PhysicsLoop {
         self.ticks.origin_ns.get_or_insert(origin_ns);
     }
 
-    /// For a method on the session's tick grid: this loop joins the grid at the tick its first
-    /// step falls in (its copy is the state there), not at tick 0: a restarted or late physics
-    /// process starts where the session is instead of re-simulating it from its start (at most
-    /// [`MAX_CATCH_UP_TICKS`] extra ticks a period: a restart ten minutes in took 75 s to catch
-    /// up, showing the user the session's past). Before the first step; nothing off the grid.
-    pub fn join_late(&mut self) {
-        self.ticks.join = self.ticks.on_grid && self.ticks.done == 0;
+    /// For a method on the session's tick grid: if its first step on the grid falls in tick
+    /// `after` or later (the session's time 0 may only be learnt then), this loop joins the grid
+    /// at that tick, from `state` (`None`: the copy it was given), not at tick 0: a restarted or
+    /// late physics process starts where the session is instead of re-simulating it from its
+    /// start (at most [`MAX_CATCH_UP_TICKS`] extra ticks a period: a restart ten minutes in took
+    /// 75 s to catch up, showing the user the session's past). Before the first step; nothing
+    /// off the grid.
+    pub fn join_late(&mut self, after: u64, state: Option<BodyState>) {
+        if self.ticks.on_grid && self.ticks.done == 0 {
+            self.ticks.join = Some((after, state));
+        }
     }
 
     /// Ticks of the session's grid stepped so far (methods that step on it).
@@ -216,12 +221,17 @@ impl PhysicsLoop {
         };
         // Ticks whose start has come: 0 ..= (now - origin) / period.
         let due = (now_ns - origin) / self.period_ns.max(1) + 1;
-        if std::mem::take(&mut self.ticks.join) {
-            // Joining late: the copy is the state at the start of the current tick.
-            self.ticks.done = due - 1;
-            self.ticks.joined = self.ticks.done;
-            self.method
-                .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
+        if let Some((after, state)) = self.ticks.join.take() {
+            if due > after {
+                // Joining late: the copy is the state at the start of the current tick.
+                self.ticks.done = due - 1;
+                self.ticks.joined = self.ticks.done;
+                if let Some(s) = state {
+                    self.copy = ObjectCopy::new(s);
+                }
+                self.method
+                    .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
+            }
         }
         let behind = due.saturating_sub(self.ticks.done);
         if behind > 1 {

@@ -13,7 +13,7 @@ use coop_model::method::Consistency;
 use coop_model::method::ObjectCopy;
 use coop_model::scenario::{MethodName, Scenario, SiteSpec};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack};
-use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
+use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming, MAX_CATCH_UP_TICKS};
 use coop_rt::shm::{Consumer, Producer, RingSegment, SegmentName};
 
 mod common;
@@ -300,12 +300,14 @@ fn a_missed_contact_is_replayed_without_allocating() {
 
 /// A physics loop that joins the session late (a restart, a late station) steps from the tick
 /// its first step falls in, not from tick 0: one tick at its first step, none of the 5 s before.
+/// (One whose first step falls before the join threshold steps from tick 0, as the others: see
+/// `a_loop_started_with_the_session_steps_from_tick_0`.)
 #[test]
 fn a_late_physics_loop_joins_the_grid_where_the_session_is() {
     let sc = scenario();
     for method in [MethodName::Timewarp, MethodName::Coupled] {
         let mut s = site_tagged(&sc, 0, method, "j");
-        s.physics.join_late();
+        s.physics.join_late(1000, None);
         let now = EPOCH + 5000 * MS + MS / 2;
         let p = tool_at(0, 5.0);
         let sample = ToolSample {
@@ -326,4 +328,20 @@ fn a_late_physics_loop_joins_the_grid_where_the_session_is() {
             "{method:?}: nothing to catch up"
         );
     }
+}
+
+/// A loop that may join late but whose first step comes within the threshold (stations started
+/// together) steps from tick 0 like every other site.
+#[test]
+fn a_loop_started_with_the_session_steps_from_tick_0() {
+    let sc = scenario();
+    let mut s = site_tagged(&sc, 1, MethodName::Timewarp, "z");
+    s.physics.join_late(1000, None);
+    let now = EPOCH + 300 * MS + MS / 2;
+    s.physics.step(now);
+    assert_eq!(
+        s.physics.ticks(),
+        1 + MAX_CATCH_UP_TICKS,
+        "catching up from tick 0"
+    );
 }

@@ -208,39 +208,31 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             Some(Consumer::open(&names.track_in, &opts).context("opening the track-in ring")?);
     }
     let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
-    // The session's tick now, for methods on its grid (0 before its time 0 is known).
-    let tick_ns = u64::try_from(period(sc.site[i].physics_rate_hz).as_nanos())
-        .unwrap_or(1_000_000)
-        .max(1);
-    let tick_now = ctl
-        .epoch()
-        .map_or(0, |epoch| monotonic_ns().saturating_sub(epoch) / tick_ns);
-    // A physics process on the grid that starts more than this many ticks after the session's
-    // time 0 (a restart, a late station) joins the grid where it is now, from the newest state
-    // its predecessor published, instead of re-simulating the session from its start.
-    let mut join_after = u64::MAX;
+    // A physics process on the grid whose first step falls this many ticks or more after the
+    // session's time 0 (a restart, a late station: the time 0 may only be learnt then) joins the
+    // grid where it is, from the newest state its predecessor published, instead of
+    // re-simulating the session from its start (see `PhysicsLoop::join_late`).
+    let mut join_after = None;
     let method: Box<dyn Consistency> = match sc.method {
         MethodName::Naive => Box::<Naive>::default(),
         MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
         // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
-        // the confirmed state is the same bits everywhere only from the same start.
-        // One started more than a history after the session's time 0 (a restart, a late
-        // station) has no history before it and cannot have the positions the others no longer
-        // keep: it yields to the sites that were there (see `coop_model::timewarp`'s docs on
-        // healing), adopting a confirmed state of theirs. Stations started together, a few
-        // hundred ms apart, are all there from the start.
+        // the confirmed state is the same bits everywhere only from the same start. One that
+        // joins more than a history after it (a restart, a late station) has no history before
+        // it and cannot have the positions the others no longer keep: it yields to the sites
+        // that were there (see `coop_model::timewarp`'s docs on healing), adopting a confirmed
+        // state of theirs. Stations started together, a few hundred ms apart, are all there from
+        // the start.
         MethodName::Timewarp => {
-            let mut tw = sc.timewarp(i, &ObjectCopy::new(start));
-            join_after = tw.history_ticks() as u64;
-            tw.set_started_tick(if tick_now < join_after { 0 } else { tick_now });
+            let tw = sc.timewarp(i, &ObjectCopy::new(start));
+            join_after = Some(tw.history_ticks() as u64);
             Box::new(tw)
         }
         MethodName::Coupled => {
-            join_after = coop_model::timewarp::WINDOW_TICKS as u64;
+            join_after = Some(coop_model::timewarp::WINDOW_TICKS as u64);
             Box::new(sc.coupled(i))
         }
     };
-    let join = (tick_now >= join_after).then_some(tick_now);
     let step = period(sc.site[i].physics_rate_hz);
     let timing = PhysicsTiming {
         period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
@@ -252,30 +244,27 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     };
     // A restarted physics resumes from the newest state its predecessor published, not from the
     // scenario's start (the servo kept displaying that state; a jump back would be felt). On the
-    // grid (timewarp, coupled) only when it joins the grid late; started with the session, it
-    // steps from tick 0 like every other site.
-    let on_grid = matches!(sc.method, MethodName::Timewarp | MethodName::Coupled);
-    let resumed = if on_grid && join.is_none() {
-        None
-    } else {
-        ctl.resume().and_then(|s| s.state())
-    };
+    // grid (timewarp, coupled) only if it joins late; started with the session, it steps from
+    // tick 0 like every other site.
+    let resumed = ctl.resume().and_then(|s| s.state());
     if resumed.is_some() {
         eprintln!(
-            "station physics {}: resuming from the last published state",
-            cfg.name
+            "station physics {}: resuming from the last published state{}",
+            cfg.name,
+            if join_after.is_some() {
+                " if it joins the session's tick grid late"
+            } else {
+                ""
+            }
         );
     }
-    if let Some(tick) = join {
-        eprintln!(
-            "station physics {}: joining the session's tick grid where it is (about tick {tick})",
-            cfg.name
-        );
-    }
-    let copy = ObjectCopy::new(resumed.unwrap_or(start));
+    let copy = ObjectCopy::new(match join_after {
+        Some(_) => start,
+        None => resumed.unwrap_or(start),
+    });
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
-    if join.is_some() {
-        physics.join_late();
+    if let Some(after) = join_after {
+        physics.join_late(after, resumed);
     }
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
     let mut last_report_seq = timing.report_seq;

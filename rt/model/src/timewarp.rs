@@ -927,6 +927,8 @@ impl Consistency for TimeWarp {
     }
     fn start_at_tick(&mut self, tick: i64) {
         let tick = tick.max(0);
+        // It was not there from the start: it yields (see the module docs).
+        self.started_tick = tick.unsigned_abs();
         self.now_tick = tick;
         self.origin_tick = tick;
         self.tallied_until = tick;
