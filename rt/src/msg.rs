@@ -1,6 +1,6 @@
 //! The messages on a station's rings, as plain old data (H5): servo → physics [`ToolSample`],
 //! physics → servo [`ObjectSample`], physics ⇄ network [`SiteReport`] and [`ToolTrack`], physics → recorder
-//! [`TraceRecord`]. Each is declared once with [`pod_message!`], which derives from the one field
+//! [`TraceRecord`]. Each is declared once with `pod_message!`, which derives from the one field
 //! list its words (`WORDS`, `to_words`, `from_words`) and its `LAYOUT`: the wire format
 //! (`coop_transport::wire`) and the control block's resume seqlock are built on those, never on a
 //! second, hand-written field order. Each has a stable `TYPE_NAME` and a compile-time size check;
@@ -17,7 +17,7 @@ use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
 
-/// A field of a [`pod_message!`] struct: a `u64`, an `f64` or an array of one of them, as 8-byte
+/// A field of a `pod_message!` struct: a `u64`, an `f64` or an array of one of them, as 8-byte
 /// words. The words are the field's bits (`f64::to_bits`), so a round trip is exact, NaN included.
 pub trait WordField: Copy {
     /// `"u64"` or `"f64"`.

@@ -38,7 +38,7 @@ use nalgebra::UnitQuaternion;
 
 use crate::body::{BodyState, MassProps, Vec3};
 
-/// Display parameters (the scenario's `[display]` table; see [`crate::scenario::DisplaySpec`]).
+/// Display parameters (the scenario's `[display]` table; see [`DisplaySpec`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DisplayParams {
     /// Whether the display stages run (off: the servo renders the copy's contact, with only the
