@@ -13,6 +13,10 @@
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
 //! measured loops, which follow coop-rt's contract (no allocation, lock, logging or system call but
 //! the timer sleep inside the loop).
+
+// The doc comments of the clap structs are the command lines' help, where `<name>` is a
+// placeholder, not an HTML tag.
+#![allow(rustdoc::invalid_html_tags)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 

@@ -1016,8 +1016,8 @@ impl Recorder {
         self.put_log(m.t_ns, Level::Info, text)
     }
     /// A record from physics' trace ring: `/adoption` for a [`TraceRecord::ADOPTION`], else
-    /// `/object` and `/tool` (a [`TraceRecord::SAMPLE`]); the same messages as [`Recorder::adoption`]
-    /// and [`Recorder::sample`] write.
+    /// `/object` and `/tool` (a [`TraceRecord::SAMPLE`]); the same messages as `Recorder::adoption`
+    /// and `Recorder::sample` write.
     ///
     /// # Errors
     /// Writing failed.

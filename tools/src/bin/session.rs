@@ -1,5 +1,9 @@
 //! `session`: a multi-site session of real stations on this machine. See `session --help`.
 
+// The doc comments of the clap structs are the command lines' help, where `<name>` is a
+// placeholder, not an HTML tag.
+#![allow(rustdoc::invalid_html_tags)]
+
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};

@@ -3,7 +3,7 @@
 //! - publishes this site's reports (read from the physics → network ring) on its state key, express,
 //!   real-time priority, dropped rather than queued under congestion ([`publish`]);
 //! - hands the other sites' reports to physics (network → physics ring) the moment zenoh delivers
-//!   them, after [`wire::Inbound::check`](crate::wire::Inbound::check) (typed refusals are counted,
+//!   them, after [`admit::Inbound::check`](crate::admit::Inbound::check) (typed refusals are counted,
 //!   never applied), with their time corrected by the sender's clock offset, through the
 //!   receive-side network emulation when configured (`receive`, [`emulate`]);
 //! - declares a liveliness token (who is present) and watches everyone's (`presence`); answers

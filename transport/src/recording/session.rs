@@ -13,7 +13,7 @@
 //! | `/tool`       | JSON, as in a station's recording | one per site                                 |
 //! | `/divergence` | JSON [`DivergenceMsg`]    | the largest distance between copies, each copy's from the reference |
 //! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference` |
-//! | `/scene`      | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`](super::SCENE_EVERY): every site's entities and the reference copy ([`REFERENCE_COLOUR`](super::scene::REFERENCE_COLOUR)) |
+//! | `/scene`      | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`]: every site's entities and the reference copy ([`REFERENCE_COLOUR`]) |
 //! | `/log`        | `foxglove.Log`            | the session's start (scenario, method, sites)       |
 //!
 //! The frames, entities and colours are the recordings' own ([`Scene`]); one file, no parts,
