@@ -200,15 +200,15 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn timewarp_stats(&self) -> Option<crate::timewarp::Stats> {
         None
     }
-    /// For a method that steps on the session's tick grid (`timewarp`, `coupled`): the copy
-    /// given at construction is the state at the start of tick `tick`, not tick 0, and nothing
+    /// For a method that steps on the session's tick grid (`timewarp`, `coupled`): the copy it
+    /// is stepped with is the state at the start of tick `tick`, not tick 0, and nothing
     /// before it was simulated here (a restarted or late physics process joins the grid where it
     /// is now instead of re-simulating the session from its start). Called before the first step.
     fn start_at_tick(&mut self, tick: i64) {
         let _ = tick;
     }
     /// The object state the own user is shown (the servo renders against it): the copy's,
-    /// unless the method replays a contact the user missed ([`crate::timewarp::TimeWarp::shown_state`]).
+    /// unless the method replays a contact the user missed (`timewarp`: see [`crate::timewarp`]).
     fn shown(&self, copy: &ObjectCopy) -> crate::body::BodyState {
         copy.state
     }

@@ -371,11 +371,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 };
                 let copy = if reference { &shared } else { &s.copy };
                 // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                let shown = if reference {
-                    shared.state
-                } else {
-                    s.method.shown(copy)
-                };
+                let shown = s.method.shown(copy);
                 let (tool_pos, tool_vel) = match &s.replay {
                     Some(r) => r.at(ns_to_s(t)),
                     None => {

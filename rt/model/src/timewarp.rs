@@ -49,7 +49,7 @@
 //! contact live ([`REPLAY_MIN_TICKS`] or more), while no tool touches the object now (a free
 //! object's knock, not a grasp: replayed against several hands that all moved on, the history
 //! cost the three-user grasp 2 of 12 seeds' carry at 200 ms) and the own tool is within
-//! [`REPLAY_REACH_M`] of where it was then, makes [`TimeWarp::shown_state`] (what the servo
+//! [`REPLAY_REACH_M`] of where it was then, makes [`Consistency::shown`] (what the servo
 //! renders against) the re-simulated history from [`REPLAY_LEAD_TICKS`] before the contact on,
 //! [`REPLAY_SPEED`] times as fast and at the history's own pace into and through the contact,
 //! until it reaches the copy ([`Stats::replays`]). The user feels the knock the confirmed history
@@ -91,7 +91,7 @@ pub const REACH_TIME_TICKS: i64 = 300;
 /// How long a reach is predicted before the tool is held, ticks.
 pub const REACH_TICKS: i64 = 1000;
 
-/// A contact the own user missed (see [`TimeWarp::shown_state`]) is replayed at this many times
+/// A contact the own user missed (see the module docs) is replayed at this many times
 /// its speed (the contact itself at its own) until the display catches up with the copy: a
 /// replay of `d` ticks of history ends about `d / (REPLAY_SPEED - 1)` ticks later (250 ms after
 /// a 500 ms delay's news).
@@ -223,7 +223,7 @@ pub struct Stats {
     /// Confirmed states adopted from a site before this one whose confirmed history differed
     /// (after a fallback or a restart): see the module docs.
     pub adopted_states: u64,
-    /// Missed contacts replayed to the own user ([`TimeWarp::shown`]).
+    /// Missed contacts replayed to the own user ([`Consistency::shown`]).
     pub replays: u64,
 }
 
@@ -684,23 +684,6 @@ impl TimeWarp {
         }
     }
 
-    /// The object state the own user is shown: the copy's, or during a replay of a missed contact
-    /// the history's at the replayed tick, its velocities at the replay's speed (so the display
-    /// sees the motion it shows).
-    pub fn shown_state(&self, copy: &ObjectCopy) -> BodyState {
-        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        match self.replay {
-            Some((t, _)) if self.slots[self.idx(t)].tick == t => {
-                let mut s = self.slots[self.idx(t)].copy.state;
-                let k = self.replay_speed(t) as f64;
-                s.vel *= k;
-                s.ang_mom *= k;
-                s
-            }
-            _ => copy.state,
-        }
-    }
-
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
     fn hash_at(&self, t: i64) -> Option<u64> {
         let s = &self.slots[self.idx(t)];
@@ -922,8 +905,20 @@ impl Consistency for TimeWarp {
     fn timewarp_stats(&self) -> Option<Stats> {
         Some(self.stats)
     }
+    /// The copy's state, or during a replay of a missed contact the history's at the replayed
+    /// tick, its velocities at the replay's speed (so the display sees the motion it shows).
     fn shown(&self, copy: &ObjectCopy) -> BodyState {
-        self.shown_state(copy)
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        match self.replay {
+            Some((t, _)) if self.slots[self.idx(t)].tick == t => {
+                let mut s = self.slots[self.idx(t)].copy.state;
+                let k = self.replay_speed(t) as f64;
+                s.vel *= k;
+                s.ang_mom *= k;
+                s
+            }
+            _ => copy.state,
+        }
     }
     fn start_at_tick(&mut self, tick: i64) {
         let tick = tick.max(0);
@@ -931,8 +926,6 @@ impl Consistency for TimeWarp {
         self.started_tick = tick.unsigned_abs();
         self.now_tick = tick;
         self.origin_tick = tick;
-        self.tallied_until = tick;
-        self.replayed_until = tick;
         // No position before the history's start is needed (none is simulated here): the
         // others' are taken from `tick` on, and those before it are neither gaps nor fallbacks.
         for j in (0..self.sites).filter(|&j| j != self.me) {
@@ -1185,7 +1178,7 @@ mod tests {
             }
             tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
             out.touched |= tw.contacts[0].touching();
-            let shown = tw.shown_state(&copy);
+            let shown = tw.shown(&copy);
             out.shown_was_copy &= shown == copy.state;
             // The rim (0.04 m) meets the tool (0.005 m) in the plane.
             let gap = (own(k) - shown.pos).xy().norm() - 0.045;
