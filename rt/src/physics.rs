@@ -438,6 +438,8 @@ impl PhysicsLoop {
             set(&r.unfelt_contact_ticks, st.unfelt_contact_ticks);
             set(&r.phantom_contact_ticks, st.phantom_contact_ticks);
             set(&r.replays, st.replays);
+            set(&r.local_lag_ticks, st.local_lag_ticks);
+            set(&r.lagged_ticks, st.lagged_ticks);
         }
         set(&r.tracks_received, self.tracks.received);
         set(&r.tracks_rejected, self.tracks.rejected);

@@ -81,6 +81,8 @@ pub struct Row {
     pub phantom_contact_ms: f64,
     /// Missed contacts replayed to the users from the confirmed history, all sites.
     pub replays: u64,
+    /// The largest local lag of any site's own tool, ms (`timewarp`).
+    pub local_lag_max_ms: f64,
 }
 
 impl Row {
@@ -127,6 +129,7 @@ impl Row {
             unfelt_contact_ms: m.unfelt_contact_ms,
             phantom_contact_ms: m.phantom_contact_ms,
             replays: m.replays,
+            local_lag_max_ms: m.local_lag_max_ms,
         }
     }
 }

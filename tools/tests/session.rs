@@ -571,6 +571,8 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
                 && rb["replays"].is_u64(),
             "{site}: {rb}"
         );
+        // Both users grasp, squeeze and carry the disk: the own tool was lagged meanwhile.
+        assert!(rb["lagged_ticks"].as_u64() > Some(0), "{site}: {rb}");
     }
     let _ = std::fs::remove_dir_all(&out);
 }

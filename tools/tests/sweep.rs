@@ -81,6 +81,7 @@ fn sweep_json_has_every_method_and_delay_and_timewarp_does_the_task() {
         "unfelt_contact_ms",
         "phantom_contact_ms",
         "replays",
+        "local_lag_max_ms",
     ] {
         for r in rows {
             assert!(r.get(key).is_some(), "{key} missing in {r}");
@@ -298,7 +299,10 @@ fn eight_user_bench_scenario_has_everyone_touching() {
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
     let m = metrics::compute(&sc, &r, &reference);
     assert_eq!(m.hash_mismatches, 0);
-    assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+    // Every site's own tool lagged by half the 150 ms while its neighbours are near the disk
+    // (`timewarp::LOCAL_LAG_SHARE`) doubles the copies' largest distance, 11.7 -> 21.4 mm: the
+    // lagged positions are still sent as they are stepped, so partners predict as far as before.
+    assert!(m.co_contact_divergence_max_m < 0.025, "{m:?}");
 }
 
 /// `coupled` exchanges the tools without rollback: at a constant 50 ms (seed 1) it does the whole
@@ -427,4 +431,28 @@ fn timewarp_lifts_and_carries_the_disk_in_3d_at_200_ms() {
     assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
     let (_, p) = scenario_run("lift.toml", MethodName::Paper, 200.0, 1);
     assert!(p.phases_passed < p.phases_total, "{p:?}");
+}
+
+/// The three-user task (issue 12): users 1 and 2 grasp the disk from the sides and user 3 from
+/// the front, squeeze it and carry it together (`scenarios/three-grasp.toml`), and the 3-D one, in
+/// which they lift it, carry it and set it down (`scenarios/three-lift.toml`). At a constant 200 ms
+/// `timewarp` does every phase at every site, with its own tool lagged by about half the delay
+/// while a partner's is near the object (seed 3 of the first and seed 2 of the second lost the
+/// carry without the lag).
+#[test]
+fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
+    for (file, seed) in [("three-grasp.toml", 3), ("three-lift.toml", 2)] {
+        let (_, m) = scenario_run(file, MethodName::Timewarp, 200.0, seed);
+        assert_eq!(m.phases_passed, m.phases_total, "{file}: {m:?}");
+        assert_eq!(m.hash_mismatches, 0, "{file}");
+        assert!(m.energy_beyond_users_j <= 0.0, "{file}: {m:?}");
+        // Half of 200 ms (and the jitter), capped at 100 ms.
+        assert!(
+            (90.0..=100.0).contains(&m.local_lag_max_ms),
+            "{file}: {m:?}"
+        );
+        for s in &m.sites {
+            assert!(s.lagged_s > 1.0, "{file}: {s:?}");
+        }
+    }
 }

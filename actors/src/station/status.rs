@@ -271,6 +271,10 @@ pub struct RollbackStatus {
     /// The grid tick physics joined at (0: at the session's start; later: a restart, a late
     /// station, where the session was).
     pub joined_tick: u64,
+    /// The own tool's local lag now, ticks.
+    pub local_lag_ticks: u64,
+    /// Ticks stepped with the own tool lagged.
+    pub lagged_ticks: u64,
 }
 
 impl RollbackStatus {
@@ -297,6 +301,8 @@ impl RollbackStatus {
             phantom_contact_ticks: l(&r.phantom_contact_ticks),
             replays: l(&r.replays),
             joined_tick: l(&r.joined_tick),
+            local_lag_ticks: l(&r.local_lag_ticks),
+            lagged_ticks: l(&r.lagged_ticks),
         })
     }
 }
@@ -305,7 +311,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks",
+            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all",
             self.ticks,
             self.joined_tick,
             self.rollbacks,
@@ -322,7 +328,9 @@ impl std::fmt::Display for RollbackStatus {
             self.late_periods,
             self.unfelt_contact_ticks,
             self.replays,
-            self.phantom_contact_ticks
+            self.phantom_contact_ticks,
+            self.local_lag_ticks,
+            self.lagged_ticks
         )
     }
 }

@@ -129,6 +129,11 @@ pub struct SiteMetrics {
     pub phantom_contact_ms: f64,
     /// Missed contacts replayed to this site's user from the confirmed history.
     pub replays: u64,
+    /// The largest local lag of this site's own tool, ms (`timewarp`: see
+    /// [`crate::timewarp::LOCAL_LAG_SHARE`]; 0 for other methods)...
+    pub local_lag_max_ms: f64,
+    /// ... and the time its tool was lagged, s.
+    pub lagged_s: f64,
 }
 
 /// A run's figures.
@@ -209,6 +214,8 @@ pub struct Metrics {
     pub phantom_contact_ms: f64,
     /// Missed contacts replayed to the users, all sites ([`SiteMetrics::replays`]).
     pub replays: u64,
+    /// The largest local lag of any site's own tool, ms ([`SiteMetrics::local_lag_max_ms`]).
+    pub local_lag_max_ms: f64,
     /// Per site.
     pub sites: Vec<SiteMetrics>,
 }
@@ -365,6 +372,8 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 unfelt_contact_ms: ms(tw.unfelt_contact_ticks),
                 phantom_contact_ms: ms(tw.phantom_contact_ticks),
                 replays: tw.replays,
+                local_lag_max_ms: ms(tw.max_local_lag_ticks),
+                lagged_s: ms(tw.lagged_ticks) / 1e3,
             }
         })
         .collect();
@@ -428,6 +437,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         unfelt_contact_ms: sites.iter().map(|s| s.unfelt_contact_ms).sum(),
         phantom_contact_ms: sites.iter().map(|s| s.phantom_contact_ms).sum(),
         replays: sites.iter().map(|s| s.replays).sum(),
+        local_lag_max_ms: sites.iter().map(|s| s.local_lag_max_ms).fold(0.0, f64::max),
         divergence_max_m: divs.iter().copied().fold(0.0, f64::max),
         divergence_rms_m: rms(divs.iter().copied()),
         divergence_after_contact_m: after,

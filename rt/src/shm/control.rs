@@ -451,6 +451,11 @@ pub struct RollbackShared {
     /// The grid tick this physics process joined at (0: with the session, at its start; later:
     /// a restarted or late one, where the session was).
     pub joined_tick: AtomicU64,
+    /// The own tool's local lag now, ticks (`timewarp`: its positions enter the physics this late
+    /// while it and another site's are near the object).
+    pub local_lag_ticks: AtomicU64,
+    /// Ticks stepped with the own tool lagged.
+    pub lagged_ticks: AtomicU64,
 }
 
 /// What the network process writes.
@@ -532,7 +537,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v15";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v16";
 }
 
 impl ControlBlock {

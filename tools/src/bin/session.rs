@@ -159,10 +159,10 @@ enum Command {
 /// Per method and station, from the statuses read just before the end: physics overruns during
 /// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
 /// and a rolling-back method's rollbacks, hash checks, confirmed states adopted, contact unfelt
-/// and phantom, and missed contacts replayed.
+/// and phantom, missed contacts replayed, and ticks the own tool was lagged.
 fn print_station_loops(v: &serde_json::Value) {
     println!(
-        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}",
+        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}  {:>12}",
         "method",
         "site",
         "physics overruns",
@@ -174,7 +174,8 @@ fn print_station_loops(v: &serde_json::Value) {
         "mismatches",
         "adopted",
         "unfelt/phantom ticks",
-        "replayed"
+        "replayed",
+        "lagged ticks"
     );
     for (m, r) in v["methods"].as_object().into_iter().flatten() {
         for (site, st) in r["stations"].as_object().into_iter().flatten() {
@@ -196,7 +197,7 @@ fn print_station_loops(v: &serde_json::Value) {
                 }
             };
             println!(
-                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}",
+                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}  {:>12}",
                 or_dash(&live["overruns_during_session"]["physics"]),
                 or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
                 or_dash(&rb["rollbacks"]),
@@ -207,6 +208,7 @@ fn print_station_loops(v: &serde_json::Value) {
                 or_dash(&rb["adopted_states"]),
                 pair("unfelt_contact_ticks", "phantom_contact_ticks"),
                 or_dash(&rb["replays"]),
+                or_dash(&rb["lagged_ticks"]),
             );
         }
     }
