@@ -229,7 +229,10 @@ fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirme
         assert!(st.hash_checks > 50, "site {i} compared hashes: {st:?}");
         assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
         // Both tools squeeze the disk: each site's own tool was lagged (by half the 30 ms).
-        assert!(st.lagged_ticks > 100 && st.max_local_lag_ticks >= 14, "site {i}: {st:?}");
+        assert!(
+            st.lagged_ticks > 100 && st.max_local_lag_ticks >= 14,
+            "site {i}: {st:?}"
+        );
     }
 }
 

@@ -58,6 +58,15 @@
 //! the push can reach user 2. The copy, its confirmed state and every site's physics are
 //! untouched; a contact of the live copy, or the hand moving away, ends a replay at once.
 //!
+//! Local lag (Mauve et al. 2004's companion of timewarp, GGPO's input delay): while the own tool
+//! and a partner's are both within [`LOCAL_LAG_NEAR_M`] of the object, the own tool's measured
+//! positions enter the physics late by [`LOCAL_LAG_SHARE`] of the partner's measured one-way delay
+//! (at most [`LOCAL_LAG_MAX_TICKS`]), grown into at half speed and caught up at twice it, never
+//! while the own tool touches the object. Each copy then holds its own tool and the partners'
+//! newest known positions nearer the same moment, so each user's hand reacts to an object that moves
+//! as the partners' hands move it ([`Stats::local_lag_ticks`], [`Stats::lagged_ticks`]). The input
+//! of a tick is whatever position the site stepped it with: every site still steps the same inputs.
+//!
 //! Determinism: the forces are summed in site order whatever site computes them, every input is an
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
 //! same platform gives the same bits; see the crate docs on transcendental functions).
