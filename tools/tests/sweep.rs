@@ -455,4 +455,14 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
             assert!(s.lagged_s > 1.0, "{file}: {s:?}");
         }
     }
+    // Without the lag (`[timewarp] local_lag_share = 0`) the carry is lost.
+    let base = scenario_file::load(&repo().join("scenarios/three-grasp.toml")).expect("file");
+    let mut sc = scenario_at(&base, 200.0, 3).expect("valid");
+    sc.timewarp.local_lag_share = 0.0;
+    sc.validate().expect("valid without the lag");
+    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+    let m = metrics::compute(&sc, &r, &reference);
+    assert!(m.phases_passed < m.phases_total, "{m:?}");
+    assert_eq!(m.local_lag_max_ms, 0.0);
 }

@@ -113,7 +113,7 @@ pub struct Scenario {
 }
 
 /// The `timewarp` method's settings (`[timewarp]`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(
     feature = "serde",
     derive(Deserialize),
@@ -126,7 +126,28 @@ pub struct TimewarpSpec {
     /// [`Scenario::timewarp_horizon_s`]). Otherwise at least the first three, at most 10 s (one snapshot
     /// per physics tick is kept, allocated at start).
     pub horizon_ms: f64,
+    /// The own tool's local lag while a partner's is near the object, as a share of that
+    /// partner's measured one-way delay, 0 to 1 (0: none; see
+    /// [`crate::timewarp::LOCAL_LAG_SHARE`], the default).
+    pub local_lag_share: f64,
+    /// ... at most this, ms, 0 to [`MAX_LOCAL_LAG_MS`] (default
+    /// [`crate::timewarp::LOCAL_LAG_MAX_TICKS`] at 1 kHz).
+    pub local_lag_max_ms: f64,
 }
+
+impl Default for TimewarpSpec {
+    fn default() -> Self {
+        Self {
+            horizon_ms: 0.0,
+            local_lag_share: crate::timewarp::LOCAL_LAG_SHARE,
+            local_lag_max_ms: crate::timewarp::LOCAL_LAG_MAX_TICKS as f64,
+        }
+    }
+}
+
+/// The largest `timewarp.local_lag_max_ms`, ms (what the own tool's measured positions kept cover
+/// at 1 kHz).
+pub const MAX_LOCAL_LAG_MS: f64 = 200.0;
 
 /// The longest `timewarp.horizon_ms`, ms.
 pub const MAX_HORIZON_MS: f64 = 10_000.0;
@@ -730,6 +751,7 @@ impl Scenario {
         self.validate_stability()?;
         self.validate_start()?;
         self.validate_horizon()?;
+        self.validate_local_lag()?;
         for (i, p) in self.phase.iter().enumerate() {
             let at = |f: &str| format!("phase[{i}].{f}");
             if p.name.is_empty() {
@@ -776,6 +798,39 @@ impl Scenario {
                     "must cover the largest delay, its jitter and the slowest report period \
                      ({least_ms:.1} ms) and be at most {MAX_HORIZON_MS} ms; 0 derives it \
                      (that + 100 ms)"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `timewarp.local_lag_share` in 0..=1 and `timewarp.local_lag_max_ms` in
+    /// 0..=[`MAX_LOCAL_LAG_MS`], and no more ticks than the own tool's measured positions kept.
+    fn validate_local_lag(&self) -> Result<(), ScenarioError> {
+        let tw = &self.timewarp;
+        if !(tw.local_lag_share.is_finite() && (0.0..=1.0).contains(&tw.local_lag_share)) {
+            return Err(err(
+                "timewarp.local_lag_share",
+                tw.local_lag_share,
+                "must be from 0 (no local lag) to 1 (the partners' whole delay)",
+            ));
+        }
+        let most = self
+            .site
+            .iter()
+            .map(|s| {
+                MAX_LOCAL_LAG_MS
+                    .min(crate::timewarp::MAX_LOCAL_LAG_TICKS as f64 * 1e3 / s.physics_rate_hz)
+            })
+            .fold(MAX_LOCAL_LAG_MS, f64::min);
+        if !(tw.local_lag_max_ms.is_finite() && (0.0..=most).contains(&tw.local_lag_max_ms)) {
+            return Err(err(
+                "timewarp.local_lag_max_ms",
+                tw.local_lag_max_ms,
+                format!(
+                    "must be from 0 to {most} ms ({} physics ticks at the slowest site's rate, at \
+                     most {MAX_LOCAL_LAG_MS} ms)",
+                    crate::timewarp::MAX_LOCAL_LAG_TICKS
                 ),
             ));
         }
@@ -917,6 +972,10 @@ impl Scenario {
             radii,
             (horizon_s / dt).ceil() as usize,
             copy,
+        );
+        tw.set_local_lag(
+            self.timewarp.local_lag_share,
+            (self.timewarp.local_lag_max_ms * 1e-3 / dt).round() as i64,
         );
         // Every user pressing the object into one plane with all the device's force, and its
         // weight: per plane at most that force's depth, ½ F² / K each.

@@ -138,9 +138,11 @@ const LAG_SHRINK_HALF_TICKS: i64 = 4;
 /// above it when no lag is wanted).
 const LAG_SLACK_BELOW_HALF_TICKS: i64 = 2;
 const LAG_SLACK_ABOVE_HALF_TICKS: i64 = 20;
+/// The largest local lag that can be configured, ticks ([`TimeWarp::set_local_lag`]).
+pub const MAX_LOCAL_LAG_TICKS: i64 = 200;
 /// The own tool's measured positions kept for the lag (a power of two above the largest lag).
 const MEASURED_RING: usize = 256;
-const _: () = assert!(MEASURED_RING as i64 > LOCAL_LAG_MAX_TICKS + LAG_SLACK_ABOVE_HALF_TICKS);
+const _: () = assert!(MEASURED_RING as i64 > MAX_LOCAL_LAG_TICKS + LAG_SLACK_ABOVE_HALF_TICKS);
 /// A partner's measured one-way delay follows each report's by this share (a low-pass filter).
 const DELAY_FILTER_SHARE: f64 = 0.125;
 
@@ -333,6 +335,9 @@ pub struct TimeWarp {
     lag_target: i64,
     /// Per site: its positions' measured one-way delay, ticks (filtered; 0: none yet).
     delay_ticks: [f64; MAX_SITES],
+    /// The share of a near partner's delay the own tool is lagged by, and the most, ticks.
+    lag_share: f64,
+    lag_max: i64,
     stats: Stats,
     /// The first confirmed tick not yet compared, live against confirmed contact.
     tallied_until: i64,
@@ -393,6 +398,8 @@ impl TimeWarp {
             play_head: 0,
             lag_target: 0,
             delay_ticks: [0.0; MAX_SITES],
+            lag_share: LOCAL_LAG_SHARE,
+            lag_max: LOCAL_LAG_MAX_TICKS,
             stats: Stats::default(),
             tallied_until: 0,
             replay: None,
@@ -1030,7 +1037,19 @@ impl Consistency for TimeWarp {
 }
 
 impl TimeWarp {
-    /// The local lag wanted from the next tick on: [`LOCAL_LAG_SHARE`] of the largest measured
+    /// Lags the own tool by `share` (0 to 1; 0: never) of a near partner's delay, at most
+    /// `max_ticks` (up to [`MAX_LOCAL_LAG_TICKS`]); [`LOCAL_LAG_SHARE`] and
+    /// [`LOCAL_LAG_MAX_TICKS`] unless set.
+    pub fn set_local_lag(&mut self, share: f64, max_ticks: i64) {
+        self.lag_share = if share.is_finite() {
+            share.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.lag_max = max_ticks.clamp(0, MAX_LOCAL_LAG_TICKS);
+    }
+
+    /// The local lag wanted from the next tick on: the configured share of the largest measured
     /// delay of the sites whose tools (as last simulated) are within [`LOCAL_LAG_NEAR_M`] of the
     /// object while the own tool (as measured) is too; none otherwise.
     fn want_lag(&mut self, world: &World, copy: &ObjectCopy) {
@@ -1056,7 +1075,7 @@ impl TimeWarp {
                 }
             }
         }
-        self.lag_target = ((delay * LOCAL_LAG_SHARE) as i64).clamp(0, LOCAL_LAG_MAX_TICKS);
+        self.lag_target = ((delay * self.lag_share) as i64).clamp(0, self.lag_max);
     }
 
     /// GGPO's synctest: rolls the copy back `depth` ticks and re-simulates them with the same
@@ -1137,6 +1156,49 @@ mod tests {
             let e = sc.validate().expect_err("refused");
             assert_eq!(e.field, "timewarp.horizon_ms", "{e}");
             assert!(e.rule.contains("230.0 ms"), "{e}");
+        }
+    }
+
+    /// `[timewarp] local_lag_share` and `local_lag_max_ms` default to the method's constants, set
+    /// the site's lag, and out of range are refused with the field and the rule.
+    #[test]
+    fn the_local_lag_is_configured_and_checked() {
+        let (mut sc, _) = paper_world();
+        for (name, x, base) in [("user1", -0.2, -0.3), ("user2", 0.2, 0.3)] {
+            sc.site.push(crate::scenario::SiteSpec {
+                name: name.into(),
+                device_base_m: [base, -0.2, 0.0],
+                script: vec![crate::scenario::KeyframeSpec {
+                    t_s: 0.0,
+                    target_m: [x, 0.0, 0.01],
+                }],
+                ..Default::default()
+            });
+        }
+        sc.validate().expect("defaults");
+        assert_eq!(sc.timewarp.local_lag_share, LOCAL_LAG_SHARE);
+        let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let tw = sc.timewarp(0, &copy);
+        assert_eq!(
+            (tw.lag_share, tw.lag_max),
+            (LOCAL_LAG_SHARE, LOCAL_LAG_MAX_TICKS)
+        );
+        sc.timewarp.local_lag_share = 0.0;
+        sc.timewarp.local_lag_max_ms = 150.0;
+        sc.validate().expect("no lag, a larger cap");
+        let tw = sc.timewarp(0, &copy);
+        assert_eq!((tw.lag_share, tw.lag_max), (0.0, 150));
+        for bad in [-0.1, 1.5, f64::NAN] {
+            sc.timewarp.local_lag_share = bad;
+            let e = sc.validate().expect_err("refused");
+            assert_eq!(e.field, "timewarp.local_lag_share", "{e}");
+        }
+        sc.timewarp.local_lag_share = 0.5;
+        for bad in [-1.0, 201.0, f64::INFINITY] {
+            sc.timewarp.local_lag_max_ms = bad;
+            let e = sc.validate().expect_err("refused");
+            assert_eq!(e.field, "timewarp.local_lag_max_ms", "{e}");
+            assert!(e.rule.contains("200"), "{e}");
         }
     }
 
