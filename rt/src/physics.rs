@@ -274,11 +274,12 @@ impl PhysicsLoop {
         }
         self.receive_tracks(now_ns);
         let steps = self.ticks_due(now_ns);
-        if self.ticks.on_grid && steps > 0 {
-            // The tool as measured at this tick (held over catch-up ticks).
-            self.method.own_tool(Vec3::from(self.tool.tool_pos));
-        }
         for _ in 0..steps {
+            if self.ticks.on_grid {
+                // The tool as measured at this tick (held over catch-up ticks: one sample a tick,
+                // so a local lag counts ticks).
+                self.method.own_tool(Vec3::from(self.tool.tool_pos));
+            }
             self.copy.time_s = now_s - self.period_ns as f64 * 1e-9;
             let before = self.copy;
             self.method.physics_step(

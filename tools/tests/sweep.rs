@@ -8,7 +8,7 @@ use std::process::Command;
 
 use coop_actors::scenario_file;
 use coop_model::metrics;
-use coop_model::scenario::MethodName;
+use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode};
 use coop_tools::sweep::scenario_at;
 
@@ -291,17 +291,26 @@ fn eight_user_bench_scenario_has_everyone_touching() {
     let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
     let sc = scenario_at(&coop_tools::simbench::eight_users(&base), 150.0, 1).expect("valid");
     assert_eq!(sc.site.len(), 8);
-    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
-    let all = (0..r.t.len())
-        .filter(|&k| r.sites.iter().all(|s| s.touching[k]))
-        .count();
-    assert!(all > 100, "all eight touch at only {all} samples");
-    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    let m = metrics::compute(&sc, &r, &reference);
-    assert_eq!(m.hash_mismatches, 0);
-    // Every site's own tool lagged by half the 150 ms while its neighbours are near the disk
-    // (`timewarp::LOCAL_LAG_SHARE`) doubles the copies' largest distance, 11.7 -> 21.4 mm: the
-    // lagged positions are still sent as they are stepped, so partners predict as far as before.
+    let run = |sc: &Scenario| {
+        let r = sim::run(sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+        let all = (0..r.t.len())
+            .filter(|&k| r.sites.iter().all(|s| s.touching[k]))
+            .count();
+        assert!(all > 100, "all eight touch at only {all} samples");
+        let reference = sim::run(sc, Mode::Reference, &mut |_| {});
+        let m = metrics::compute(sc, &r, &reference);
+        assert_eq!(m.hash_mismatches, 0);
+        m
+    };
+    // Without the local lag the copies stay within 20 mm of each other while all touch (11.7 mm);
+    // with every site's own tool lagged by half the 150 ms while its neighbours are near the disk
+    // (`timewarp::LOCAL_LAG_SHARE`), within 25 mm (21.4 mm): what the lag costs here, since the
+    // lagged positions are sent as they are stepped and partners predict as far as before.
+    let mut without = sc.clone();
+    without.timewarp.local_lag_share = 0.0;
+    let m = run(&without);
+    assert!(m.co_contact_divergence_max_m < 0.02, "{m:?}");
+    let m = run(&sc);
     assert!(m.co_contact_divergence_max_m < 0.025, "{m:?}");
 }
 
@@ -437,11 +446,11 @@ fn timewarp_lifts_and_carries_the_disk_in_3d_at_200_ms() {
 /// the front, squeeze it and carry it together (`scenarios/three-grasp.toml`), and the 3-D one, in
 /// which they lift it, carry it and set it down (`scenarios/three-lift.toml`). At a constant 200 ms
 /// `timewarp` does every phase at every site, with its own tool lagged by about half the delay
-/// while a partner's is near the object (seed 3 of the first and seed 2 of the second lost the
-/// carry without the lag).
+/// while a partner's is near the object; without it (`[timewarp] local_lag_share = 0`, the method as
+/// it was before the lag) both runs miss phases.
 #[test]
 fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
-    for (file, seed) in [("three-grasp.toml", 3), ("three-lift.toml", 2)] {
+    for (file, seed) in [("three-grasp.toml", 3), ("three-lift.toml", 1)] {
         let (_, m) = scenario_run(file, MethodName::Timewarp, 200.0, seed);
         assert_eq!(m.phases_passed, m.phases_total, "{file}: {m:?}");
         assert_eq!(m.hash_mismatches, 0, "{file}");
@@ -454,15 +463,17 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
         for s in &m.sites {
             assert!(s.lagged_s > 1.0, "{file}: {s:?}");
         }
+        let base = scenario_file::load(&repo().join("scenarios").join(file)).expect(file);
+        let mut sc = scenario_at(&base, 200.0, seed).expect("valid");
+        sc.timewarp.local_lag_share = 0.0;
+        sc.validate().expect("valid without the lag");
+        let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+        let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+        let m = metrics::compute(&sc, &r, &reference);
+        assert!(
+            m.phases_passed < m.phases_total,
+            "{file} without the lag: {m:?}"
+        );
+        assert_eq!(m.local_lag_max_ms, 0.0);
     }
-    // Without the lag (`[timewarp] local_lag_share = 0`) the carry is lost.
-    let base = scenario_file::load(&repo().join("scenarios/three-grasp.toml")).expect("file");
-    let mut sc = scenario_at(&base, 200.0, 3).expect("valid");
-    sc.timewarp.local_lag_share = 0.0;
-    sc.validate().expect("valid without the lag");
-    let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
-    let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    let m = metrics::compute(&sc, &r, &reference);
-    assert!(m.phases_passed < m.phases_total, "{m:?}");
-    assert_eq!(m.local_lag_max_ms, 0.0);
 }

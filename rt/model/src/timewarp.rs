@@ -61,8 +61,8 @@
 //! Local lag (Mauve et al. 2004's companion of timewarp, GGPO's input delay): while the own tool
 //! and a partner's are both within [`LOCAL_LAG_NEAR_M`] of the object, the own tool's measured
 //! positions enter the physics late by [`LOCAL_LAG_SHARE`] of the partner's measured one-way delay
-//! (at most [`LOCAL_LAG_MAX_TICKS`]), grown into at half speed and caught up at twice it, never
-//! while the own tool touches the object. Each copy then holds its own tool and the partners'
+//! (at most [`LOCAL_LAG_MAX_TICKS`]), grown into at half speed and caught up at twice it, the
+//! latter never while the own tool touches the object. Each copy then holds its own tool and the partners'
 //! newest known positions nearer the same moment, so each user's hand reacts to an object that moves
 //! as the partners' hands move it ([`Stats::local_lag_ticks`], [`Stats::lagged_ticks`]). The input
 //! of a tick is whatever position the site stepped it with: every site still steps the same inputs.
@@ -121,28 +121,33 @@ pub const REPLAY_MIN_TICKS: u64 = 3;
 /// by [`LOCAL_LAG_SHARE`] of that site's measured delay, m.
 pub const LOCAL_LAG_NEAR_M: f64 = 0.01;
 /// The share of the nearby partners' (largest) measured one-way delay the own tool is delayed by.
-/// A partner's position is then predicted over the rest of the delay only, and both users' inputs
-/// at a tick come from nearer the same moment: a three-user carry at 200 ms, whose users' hands
-/// each react to the disk a delay late, holds in 21 of 24 seeds instead of 11 (and the 3-D
-/// three-user lift in 17 instead of 0).
+/// The copy then holds the own tool and the partners' newest known positions nearer the same
+/// moment (the partners' are predicted as far ahead as before: the own positions are sent as they
+/// are stepped): a three-user carry at 200 ms, whose users' hands each react to the disk a delay
+/// late, does every phase in 23 of 24 seeds instead of 11 (the 3-D three-user lift in 18 instead
+/// of 0).
 pub const LOCAL_LAG_SHARE: f64 = 0.5;
 /// The most the own tool is delayed by, ticks (100 ms at 1 kHz): beyond it a lag costs the
 /// single-user parts of a task more than it saves (the 3-D lift at 300 ms fails with 150).
 pub const LOCAL_LAG_MAX_TICKS: i64 = 100;
 /// How the lag changes, in half ticks of the own tool's measured positions per tick: it grows by
-/// playing them at half speed and shrinks by playing them at twice the speed, the latter only while
-/// the own tool touches nothing (a hand in contact is never fast-forwarded into the object).
+/// playing them at half speed (a position between two measured ones at the odd half ticks) and
+/// shrinks by playing them at twice the speed, the latter only while the own tool touches nothing
+/// (a hand in contact is never fast-forwarded into the object; it may be slowed).
 const LAG_GROW_HALF_TICKS: i64 = 1;
 const LAG_SHRINK_HALF_TICKS: i64 = 4;
 /// ... and within these of its target (half ticks) it stays (a measured delay jitters; none
-/// above it when no lag is wanted).
+/// above it when no lag is wanted): it settles up to a tick below its target.
 const LAG_SLACK_BELOW_HALF_TICKS: i64 = 2;
 const LAG_SLACK_ABOVE_HALF_TICKS: i64 = 20;
-/// The largest local lag that can be configured, ticks ([`TimeWarp::set_local_lag`]).
-pub const MAX_LOCAL_LAG_TICKS: i64 = 200;
-/// The own tool's measured positions kept for the lag (a power of two above the largest lag).
-const MEASURED_RING: usize = 256;
-const _: () = assert!(MEASURED_RING as i64 > MAX_LOCAL_LAG_TICKS + LAG_SLACK_ABOVE_HALF_TICKS);
+/// The largest local lag, ticks ([`TimeWarp::set_local_lag`]): 200 ms at the fastest physics
+/// rate a scenario may have (20 kHz).
+pub const MAX_LOCAL_LAG_TICKS: i64 = 4000;
+/// The own tool's measured positions kept for the lag (a power of two above the largest lag and
+/// its slack, in ticks).
+const MEASURED_RING: usize = 4096;
+const _: () =
+    assert!(MEASURED_RING as i64 > MAX_LOCAL_LAG_TICKS + LAG_SLACK_ABOVE_HALF_TICKS / 2 + 1);
 /// A partner's measured one-way delay follows each report's by this share (a low-pass filter).
 const DELAY_FILTER_SHARE: f64 = 0.125;
 
@@ -327,7 +332,7 @@ pub struct TimeWarp {
     /// The own tool's position at the tick being simulated: the measured one, `lag` ticks late.
     own: Quantized,
     /// The own tool's measured positions, the `k`-th at `k % MEASURED_RING`, and how many.
-    measured: [Quantized; MEASURED_RING],
+    measured: Box<[Quantized]>,
     measured_count: i64,
     /// Which measured position is the own input, in half ticks (the lag grows at half speed).
     play_head: i64,
@@ -393,7 +398,7 @@ impl TimeWarp {
             contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
-            measured: [[0; 3]; MEASURED_RING],
+            measured: vec![[0; 3]; MEASURED_RING].into_boxed_slice(),
             measured_count: 0,
             play_head: 0,
             lag_target: 0,
@@ -800,8 +805,17 @@ impl Consistency for TimeWarp {
             2
         };
         self.play_head = (self.play_head + step).min(now);
-        self.own = self.measured[(self.play_head / 2) as usize % MEASURED_RING];
-        let lag = ((now - self.play_head) / 2).unsigned_abs();
+        let at = |k: i64| self.measured[k as usize % MEASURED_RING];
+        let k = self.play_head / 2;
+        self.own = if self.play_head % 2 == 0 {
+            at(k)
+        } else {
+            // Half-way between two measured positions (k + 1 <= n: the head is below `now`).
+            let (a, b) = (at(k), at(k + 1));
+            std::array::from_fn(|i| ((i64::from(a[i]) + i64::from(b[i])) / 2) as i32)
+        };
+        // How late the input is: whole ticks, a half rounded up.
+        let lag = ((now - self.play_head + 1) / 2).unsigned_abs();
         self.stats.local_lag_ticks = lag;
         self.stats.max_local_lag_ticks = self.stats.max_local_lag_ticks.max(lag);
         self.stats.lagged_ticks += u64::from(lag > 0);
@@ -912,8 +926,10 @@ impl Consistency for TimeWarp {
         if r.count > 0 {
             let end = r.first_tick + r.count as i64 - 1;
             // How late the newest position arrived (a repair of older ones says nothing of it).
-            if end > self.newest[from] {
-                let late = (self.now_tick - end).max(0) as f64;
+            // (Ahead of this site's tick, by the two grids' offset, it says nothing either.)
+            let late = self.now_tick - end;
+            if end > self.newest[from] && late >= 0 {
+                let late = late as f64;
                 let d = &mut self.delay_ticks[from];
                 *d = if *d == 0.0 {
                     late
@@ -1001,6 +1017,10 @@ impl Consistency for TimeWarp {
         ) {
             *asked = false;
             *want = false;
+        }
+        // Nor is its delay known any more: no lag for it until it reports again.
+        if let Some(d) = self.delay_ticks.get_mut(from) {
+            *d = 0.0;
         }
     }
     fn timewarp_stats(&self) -> Option<Stats> {
@@ -1440,6 +1460,33 @@ mod tests {
         let st = tw.stats();
         assert_eq!(st.max_local_lag_ticks, lag);
         assert!(st.lagged_ticks > 500, "{st:?}");
+    }
+
+    /// A partner reported lost (its link down) has no known delay: the own tool's lag for it ends.
+    #[test]
+    fn a_lost_partner_ends_the_lag() {
+        let (mut tw, mut copy, w) = two_tools_on_a_disk();
+        for k in 0..700i64 {
+            tw.own_tool(Vec3::new(-0.05, 0.0, 0.01));
+            let first = k - 120;
+            if (9..400).contains(&first) && k % 10 == 0 {
+                let mut r = ToolReport {
+                    first_tick: first - 9,
+                    ..ToolReport::NONE
+                };
+                for _ in r.first_tick..=first {
+                    r.positions[r.count] = quantize(Vec3::new(0.05, 0.0, 0.01));
+                    r.count += 1;
+                }
+                tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+            }
+            if k == 550 {
+                assert!(tw.stats().local_lag_ticks >= 59, "{:?}", tw.stats());
+                tw.peer_lost(1, k as f64 * 1e-3);
+            }
+            tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        }
+        assert_eq!(tw.stats().local_lag_ticks, 0, "{:?}", tw.stats());
     }
 
     /// A lag is never caught up while the own tool touches the object: its positions would be
