@@ -1088,9 +1088,12 @@ impl TimeWarp {
         let measured = self.measured[(self.measured_count - 1).max(0) as usize % MEASURED_RING];
         let last = &self.slots[self.idx(self.now_tick - 1)];
         let mut delay: f64 = 0.0;
-        if self.measured_count > 0 && near(measured, self.radii[self.me]) {
+        if self.measured_count > 0
+            && last.tick == self.now_tick - 1
+            && near(measured, self.radii[self.me])
+        {
             for j in (0..self.sites).filter(|&j| j != self.me) {
-                if last.tick == self.now_tick - 1 && near(last.inputs[j], self.radii[j]) {
+                if near(last.inputs[j], self.radii[j]) {
                     delay = delay.max(self.delay_ticks[j]);
                 }
             }
@@ -1140,10 +1143,21 @@ mod tests {
         )
     }
 
-    /// The history kept is `[timewarp] horizon_ms`, or by default what the network can delay a
-    /// position by plus 100 ms; a horizon that does not cover that is refused.
-    #[test]
-    fn the_horizon_is_configured_or_covers_the_latest_arrival() {
+    /// A report of a tool at `at(t)` for ticks `first..=last`.
+    fn track(first: i64, last: i64, at: impl Fn(i64) -> Quantized) -> Report {
+        let mut r = ToolReport {
+            first_tick: first,
+            ..ToolReport::NONE
+        };
+        for t in first..=last {
+            r.positions[r.count] = at(t);
+            r.count += 1;
+        }
+        Report::Tools(r)
+    }
+
+    /// [`paper_world`]'s scenario with two users resting 0.2 m either side of the disk.
+    fn two_users() -> Scenario {
         let (mut sc, _) = paper_world();
         for (name, x, base) in [("user1", -0.2, -0.3), ("user2", 0.2, 0.3)] {
             sc.site.push(crate::scenario::SiteSpec {
@@ -1156,6 +1170,14 @@ mod tests {
                 ..Default::default()
             });
         }
+        sc
+    }
+
+    /// The history kept is `[timewarp] horizon_ms`, or by default what the network can delay a
+    /// position by plus 100 ms; a horizon that does not cover that is refused.
+    #[test]
+    fn the_horizon_is_configured_or_covers_the_latest_arrival() {
+        let mut sc = two_users();
         sc.network.delay_min_ms = 20.0;
         sc.network.delay_max_ms = 200.0;
         sc.network.jitter_ms = 10.0;
@@ -1183,18 +1205,7 @@ mod tests {
     /// the site's lag, and out of range are refused with the field and the rule.
     #[test]
     fn the_local_lag_is_configured_and_checked() {
-        let (mut sc, _) = paper_world();
-        for (name, x, base) in [("user1", -0.2, -0.3), ("user2", 0.2, 0.3)] {
-            sc.site.push(crate::scenario::SiteSpec {
-                name: name.into(),
-                device_base_m: [base, -0.2, 0.0],
-                script: vec![crate::scenario::KeyframeSpec {
-                    t_s: 0.0,
-                    target_m: [x, 0.0, 0.01],
-                }],
-                ..Default::default()
-            });
-        }
+        let mut sc = two_users();
         sc.validate().expect("defaults");
         assert_eq!(sc.timewarp.local_lag_share, LOCAL_LAG_SHARE);
         let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
@@ -1371,15 +1382,8 @@ mod tests {
             let first = k - delay;
             if first >= 0 && (delay == 0 || k % 10 == 0) {
                 let count = if delay == 0 { 1 } else { 10 };
-                let mut r = ToolReport {
-                    first_tick: (first - count as i64 + 1).max(0),
-                    ..ToolReport::NONE
-                };
-                for t in r.first_tick..=first {
-                    r.positions[r.count] = remote(t);
-                    r.count += 1;
-                }
-                tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+                let r = track((first - count + 1).max(0), first, remote);
+                tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
             }
             tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
             out.touched |= tw.contacts[0].touching();
@@ -1409,15 +1413,8 @@ mod tests {
             tw.own_tool(own(k));
             let first = k - delay;
             if first >= 9 && k % 10 == 0 {
-                let mut r = ToolReport {
-                    first_tick: first - 9,
-                    ..ToolReport::NONE
-                };
-                for t in r.first_tick..=first {
-                    r.positions[r.count] = quantize(remote(t));
-                    r.count += 1;
-                }
-                tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+                let r = track(first - 9, first, |t| quantize(remote(t)));
+                tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
             }
             tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
             inputs.push(tw.own_at(k));
@@ -1470,15 +1467,8 @@ mod tests {
             tw.own_tool(Vec3::new(-0.05, 0.0, 0.01));
             let first = k - 120;
             if (9..400).contains(&first) && k % 10 == 0 {
-                let mut r = ToolReport {
-                    first_tick: first - 9,
-                    ..ToolReport::NONE
-                };
-                for _ in r.first_tick..=first {
-                    r.positions[r.count] = quantize(Vec3::new(0.05, 0.0, 0.01));
-                    r.count += 1;
-                }
-                tw.receive(&w, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+                let r = track(first - 9, first, |_| quantize(Vec3::new(0.05, 0.0, 0.01)));
+                tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
             }
             if k == 550 {
                 assert!(tw.stats().local_lag_ticks >= 59, "{:?}", tw.stats());
