@@ -1031,8 +1031,8 @@ impl Scenario {
             .fold(0.0, f64::max)
     }
 
-    /// Site `i`'s `coupled` method: remote tools are played the largest delay, its jitter and the
-    /// slowest report period late (when every position has arrived, short of a loss).
+    /// Site `i`'s `coupled` method: remote tools are played at most the largest delay, its jitter
+    /// and the slowest report period late (that late until their arrival is measured).
     pub fn coupled(&self, i: usize) -> crate::coupled::Coupled {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let playout_s = self.latest_arrival_s();
