@@ -217,6 +217,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     };
     let dir = std::env::temp_dir().join(format!("coop-partition-{pid}"));
     let session = format!("np{pid}");
+    let t0 = std::time::Instant::now();
     let (mut sa, mut sb) = start_pair(&ns, &dir, &session, (None, 6.0), 18);
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
@@ -228,6 +229,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     });
     let cycles = |me: &str| status(me).map_or(0, |s| s.loops.physics.cycles);
     let before = (cycles("user1"), cycles("user2"));
+    eprintln!("timeline: exchanging at {:?}, physics cycles {before:?}", t0.elapsed());
     let link = format!("cva{tag}");
     ip(&["-n", &ns.names[0], "link", "set", &link, "down"]).expect("link down");
     let lost = wait_until("each station to see the other lost", limit, || {
@@ -238,8 +240,10 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
         lost.0.running && lost.1.running,
         "the stations go on locally"
     );
+    eprintln!("timeline: lost at {:?}, cycles {}", t0.elapsed(), cycles("user1"));
     std::thread::sleep(Duration::from_secs(5).saturating_sub(Duration::from_millis(500)));
     ip(&["-n", &ns.names[0], "link", "set", &link, "up"]).expect("link up");
+    eprintln!("timeline: up at {:?}, cycles {}", t0.elapsed(), cycles("user1"));
     wait_until("each station to hear the other again", limit, || {
         let (x, y) = (status("user1")?, status("user2")?);
         let back = |s: &coop_actors::station::status::StationStatus, other: usize| {
@@ -247,6 +251,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
         };
         (back(&x, 1) && back(&y, 0)).then_some(())
     });
+    eprintln!("timeline: rejoined at {:?}, cycles {}", t0.elapsed(), cycles("user1"));
     // Servo and physics never stopped: no restart, and the loops kept counting.
     for (me, was) in [("user1", before.0), ("user2", before.1)] {
         let s = status(me).expect("status");
