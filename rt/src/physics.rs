@@ -442,6 +442,9 @@ impl PhysicsLoop {
             set(&r.local_lag_ticks, st.local_lag_ticks);
             set(&r.lagged_ticks, st.lagged_ticks);
         }
+        if let Some(p) = self.method.playout_ticks() {
+            set(&r.playout_ticks, p.ceil() as u64);
+        }
         set(&r.tracks_received, self.tracks.received);
         set(&r.tracks_rejected, self.tracks.rejected);
         set(&r.track_drops, self.tracks.drops);

@@ -638,6 +638,14 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
         );
         assert!(ph["adoptions"].as_u64() > Some(0), "{site} pulled: {ph}");
         assert_eq!(rb["rollbacks"], 0, "{site}: no rollback in coupled: {ph}");
+        // The jitter buffer follows the delay: near the end (14 s) the delay swings up through
+        // ~380 ms, and the other's tool is played about that late (one run: 370 ticks at user 1),
+        // not the largest arrival (560) it started at, nor anywhere near none.
+        let playout = rb["playout_ticks"].as_u64().unwrap_or(0);
+        assert!(
+            (100..540).contains(&playout),
+            "{site} played the other's tool {playout} ticks late: {ph}"
+        );
     }
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -275,6 +275,8 @@ pub struct RollbackStatus {
     pub local_lag_ticks: u64,
     /// Ticks stepped with the own tool lagged.
     pub lagged_ticks: u64,
+    /// How late the other sites' tools are played now, ticks (`coupled`; 0 otherwise).
+    pub playout_ticks: u64,
 }
 
 impl RollbackStatus {
@@ -303,6 +305,7 @@ impl RollbackStatus {
             joined_tick: l(&r.joined_tick),
             local_lag_ticks: l(&r.local_lag_ticks),
             lagged_ticks: l(&r.lagged_ticks),
+            playout_ticks: l(&r.playout_ticks),
         })
     }
 }
@@ -311,7 +314,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all",
+            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all; other tools played {} ticks late",
             self.ticks,
             self.joined_tick,
             self.rollbacks,
@@ -330,7 +333,8 @@ impl std::fmt::Display for RollbackStatus {
             self.replays,
             self.phantom_contact_ticks,
             self.local_lag_ticks,
-            self.lagged_ticks
+            self.lagged_ticks,
+            self.playout_ticks
         )
     }
 }

@@ -301,6 +301,12 @@ impl Consistency for Coupled {
     fn remote_force(&self) -> Vec3 {
         self.remote_force
     }
+    fn playout_ticks(&self) -> Option<f64> {
+        (0..self.sites)
+            .filter(|&j| j != self.me)
+            .map(|j| self.playout_q[j] as f64 / QUARTERS as f64)
+            .reduce(f64::max)
+    }
     fn physics_step(
         &mut self,
         world: &World,

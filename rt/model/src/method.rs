@@ -200,6 +200,11 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn timewarp_stats(&self) -> Option<crate::timewarp::Stats> {
         None
     }
+    /// For a method that plays the other sites' tools from a jitter buffer (`coupled`): how late
+    /// the latest-played one is played now, ticks.
+    fn playout_ticks(&self) -> Option<f64> {
+        None
+    }
     /// For a method that steps on the session's tick grid (`timewarp`, `coupled`): the copy it
     /// is stepped with is the state at the start of tick `tick`, not tick 0, and nothing
     /// before it was simulated here (a restarted or late physics process joins the grid where it

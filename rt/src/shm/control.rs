@@ -456,6 +456,9 @@ pub struct RollbackShared {
     pub local_lag_ticks: AtomicU64,
     /// Ticks stepped with the own tool lagged.
     pub lagged_ticks: AtomicU64,
+    /// How late the other sites' tools are played now, ticks, the latest-played one (`coupled`:
+    /// its adaptive jitter buffer; rounded up).
+    pub playout_ticks: AtomicU64,
 }
 
 /// What the network process writes.
@@ -537,7 +540,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v16";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v17";
 }
 
 impl ControlBlock {
