@@ -229,10 +229,14 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     });
     let cycles = |me: &str| status(me).map_or(0, |s| s.loops.physics.cycles);
     let before = (cycles("user1"), cycles("user2"));
-    eprintln!(
-        "timeline: exchanging at {:?}, physics cycles {before:?}",
-        t0.elapsed()
-    );
+    let mark = |what: &str| {
+        let at = (cycles("user1"), cycles("user2"));
+        eprintln!(
+            "timeline: {what} at {:?}, physics cycles {at:?}",
+            t0.elapsed()
+        );
+    };
+    mark("exchanging");
     let link = format!("cva{tag}");
     ip(&["-n", &ns.names[0], "link", "set", &link, "down"]).expect("link down");
     let lost = wait_until("each station to see the other lost", limit, || {
@@ -243,18 +247,10 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
         lost.0.running && lost.1.running,
         "the stations go on locally"
     );
-    eprintln!(
-        "timeline: lost at {:?}, cycles {}",
-        t0.elapsed(),
-        cycles("user1")
-    );
+    mark("lost");
     std::thread::sleep(Duration::from_secs(5).saturating_sub(Duration::from_millis(500)));
     ip(&["-n", &ns.names[0], "link", "set", &link, "up"]).expect("link up");
-    eprintln!(
-        "timeline: up at {:?}, cycles {}",
-        t0.elapsed(),
-        cycles("user1")
-    );
+    mark("link up");
     wait_until("each station to hear the other again", limit, || {
         let (x, y) = (status("user1")?, status("user2")?);
         let back = |s: &coop_actors::station::status::StationStatus, other: usize| {
@@ -262,11 +258,7 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
         };
         (back(&x, 1) && back(&y, 0)).then_some(())
     });
-    eprintln!(
-        "timeline: rejoined at {:?}, cycles {}",
-        t0.elapsed(),
-        cycles("user1")
-    );
+    mark("rejoined");
     // Servo and physics never stopped: no restart, and the loops kept counting.
     for (me, was) in [("user1", before.0), ("user2", before.1)] {
         let s = status(me).expect("status");

@@ -586,9 +586,11 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
 /// How much of the cooperative half is done is measured, not asserted: on real stations the catch
 /// depends on when the leader's reports arrive (a state dead-reckoned through the catching tool
 /// and pulled to throws the disk back 15–27 mm, and user 1 then misses the grasp). Under a load on
-/// both cores, 19 runs (13 release, 6 debug): 12 of 12 phases in 15, 10 in three, 9 in one (one CI
-/// run of the fixed playout: 9). The simulator passes 12/12 on this scenario for seeds 1–9 and the sweep up to
-/// 200 ms (`tools/tests/sweep.rs`).
+/// both cores, 8 runs of this test's (debug) binaries: 12 of 12 phases in four, 11 in one, 10 in
+/// three (the grasp), push and catch at both stations, 11–18 mm co-contact divergence and the
+/// other's tool played 367–395 ticks late at the end in every one. One CI run of the fixed
+/// playout: 9. In the simulator
+/// (`sim compare` on this scenario, seeds 1–9) 12 of 12 but on seed 8 (11).
 #[test]
 fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
     let _turn = ONE_AT_A_TIME.lock();
@@ -600,19 +602,23 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
     let real = &v["methods"]["coupled"]["real"];
     assert_eq!(real["phases_total"].as_u64(), Some(12), "{real}");
     for site in real["sites"].as_array().expect("sites") {
-        let phases = site["phases"].as_array().expect("phases");
-        for phase in &phases[..2] {
+        let phases = &site["phases"];
+        for (k, name) in ["push", "catch"].into_iter().enumerate() {
             assert!(
-                matches!(phase[0].as_str(), Some("push" | "catch")) && phase[1] == true,
-                "{}: {phase} ({real})",
+                phases[k][0] == name && phases[k][1] == true,
+                "{}: {name}: {phases} ({real})",
                 site["name"]
             );
         }
     }
     assert!(
-        real["co_contact_divergence_max_m"].as_f64() < Some(0.04),
-        "one object while both touch it: {real}"
+        real["co_contact_samples"].as_u64() > Some(0),
+        "both users touched the disk at once: {real}"
     );
+    let co = real["co_contact_divergence_max_m"]
+        .as_f64()
+        .expect("co-contact divergence");
+    assert!(co < 0.04, "one object while both touch it: {co} m ({real})");
     assert!(
         real["divergence_final_m"].as_f64() < Some(0.01),
         "the copies end together: {real}"
@@ -638,9 +644,9 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
         );
         assert!(ph["adoptions"].as_u64() > Some(0), "{site} pulled: {ph}");
         assert_eq!(rb["rollbacks"], 0, "{site}: no rollback in coupled: {ph}");
-        // The jitter buffer follows the delay: near the end (14 s) the delay swings up through
-        // ~380 ms, and the other's tool is played about that late (one run: 370 ticks at user 1),
-        // not the largest arrival (560) it started at, nor anywhere near none.
+        // The jitter buffer follows the delay: read at 13.9-14.2 s, the arrivals then were sent
+        // about 0.3 s before, 285-345 ms late, so the other's tool is played some 300-420 ticks
+        // late (one run: 370 at user 1), not the largest arrival (560) it started at.
         let playout = rb["playout_ticks"].as_u64().unwrap_or(0);
         assert!(
             (100..540).contains(&playout),

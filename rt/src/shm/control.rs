@@ -456,8 +456,8 @@ pub struct RollbackShared {
     pub local_lag_ticks: AtomicU64,
     /// Ticks stepped with the own tool lagged.
     pub lagged_ticks: AtomicU64,
-    /// How late the other sites' tools are played now, ticks, the latest-played one (`coupled`:
-    /// its adaptive jitter buffer; rounded up).
+    /// How late the other sites' tools are played now, ticks, the largest over them (`coupled`:
+    /// its adaptive jitter buffer; rounded up; 0 under other methods).
     pub playout_ticks: AtomicU64,
 }
 
