@@ -314,7 +314,7 @@ impl std::fmt::Display for RollbackStatus {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all{}",
+            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all",
             self.ticks,
             self.joined_tick,
             self.rollbacks,
@@ -333,13 +333,12 @@ impl std::fmt::Display for RollbackStatus {
             self.replays,
             self.phantom_contact_ticks,
             self.local_lag_ticks,
-            self.lagged_ticks,
-            if self.playout_ticks > 0 {
-                format!("; other tools played {} ticks late", self.playout_ticks)
-            } else {
-                String::new()
-            }
-        )
+            self.lagged_ticks
+        )?;
+        if self.playout_ticks > 0 {
+            write!(f, "; other tools played {} ticks late", self.playout_ticks)?;
+        }
+        Ok(())
     }
 }
 

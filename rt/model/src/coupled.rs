@@ -522,19 +522,7 @@ mod tests {
     use super::*;
     use crate::body::BodyState;
     use crate::scenario::Scenario;
-
-    /// A report of site 1's tool at `at(t)` for ticks `first..end`.
-    fn track(first: i64, end: i64, at: impl Fn(i64) -> Quantized) -> Report {
-        let mut r = ToolReport {
-            first_tick: first,
-            ..ToolReport::NONE
-        };
-        for t in first..end {
-            r.positions[r.count] = at(t);
-            r.count += 1;
-        }
-        Report::Tools(r)
-    }
+    use crate::timewarp::track;
 
     /// Site 0 of two, 1 kHz, playing at most 600 ticks late, receives site 1's tool (far from the
     /// disk, moving 1 quantum per tick along x) in 50-tick reports sent 300 ticks late, then 20
@@ -565,7 +553,7 @@ mod tests {
         let mut playout_at = std::collections::BTreeMap::new();
         for t in 0..12_400_i64 {
             for sent in (50..=t).step_by(50).filter(|&s| s + delay(s) == t) {
-                let r = track(sent - 50, sent, far);
+                let r = track(sent - 50, sent - 1, far);
                 assert!(c
                     .receive(&world, &mut copy, 1, &r, t as f64 * 1e-3)
                     .is_none());

@@ -201,7 +201,7 @@ pub trait Consistency: std::fmt::Debug + Send {
         None
     }
     /// For a method that plays the other sites' tools from a jitter buffer (`coupled`): how late
-    /// the latest-played one is played now, ticks.
+    /// they are played now, ticks, the largest over them.
     fn playout_ticks(&self) -> Option<f64> {
         None
     }

@@ -1113,6 +1113,20 @@ impl TimeWarp {
     }
 }
 
+/// A report of a tool at `at(t)` for ticks `first..=last` (the methods' tests).
+#[cfg(test)]
+pub(crate) fn track(first: i64, last: i64, at: impl Fn(i64) -> Quantized) -> Report {
+    let mut r = ToolReport {
+        first_tick: first,
+        ..ToolReport::NONE
+    };
+    for t in first..=last {
+        r.positions[r.count] = at(t);
+        r.count += 1;
+    }
+    Report::Tools(r)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1141,19 +1155,6 @@ mod tests {
             copy,
             w,
         )
-    }
-
-    /// A report of a tool at `at(t)` for ticks `first..=last`.
-    fn track(first: i64, last: i64, at: impl Fn(i64) -> Quantized) -> Report {
-        let mut r = ToolReport {
-            first_tick: first,
-            ..ToolReport::NONE
-        };
-        for t in first..=last {
-            r.positions[r.count] = at(t);
-            r.count += 1;
-        }
-        Report::Tools(r)
     }
 
     /// [`paper_world`]'s scenario with two users resting 0.2 m either side of the disk.
