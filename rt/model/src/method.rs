@@ -510,8 +510,8 @@ impl Consistency for Naive {
         {
             if slot.is_none_or(|(t, _)| *t_s > t) {
                 *slot = Some((*t_s, *force));
-                self.lost_at[from] = None; // heard again
-                                           // A NaN gives nothing.
+                // Heard again; a NaN gives nothing.
+                self.lost_at[from] = None;
                 let given = if given_j.is_finite() { *given_j } else { 0.0 };
                 self.allowed_j[from] = given * (1.0 + NAIVE_SLACK_FRACTION) + NAIVE_SLACK_J;
             }
