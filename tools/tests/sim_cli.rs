@@ -104,8 +104,11 @@ fn same_seed_gives_byte_identical_outputs() {
     let _ = std::fs::remove_dir_all(&d2);
 }
 
-/// The paper's experiment: naive diverges far beyond the disk's radius and stays apart; the paper's
-/// method brings the copies together once contacts end (under 1 mm).
+/// The paper's experiment: naive diverges beyond the disk's radius and stays apart; the paper's
+/// method brings the copies together once contacts end (under 1 mm). (Naive's copies part by
+/// 55 mm and end 41 mm apart; before its received forces were stopped as soon as they had done
+/// what their users gave, they could push a copy on for a delay beyond that, and parted by
+/// 253 mm.)
 #[test]
 fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
     let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
@@ -122,7 +125,7 @@ fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
         &reference,
     );
     assert!(
-        naive.divergence_max_m > 4.0 * radius,
+        naive.divergence_max_m > radius,
         "naive max {}",
         naive.divergence_max_m
     );
