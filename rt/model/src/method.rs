@@ -898,6 +898,21 @@ mod tests {
         }
     }
 
+    /// [`world`] with its plane through the origin (a table, `y` up), and the disk resting on it
+    /// (within the support's band) moving at `vel`.
+    fn on_a_table(vel: Vec3) -> (World, BodyState) {
+        let mut w = world();
+        w.planes[0] = Plane {
+            normal: Vec3::y(),
+            offset: 0.0,
+        };
+        let s = BodyState {
+            vel,
+            ..BodyState::at_rest(Vec3::new(0.0, 0.0399, 0.0))
+        };
+        (w, s)
+    }
+
     /// Second-order dead reckoning is exact in free flight; first order misses ½ g Δ².
     #[test]
     fn gravity_aware_dead_reckoning_follows_the_parabola() {
@@ -999,15 +1014,7 @@ mod tests {
     /// unslowed (0.44 m up after 0.5 s); `paper` adopts it with no more energy than the state sent.
     #[test]
     fn paper_never_adopts_more_energy_than_the_state_sent() {
-        let mut w = world();
-        w.planes[0] = Plane {
-            normal: Vec3::y(),
-            offset: 0.0,
-        };
-        let sent = BodyState {
-            vel: Vec3::new(0.0, 0.87, 0.0),
-            ..BodyState::at_rest(Vec3::new(0.0, 0.0399, 0.0))
-        };
+        let (w, sent) = on_a_table(Vec3::new(0.0, 0.87, 0.0));
         let accel = supported_gravity(&w, &sent);
         assert!(accel.norm() < 1e-12, "reported as resting: {accel:?}");
         let reckoned = dead_reckon(&w, &sent, accel, 0.5, 2);
@@ -1041,15 +1048,7 @@ mod tests {
     /// Order 2 on a table: a slide decelerates under kinetic friction and stops where physics stops it.
     #[test]
     fn dead_reckoning_slides_to_a_stop() {
-        let mut w = world();
-        w.planes[0] = Plane {
-            normal: Vec3::y(),
-            offset: 0.0,
-        };
-        let s = BodyState {
-            vel: Vec3::new(0.2, 0.0, 0.0),
-            ..BodyState::at_rest(Vec3::new(0.0, 0.0399, 0.0))
-        };
+        let (w, s) = on_a_table(Vec3::new(0.2, 0.0, 0.0));
         let a = supported_gravity(&w, &s);
         assert!(a.norm() < 1e-12, "a table carries all of gravity: {a:?}");
         let decel = w.env_contact.friction_kinetic * 9.81 / 3.0;
