@@ -857,7 +857,13 @@ impl Consistency for TimeWarp {
             // is given at the window's end, a tick the sender has confirmed too, so that no
             // report names a frontier past the last position it carries (the wire's rule,
             // `coop_rt::msg::ToolTrack::report`: a station refused every repair before).
-            confirmed_tick: self.confirmed_tick().min(first + count),
+            // (Nor past the last tick simulated: a site whose grid runs behind the others' knows
+            // their positions beyond its own tick, and its frontier is then a state it has not
+            // stepped to yet, with no hash to send: it sent none, and was never compared.)
+            confirmed_tick: self
+                .confirmed_tick()
+                .min(first + count)
+                .min(self.now_tick - 1),
             confirmed_hash: 0,
             need: [-1; MAX_SITES],
             need_state: 0,
@@ -942,11 +948,16 @@ impl Consistency for TimeWarp {
         // Every position up to the frontier is known: a gap holds it back (the sender is asked
         // for it), and one that left the history can never be filled: given up, counted once
         // (while the rest of it leaves the history, report by report, it is the same gap).
+        // A gap is given up where the sender can no longer fill it either: before its history,
+        // which ends later than this site's when its grid runs ahead (stations started apart).
+        // (Given up only at this site's horizon, a gap the sender had already dropped followed
+        // that horizon forever: the frontier stayed a history behind, and no hash was compared.)
+        let senders_oldest = oldest.max(self.newest[from] - self.len() + 2);
         let mut k = self.known_until[from];
-        if k + 1 < oldest && self.newest[from] >= oldest {
+        if k + 1 < senders_oldest && self.newest[from] >= senders_oldest {
             self.stats.fallbacks += u64::from(!self.given_up[from]);
             self.given_up[from] = true;
-            k = oldest - 1;
+            k = senders_oldest - 1;
         }
         let pinned = k;
         while k < self.newest[from] && self.received_at(from, k + 1).is_some() {
@@ -1571,6 +1582,57 @@ mod tests {
             "the same confirmed state at {t}"
         );
         assert_eq!(a.stats().adopted_states, 0, "{:?}", a.stats());
+    }
+
+    /// Stations started apart: site 1's grid runs `skew` ticks ahead of site 0's (it started
+    /// first), and they hear each other only from wall tick `connect`. Reports go every 11 and 50
+    /// ticks (the paper's 90 and 20 Hz) and arrive a tick later. Both compare their confirmed
+    /// states, many times, and agree. Before, with 209 ticks of skew and a late connection, neither
+    /// compared once: site 0 gave up the start-up gap only at its own horizon, which site 1's
+    /// history had already left, so its frontier trailed a history behind for the whole session;
+    /// and without a late connection the site ahead compared once or not at all, the frontier
+    /// of the site behind being a tick it had not stepped to (no hash sent).
+    #[test]
+    fn stations_started_apart_compare_their_confirmed_states() {
+        let (_, w) = paper_world();
+        let sc = paper_world().0;
+        for (skew, connect) in [(50_i64, 0_i64), (209, 1000), (-209, 1000), (400, 1500)] {
+            let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+            let mut radii = [0.0; MAX_SITES];
+            radii[..2].fill(0.005);
+            let mut sites = [0, 1].map(|i| {
+                (
+                    TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 660, &start),
+                    start,
+                )
+            });
+            let (begin, every) = ([skew.max(0), (-skew).max(0)], [11_i64, 50]);
+            let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+            for k in 0..6000 {
+                for i in (0..2).filter(|&i| k >= begin[i]) {
+                    let (tw, copy) = &mut sites[i];
+                    for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                        tw.receive(&w, copy, *from, r, 0.0);
+                    }
+                    tw.own_tool(Vec3::new(if i == 0 { -0.2 } else { 0.2 }, 0.0, 0.01));
+                    tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+                    if (k - begin[i]) % every[i] == 0 && k >= connect {
+                        let r = tw.report(copy, &ContactForce::default(), 0.0);
+                        in_flight.push((k + 1, i, r));
+                    }
+                }
+                in_flight.retain(|m| m.0 > k);
+            }
+            for (i, (tw, _)) in sites.iter().enumerate() {
+                let st = tw.stats();
+                // A report of the other site's every 50 (or 11) ticks, from the connection on.
+                assert!(
+                    st.hash_checks > 60,
+                    "skew {skew}, connected at {connect}: site {i} compared: {st:?}"
+                );
+                assert_eq!(st.hash_mismatches, 0, "skew {skew}: site {i}: {st:?}");
+            }
+        }
     }
 
     /// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at
