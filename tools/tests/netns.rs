@@ -6,7 +6,7 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use coop_tests::{ip, station_config, wait_until, Namespaces, Reaped, StationConfig};
+use coop_tests::{ip, station_config, wait_for, wait_until, Namespaces, Reaped, StationConfig};
 
 /// The tests run one pair of stations at a time: two pairs of debug-build stations (a `timewarp`
 /// one re-simulating hundreds of ticks per rollback) overload a 2-core machine together, and one
@@ -222,10 +222,18 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     let sites = ["user1".to_owned(), "user2".to_owned()];
     let status = |me: &str| coop_actors::station::status::read(&session, me, &sites).ok();
     let limit = Duration::from_secs(60);
-    wait_until("both stations exchanging states", limit, || {
-        let (x, y) = (status("user1")?, status("user2")?);
-        (x.network.received > 50 && y.network.received > 50 && y.physics.adoptions > 0)
-            .then_some(())
+    let mut seen = Seen::default();
+    wait_for("both stations exchanging states", limit, || {
+        match (status("user1"), status("user2")) {
+            (Some(x), Some(y))
+                if x.network.received > 50
+                    && y.network.received > 50
+                    && y.physics.adoptions > 0 =>
+            {
+                Ok(())
+            }
+            _ => Err(seen.now(&session, &sites)),
+        }
     });
     let cycles = |me: &str| status(me).map_or(0, |s| s.loops.physics.cycles);
     let before = (cycles("user1"), cycles("user2"));
@@ -317,6 +325,31 @@ fn a_partition_is_survived_without_stale_adoptions_and_peers_are_lost_and_rejoin
     );
     drop(ns);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Both stations' status as people read it (`station status`), for a wait's failure message: what
+/// each saw of the other (peers, received, held, refused). Remembers the last one read while either
+/// station was up (they may have stopped by the time the wait gives up).
+#[derive(Default)]
+struct Seen(String);
+
+impl Seen {
+    fn now(&mut self, session: &str, sites: &[String]) -> String {
+        let (mut text, mut any) = (String::new(), false);
+        for me in ["user1", "user2"] {
+            match coop_actors::station::status::read(session, me, sites) {
+                Ok(s) => {
+                    any = true;
+                    text.push_str(&format!("\n{s}"));
+                }
+                Err(e) => text.push_str(&format!("\n{me}: no status ({e})")),
+            }
+        }
+        if any || self.0.is_empty() {
+            self.0 = text;
+        }
+        self.0.clone()
+    }
 }
 
 type Rollback = coop_actors::station::status::RollbackStatus;
@@ -413,10 +446,15 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
             .and_then(|s| s.physics.rollback)
     };
     let limit = Duration::from_secs(60);
-    wait_until("both stations comparing confirmed states", limit, || {
-        let (x, y) = (rollback("user1")?, rollback("user2")?);
-        (x.hash_checks > 0 && y.hash_checks > 0).then_some(())
-    });
+    let mut seen = Seen::default();
+    wait_for(
+        "both stations comparing confirmed states",
+        limit,
+        || match (rollback("user1"), rollback("user2")) {
+            (Some(x), Some(y)) if x.hash_checks > 0 && y.hash_checks > 0 => Ok(()),
+            _ => Err(seen.now(&session, &sites)),
+        },
+    );
     let link = format!("cva{tag}");
     ip(&["-n", &ns.names[0], "link", "set", &link, "down"]).expect("link down");
     let down_at = rollback("user1").map_or(0, |x| x.ticks);
@@ -505,11 +543,15 @@ fn a_restarted_timewarp_physics_adopts_the_others_confirmed_state() {
     let limit = Duration::from_secs(60);
     // After user 1's first push (0.5-1.4 s: the disk slides to x = 0.089 m); the rebuilt history
     // lacks it (and the second, at 10 s, if that came before the kill).
-    let (physics, killed_at) = wait_until("the first push over, both comparing", limit, || {
-        let (x, y) = (rollback("user1")?, rollback("user2")?);
-        let s = status("user1")?;
-        let p = s.children.iter().find(|c| c.name == "physics")?.pid;
-        (x.ticks > 3000 && x.hash_checks > 0 && y.hash_checks > 0).then_some((p, x.ticks))
+    let mut seen = Seen::default();
+    let (physics, killed_at) = wait_for("the first push over, both comparing", limit, || {
+        let ready = || {
+            let (x, y) = (rollback("user1")?, rollback("user2")?);
+            let s = status("user1")?;
+            let p = s.children.iter().find(|c| c.name == "physics")?.pid;
+            (x.ticks > 3000 && x.hash_checks > 0 && y.hash_checks > 0).then_some((p, x.ticks))
+        };
+        ready().ok_or_else(|| seen.now(&session, &sites))
     });
     // (Stations started apart may have healed a start-up divergence already: count from here.)
     let user2_adopted = rollback("user2").map_or(0, |y| y.adopted_states);
