@@ -44,7 +44,9 @@
 use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
 use crate::method::MAX_SITES;
-use crate::method::{dead_reckon, integrate, Adoption, Consistency, ObjectCopy, Report, World};
+use crate::method::{
+    dead_reckon_passive, integrate, Adoption, Consistency, ObjectCopy, Report, World,
+};
 use crate::timewarp::{position, quantize, Quantized, ToolReport, UNKNOWN, WINDOW_TICKS};
 
 /// Time constant of the pull towards the leading site's copy, s: long against the contact's
@@ -473,7 +475,9 @@ impl Consistency for Coupled {
         if from != self.leader {
             return None;
         }
-        let mut target = dead_reckon(world, &r.state, r.accel, now_s - r.t_s, 2);
+        // (Reckoned as `paper` adopts: with no more energy than the leader sent. The pull's budget
+        // is the target's energy; a target flown on unslowed would have raised it.)
+        let mut target = dead_reckon_passive(world, &r.state, r.accel, now_s - r.t_s, 2);
         // Along the normal of a plane the local copy rests on, its contact is local physics.
         for plane in world.planes() {
             if crate::method::plane_depth(world, plane, &copy.state) > -1e-4 {
@@ -523,6 +527,42 @@ mod tests {
     use crate::body::BodyState;
     use crate::scenario::Scenario;
     use crate::timewarp::track;
+
+    /// The leader's state reported resting on the table but leaving it fast (a disk its user's tool
+    /// flicked up at 0.87 m/s), half a second old: the pull may bring this copy (2 cm above the
+    /// table, at rest) up to the energy the leader sent and no further. Before, the target was
+    /// reckoned unslowed 0.44 m up, its energy the pull's budget: the copy was lifted to 186 mJ,
+    /// 135 mJ beyond the 51 mJ sent.
+    #[test]
+    fn a_pull_takes_no_more_energy_than_the_leader_sent() {
+        let (w, sent) = crate::method::tests::on_a_table(Vec3::new(0.0, 0.87, 0.0));
+        let sc = Scenario::default();
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut c = Coupled::new(0, 2, 1e-3, sc.contact, radii, 600);
+        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
+        let r = Report::Coupled(CoupledReport {
+            tools: ToolReport::NONE,
+            t_s: 1.0,
+            state: sent,
+            accel: crate::method::supported_gravity(&w, &sent),
+            touch_since_s: 0.9,
+            last_touch_s: 0.9,
+        });
+        let e = |s: &BodyState| crate::tank::stored_energy(&w, s);
+        let before = e(&copy.state);
+        assert!(c.receive(&w, &mut copy, 1, &r, 1.5).is_some(), "pulled");
+        let mut on_surface = sent;
+        crate::method::push_out_of_environment(&w, &mut on_surface);
+        assert!(e(&on_surface) > before, "the leader's state holds more");
+        assert!(
+            e(&copy.state) <= e(&on_surface) + crate::method::DEAD_RECKONING_SLACK_J,
+            "{} J after the pull, {} J sent",
+            e(&copy.state),
+            e(&on_surface)
+        );
+        assert!(e(&copy.state) > before, "pulled up towards it");
+    }
 
     /// Site 0 of two, 1 kHz, playing at most 600 ticks late, receives site 1's tool (far from the
     /// disk, moving 1 quantum per tick along x) in 50-tick reports sent 300 ticks late, then 20
