@@ -499,6 +499,19 @@ fn a_partition_longer_than_the_history_is_healed_by_adopting_the_lower_sites_con
     );
     eprintln!("healed: user1 {}\nhealed: user2 {}", after.0, after.1);
     let (pa, _) = copies_end_together([&mut sa, &mut sb], &dir, limit);
+    // Each recorded the whole silence at the rejoin: at least the partition's 2 s (ticks 15500 to
+    // 17500), however long. (Longer than zenoh's lease, the peer had also left the session: the
+    // silence measured from its return said 0.00 s.)
+    for me in ["user1", "user2"] {
+        let r =
+            coop_transport::recording::read(&dir.join(format!("{me}.mcap"))).expect("recording");
+        let rejoined = r.peers.iter().find(|p| p.event == "rejoined");
+        assert!(
+            rejoined.is_some_and(|p| p.silent_s > 2.0),
+            "{me}'s recording gives the partition's silence at the rejoin: {:?}",
+            r.peers
+        );
+    }
     assert!(
         pa[0] > 0.095,
         "user1's second push moved the disk on from x = 0.089 m: {pa:?}"

@@ -53,6 +53,9 @@ pub(super) struct Receiver<'a> {
     silence_ns: Vec<u64>,
     /// Per site: when a state of it was last taken (our clock), if ever since it joined.
     last_heard: Vec<Option<u64>>,
+    /// Per lost site: when it was last heard before it fell silent. Kept when it leaves (zenoh
+    /// drops a peer silent past its lease), so "heard again after" is the whole silence.
+    silent_since: Vec<Option<u64>>,
     lost: u64,
     losses: u64,
     rejoins: u64,
@@ -113,6 +116,7 @@ impl<'a> Receiver<'a> {
             emulated_lost: 0,
             silence_ns,
             last_heard: vec![None; sites.len()],
+            silent_since: vec![None; sites.len()],
             lost: 0,
             losses: 0,
             rejoins: 0,
@@ -273,7 +277,8 @@ impl<'a> Receiver<'a> {
             let net = &self.control.network;
             net.peers_lost.store(self.lost, Ordering::Relaxed);
             net.peer_rejoins.store(self.rejoins, Ordering::Relaxed);
-            let silent_s = before.map_or(0.0, |b| now.saturating_sub(b) as f64 * 1e-9);
+            let since = self.silent_since[site].take().or(before);
+            let silent_s = since.map_or(0.0, |b| now.saturating_sub(b) as f64 * 1e-9);
             eprintln!(
                 "network: site {} heard again after {silent_s:.2} s",
                 self.sites[site]
@@ -303,6 +308,7 @@ impl<'a> Receiver<'a> {
                 continue;
             }
             self.lost |= 1 << j;
+            self.silent_since[j] = Some(t);
             self.losses += 1;
             let net = &self.control.network;
             net.peers_lost.store(self.lost, Ordering::Relaxed);
