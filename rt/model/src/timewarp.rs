@@ -1594,8 +1594,7 @@ mod tests {
     /// of the site behind being a tick it had not stepped to (no hash sent).
     #[test]
     fn stations_started_apart_compare_their_confirmed_states() {
-        let (_, w) = paper_world();
-        let sc = paper_world().0;
+        let (sc, w) = paper_world();
         for (skew, connect) in [(50_i64, 0_i64), (209, 1000), (-209, 1000), (400, 1500)] {
             let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
             let mut radii = [0.0; MAX_SITES];
