@@ -125,6 +125,7 @@ fn runs_then_stops_on_sigterm_leaving_nothing() {
         shm_entries(&format!("coop_{session}_")).is_empty(),
         "segments left behind"
     );
+    let _ = std::fs::remove_dir_all(cfg.parent().expect("dir"));
 }
 
 /// ... and each restart is a `/log` line of the station's recording, naming the child and why it
@@ -301,6 +302,7 @@ fn a_killed_supervisor_takes_its_children_and_the_next_run_cleans_up() {
     assert!(status.success(), "exit {status}");
     drop(ctl);
     assert!(shm_entries(&format!("coop_{session}_")).is_empty());
+    let _ = std::fs::remove_dir_all(cfg.parent().expect("dir"));
 }
 
 fn free_port() -> u16 {
@@ -694,6 +696,7 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
     kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");
     let (status, _) = station.finish();
     assert!(status.success(), "exit {status}");
+    let _ = std::fs::remove_dir_all(cfg.parent().expect("dir"));
 }
 
 /// A device safety limit that acts on a real station is named by `station status`, with when it
