@@ -51,11 +51,10 @@ pub(super) struct Receiver<'a> {
     pub(super) emulated_lost: u64,
     /// Per site: how long it may be silent before it is lost, ns.
     silence_ns: Vec<u64>,
-    /// Per site: when a state of it was last taken (our clock), if ever since it joined.
+    /// Per site: when a state of it was last taken (our clock), if ever since it joined. Kept
+    /// for a lost site when it leaves (zenoh drops a peer silent past its lease), so "heard
+    /// again after" is the whole silence.
     last_heard: Vec<Option<u64>>,
-    /// Per lost site: when it was last heard before it fell silent. Kept when it leaves (zenoh
-    /// drops a peer silent past its lease), so "heard again after" is the whole silence.
-    silent_since: Vec<Option<u64>>,
     lost: u64,
     losses: u64,
     rejoins: u64,
@@ -116,7 +115,6 @@ impl<'a> Receiver<'a> {
             emulated_lost: 0,
             silence_ns,
             last_heard: vec![None; sites.len()],
-            silent_since: vec![None; sites.len()],
             lost: 0,
             losses: 0,
             rejoins: 0,
@@ -277,8 +275,7 @@ impl<'a> Receiver<'a> {
             let net = &self.control.network;
             net.peers_lost.store(self.lost, Ordering::Relaxed);
             net.peer_rejoins.store(self.rejoins, Ordering::Relaxed);
-            let since = self.silent_since[site].take().or(before);
-            let silent_s = since.map_or(0.0, |b| now.saturating_sub(b) as f64 * 1e-9);
+            let silent_s = before.map_or(0.0, |b| now.saturating_sub(b) as f64 * 1e-9);
             eprintln!(
                 "network: site {} heard again after {silent_s:.2} s",
                 self.sites[site]
@@ -308,7 +305,6 @@ impl<'a> Receiver<'a> {
                 continue;
             }
             self.lost |= 1 << j;
-            self.silent_since[j] = Some(t);
             self.losses += 1;
             let net = &self.control.network;
             net.peers_lost.store(self.lost, Ordering::Relaxed);
@@ -328,10 +324,12 @@ impl<'a> Receiver<'a> {
     }
 
     /// Site `j` left the session (its liveliness token went away): a new run of it starts its
-    /// sequence, its clock and its silence afresh.
+    /// sequence, its clock and (unless it is lost, whose silence goes on) its silence afresh.
     pub(super) fn left(&mut self, j: usize) {
         self.inbound.forget(j);
-        self.last_heard[j] = None;
+        if self.lost & (1 << j) == 0 {
+            self.last_heard[j] = None;
+        }
         self.waiting[j] = None;
         self.control.network.clock_rtt_ns[j].store(0, Ordering::Relaxed);
     }
