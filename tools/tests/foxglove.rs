@@ -207,6 +207,15 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
         .args(&sites)
         .output()
         .expect("python3 runs");
+    // A second viewer connects while the session runs and stays 2 s: it gets the whole scene
+    // first (the last one, at once), then the turns' arrows as they change.
+    let later = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60"])
+        .args(&sites)
+        .env("LISTEN_S", "2")
+        .output()
+        .expect("python3 runs");
     let session = child.wait_with_output().expect("session ends");
     let launcher_log = log.join().unwrap_or_default();
     assert!(
@@ -238,6 +247,23 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
             .as_str()
             .is_some_and(|l| l.contains("scenario three-users")),
         "{v}"
+    );
+    assert!(
+        later.status.success(),
+        "the later client failed: {}",
+        String::from_utf8_lossy(&later.stderr)
+    );
+    let w: Value = serde_json::from_slice(&later.stdout).expect("the later client prints JSON");
+    assert_eq!(
+        (&w["errors"], &w["complete"]),
+        (&serde_json::json!([]), &serde_json::json!(true)),
+        "{w}"
+    );
+    let first = w["first_scene_ids"].as_array().map_or(0, Vec::len);
+    assert_eq!(first, 1 + 3 * sites.len(), "the whole scene first: {w}");
+    assert!(
+        w["arrow_scenes"].as_u64() > Some(0),
+        "between whole scenes, the arrows that changed alone: {w}"
     );
     // The session's own result is unaffected.
     let result: Value = serde_json::from_slice(&session.stdout).expect("the session's JSON");
@@ -421,6 +447,11 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
         "{v}"
     );
     assert_eq!(v["max_scene_entities"].as_u64(), Some(4), "{v}");
+    assert_eq!(
+        v["first_scene_ids"],
+        serde_json::json!(["environment", "object/user1", "tool/user1", "force/user1"]),
+        "the whole scene first: {v}"
+    );
     assert!(
         v["logs"][0]
             .as_str()

@@ -4,12 +4,16 @@
 //! and `station run --live` (the network process offers its own samples, [`LiveView::offer`]).
 //!
 //! A publishing thread wakes every [`PERIOD`] (about 60 Hz) and sends, for what arrived since its
-//! last turn, the frames `world → object/<site>` and `world → tool/<site>` on `/tf` and one
-//! `/scene` with every site's entities (the same messages as the recordings', [`Scene`]), and the
-//! events on `/log`. Nothing that feeds it waits for a viewer: [`LiveView::offer`] only replaces
-//! the newest sample under a short lock (the publishing thread encodes and sends outside it), the
-//! stations' live key is put at background priority and dropped under congestion, and each viewer
-//! has its own thread and a bounded queue of turns: a viewer too slow to take a turn loses it.
+//! last turn, the frames `world → object/<site>` and `world → tool/<site>` on `/tf`, the events on
+//! `/log`, and on `/scene` (the same entities as the recordings', [`Scene`]) what changed: the
+//! objects, tools and environment are locked to their frames and move with `/tf`, so the whole
+//! scene goes when a site first shows and every [`WHOLE_SCENE_EVERY`], and in between only the
+//! force arrows that changed. A viewer that subscribes gets the last whole scene at once.
+//!
+//! Nothing that feeds it waits for a viewer: [`LiveView::offer`] only replaces the newest sample
+//! under a short lock (the publishing thread encodes and sends outside it), the stations' live key
+//! is put at background priority and dropped under congestion, and each viewer has its own thread
+//! and a bounded queue of turns: a viewer too slow to take a turn loses it.
 //!
 //! The server is ours, small (the protocol's `serverInfo`, `advertise`, `subscribe`,
 //! `unsubscribe` and binary `messageData`, on `tungstenite`): the `foxglove` crate's server speaks
@@ -34,7 +38,7 @@ use zenoh::Wait;
 
 use crate::keys;
 use crate::network::LIVE_EVERY_NS;
-use crate::recording::scene::{encode, timestamp};
+use crate::recording::scene::{arrow, encode, timestamp};
 use crate::recording::{SampleMsg, Scene};
 
 /// The WebSocket subprotocol spoken.
@@ -72,6 +76,9 @@ type Turn = Arc<[Frame]>;
 pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 /// How often the viewer gets the newest state: about 60 Hz.
 pub const PERIOD: Duration = Duration::from_nanos(16_666_667);
+/// How often `/scene` carries the whole scene while samples come (between: the force arrows that
+/// changed). It bounds how long a viewer that lost a turn (its queue was full) misses an entity.
+pub const WHOLE_SCENE_EVERY: Duration = Duration::from_secs(1);
 
 /// The live view could not be started or could not follow a session.
 #[derive(Debug, thiserror::Error)]
@@ -119,7 +126,72 @@ struct Shown {
     log_name: String,
 }
 
+/// A publishing turn, before encoding: the frames, the scene (and whether it is the whole one),
+/// the log lines.
+struct Turned {
+    frames: Vec<FrameTransform>,
+    scene: Option<(SceneUpdate, bool)>,
+    logs: Vec<Log>,
+}
+
 impl Shown {
+    /// This turn at wall time `now` (ns): the frames of the sites with a new sample; the whole
+    /// scene if a site shows for the first time, or if `whole_due` and a sample came; else the
+    /// force arrows that changed (no scene if none did); the log lines.
+    fn turn(&mut self, now: u64, whole_due: bool) -> Turned {
+        let mut frames = Vec::new();
+        let mut arrows = Vec::new();
+        let mut new_site = false;
+        for i in 0..self.scenes.len() {
+            let Some(m) = self.newest[i].take() else {
+                continue;
+            };
+            let scene = &self.scenes[i];
+            frames.extend(scene.transforms(&m, now));
+            match &self.shown[i] {
+                None => new_site = true,
+                Some(before) if arrow(before.f_object) != arrow(m.f_object) => {
+                    arrows.push(scene.force(&m, now));
+                }
+                Some(_) => {}
+            }
+            self.shown[i] = Some(m);
+        }
+        let update = |entities| SceneUpdate {
+            deletions: Vec::new(),
+            entities,
+        };
+        let scene = if new_site || (whole_due && !frames.is_empty()) {
+            let mut entities = Vec::new();
+            if let Some(first) = self.scenes.first() {
+                entities.push(first.environment(now));
+            }
+            for (scene, m) in self.scenes.iter().zip(&self.shown) {
+                if let Some(m) = m {
+                    entities.extend(scene.entities(m, now));
+                }
+            }
+            Some((update(entities), true))
+        } else {
+            (!arrows.is_empty()).then(|| (update(arrows), false))
+        };
+        let logs = std::mem::take(&mut self.logs)
+            .into_iter()
+            .map(|(level, message)| Log {
+                timestamp: Some(timestamp(now)),
+                level: level as i32,
+                message,
+                name: self.log_name.clone(),
+                ..Log::default()
+            })
+            .collect();
+        Turned {
+            frames,
+            scene,
+            logs,
+        }
+    }
+
     /// Site `i`'s newest sample (the first says the site is live).
     fn offer(&mut self, i: usize, m: SampleMsg) {
         if i >= self.scenes.len() {
@@ -135,9 +207,14 @@ impl Shown {
 
 /// The viewers' queues.
 type Viewers = Arc<Mutex<Vec<SyncSender<Turn>>>>;
-/// The `/log` frames so far (the newest [`LOG_KEPT`]), sent to each viewer when it subscribes:
-/// events that happened before it connected are not lost to it.
-type LogHistory = Arc<Mutex<Vec<Frame>>>;
+/// What a viewer gets when it subscribes, sent before the turns' frames: the `/log` frames so far
+/// (the newest [`LOG_KEPT`]; events that happened before it connected are not lost to it) and the
+/// last whole `/scene` (the turns between carry only what changed).
+#[derive(Default)]
+struct Backlog {
+    logs: Vec<Frame>,
+    scene: Option<Frame>,
+}
 /// Log frames kept for late viewers.
 const LOG_KEPT: usize = 256;
 
@@ -200,7 +277,7 @@ impl LiveView {
         let shown: Arc<Mutex<Shown>> = Arc::default();
         let stop = Arc::new(AtomicU64::new(0));
         let viewers: Viewers = Arc::default();
-        let history: LogHistory = Arc::default();
+        let backlog: Arc<Mutex<Backlog>> = Arc::default();
         let spawn = |what: &'static str, f: Box<dyn FnOnce() + Send>| {
             std::thread::Builder::new()
                 .name(what.into())
@@ -209,12 +286,12 @@ impl LiveView {
         };
         let mut threads = vec![spawn("live-view", {
             let (shown, stop) = (shown.clone(), stop.clone());
-            let (viewers, history) = (viewers.clone(), history.clone());
-            Box::new(move || publish(&viewers, &history, &shown, &stop))
+            let (viewers, backlog) = (viewers.clone(), backlog.clone());
+            Box::new(move || publish(&viewers, &backlog, &shown, &stop))
         })?];
         let accepting = spawn("live-accept", {
             let (stop, viewers) = (stop.clone(), viewers.clone());
-            Box::new(move || accept(&listener, &viewers, &history, &stop))
+            Box::new(move || accept(&listener, &viewers, &backlog, &stop))
         });
         match accepting {
             Ok(t) => threads.push(t),
@@ -320,66 +397,38 @@ impl LiveView {
 /// The publishing thread: every [`PERIOD`], what arrived since the last turn.
 fn publish(
     viewers: &Mutex<Vec<SyncSender<Turn>>>,
-    history: &Mutex<Vec<Frame>>,
+    backlog: &Mutex<Backlog>,
     shown: &Mutex<Shown>,
     stop: &AtomicU64,
 ) {
     // The stations put at most every LIVE_EVERY_NS; faster turns would only repeat frames.
     let period = PERIOD.max(Duration::from_nanos(LIVE_EVERY_NS));
     let mut next = Instant::now() + period;
+    let mut next_whole = Instant::now();
     while stop.load(Ordering::Relaxed) == 0 {
-        let (frames, update, logs, now) = {
-            let mut s = lock(shown);
-            let now = unix_ns();
-            let mut frames = Vec::new();
-            let mut changed = false;
-            for i in 0..s.scenes.len() {
-                if let Some(m) = s.newest[i].take() {
-                    frames.extend(s.scenes[i].transforms(&m, now));
-                    s.shown[i] = Some(m);
-                    changed = true;
-                }
-            }
-            let update = changed.then(|| {
-                let mut entities = Vec::new();
-                if let Some(first) = s.scenes.first() {
-                    entities.push(first.environment(now));
-                }
-                for (scene, m) in s.scenes.iter().zip(&s.shown) {
-                    if let Some(m) = m {
-                        entities.extend(scene.entities(m, now));
-                    }
-                }
-                SceneUpdate {
-                    deletions: Vec::new(),
-                    entities,
-                }
-            });
-            let logs: Vec<Log> = std::mem::take(&mut s.logs)
-                .into_iter()
-                .map(|(level, message)| Log {
-                    timestamp: Some(timestamp(now)),
-                    level: level as i32,
-                    message,
-                    name: s.log_name.clone(),
-                    ..Log::default()
-                })
-                .collect();
-            (frames, update, logs, now)
-        };
+        let now = unix_ns();
+        let turned = lock(shown).turn(now, Instant::now() >= next_whole);
         // Encoding and sending happen outside the lock: the zenoh callback never waits for them.
-        let (frames, update, logs, now) = (frames, update, logs, now);
-        let mut out: Vec<Frame> = frames
+        let mut out: Vec<Frame> = turned
+            .frames
             .iter()
             .map(|f| Arc::new((TF, now, encode(f))))
             .collect();
-        out.extend(update.iter().map(|u| Arc::new((SCENE, now, encode(u)))));
-        let logs: Vec<Frame> = logs
+        if let Some((update, whole)) = &turned.scene {
+            let frame = Arc::new((SCENE, now, encode(update)));
+            if *whole {
+                next_whole = Instant::now() + WHOLE_SCENE_EVERY;
+                lock(backlog).scene = Some(frame.clone());
+            }
+            out.push(frame);
+        }
+        let logs: Vec<Frame> = turned
+            .logs
             .iter()
             .map(|l| Arc::new((LOG, now, encode(l))))
             .collect();
         if !logs.is_empty() {
-            let mut h = lock(history);
+            let h = &mut lock(backlog).logs;
             h.extend(logs.iter().cloned());
             let excess = h.len().saturating_sub(LOG_KEPT);
             h.drain(..excess);
@@ -413,17 +462,22 @@ impl Drop for LiveView {
 }
 
 /// The listener: a thread per viewer, until stopped.
-fn accept(listener: &TcpListener, viewers: &Viewers, history: &LogHistory, stop: &Arc<AtomicU64>) {
+fn accept(
+    listener: &TcpListener,
+    viewers: &Viewers,
+    backlog: &Arc<Mutex<Backlog>>,
+    stop: &Arc<AtomicU64>,
+) {
     while stop.load(Ordering::Relaxed) == 0 {
         match listener.accept() {
             Ok((stream, peer)) => {
                 let (tx, rx) = sync_channel(QUEUE);
                 lock(viewers).push(tx);
-                let (stop, history) = (stop.clone(), history.clone());
+                let (stop, backlog) = (stop.clone(), backlog.clone());
                 let _ = std::thread::Builder::new()
                     .name("live-viewer".into())
                     .spawn(move || {
-                        if let Err(e) = serve(stream, &rx, &history, &stop) {
+                        if let Err(e) = serve(stream, &rx, &backlog, &stop) {
                             eprintln!("live view: viewer {peer}: {e}");
                         }
                     });
@@ -450,7 +504,7 @@ fn would_block(e: &tungstenite::Error) -> bool {
 fn serve(
     stream: TcpStream,
     frames: &Receiver<Turn>,
-    history: &Mutex<Vec<Frame>>,
+    backlog: &Mutex<Backlog>,
     stop: &AtomicU64,
 ) -> Result<(), tungstenite::Error> {
     stream.set_nonblocking(false)?;
@@ -519,14 +573,27 @@ fn serve(
         let read = loop {
             match ws.read() {
                 Ok(Message::Text(t)) => {
-                    let had_log = subs.iter().any(|(c, _)| *c == LOG);
+                    let had =
+                        |subs: &[(u32, u32)], channel| subs.iter().any(|(c, _)| *c == channel);
+                    let (had_log, had_scene) = (had(&subs, LOG), had(&subs, SCENE));
                     on_request(&t, &mut subs);
-                    if !had_log && subs.iter().any(|(c, _)| *c == LOG) {
-                        // The events so far go first, before this turn's frames.
-                        let mut h = lock(history).clone();
-                        h.append(&mut pending);
-                        pending = h;
+                    // The events so far and the last whole scene go first, before this turn's
+                    // frames.
+                    let b = lock(backlog);
+                    let mut first = Vec::new();
+                    if !had_log && had(&subs, LOG) {
+                        first.extend(b.logs.iter().cloned());
                     }
+                    if let Some(whole) =
+                        b.scene.as_ref().filter(|_| !had_scene && had(&subs, SCENE))
+                    {
+                        // Arrows older than it are in it already.
+                        pending.retain(|f| f.0 != SCENE || f.1 > whole.1);
+                        first.push(whole.clone());
+                    }
+                    drop(b);
+                    first.append(&mut pending);
+                    pending = first;
                 }
                 Ok(Message::Close(_)) => break Ok(false),
                 Ok(_) => {}
@@ -596,5 +663,83 @@ fn on_request(text: &str, subs: &mut Vec<(u32, u32)>) {
             subs.retain(|(_, id)| !ids.contains(id));
         }
         _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::recording::scene::{site_colour, Body, ARROW_MIN_N};
+
+    fn shown(sites: &[&str]) -> Shown {
+        let scenes = sites
+            .iter()
+            .enumerate()
+            .map(|(i, site)| Scene {
+                site: (*site).into(),
+                colour: site_colour(i),
+                object: Body::Sphere { radius: 0.04 },
+                tool_radius_m: 0.005,
+                planes: vec![([0.0, 0.0, 1.0], 0.0)],
+            })
+            .collect::<Vec<_>>();
+        Shown {
+            session: "s".into(),
+            newest: vec![None; scenes.len()],
+            shown: vec![None; scenes.len()],
+            scenes,
+            ..Shown::default()
+        }
+    }
+
+    fn sample(f_object: [f64; 3]) -> SampleMsg {
+        SampleMsg {
+            rot: [1.0, 0.0, 0.0, 0.0],
+            f_object,
+            ..SampleMsg::default()
+        }
+    }
+
+    /// Entity ids of a turn's scene and whether it is the whole one.
+    fn scene_of(t: &Turned) -> Option<(Vec<String>, bool)> {
+        t.scene
+            .as_ref()
+            .map(|(u, whole)| (u.entities.iter().map(|e| e.id.clone()).collect(), *whole))
+    }
+
+    fn ids(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| (*s).to_owned()).collect()
+    }
+
+    #[test]
+    fn a_scene_goes_whole_when_a_site_shows_or_it_is_due_and_else_only_the_changed_arrows() {
+        let mut s = shown(&["a", "b"]);
+        s.offer(0, sample([0.0; 3]));
+        let t = s.turn(1, false);
+        assert_eq!(t.frames.len(), 2);
+        assert_eq!(
+            scene_of(&t),
+            Some((ids(&["environment", "object/a", "tool/a", "force/a"]), true))
+        );
+        assert_eq!(t.logs.len(), 1, "a: live");
+        // The same arrow (none: below the least drawn) moves with the frames only.
+        s.offer(0, sample([0.0, 0.0, ARROW_MIN_N / 2.0]));
+        let t = s.turn(2, false);
+        assert_eq!((t.frames.len(), scene_of(&t)), (2, None));
+        // A changed force: its arrow alone.
+        s.offer(0, sample([0.0, 0.0, 1.0]));
+        assert_eq!(
+            scene_of(&s.turn(3, false)),
+            Some((ids(&["force/a"]), false))
+        );
+        // A site showing for the first time: every site's entities.
+        s.offer(1, sample([0.0; 3]));
+        let (all, whole) = scene_of(&s.turn(4, false)).expect("a scene");
+        assert_eq!((all.len(), whole), (7, true));
+        // Due: the whole scene, if a sample came.
+        assert!(scene_of(&s.turn(5, true)).is_none());
+        s.offer(1, sample([0.0; 3]));
+        let (all, whole) = scene_of(&s.turn(6, true)).expect("a scene");
+        assert_eq!((all.len(), whole), (7, true));
     }
 }

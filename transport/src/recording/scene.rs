@@ -71,6 +71,12 @@ pub struct Scene {
     pub planes: Vec<([f64; 3], f64)>,
 }
 
+/// The force `f` (N) drawn as an arrow, or `None` where it is below [`ARROW_MIN_N`]: two
+/// samples with the same `arrow` draw the same.
+pub fn arrow(f: [f64; 3]) -> Option<[f64; 3]> {
+    ((f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt() >= ARROW_MIN_N).then_some(f)
+}
+
 /// A distinct colour per site index (eight, repeating), the object's alpha.
 pub fn site_colour(index: usize) -> [f64; 4] {
     const PALETTE: [[f64; 3]; 8] = [
@@ -276,10 +282,22 @@ impl Scene {
             size: Some(v3([2.0 * self.tool_radius_m; 3])),
             color: Some(colour([r, g, b, 1.0])),
         });
-        let mut force = entity(self.tool_frame(), format!("force/{}", self.site));
-        let f = s.f_object;
-        let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-        if magnitude >= ARROW_MIN_N {
+        [object, tool, self.force(s, unix_ns)]
+    }
+
+    /// The force the user applies to this copy in sample `s`, as an arrow at the tool (an entity
+    /// without one when the force is below [`ARROW_MIN_N`]).
+    pub fn force(&self, s: &SampleMsg, unix_ns: u64) -> SceneEntity {
+        let mut force = SceneEntity {
+            timestamp: Some(timestamp(unix_ns)),
+            frame_id: self.tool_frame(),
+            id: format!("force/{}", self.site),
+            frame_locked: true,
+            ..SceneEntity::default()
+        };
+        if let Some(f) = arrow(s.f_object) {
+            let magnitude = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            let [r, g, b, _] = self.colour;
             force.arrows.push(ArrowPrimitive {
                 pose: pose([0.0; 3], rotation_onto([1.0, 0.0, 0.0], f)),
                 shaft_length: magnitude * ARROW_M_PER_N,
@@ -289,7 +307,7 @@ impl Scene {
                 color: Some(colour([r, g, b, 1.0])),
             });
         }
-        [object, tool, force]
+        force
     }
 
     /// The environment's planes (in `world`), each a thin square whose top face is the plane.
