@@ -10,9 +10,9 @@
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::{ContactForce, EnvContactState, ToolContactState, MAX_PLANES};
-use coop_model::coupled::CoupledReport;
+use coop_model::method::track::CoupledReport;
+use coop_model::method::track::{Snapshot, ToolReport, WINDOW_TICKS};
 use coop_model::method::{Report, MAX_SITES};
-use coop_model::timewarp::{Snapshot, ToolReport, WINDOW_TICKS};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
@@ -325,7 +325,7 @@ unsafe impl ShmPod for SiteReport {
 pub const TRACK_POSITION_WORDS: usize = WINDOW_TICKS * 3 / 2;
 /// The largest tick a track may name: 2⁴⁰ ticks are 35 years at 1 kHz (a larger one is garbage).
 pub const MAX_TRACK_TICK: u64 = 1 << 40;
-/// The largest magnitude of a quantized coordinate ([`coop_model::timewarp::quantize`]'s clamp).
+/// The largest magnitude of a quantized coordinate ([`coop_model::method::track::quantize`]'s clamp).
 pub const MAX_QUANTIZED: i64 = 2_000_000_000;
 
 pod_message! {
@@ -465,7 +465,7 @@ impl ToolTrack {
     /// frontier past the last tick sent, a coordinate beyond [`MAX_QUANTIZED`], a nonzero unused
     /// coordinate, or a carried state that is not one (a repair of a receiver's gap, an older
     /// window, gives its sender's frontier at the window's end: see
-    /// `coop_model::timewarp::TimeWarp`'s report). The one validation of a track:
+    /// `coop_model::method::TimeWarp`'s report). The one validation of a track:
     /// the wire's decode and physics' ring → model conversion both apply it (see
     /// [`SiteReport::report`] for why both).
     pub fn report(&self) -> Option<(usize, Report)> {
@@ -1019,8 +1019,9 @@ mod tests {
     #[test]
     fn a_timewarp_repair_passes_the_frontier_rule() {
         use coop_model::contact::ContactForce;
+        use coop_model::method::track::quantize;
+        use coop_model::method::TimeWarp;
         use coop_model::method::{Consistency, ObjectCopy, MAX_SITES};
-        use coop_model::timewarp::{quantize, TimeWarp};
         let sc = coop_model::scenario::Scenario::default();
         let world = sc.world();
         let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));

@@ -5,7 +5,8 @@
 //! process.
 
 use coop_model::contact::ContactForce;
-use coop_model::method::{Consistency, ObjectCopy, World};
+use coop_model::method::{Consistency, ObjectCopy};
+use coop_model::world::World;
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::method::Report;
@@ -204,9 +205,9 @@ impl PhysicsLoop {
         self.ticks.done
     }
 
-    /// The method's rollback figures, if it rolls back.
-    pub fn timewarp_stats(&self) -> Option<coop_model::timewarp::Stats> {
-        self.method.timewarp_stats()
+    /// What the method did so far (rollbacks, jitter-buffer playout).
+    pub fn method_stats(&self) -> coop_model::method::Stats {
+        self.method.stats()
     }
 
     /// How many ticks to step at `now_ns`: one per physics period on the grid (up to
@@ -427,7 +428,8 @@ impl PhysicsLoop {
         p.drops.set(Ring::Trace, self.trace_drops);
         let r = &p.rollback;
         let set = |a: &crate::sync::AtomicU64, v: u64| a.store(v, crate::sync::Ordering::Relaxed);
-        if let Some(st) = self.method.timewarp_stats() {
+        let stats = self.method.stats();
+        if let Some(st) = stats.rollback() {
             set(&r.rollbacks, st.rollbacks);
             set(&r.resimulated_ticks, st.resimulated_ticks);
             set(&r.max_depth, st.max_depth);
@@ -442,7 +444,7 @@ impl PhysicsLoop {
             set(&r.local_lag_ticks, st.local_lag_ticks);
             set(&r.lagged_ticks, st.lagged_ticks);
         }
-        if let Some(p) = self.method.playout_ticks() {
+        if let Some(p) = stats.playout_ticks() {
             set(&r.playout_ticks, p.ceil() as u64);
         }
         set(&r.tracks_received, self.tracks.received);

@@ -7,8 +7,8 @@
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
-use coop_model::method::World;
 use coop_model::servo::{Servo, ServoInput};
+use coop_model::world::World;
 
 use crate::device::safety::{Guarded, Trip};
 use crate::device::{CartesianDevice, Placement};

@@ -4,11 +4,10 @@
 //! when physics stops, the servo's commanded force ramps to zero within stale limit + ramp; and the
 //! loop steps allocate nothing.
 
-use coop_model::body::{BodyState, Vec3};
+use coop_model::body::Vec3;
 use coop_model::device::Plant;
-use coop_model::method::{ObjectCopy, Paper};
 use coop_model::replay::Trajectory;
-use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
+use coop_model::scenario::{KeyframeSpec, MethodName, Scenario, SiteSpec};
 use coop_model::servo::Servo;
 use coop_rt::device::replay::Replay;
 use coop_rt::device::safety::{Guarded, Limit, SafetyLimits};
@@ -115,9 +114,9 @@ fn rig_with<D: CartesianDevice>(
     );
     let physics = PhysicsLoop::new(
         0,
-        Box::new(Paper::new(2, 0)),
+        sc.method(0, MethodName::Paper),
         world,
-        ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m))),
+        sc.start_copy(),
         PhysicsRings {
             tools: tool.consumer().expect("c"),
             remote: rem.consumer().expect("c"),

@@ -86,11 +86,8 @@ fn site_tagged(sc: &Scenario, i: usize, method: MethodName, extra: &str) -> Site
     let rem = RingSegment::<SiteReport>::create(&name(&tag, "rem"), 64).expect("rem");
     let tko = RingSegment::<ToolTrack>::create(&name(&tag, "tko"), 64).expect("tko");
     let tki = RingSegment::<ToolTrack>::create(&name(&tag, "tki"), 64).expect("tki");
-    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m)));
-    let method: Box<dyn Consistency> = match method {
-        MethodName::Coupled => Box::new(sc.coupled(i)),
-        _ => Box::new(sc.timewarp(i, &copy)),
-    };
+    let copy = sc.start_copy();
+    let method = sc.method(i, method);
     let mut physics = PhysicsLoop::new(
         i,
         method,
@@ -222,7 +219,11 @@ fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirme
     );
     on_the_grid_carried_and_together(&sites, last);
     for (i, s) in sites.iter().enumerate() {
-        let st = s.physics.timewarp_stats().expect("timewarp has stats");
+        let st = s
+            .physics
+            .method_stats()
+            .rollback()
+            .expect("timewarp has stats");
         let tr = s.physics.tracks;
         assert!(tr.late_periods > 0 && tr.caught_up_ticks > 0, "{tr:?}");
         assert!(st.rollbacks > 10, "site {i} rolled back: {st:?}");
@@ -253,8 +254,8 @@ fn coupled_over_real_rings_pulls_without_allocating_and_keeps_the_copies_togethe
 #[test]
 fn a_missed_contact_is_replayed_without_allocating() {
     use coop_model::contact::ContactForce;
+    use coop_model::method::track::{quantize, ToolReport};
     use coop_model::method::Report;
-    use coop_model::timewarp::{quantize, ToolReport};
     const LATE: i64 = 300;
     let mut sc = scenario();
     sc.network.delay_min_ms = LATE as f64;
@@ -297,7 +298,7 @@ fn a_missed_contact_is_replayed_without_allocating() {
             shown_apart += u32::from(tw.shown(&copy) != copy.state);
         });
     }
-    let st = tw.stats();
+    let st = tw.rollback_stats();
     assert_eq!(st.replays, 1, "the knock was replayed: {st:?}");
     assert!(shown_apart > 0, "the replay showed the history");
     assert_eq!(allocations, 0, "the replay allocated");

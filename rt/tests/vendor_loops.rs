@@ -2,9 +2,7 @@
 //! SDK), through the station's device type and the safety layer, over real shared-memory rings with
 //! the physics loop: it allocates nothing, and the device is commanded a force.
 
-use coop_model::body::{BodyState, Vec3};
-use coop_model::method::{ObjectCopy, Paper};
-use coop_model::scenario::{KeyframeSpec, Scenario, SiteSpec};
+use coop_model::scenario::{KeyframeSpec, MethodName, Scenario, SiteSpec};
 use coop_model::servo::Servo;
 use coop_rt::device::dhd::DhdDevice;
 use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
@@ -66,9 +64,9 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
     );
     let mut physics = PhysicsLoop::new(
         0,
-        Box::new(Paper::new(2, 0)),
+        sc.method(0, MethodName::Paper),
         world,
-        ObjectCopy::new(BodyState::at_rest(Vec3::from(sc.object.start_m))),
+        sc.start_copy(),
         PhysicsRings {
             tools: tool.consumer().expect("c"),
             remote: rem.consumer().expect("c"),

@@ -15,12 +15,12 @@ use std::time::Instant;
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
-use coop_model::method::{Consistency, ObjectCopy, Paper, Report};
+use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
+use coop_model::method::{Consistency, ObjectCopy, Report};
 use coop_model::metrics;
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::sim::{self, Mode};
-use coop_model::timewarp::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
 
 use coop_actors::scenario_file;
 
@@ -115,7 +115,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
         tw.physics_step(&world, &mut copy, &ContactForce::default(), dt);
         copy.time_s = k as f64 * dt;
     }
-    let before = tw.timewarp_stats().unwrap_or_default();
+    let before = tw.stats().rollback().unwrap_or_default();
     // Site 1's tool was 0.01 mm further in from tick now − 500 on: re-simulate 500 ticks.
     let mut moved = touching(1);
     moved[0] -= 1;
@@ -126,7 +126,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
         let t0 = Instant::now();
         t.receive(&world, &mut c, 1, black_box(&late), now as f64 * dt);
         let ns = t0.elapsed().as_nanos() as f64;
-        let after = t.timewarp_stats().unwrap_or_default();
+        let after = t.stats().rollback().unwrap_or_default();
         let depth = after.resimulated_ticks - before.resimulated_ticks;
         if depth != ROLLBACK_TICKS as u64 {
             anyhow::bail!(
@@ -220,7 +220,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
 
     // Physics: one object resting on the table with the own user pushing it (contact + environment).
     let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
-    let mut method = Paper::new(sc.dead_reckoning_order, 0);
+    let mut method = sc.method(0, MethodName::Paper);
     let push = ContactForce {
         force: Vec3::new(0.3, 0.05, 0.0),
         point: start.pos - Vec3::new(sc.object.radius_m, 0.0, 0.0),

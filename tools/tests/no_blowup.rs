@@ -1,5 +1,5 @@
 //! No method lets a copy gain energy no user put in, or leave the world: the `paper` blow-up at a
-//! constant 300 ms, seed 3 (4.7 kJ and 98 m before the no-gain bound of `coop_model::tank`), and
+//! constant 300 ms, seed 3 (4.7 kJ and 98 m before the no-gain bound of `coop_model::method::tank`), and
 //! every method × delay × seed of the default sweep of `scenarios/paper.toml` and of the 3-D
 //! `scenarios/lift.toml` (where `paper` threw a lifted disk 19 cm up, 54 mJ beyond the users' work,
 //! before the bound kept the tool's spring from paying for the object's motion), of

@@ -10,8 +10,8 @@
 //! resynchronised after [`RESYNC_STRIKES`] of them in a row (counted), while a replay (an old time)
 //! stays refused.
 
+use coop_model::method::track::QUANTUM_M;
 use coop_model::scenario::Scenario;
-use coop_model::timewarp::QUANTUM_M;
 use coop_model::MAX_SITES;
 use coop_rt::msg::{SiteReport, ToolTrack, KIND_COUPLED};
 use coop_rt::shm::control::Refused;
@@ -120,7 +120,7 @@ pub struct Bounds {
 pub const FUTURE_NS: u64 = 100_000_000;
 /// How far a tool track's last tick may lie before the newest taken from its site: the longest
 /// `timewarp` history (10 s) at the fastest physics (20 kHz). A track sent again for a receiver's
-/// gap ([`coop_model::timewarp::ToolReport::need`]) is older than the newest, never by more.
+/// gap ([`coop_model::method::track::ToolReport::need`]) is older than the newest, never by more.
 pub const MAX_TRACK_REWIND_TICKS: u64 = 200_000;
 
 impl Bounds {
@@ -751,7 +751,7 @@ mod tests {
     #[test]
     fn tool_tracks_are_admitted_by_the_same_rules_as_states() {
         use crate::wire::encode_track;
-        use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
+        use coop_model::method::track::{ToolReport, WINDOW_TICKS};
         let r = ToolReport {
             first_tick: 100,
             count: 10,
@@ -837,7 +837,7 @@ mod tests {
         // where a state would be (faster than anything in the world can go).
         let with_state = |vel: f64| {
             let mut w = r;
-            w.state = Some(coop_model::timewarp::Snapshot {
+            w.state = Some(coop_model::method::track::Snapshot {
                 tick: 300_000,
                 state: coop_model::body::BodyState {
                     vel: coop_model::body::Vec3::new(vel, 0.0, 0.0),

@@ -355,7 +355,7 @@ mod tests {
 
     #[test]
     fn tracks_round_trip_and_every_corruption_is_refused_while_states_stay_version_1() {
-        use coop_model::timewarp::{ToolReport, WINDOW_TICKS};
+        use coop_model::method::track::{ToolReport, WINDOW_TICKS};
         let mut r = ToolReport {
             first_tick: 500,
             count: 20,
@@ -401,7 +401,7 @@ mod tests {
         contacts[1] = coop_model::contact::ToolContactState::from_anchor(Some(
             coop_model::body::Vec3::new(0.04, 0.0, -0.0),
         ));
-        let snap = coop_model::timewarp::Snapshot {
+        let snap = coop_model::method::track::Snapshot {
             tick: 480,
             state: body,
             env: coop_model::contact::EnvContactState::from_anchors(anchors),
@@ -411,7 +411,7 @@ mod tests {
             need_state: 0b10,
             started_tick: 3,
             state: Some(snap),
-            confirmed_hash: coop_model::timewarp::hash_state(&body),
+            confirmed_hash: coop_model::method::timewarp::hash_state(&body),
             ..r
         };
         let ts = ToolTrack::new(1, 4, 99, &with_state);

@@ -9,9 +9,8 @@
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use coop_model::body::{BodyState, Vec3};
-use coop_model::method::{Consistency, Naive, ObjectCopy, Paper};
-use coop_model::scenario::MethodName;
+use coop_model::method::{Consistency, ObjectCopy};
+use coop_model::scenario::{MethodName, Scenario};
 use coop_model::servo::Servo;
 use coop_rt::device::safety::{clamp_contact, Guarded};
 use coop_rt::device::CartesianDevice;
@@ -207,32 +206,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         rings.tracks_in =
             Some(Consumer::open(&names.track_in, &opts).context("opening the track-in ring")?);
     }
-    let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
-    // A physics process on the grid whose first step falls this many ticks or more after the
-    // session's time 0 (a restart, a late station: the time 0 may only be learnt then) joins the
-    // grid where it is, from the newest state its predecessor published, instead of
-    // re-simulating the session from its start (see `PhysicsLoop::join_late`).
-    let mut join_after = None;
-    let method: Box<dyn Consistency> = match sc.method {
-        MethodName::Naive => Box::<Naive>::default(),
-        MethodName::Paper => Box::new(Paper::new(sc.dead_reckoning_order, i)),
-        // Every site starts its copy at the scenario's start on tick 0 (the session's time 0):
-        // the confirmed state is the same bits everywhere only from the same start. One that
-        // joins more than a history after it (a restart, a late station) has no history before
-        // it and cannot have the positions the others no longer keep: it yields to the sites
-        // that were there (see `coop_model::timewarp`'s docs on healing), adopting a confirmed
-        // state of theirs. Stations started together, a few hundred ms apart, are all there from
-        // the start.
-        MethodName::Timewarp => {
-            let tw = sc.timewarp(i, &ObjectCopy::new(start));
-            join_after = Some(tw.history_ticks() as u64);
-            Box::new(tw)
-        }
-        MethodName::Coupled => {
-            join_after = Some(coop_model::timewarp::WINDOW_TICKS as u64);
-            Box::new(sc.coupled(i))
-        }
-    };
+    let (method, join_after) = physics_method(sc, i);
     let step = period(sc.site[i].physics_rate_hz);
     let timing = PhysicsTiming {
         period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
@@ -258,10 +232,10 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             }
         );
     }
-    let copy = ObjectCopy::new(match join_after {
-        Some(_) => start,
-        None => resumed.unwrap_or(start),
-    });
+    let copy = match (join_after, resumed) {
+        (None, Some(state)) => ObjectCopy::new(state),
+        _ => sc.start_copy(),
+    };
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     if let Some(after) = join_after {
         physics.join_late(after, resumed);
@@ -361,4 +335,63 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     }
     coop_transport::network::run(args)?;
     Ok(())
+}
+
+/// Site `i`'s method for its physics process, built by the scenario's one factory as the
+/// simulator's is, and the ticks after the session's time 0 past which a process on the tick
+/// grid joins late.
+///
+/// Every site starts its copy at the scenario's start on tick 0 (the session's time 0): the
+/// confirmed state is the same bits everywhere only from the same start. A physics process whose
+/// first step falls a method's history or more after it (a restart, a late station: the time 0
+/// may only be learnt then) has no history before it and cannot have the positions the others no
+/// longer keep: it joins the grid where it is, from the newest state its predecessor published
+/// (see `PhysicsLoop::join_late`), and yields to the sites that were there (see
+/// `coop_model::method::timewarp`'s docs on healing), adopting a confirmed state of theirs.
+/// Stations started together, a few hundred ms apart, are all there from the start.
+pub(crate) fn physics_method(sc: &Scenario, i: usize) -> (Box<dyn Consistency>, Option<u64>) {
+    let method = sc.method(i, sc.method);
+    let join_after = method.grid_history_ticks();
+    (method, join_after)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coop_model::sim::{site_method, Mode};
+
+    /// A station's physics process and the simulator run the same method: the same type with the
+    /// same parameters (a `paper` without its tool's spring in its no-gain bound, say, differs in
+    /// its `Debug`), for every committed scenario, method and site.
+    #[test]
+    fn a_station_builds_every_method_as_the_simulator_does() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+        let mut files: Vec<_> = std::fs::read_dir(&dir)
+            .expect("scenarios/")
+            .map(|e| e.expect("entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+            .collect();
+        files.sort();
+        assert!(files.len() >= 5, "{files:?}");
+        let mut compared = 0;
+        for file in &files {
+            let mut sc = crate::scenario_file::load(file).expect("a committed scenario loads");
+            for name in MethodName::ALL {
+                sc.method = name;
+                for i in 0..sc.site.len() {
+                    let (station, _) = physics_method(&sc, i);
+                    let sim = site_method(&sc, Mode::Distributed(name), i);
+                    assert_eq!(station.name(), name.as_str());
+                    assert!(
+                        format!("{station:?}") == format!("{sim:?}"),
+                        "{}: {} at site {i}: the station's method differs from the simulator's",
+                        file.display(),
+                        name.as_str()
+                    );
+                    compared += 1;
+                }
+            }
+        }
+        assert!(compared >= 40, "{compared}");
+    }
 }

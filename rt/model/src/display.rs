@@ -17,7 +17,7 @@
 //! 2. **Step limiter** ([`StepLimiter`]). Beyond the copy's own contact change (what the user
 //!    feels with no correction), the displayed force changes by at most `max(fraction · |F|, floor)`
 //!    per servo tick: by default the force JND of 7 % (Jones 1989; see
-//!    [`crate::metrics::force_jnd_n`]) with a floor of 0.05 N, so no correction's step is noticeable. The floor
+//!    [`crate::perception::force_jnd_n`]) with a floor of 0.05 N, so no correction's step is noticeable. The floor
 //!    at a 1 kHz servo lets the force rise from zero at 50 N/s, what an 800 N/m contact (the paper
 //!    task's) needs at 6 cm/s of approach, and it is the floor below which [`crate::metrics`] counts
 //!    no step; the relative part then grows the allowed step geometrically (7 %/tick).
@@ -72,8 +72,8 @@ impl Default for DisplayParams {
             pass_through_jump_rad: 2e-3,
             pass_through_jump_m_per_s: 0.5,
             pass_through_jump_rad_per_s: 10.0,
-            max_step_fraction: crate::metrics::FORCE_JND_FRACTION,
-            max_step_floor_n: crate::metrics::FORCE_JND_FLOOR_N,
+            max_step_fraction: crate::perception::FORCE_JND_FRACTION,
+            max_step_floor_n: crate::perception::FORCE_JND_FLOOR_N,
             max_damping_n_s_per_m: 20.0,
         }
     }
@@ -387,9 +387,9 @@ impl DisplaySpec {
     /// Checks every field.
     ///
     /// # Errors
-    /// A [`crate::scenario::ScenarioError`] naming the field (`display.…`), the value and the rule.
-    pub fn validate(&self) -> Result<(), crate::scenario::ScenarioError> {
-        use crate::scenario::{bounded, in_closed};
+    /// A [`crate::rules::ScenarioError`] naming the field (`display.…`), the value and the rule.
+    pub fn validate(&self) -> Result<(), crate::rules::ScenarioError> {
+        use crate::rules::{bounded, in_closed};
         bounded(
             "display.blend_time_constant_ms",
             self.blend_time_constant_ms,

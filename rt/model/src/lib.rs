@@ -13,23 +13,23 @@
 pub mod body;
 pub mod contact;
 pub mod controller;
-pub mod coupled;
 pub mod device;
 pub mod display;
 pub mod histogram;
 pub mod link;
 pub mod method;
 pub mod metrics;
+pub mod perception;
 pub mod replay;
 pub mod rng;
+pub mod rules;
 pub mod scenario;
 pub mod servo;
 pub mod shape;
 pub mod sim;
-pub mod tank;
-pub mod timewarp;
 pub mod user;
+pub mod world;
 
 /// Sites a session can have: the one bound every fixed-size table (a report's inclusion times, the
 /// control block's per-peer slots, the wire's `included` field) is sized by.
-pub use method::MAX_SITES;
+pub use world::MAX_SITES;

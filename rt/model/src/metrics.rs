@@ -36,7 +36,7 @@
 //!   into the user (the passivity observer's figure, [`crate::display`]; ≤ 0 is passive).
 //! - **Correction energy**: per site, the energy its copy gained from corrections — the positive
 //!   part of each adoption's (paper) or rollback's (timewarp) change of mechanical energy, summed.
-//! - **Bounded corrections**: per site, the corrections the no-gain bound ([`crate::tank`]) scaled
+//! - **Bounded corrections**: per site, the corrections the no-gain bound ([`crate::method::tank`]) scaled
 //!   back because they would have given the copy energy no user put in, and the energy it took out.
 //! - **Energy beyond the users' work**: the most any copy's translational energy (½ m v² plus
 //!   gravity's potential, from the trace) ever exceeded its start by more than every user's positive
@@ -61,17 +61,7 @@ use crate::sim::RunResult;
 #[cfg(feature = "serde")]
 use serde::Serialize;
 
-/// Weber fraction of force: a change of the displayed force by more than this fraction of the force
-/// is noticeable (about 7 % for forces at the hand; Jones, "Matching forces", 1989; Pang et al. 1991).
-pub const FORCE_JND_FRACTION: f64 = 0.07;
-/// Below this the fraction is meaningless (near zero force any step would count): a change smaller
-/// than 0.05 N is never counted, N.
-pub const FORCE_JND_FLOOR_N: f64 = 0.05;
-
-/// The just-noticeable change of a displayed force of `force_n` N: 7 % of it, at least 0.05 N.
-pub fn force_jnd_n(force_n: f64) -> f64 {
-    (FORCE_JND_FRACTION * force_n.abs()).max(FORCE_JND_FLOOR_N)
-}
+pub use crate::perception::{force_jnd_n, FORCE_JND_FLOOR_N, FORCE_JND_FRACTION};
 
 /// Per-site figures.
 #[derive(Debug, Clone, PartialEq)]
@@ -130,7 +120,7 @@ pub struct SiteMetrics {
     /// Missed contacts replayed to this site's user from the confirmed history.
     pub replays: u64,
     /// The largest local lag of this site's own tool, ms (`timewarp`: see
-    /// [`crate::timewarp::LOCAL_LAG_SHARE`]; 0 for other methods)...
+    /// [`crate::method::timewarp::LOCAL_LAG_SHARE`]; 0 for other methods)...
     pub local_lag_max_ms: f64,
     /// ... and the time its tool was lagged, s.
     pub lagged_s: f64,

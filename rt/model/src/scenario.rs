@@ -2,14 +2,17 @@
 //! the network, and the task phases to check. Parsed from TOML by the tools (serde, behind this
 //! crate's `serde` feature); validated here, with errors that name the field, the value and the rule.
 
-use crate::body::{MassProps, Vec3};
+use crate::body::{BodyState, MassProps, Vec3};
 use crate::contact::{ContactParams, Plane, MAX_PLANES};
 use crate::controller::ControllerParams;
 use crate::device::{HandParams, ScaraParams};
-use crate::method::{World, MAX_SITES};
+use crate::method::{Consistency, Coupled, Naive, ObjectCopy, Paper, TimeWarp};
+pub use crate::rules::ScenarioError;
+use crate::rules::{bounded, err, finite3, in_closed, in_range};
 use crate::servo::ServoParams;
 use crate::shape::Shape;
 use crate::user::Keyframe;
+use crate::world::{World, MAX_SITES};
 
 #[cfg(feature = "serde")]
 use serde::{Deserialize, Serialize};
@@ -128,10 +131,10 @@ pub struct TimewarpSpec {
     pub horizon_ms: f64,
     /// The own tool's local lag while a partner's is near the object, as a share of that
     /// partner's measured one-way delay, 0 to 1 (0: none; see
-    /// [`crate::timewarp::LOCAL_LAG_SHARE`], the default).
+    /// [`crate::method::timewarp::LOCAL_LAG_SHARE`], the default).
     pub local_lag_share: f64,
     /// ... at most this, ms, 0 to [`MAX_LOCAL_LAG_MS`] (default
-    /// [`crate::timewarp::LOCAL_LAG_MAX_TICKS`] at 1 kHz).
+    /// [`crate::method::timewarp::LOCAL_LAG_MAX_TICKS`] at 1 kHz).
     pub local_lag_max_ms: f64,
 }
 
@@ -139,14 +142,14 @@ impl Default for TimewarpSpec {
     fn default() -> Self {
         Self {
             horizon_ms: 0.0,
-            local_lag_share: crate::timewarp::LOCAL_LAG_SHARE,
-            local_lag_max_ms: crate::timewarp::LOCAL_LAG_MAX_TICKS as f64,
+            local_lag_share: crate::method::timewarp::LOCAL_LAG_SHARE,
+            local_lag_max_ms: crate::method::timewarp::LOCAL_LAG_MAX_TICKS as f64,
         }
     }
 }
 
 /// The largest `timewarp.local_lag_max_ms`, ms (what the own tool's measured positions kept cover
-/// at the fastest physics rate, [`crate::timewarp::MAX_LOCAL_LAG_TICKS`]).
+/// at the fastest physics rate, [`crate::method::timewarp::MAX_LOCAL_LAG_TICKS`]).
 pub const MAX_LOCAL_LAG_MS: f64 = 200.0;
 
 /// The longest `timewarp.horizon_ms`, ms.
@@ -403,75 +406,6 @@ impl Default for PhaseSpec {
     }
 }
 
-/// A scenario value breaks a rule.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ScenarioError {
-    /// Field path, e.g. `site[1].servo_rate_hz`.
-    pub field: String,
-    /// The value found.
-    pub value: String,
-    /// The rule it breaks.
-    pub rule: String,
-}
-
-impl std::fmt::Display for ScenarioError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} = {}: {}", self.field, self.value, self.rule)
-    }
-}
-
-impl std::error::Error for ScenarioError {}
-
-fn err(
-    field: impl Into<String>,
-    value: impl std::fmt::Debug,
-    rule: impl Into<String>,
-) -> ScenarioError {
-    ScenarioError {
-        field: field.into(),
-        value: format!("{value:?}"),
-        rule: rule.into(),
-    }
-}
-
-/// `lo < v <= hi` and finite (NaN fails: positive containment, H8).
-fn in_range(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
-    if v > lo && v <= hi && v.is_finite() {
-        Ok(())
-    } else {
-        Err(err(
-            field,
-            v,
-            format!("must be a finite number above {lo} and at most {hi}"),
-        ))
-    }
-}
-
-/// `lo <= v <= hi` and finite.
-pub(crate) fn in_closed(field: &str, v: f64, lo: f64, hi: f64) -> Result<(), ScenarioError> {
-    if v >= lo && v <= hi && v.is_finite() {
-        Ok(())
-    } else {
-        Err(err(
-            field,
-            v,
-            format!("must be a finite number from {lo} to {hi}"),
-        ))
-    }
-}
-
-fn finite3(field: &str, v: &[f64; 3], bound: f64) -> Result<(), ScenarioError> {
-    if v.iter().all(|x| x.is_finite() && x.abs() <= bound) {
-        Ok(())
-    } else {
-        Err(err(
-            field,
-            v,
-            format!("every component must be finite and within ±{bound}"),
-        ))
-    }
-}
-
 fn validate_contact(c: &ContactParams, at: &str) -> Result<(), ScenarioError> {
     in_range(
         &format!("{at}.stiffness_n_per_m"),
@@ -526,26 +460,6 @@ pub fn valid_name(s: &str) -> bool {
         && s.as_bytes()[0].is_ascii_alphanumeric()
         && s.bytes()
             .all(|b| b.is_ascii_alphanumeric() || b == b'.' || b == b'-')
-}
-
-/// `lo <= v <= hi` and finite, with the unit in the rule: a lower bound that keeps the value
-/// meaningful (a rate of 1e-300 Hz, a mass of 1e-300 kg), not only positive.
-pub(crate) fn bounded(
-    field: &str,
-    v: f64,
-    lo: f64,
-    hi: f64,
-    unit: &str,
-) -> Result<(), ScenarioError> {
-    if v >= lo && v <= hi && v.is_finite() {
-        Ok(())
-    } else {
-        Err(err(
-            field,
-            v,
-            format!("must be a finite number from {lo} to {hi} {unit}"),
-        ))
-    }
 }
 
 impl Scenario {
@@ -943,17 +857,34 @@ impl Scenario {
         ScaraParams::paper(Vec3::from(self.site[i].device_base_m))
     }
 
+    /// Site `i`'s consistency method `name`: the one place a method is built. The simulator, the
+    /// station's physics process and the tests all build theirs here, so a method is the same
+    /// wherever it runs (a `paper` built without its tool once counted the tool's spring in its
+    /// no-gain bound in the simulator only).
+    pub fn method(&self, i: usize, name: MethodName) -> Box<dyn Consistency> {
+        match name {
+            MethodName::Naive => Box::<Naive>::default(),
+            MethodName::Paper => Box::new(
+                Paper::new(self.dead_reckoning_order, i)
+                    .with_tool(self.site[i].tool_radius_m, self.contact.stiffness_n_per_m),
+            ),
+            MethodName::Timewarp => Box::new(self.timewarp(i, &self.start_copy())),
+            MethodName::Coupled => Box::new(self.coupled(i)),
+        }
+    }
+
+    /// A site's copy of the world at the scenario's start, time 0.
+    pub fn start_copy(&self) -> ObjectCopy {
+        ObjectCopy::new(BodyState::at_rest(Vec3::from(self.object.start_m)))
+    }
+
     /// Site `i`'s `timewarp` method, starting from `copy`: the common tick is the physics step (every
     /// site's must be the same), the horizon is [`Self::timewarp_horizon_s`].
-    pub fn timewarp(
-        &self,
-        i: usize,
-        copy: &crate::method::ObjectCopy,
-    ) -> crate::timewarp::TimeWarp {
+    pub fn timewarp(&self, i: usize, copy: &ObjectCopy) -> TimeWarp {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let horizon_s = self.timewarp_horizon_s();
         let radii = self.tool_radii();
-        let mut tw = crate::timewarp::TimeWarp::new(
+        let mut tw = TimeWarp::new(
             i,
             self.site.len(),
             dt,
@@ -993,7 +924,7 @@ impl Scenario {
     /// arrive plus 100 ms. With `network.loss`, also one slowest report period for each of the
     /// [`Self::losses_in_a_row`] reports it can lose in a row, and a round trip more (the latest
     /// arrival again: a run of losses longer than a report's window leaves a gap, which the
-    /// receiver asks for and the sender sends again, [`crate::timewarp::ToolReport::need`]); at
+    /// receiver asks for and the sender sends again, [`crate::method::track::ToolReport::need`]); at
     /// most [`MAX_HORIZON_MS`]. A position that arrives older than the history cannot be undone:
     /// the copies' confirmed states then differ for good (counted, as fallbacks and hash
     /// mismatches). At a loss of 0.3 and 150 ms, the history without loss's terms lost two or more
@@ -1033,11 +964,11 @@ impl Scenario {
 
     /// Site `i`'s `coupled` method: remote tools are played at most the largest delay, its jitter
     /// and the slowest report period late (that late until their arrival is measured).
-    pub fn coupled(&self, i: usize) -> crate::coupled::Coupled {
+    pub fn coupled(&self, i: usize) -> Coupled {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let playout_s = self.latest_arrival_s();
         let radii = self.tool_radii();
-        crate::coupled::Coupled::new(
+        Coupled::new(
             i,
             self.site.len(),
             dt,

@@ -20,7 +20,7 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::device::{Plant, ScaraForceLoop};
 use crate::link::DueQueue;
-use crate::method::{integrate, Consistency, EnergyAccount, Naive, ObjectCopy, Paper, Report};
+use crate::method::{integrate, Consistency, EnergyAccount, ObjectCopy, Report};
 use crate::rng::Rng;
 use crate::scenario::{MethodName, Scenario};
 use crate::servo::{Servo, ServoInput};
@@ -89,7 +89,7 @@ pub struct AdoptionEvent {
     /// The part of it the forces' work in the corrected history accounts for
     /// ([`crate::method::Adoption::work_j`]), J; NaN if not known.
     pub work_j: f64,
-    /// Energy the no-gain bound took out of it ([`crate::tank`]), J; 0: it fitted; NaN if not known.
+    /// Energy the no-gain bound took out of it ([`crate::method::tank`]), J; 0: it fitted; NaN if not known.
     pub clipped_j: f64,
 }
 
@@ -101,7 +101,7 @@ pub struct ForceSteps {
     /// The largest |ΔF_h| from one servo tick to the next, N.
     pub max_step_n: f64,
     /// Ticks whose step exceeded the just-noticeable difference
-    /// ([`crate::metrics::force_jnd_n`] of the force before the step).
+    /// ([`crate::perception::force_jnd_n`] of the force before the step).
     pub over_jnd: u64,
     /// What the servo's display stages did ([`crate::display`]; default: not measured).
     pub display: crate::display::DisplayStats,
@@ -114,7 +114,7 @@ impl ForceSteps {
         let step = (after - before).norm();
         self.servo_ticks += 1;
         self.max_step_n = self.max_step_n.max(step);
-        if step > crate::metrics::force_jnd_n(before.norm()) {
+        if step > crate::perception::force_jnd_n(before.norm()) {
             self.over_jnd += 1;
         }
     }
@@ -138,7 +138,7 @@ pub struct RunResult {
     /// Messages sent, delivered, lost.
     pub messages: (u64, u64, u64),
     /// Per site, for a method that rolls back: its rollbacks, depth, fallbacks, hash checks.
-    pub rollback: Vec<Option<crate::timewarp::Stats>>,
+    pub rollback: Vec<Option<crate::method::RollbackStats>>,
     /// Per site: the displayed-force steps of every servo tick.
     pub force_steps: Vec<ForceSteps>,
 }
@@ -212,6 +212,15 @@ fn ns_to_s(ns: u64) -> f64 {
     ns as f64 * 1e-9
 }
 
+/// Site `i`'s method in `mode`, built by [`Scenario::method`] as a station's is (the reference
+/// run's one shared copy is stepped by `paper`: with one copy, no report is ever adopted).
+pub fn site_method(scenario: &Scenario, mode: Mode, i: usize) -> Box<dyn Consistency> {
+    match mode {
+        Mode::Distributed(name) => scenario.method(i, name),
+        Mode::Reference => scenario.method(i, MethodName::Paper),
+    }
+}
+
 /// Runs `scenario` in `mode`. `progress(fraction)` is called about a hundred times.
 ///
 /// The scenario must be valid ([`Scenario::validate`]).
@@ -224,17 +233,6 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             let script = scenario.script(i);
             let arm = scenario.arm(i);
             let p0 = script[0].target;
-            let method: Box<dyn Consistency> = match mode {
-                Mode::Distributed(MethodName::Naive) => Box::<Naive>::default(),
-                Mode::Distributed(MethodName::Paper) | Mode::Reference => Box::new(
-                    Paper::new(scenario.dead_reckoning_order, i)
-                        .with_tool(spec.tool_radius_m, scenario.contact.stiffness_n_per_m),
-                ),
-                Mode::Distributed(MethodName::Timewarp) => {
-                    Box::new(scenario.timewarp(i, &ObjectCopy::new(start)))
-                }
-                Mode::Distributed(MethodName::Coupled) => Box::new(scenario.coupled(i)),
-            };
             Site {
                 plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
                 plant_ns: 0,
@@ -245,7 +243,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 tau: Vec3::zeros(),
                 own: ContactForce::default(),
                 copy: ObjectCopy::new(start),
-                method,
+                method: site_method(scenario, mode, i),
                 noise: Rng::derive(scenario.seed, 1000 + i as u64),
                 period_servo: period_ns(spec.servo_rate_hz),
                 period_physics: period_ns(spec.physics_rate_hz),
@@ -342,7 +340,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             }
         }
         if reference && next_ref == t {
-            let mut users = [ContactForce::default(); crate::method::MAX_SITES];
+            let mut users = [ContactForce::default(); crate::world::MAX_SITES];
             for (u, s) in users.iter_mut().zip(&sites) {
                 *u = s.own;
             }
@@ -460,7 +458,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         result
             .mech_energy
             .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
-        result.rollback.push(s.method.timewarp_stats());
+        result.rollback.push(s.method.stats().rollback());
         result.force_steps.push(ForceSteps {
             display: *s.servo.display_stats(),
             ..s.force_steps

@@ -5,9 +5,10 @@
 use coop_model::body::{BodyState, MassProps, Vec3};
 use coop_model::contact::{ContactForce, ContactParams, Plane, MAX_PLANES};
 use coop_model::device::{ScaraForceLoop, ScaraParams};
-use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, World, MAX_SITES};
+use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, MAX_SITES};
 use coop_model::servo::{Servo, ServoInput, ServoParams};
 use coop_model::shape::Shape;
+use coop_model::world::World;
 
 // The one counting allocator of the workspace's tests (a dev-dependency on coop-rt would break this
 // crate's purity, so the file is included rather than imported).

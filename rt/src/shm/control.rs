@@ -409,7 +409,7 @@ pub struct PhysicsShared {
 
 // ---- physics/network: rollback and tool-track figures (issue 12, timewarp on stations) ----
 
-/// What physics writes of a rolling-back method (`coop_model::timewarp::Stats`) and of the tool
+/// What physics writes of a rolling-back method (`coop_model::method::RollbackStats`) and of the tool
 /// tracks it exchanges: relaxed stores by physics, the one writer.
 #[derive(Debug)]
 #[repr(C)]

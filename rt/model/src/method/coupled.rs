@@ -22,7 +22,7 @@
 //!   0.25 s/s) instead of 0.56 s late throughout, and held 0.6 % (user 1's tool at user 2's site,
 //!   90 Hz reports) and 3.3 % (user 2's at user 1's, 20 Hz) of the ticks, on the delay's rises;
 //!   the co-contact divergence is 13–16 mm on seeds 1–9 instead of 16–30. The reports are
-//!   [`crate::timewarp::ToolReport`]s, the same tool trajectory `timewarp` sends.
+//!   [`crate::method::track::ToolReport`]s, the same tool trajectory `timewarp` sends.
 //! - **Pull towards the site that touched first.** Played late, the remote tools make the copies
 //!   drift apart. The site whose user's current contact began first (ties: the lower index) leads;
 //!   the others pull their copy towards its reported state (dead-reckoned to now): on each of its
@@ -30,7 +30,7 @@
 //!   a first-order convergence with time constant [`PULL_TIME_S`].
 //! - **Energy-bounded** (PSPM-style set-position clipping): a pull may bring the copy's energy up to
 //!   the leader's state's (that energy is accounted for: the leader's users gave it, at the leader's
-//!   site, under its own bound) plus what the copy's tank holds ([`crate::tank::bound_gain`] scales
+//!   site, under its own bound) plus what the copy's tank holds ([`super::tank::bound_gain`] scales
 //!   it back along the way, counted); the tank is filled by the users' positive work on this copy,
 //!   drained by what pulls add beyond the leader's energy and refilled by what they take. So no pull
 //!   gives a copy more energy than some copy's users gave theirs. The leader's energy has to count:
@@ -43,11 +43,17 @@
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
-use crate::method::MAX_SITES;
-use crate::method::{
-    dead_reckon_passive, integrate, Adoption, Consistency, ObjectCopy, Report, World,
+use crate::world::{World, MAX_SITES};
+
+use super::consistency::Consistency;
+use super::copy::{integrate, ObjectCopy};
+use super::reckon::dead_reckon_passive;
+use super::report::{Adoption, Report};
+use super::stats::Stats;
+use super::track::{
+    position, quantize, CoupledReport, Quantized, Received, ToolReport, MAX_TOOL_SPEED_M_PER_S,
+    UNKNOWN, WINDOW_TICKS,
 };
-use crate::timewarp::{position, quantize, Quantized, ToolReport, UNKNOWN, WINDOW_TICKS};
 
 /// Time constant of the pull towards the leading site's copy, s: long against the contact's
 /// oscillation (a 0.1 kg disk on the 800 N/m tool spring rings at ~14 ms), short against a task
@@ -65,26 +71,6 @@ pub const PLAYOUT_DECAY_TICKS_PER_TICK: f64 = 0.125;
 
 /// The play head's grid: a remote tool is played at quarter ticks between its positions.
 const QUARTERS: i64 = 4;
-
-/// What a `coupled` site reports: its tool trajectory, its copy, and when its user's contact began.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CoupledReport {
-    /// The tool positions, as `timewarp` sends them (no confirmed hash: `confirmed_hash` 0).
-    pub tools: ToolReport,
-    /// Time of `state`, s (sender's clock).
-    pub t_s: f64,
-    /// The sender's copy.
-    pub state: BodyState,
-    /// Gravity less the environment's support at `state`, m/s² (for dead reckoning).
-    pub accel: Vec3,
-    /// When the sender's user's current contact began, s; infinite: not touching.
-    pub touch_since_s: f64,
-    /// When the sender's user last touched, s; negative infinity: never.
-    pub last_touch_s: f64,
-}
-
-/// A received position and its tick.
-type Received = Option<(i64, Quantized)>;
 
 /// The `coupled` method of one site.
 #[derive(Debug, Clone)]
@@ -343,11 +329,15 @@ impl Consistency for Coupled {
     fn remote_force(&self) -> Vec3 {
         self.remote_force
     }
-    fn playout_ticks(&self) -> Option<f64> {
+    fn stats(&self) -> Stats {
         (0..self.sites)
             .filter(|&j| j != self.me)
             .map(|j| self.site_playout_ticks(j))
             .reduce(f64::max)
+            .map_or(Stats::None, |ticks| Stats::Playout { ticks })
+    }
+    fn grid_history_ticks(&self) -> Option<u64> {
+        Some(WINDOW_TICKS as u64)
     }
     fn physics_step(
         &mut self,
@@ -381,7 +371,7 @@ impl Consistency for Coupled {
             let v = if self.played[j] != UNKNOWN && q != UNKNOWN {
                 let v = (p - position(self.played[j])) / self.dt;
                 let speed = v.norm();
-                let max = crate::timewarp::MAX_TOOL_SPEED_M_PER_S;
+                let max = MAX_TOOL_SPEED_M_PER_S;
                 if speed > max {
                     v * (max / speed)
                 } else {
@@ -480,7 +470,7 @@ impl Consistency for Coupled {
         let mut target = dead_reckon_passive(world, &r.state, r.accel, now_s - r.t_s, 2);
         // Along the normal of a plane the local copy rests on, its contact is local physics.
         for plane in world.planes() {
-            if crate::method::plane_depth(world, plane, &copy.state) > -1e-4 {
+            if crate::world::plane_depth(world, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
                 target.pos += n * (copy.state.pos - target.pos).dot(&n);
                 target.vel += n * (copy.state.vel - target.vel).dot(&n);
@@ -489,14 +479,14 @@ impl Consistency for Coupled {
         let since = (now_s - self.last_pull_s).max(0.0);
         self.last_pull_s = now_s;
         let alpha = since / (since + PULL_TIME_S);
-        let full = crate::tank::blend(&copy.state, &target, alpha);
-        let stored = |s: &BodyState| crate::tank::stored_energy(world, s);
+        let full = super::tank::blend(&copy.state, &target, alpha);
+        let stored = |s: &BodyState| super::tank::stored_energy(world, s);
         // The leader's state is accounted for (its users gave it its energy, at its site): a pull
         // may bring the copy up to it, plus what this copy's tank holds.
         let (e_copy, e_leader) = (stored(&copy.state), stored(&target));
         let budget = self.tank_j + (e_leader - e_copy).max(0.0);
         let (new, clipped_j) =
-            match crate::tank::bound_gain(world, &copy.state, &full, budget, None) {
+            match super::tank::bound_gain(world, &copy.state, &full, budget, None) {
                 Some((s, c)) => (s, c),
                 None => (full, 0.0),
             };
@@ -525,8 +515,8 @@ impl Consistency for Coupled {
 mod tests {
     use super::*;
     use crate::body::BodyState;
+    use crate::method::timewarp::track;
     use crate::scenario::Scenario;
-    use crate::timewarp::track;
 
     /// The leader's state reported resting on the table but leaving it fast (a disk its user's tool
     /// flicked up at 0.87 m/s), half a second old: the pull may bring this copy (2 cm above the
@@ -535,7 +525,7 @@ mod tests {
     /// 135 mJ beyond the 51 mJ sent.
     #[test]
     fn a_pull_takes_no_more_energy_than_the_leader_sent() {
-        let (w, sent) = crate::method::tests::on_a_table(Vec3::new(0.0, 0.87, 0.0));
+        let (w, sent) = crate::world::fixtures::on_a_table(Vec3::new(0.0, 0.87, 0.0));
         let sc = Scenario::default();
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
@@ -545,18 +535,18 @@ mod tests {
             tools: ToolReport::NONE,
             t_s: 1.0,
             state: sent,
-            accel: crate::method::supported_gravity(&w, &sent),
+            accel: crate::world::supported_gravity(&w, &sent),
             touch_since_s: 0.9,
             last_touch_s: 0.9,
         });
-        let e = |s: &BodyState| crate::tank::stored_energy(&w, s);
+        let e = |s: &BodyState| crate::method::tank::stored_energy(&w, s);
         let before = e(&copy.state);
         assert!(c.receive(&w, &mut copy, 1, &r, 1.5).is_some(), "pulled");
         let mut on_surface = sent;
-        crate::method::push_out_of_environment(&w, &mut on_surface);
+        crate::world::push_out_of_environment(&w, &mut on_surface);
         assert!(e(&on_surface) > before, "the leader's state holds more");
         assert!(
-            e(&copy.state) <= e(&on_surface) + crate::method::DEAD_RECKONING_SLACK_J,
+            e(&copy.state) <= e(&on_surface) + crate::method::reckon::DEAD_RECKONING_SLACK_J,
             "{} J after the pull, {} J sent",
             e(&copy.state),
             e(&on_surface)

@@ -28,7 +28,7 @@
 //! change only where it bites ([`crate::metrics::Metrics::bounded_corrections`] counts it).
 
 use crate::body::{BodyState, Vec3};
-use crate::method::{plane_depth, World};
+use crate::world::{plane_depth, World};
 
 /// Kinetic, gravitational and environment-spring energy of `s`, J (see the module docs).
 pub fn stored_energy(world: &World, s: &BodyState) -> f64 {

@@ -1,0 +1,340 @@
+//! Method `paper`: Eq. 9–11, the paper's own.
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::ContactForce;
+use crate::world::{plane_depth, World, MAX_SITES};
+use nalgebra::UnitQuaternion;
+
+use super::consistency::Consistency;
+use super::copy::{integrate, ObjectCopy};
+use super::reckon::dead_reckon_passive;
+use super::report::{Adoption, Report};
+
+/// One own step's impulse: (end of the step, middle of the step, linear impulse, angular impulse,
+/// the own user's work in the step), s, s, N·s, N·m·s, J.
+type LoggedImpulse = (f64, f64, Vec3, Vec3, f64);
+
+/// Own impulses a site remembers for replay: 8 s at 1 kHz.
+const LOG_CAP: usize = 8192;
+
+/// Eq. 9–11: each site integrates its copy with its **own** user's force only, and the newest state
+/// travels between the sites; "the force of each user only updates the newest state"
+/// (superposition at the acceleration level).
+///
+/// Every report carries, per site, the time up to which that site's user's impulses are included in
+/// the state: the paper's "time of the state change", one per contributor. A site adopts a received
+/// state when it includes newer contributions of the others and none older; it dead-reckons it to now
+/// and **replays its own user's impulses the sender had not yet seen** (each impulse moves the object
+/// by Δv·(now − t) and changes its momentum by Δp). So a site never takes back its own user's push,
+/// and during a simultaneous grasp each copy carries both users' forces, each from its own site. With
+/// zero delay this is the reference run's sum of forces (for free motion exactly).
+///
+/// When nothing new is known the sites follow the copy of the site whose user touched last (it
+/// includes the newest impulse): its later snapshots are adopted, so a released object slides to
+/// rest identically everywhere.
+///
+/// Along the normal of an environment plane the local copy rests on, the local position and velocity
+/// are kept: the contact equilibrium there is local physics, and transplanting another copy's
+/// micro-bounce would pump energy into every adoption. The environment's friction stick points move
+/// with the adopted object.
+#[derive(Debug, Clone)]
+pub struct Paper {
+    /// Dead-reckoning order (0, 1, 2).
+    pub order: u8,
+    me: usize,
+    newest_from: [f64; MAX_SITES],
+    /// Own impulses: (end of the step, middle of the step, linear impulse, angular impulse, the
+    /// own user's work in the step on the local copy), a ring.
+    log: Box<[LoggedImpulse]>,
+    log_next: usize,
+    log_len: usize,
+    /// The own tool as a spring, for the no-gain bound (position from [`Consistency::own_tool`]).
+    tool: Option<super::tank::ToolSpring>,
+    /// The own user's positive work on the local copy not yet spent by replays, J: each joule the
+    /// user put in is granted to replays once ([`crate::method::tank`]).
+    tank_j: f64,
+}
+
+impl Paper {
+    /// For site `me`, with dead-reckoning `order`.
+    pub fn new(order: u8, me: usize) -> Self {
+        Self {
+            order,
+            me,
+            newest_from: [f64::NEG_INFINITY; MAX_SITES],
+            log: vec![(0.0, 0.0, Vec3::zeros(), Vec3::zeros(), 0.0); LOG_CAP].into_boxed_slice(),
+            log_next: 0,
+            log_len: 0,
+            tool: None,
+            tank_j: 0.0,
+        }
+    }
+
+    /// With the own tool's radius and contact stiffness known: the no-gain bound then counts the
+    /// tool's spring ([`super::tank::ToolSpring`]) once the tool's position is given.
+    pub fn with_tool(mut self, radius_m: f64, stiffness_n_per_m: f64) -> Self {
+        self.tool = Some(super::tank::ToolSpring {
+            pos: Vec3::repeat(f64::INFINITY),
+            radius_m,
+            stiffness_n_per_m,
+        });
+        self
+    }
+
+    /// The site whose user's impulse is the newest in `included` (ties: the lowest index).
+    fn author(included: &[f64; MAX_SITES]) -> usize {
+        (0..MAX_SITES).fold(0, |best, k| {
+            if included[k] > included[best] {
+                k
+            } else {
+                best
+            }
+        })
+    }
+}
+
+impl Consistency for Paper {
+    fn name(&self) -> &'static str {
+        "paper"
+    }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        if let Some(t) = &mut self.tool {
+            t.pos = tool_pos;
+        }
+    }
+    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let work_before = copy.energy.own_j;
+        let impulse = integrate(world, copy, std::slice::from_ref(own), 1, dt);
+        self.tank_j += (copy.energy.own_j - work_before).max(0.0);
+        if own.touching {
+            self.log[self.log_next] = (
+                copy.time_s,
+                copy.time_s - 0.5 * dt,
+                impulse.force,
+                impulse.torque,
+                copy.energy.own_j - work_before,
+            );
+            self.log_next = (self.log_next + 1) % LOG_CAP;
+            self.log_len = (self.log_len + 1).min(LOG_CAP);
+            if let Some(mine) = copy.included.get_mut(self.me) {
+                *mine = copy.time_s;
+            }
+        }
+    }
+    fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
+        Report::State {
+            t_s: now_s,
+            state: copy.state,
+            accel: copy.passive_accel,
+            included: copy.included,
+        }
+    }
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        now_s: f64,
+    ) -> Option<Adoption> {
+        let Report::State {
+            t_s,
+            state,
+            accel,
+            included,
+        } = *msg
+        else {
+            return None;
+        };
+        let newest = self.newest_from.get_mut(from)?;
+        if t_s <= *newest || !state.is_finite() || included.iter().any(|v| !v.is_finite()) {
+            return None; // a replay, an older snapshot, or garbage
+        }
+        *newest = t_s;
+        let others = (0..MAX_SITES).filter(|&k| k != self.me);
+        let gains = others.clone().any(|k| included[k] > copy.included[k]);
+        let loses = others.clone().any(|k| included[k] < copy.included[k]);
+        let same = others.clone().all(|k| included[k] == copy.included[k]);
+        let follows_author = same && from == Self::author(&copy.included) && from != self.me;
+        if !((gains && !loses) || follows_author) {
+            return None;
+        }
+        // Dead reckoning predicts a passive object: unbounded, on `three-users.toml` at 500 ms a
+        // disk a user's tool had flicked up at 0.87 m/s was adopted 0.45 m up, 129 mJ beyond every
+        // user's work.
+        let mut new = dead_reckon_passive(world, &state, accel, now_s - t_s, self.order);
+        let given = new;
+        // Replay our own impulses the sender had not seen.
+        let seen_until = included.get(self.me).copied().unwrap_or(f64::NEG_INFINITY);
+        let inv_i = new.inv_inertia_world(&world.mass);
+        let mut own_work_j = 0.0;
+        for k in 0..self.log_len {
+            let (t_end, t_mid, dp, dl, w) = self.log[(self.log_next + LOG_CAP - 1 - k) % LOG_CAP];
+            if t_end <= seen_until {
+                break;
+            }
+            own_work_j += w;
+            // The impulse acted over its step: it has moved the object for (now − step middle).
+            let age = (now_s - t_mid).max(0.0);
+            let dv = dp / world.mass.mass_kg;
+            new.vel += dv;
+            new.pos += dv * age;
+            new.ang_mom += dl;
+            new.rot = UnitQuaternion::from_scaled_axis(inv_i * dl * age) * new.rot;
+        }
+        let mut base = given;
+        for plane in world.planes() {
+            if plane_depth(world, plane, &copy.state) > -1e-4 {
+                let n = plane.normal;
+                for s in [&mut new, &mut base] {
+                    s.pos += n * (copy.state.pos - s.pos).dot(&n);
+                    s.vel += n * (copy.state.vel - s.vel).dot(&n);
+                }
+            }
+        }
+        // Never more energy than the sender's copy or this one had, plus the replayed work.
+        let (new, clipped_j, spent_j) = super::tank::bound_adoption(
+            world,
+            &super::tank::Adopted {
+                local: copy.state,
+                given,
+                base,
+                full: new,
+                tool: self.tool.filter(|t| t.pos.iter().all(|v| v.is_finite())),
+            },
+            own_work_j.min(self.tank_j),
+        );
+        self.tank_j = (self.tank_j - spent_j).max(0.0);
+        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let adoption = Adoption {
+            jump: copy.state.pos - new.pos,
+            energy_j: e(&new) - e(&copy.state),
+            work_j: 0.0,
+            age_s: now_s - t_s,
+            clipped_j,
+        };
+        copy.energy.adoption_j += adoption.energy_j;
+        copy.env.shift(new.pos - copy.state.pos);
+        copy.state = new;
+        let mine = copy.included.get(self.me).copied().unwrap_or(-1.0);
+        copy.included = included;
+        if let Some(m) = copy.included.get_mut(self.me) {
+            *m = m.max(mine);
+        }
+        Some(adoption)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::reckon::{dead_reckon, DEAD_RECKONING_SLACK_J};
+    use super::*;
+    use crate::world::fixtures::{on_a_table, world};
+    use crate::world::{push_out_of_environment, supported_gravity};
+
+    #[test]
+    fn paper_adopts_newer_contributions_and_replays_its_own() {
+        let w = World {
+            plane_count: 0,
+            gravity: Vec3::zeros(),
+            ..world()
+        };
+        let mut m = Paper::new(2, 0);
+        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::zeros()));
+        let msg = |t: f64, x: f64, mine: f64, theirs: f64| {
+            let mut included = [-1.0; MAX_SITES];
+            included[0] = mine;
+            included[1] = theirs;
+            Report::State {
+                t_s: t,
+                state: BodyState::at_rest(Vec3::new(x, 0.0, 0.0)),
+                accel: Vec3::zeros(),
+                included,
+            }
+        };
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.5, -1.0, 0.9), 1.0)
+                .is_some(),
+            "newer contribution"
+        );
+        assert_eq!((copy.state.pos.x, copy.included[1]), (0.5, 0.9));
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(0.9, 0.7, -1.0, 0.95), 1.1)
+                .is_none(),
+            "older snapshot"
+        );
+        assert!(
+            m.receive(&w, &mut copy, 1, &msg(1.0, 0.7, -1.0, 0.95), 1.1)
+                .is_none(),
+            "replay"
+        );
+        // Our own user pushes: +0.1 m/s at t = 1.0 (impulse 0.01 N·s on 0.1 kg).
+        let push = ContactForce {
+            force: Vec3::new(1.0, 0.0, 0.0),
+            point: copy.state.pos,
+            depth: 0.001,
+            touching: true,
+            slipping: false,
+        };
+        copy.time_s = 0.99;
+        m.physics_step(&w, &mut copy, &push, 0.01);
+        assert!((copy.state.vel.x - 0.1).abs() < 1e-9);
+        // A state from site 1 that has not seen our push: adopted, and our push replayed on it.
+        assert!(m
+            .receive(&w, &mut copy, 1, &msg(1.2, 0.6, -1.0, 1.1), 1.2)
+            .is_some());
+        assert!(
+            (copy.state.vel.x - 0.1).abs() < 1e-9,
+            "own impulse replayed: {:?}",
+            copy.state.vel
+        );
+        // Pushed during [0.99, 1.0]: it has moved the object for 1.2 − 0.995 s.
+        assert!(
+            (copy.state.pos.x - (0.6 + 0.1 * 0.205)).abs() < 1e-9,
+            "{:?}",
+            copy.state.pos
+        );
+        // One that has seen it: adopted as it is.
+        assert!(m
+            .receive(&w, &mut copy, 1, &msg(1.3, 0.65, 1.0, 1.25), 1.3)
+            .is_some());
+        assert!(copy.state.vel.x.abs() < 1e-12 && (copy.state.pos.x - 0.65).abs() < 1e-12);
+    }
+
+    /// A state reported resting on the table (within the support's band) but leaving it fast, as a
+    /// disk a tool flicks up: reckoned with the support's zero acceleration it would fly on
+    /// unslowed (0.44 m up after 0.5 s); `paper` adopts it with no more energy than the state sent.
+    #[test]
+    fn paper_never_adopts_more_energy_than_the_state_sent() {
+        let (w, sent) = on_a_table(Vec3::new(0.0, 0.87, 0.0));
+        let accel = supported_gravity(&w, &sent);
+        assert!(accel.norm() < 1e-12, "reported as resting: {accel:?}");
+        let reckoned = dead_reckon(&w, &sent, accel, 0.5, 2);
+        assert!(reckoned.pos.y > 0.4, "unslowed: {:?}", reckoned.pos);
+        let mut m = Paper::new(2, 0);
+        // This copy's disk is off the table (an earlier adoption lifted it): nothing of the
+        // local state is kept along the table's normal.
+        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
+        let mut included = [-1.0; MAX_SITES];
+        included[1] = 1.0;
+        let msg = Report::State {
+            t_s: 1.0,
+            state: sent,
+            accel,
+            included,
+        };
+        assert!(m.receive(&w, &mut copy, 1, &msg, 1.5).is_some());
+        // (The sent state as the reckoner puts it: on the table's surface.)
+        let mut on_surface = sent;
+        push_out_of_environment(&w, &mut on_surface);
+        let e = |s: &BodyState| crate::method::tank::stored_energy(&w, s);
+        assert!(
+            e(&copy.state) <= e(&on_surface) + DEAD_RECKONING_SLACK_J,
+            "{} J adopted, {} J sent",
+            e(&copy.state),
+            e(&on_surface)
+        );
+        assert!(copy.state.pos.y < 0.1, "{:?}", copy.state.pos);
+    }
+}

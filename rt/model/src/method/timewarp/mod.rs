@@ -1,0 +1,688 @@
+//! Method `timewarp`: exchange the users' *tools* (the causes), not the object's state (the
+//! effects), and roll back.
+//!
+//! Every site runs the same deterministic physics on a common tick grid. At each tick every user's
+//! tool acts on the copy through the same contact law (Eq. 7, with friction memory), computed from
+//! the tool's position at that tick, quantized to [`QUANTUM_M`] so every site uses the same bits: the
+//! own tool as measured, a remote one from its received trajectory, and beyond the last received
+//! tick a bounded prediction and then a hold. A site reports the own
+//! tool's positions of the last [`WINDOW_TICKS`] ticks (so a few lost reports lose nothing). When
+//! more is lost in a row, the receiver holds later positions but not the gap's: it asks for the
+//! gap ([`ToolReport::need`]) and the sender sends the window from there in every other report.
+//!
+//! The copy's full state (body, momenta, environment friction memory, every tool's friction
+//! memory) is kept for every tick of the horizon. When a received position differs from what was
+//! predicted at a tick already simulated, the copy is restored to that tick and re-simulated to now
+//! with what is known ([`RollbackStats::rollbacks`]). A position older than the horizon cannot be undone: it
+//! is counted ([`RollbackStats::fallbacks`]) and the rollback starts at the oldest tick kept.
+//!
+//! Ticks whose inputs are known from every site are *confirmed*: their state is the same bits at
+//! every site. Each report carries the sender's confirmed frontier and a hash of its state there;
+//! a receiver that has confirmed the same tick compares ([`RollbackStats::hash_checks`],
+//! [`RollbackStats::hash_mismatches`]), so a divergence of confirmed state is never silent.
+//!
+//! A divergence heals: confirmed states differ only where a site never knew an input (a link down
+//! for longer than the horizon: a fallback; a physics process that started after the session did,
+//! restarted or late, which joins the grid where the session is ([`Consistency::start_at_tick`])
+//! with no history before it), and then no
+//! rollback can repair them. A site whose confirmed state differs from that of a site *before* it
+//! asks that site for its state ([`ToolReport::need_state`]); that site sends its full confirmed
+//! state ([`Snapshot`]: body, momenta, every friction memory) with its reports while asked, and
+//! the asking site adopts it at that tick and re-simulates to now ([`RollbackStats::adopted_states`]):
+//! the paper's adoption of a received state, at the confirmed frontier. Sites are ordered by the
+//! tick their physics process started at ([`ToolReport::started_tick`]: the newest yields), then
+//! by number; the first site's history is the one kept, so sites that all disagree still converge
+//! on one. A state that puts the object deeper into the environment than all the users' forces
+//! together could ([`TimeWarp::set_max_spring_energy`]) is not adopted: the mismatches go on,
+//! counted.
+//!
+//! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
+//! touched the object though the copy had shown no contact when it first simulated them
+//! ([`RollbackStats::unfelt_contact_ticks`]), and the other way round ([`RollbackStats::phantom_contact_ticks`]).
+//! "Shown" is the physics' contact at the tick's first simulation, not the force the servo
+//! displayed (a station that catches up several ticks in one period simulates some it never
+//! displays), and a tick that leaves the history before it is confirmed (a partner silent for
+//! longer than the horizon, a fallback) is not compared.
+//!
+//! A contact the user missed is replayed to them, late, when their hand is still where it was:
+//! a rollback whose re-simulation has the own tool touching the object in ticks that showed no
+//! contact live ([`REPLAY_MIN_TICKS`] or more), while no tool touches the object now (a free
+//! object's knock, not a grasp: replayed against several hands that all moved on, the history
+//! cost the three-user grasp 2 of 12 seeds' carry at 200 ms) and the own tool is within
+//! [`REPLAY_REACH_M`] of where it was then, makes [`Consistency::shown`] (what the servo
+//! renders against) the re-simulated history from [`REPLAY_LEAD_TICKS`] before the contact on,
+//! [`REPLAY_SPEED`] times as fast and at the history's own pace into and through the contact,
+//! until it reaches the copy ([`RollbackStats::replays`]). The user feels the knock the confirmed history
+//! says they got, as hard as it was, instead of the object appearing where the knock left it:
+//! at a constant 500 ms the paper task's disk knocks user 2's waiting tool 0.2 s before any news of
+//! the push can reach user 2. The copy, its confirmed state and every site's physics are
+//! untouched; a contact of the live copy, or the hand moving away, ends a replay at once.
+//!
+//! Local lag (Mauve et al. 2004's companion of timewarp, GGPO's input delay): while the own tool
+//! and a partner's are both within [`LOCAL_LAG_NEAR_M`] of the object, the own tool's measured
+//! positions enter the physics late by [`LOCAL_LAG_SHARE`] of the partner's measured one-way delay
+//! (at most [`LOCAL_LAG_MAX_TICKS`]), grown into at half speed and caught up at twice it, the
+//! latter never while the own tool touches the object. Each copy then holds its own tool and the partners'
+//! newest known positions nearer the same moment, so each user's hand reacts to an object that moves
+//! as the partners' hands move it ([`RollbackStats::local_lag_ticks`], [`RollbackStats::lagged_ticks`]). The input
+//! of a tick is whatever position the site stepped it with: every site still steps the same inputs.
+//!
+//! Determinism: the forces are summed in site order whatever site computes them, every input is an
+//! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
+//! same platform gives the same bits; see the crate docs on transcendental functions).
+
+mod hash;
+mod lag;
+mod predict;
+mod replay;
+
+pub use hash::hash_state;
+use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
+pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_LAG_TICKS};
+pub use predict::{EXTRAPOLATE_TICKS, REACH_TICKS, REACH_TIME_TICKS, REACH_VELOCITY_TICKS};
+pub use replay::{
+    REPLAY_LEAD_TICKS, REPLAY_MIN_TICKS, REPLAY_REACH_M, REPLAY_SLOW_TICKS, REPLAY_SPEED,
+};
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
+use crate::world::{World, MAX_SITES};
+
+use super::consistency::Consistency;
+use super::copy::{integrate, ObjectCopy};
+use super::report::{Adoption, Report};
+use super::stats::{RollbackStats, Stats};
+use super::track::{
+    position, quantize, Quantized, Received, Snapshot, ToolReport, MAX_TOOL_SPEED_M_PER_S,
+    QUANTUM_M, UNKNOWN, WINDOW_TICKS,
+};
+
+/// One tick's record: the state at its start, and the inputs used in it.
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    tick: i64,
+    copy: ObjectCopy,
+    contacts: [ToolContactState; MAX_SITES],
+    inputs: [Quantized; MAX_SITES],
+    /// Per site: whether `inputs` held a received (true) or predicted (false) position.
+    known: [bool; MAX_SITES],
+    /// Whether the own tool touched the object in this tick's first (live) simulation...
+    felt: bool,
+    /// ...and in its latest.
+    touched: bool,
+}
+
+/// The `timewarp` method of one site.
+#[derive(Debug, Clone)]
+pub struct TimeWarp {
+    me: usize,
+    sites: usize,
+    dt: f64,
+    contact: ContactParams,
+    radii: [f64; MAX_SITES],
+    /// Ring of slots, tick `t` at `t % len`.
+    slots: Box<[Slot]>,
+    /// The tick the copy is at the start of (the next to simulate).
+    now_tick: i64,
+    /// Per site: received positions with their ticks (ring like `slots`).
+    received: Box<[[Received; MAX_SITES]]>,
+    /// Per site: the tick up to which every position is known (-1: none); a gap (reports lost
+    /// for longer than the window) holds it back until the sender repairs it.
+    known_until: [i64; MAX_SITES],
+    /// Per site: the newest tick whose position is known (-1: none).
+    newest: [i64; MAX_SITES],
+    /// Per site: the first own tick it last asked for again ([`ToolReport::need`]; -1: none).
+    asked: [i64; MAX_SITES],
+    /// Per site: the gap its frontier waits at was given up (counted once).
+    given_up: [bool; MAX_SITES],
+    /// Whether the last report repaired a gap (repairs alternate with the newest window).
+    repaired_last: std::cell::Cell<bool>,
+    /// Per site before this one: its confirmed state differed from ours at the last comparison,
+    /// and we ask it for that state.
+    want_state: [bool; MAX_SITES],
+    /// Per site: it asks for our confirmed state.
+    state_asked: [bool; MAX_SITES],
+    /// The tick this site's physics process started at ([`ToolReport::started_tick`]).
+    started_tick: u64,
+    /// The most environment-spring energy an adopted state may hold, J.
+    max_spring_j: f64,
+    contacts: [ToolContactState; MAX_SITES],
+    /// The oldest tick a received position changed since the last rollback.
+    dirty_from: Option<i64>,
+    /// The own tool's position at the tick being simulated: the measured one, `lag` ticks late.
+    own: Quantized,
+    /// The own tool's measured positions, the `k`-th at `k % MEASURED_RING`, and how many.
+    measured: Box<[Quantized]>,
+    measured_count: i64,
+    /// Which measured position is the own input, in half ticks (the lag grows at half speed).
+    play_head: i64,
+    /// The lag wanted now, ticks (0: none).
+    lag_target: i64,
+    /// Per site: its positions' measured one-way delay, ticks (filtered; 0: none yet).
+    delay_ticks: [f64; MAX_SITES],
+    /// The share of a near partner's delay the own tool is lagged by, and the most, ticks.
+    lag_share: f64,
+    lag_max: i64,
+    stats: RollbackStats,
+    /// The first confirmed tick not yet compared, live against confirmed contact.
+    tallied_until: i64,
+    /// A missed contact being replayed: the tick shown, and the own tool's position then.
+    replay: Option<(i64, Quantized)>,
+    /// Missed contacts before this tick were replayed (or passed over): not again.
+    replayed_until: i64,
+    /// The tick this site's history starts at (0, or where a restarted physics joined the grid:
+    /// [`Consistency::start_at_tick`]).
+    origin_tick: i64,
+}
+
+impl TimeWarp {
+    /// Site `me` of `sites`, stepping `dt` s, with the tool contact law and each site's tool
+    /// radius, keeping `horizon_ticks` of history; starting from `copy` at tick 0.
+    pub fn new(
+        me: usize,
+        sites: usize,
+        dt: f64,
+        contact: ContactParams,
+        radii: [f64; MAX_SITES],
+        horizon_ticks: usize,
+        copy: &ObjectCopy,
+    ) -> Self {
+        let len = horizon_ticks.max(WINDOW_TICKS) + 1;
+        let slot = Slot {
+            tick: i64::MIN,
+            copy: *copy,
+            contacts: [ToolContactState::default(); MAX_SITES],
+            inputs: [UNKNOWN; MAX_SITES],
+            known: [false; MAX_SITES],
+            felt: false,
+            touched: false,
+        };
+        Self {
+            me,
+            sites: sites.min(MAX_SITES),
+            dt,
+            contact,
+            radii,
+            slots: vec![slot; len].into_boxed_slice(),
+            now_tick: 0,
+            received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
+            known_until: [-1; MAX_SITES],
+            newest: [-1; MAX_SITES],
+            asked: [-1; MAX_SITES],
+            given_up: [false; MAX_SITES],
+            repaired_last: std::cell::Cell::new(false),
+            want_state: [false; MAX_SITES],
+            state_asked: [false; MAX_SITES],
+            started_tick: 0,
+            max_spring_j: f64::INFINITY,
+            contacts: [ToolContactState::default(); MAX_SITES],
+            dirty_from: None,
+            own: [0; 3],
+            measured: vec![[0; 3]; MEASURED_RING].into_boxed_slice(),
+            measured_count: 0,
+            play_head: 0,
+            lag_target: 0,
+            delay_ticks: [0.0; MAX_SITES],
+            lag_share: LOCAL_LAG_SHARE,
+            lag_max: LOCAL_LAG_MAX_TICKS,
+            stats: RollbackStats::default(),
+            tallied_until: 0,
+            replay: None,
+            replayed_until: 0,
+            origin_tick: 0,
+        }
+    }
+
+    /// This site's physics process started at session tick `tick` (a restart, a late station):
+    /// it yields to the sites that started before it (see the module docs).
+    pub fn set_started_tick(&mut self, tick: u64) {
+        self.started_tick = tick;
+    }
+
+    /// An adopted state may put the object into the environment's penalty springs with at most
+    /// `joules` (what every user pressing it with all the device's force could; a deeper one is
+    /// not adopted).
+    pub fn set_max_spring_energy(&mut self, joules: f64) {
+        self.max_spring_j = joules;
+    }
+
+    /// What it did so far.
+    pub fn rollback_stats(&self) -> RollbackStats {
+        self.stats
+    }
+
+    /// Ticks of history kept (the horizon, at least [`WINDOW_TICKS`], and the current tick).
+    pub fn history_ticks(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// The horizon, ticks.
+    fn len(&self) -> i64 {
+        self.slots.len() as i64
+    }
+
+    /// The oldest tick whose record is still kept.
+    fn oldest_kept(&self) -> i64 {
+        (self.now_tick - self.len() + 1).max(self.origin_tick)
+    }
+
+    fn idx(&self, tick: i64) -> usize {
+        tick.rem_euclid(self.len()) as usize
+    }
+
+    /// The first tick whose inputs are not all known.
+    pub fn confirmed_tick(&self) -> i64 {
+        (0..self.sites)
+            .map(|j| {
+                if j == self.me {
+                    self.now_tick
+                } else {
+                    self.known_until[j] + 1
+                }
+            })
+            .min()
+            .unwrap_or(self.now_tick)
+    }
+
+    /// Simulates tick `self.now_tick` on `copy` and keeps its record.
+    fn tick(&mut self, world: &World, copy: &mut ObjectCopy) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let t = self.now_tick;
+        let prev = self.slots[self.idx(t - 1)];
+        let mut slot = Slot {
+            tick: t,
+            copy: *copy,
+            contacts: self.contacts,
+            inputs: [[0; 3]; MAX_SITES],
+            known: [false; MAX_SITES],
+            felt: false,
+            touched: false,
+        };
+        let mut users = [ContactForce::default(); MAX_SITES];
+        for (j, user) in users.iter_mut().enumerate().take(self.sites) {
+            let (q, known) = if j == self.me {
+                (self.own_at(t), true)
+            } else {
+                self.input(j, t)
+            };
+            slot.inputs[j] = q;
+            slot.known[j] = known;
+            let p = position(q);
+            let v = if prev.tick == t - 1 && prev.inputs[j] != UNKNOWN && q != UNKNOWN {
+                let v = (p - position(prev.inputs[j])) / self.dt;
+                let speed = v.norm();
+                if speed > MAX_TOOL_SPEED_M_PER_S {
+                    v * (MAX_TOOL_SPEED_M_PER_S / speed)
+                } else {
+                    v
+                }
+            } else {
+                Vec3::zeros()
+            };
+            *user = tool_contact(
+                &self.contact,
+                &mut self.contacts[j],
+                &world.shape,
+                &copy.state,
+                &world.mass,
+                p,
+                v,
+                self.radii[j],
+            );
+        }
+        let i = self.idx(t);
+        slot.touched = users[self.me].touching;
+        // A re-simulation keeps what the first simulation of the tick showed.
+        slot.felt = if self.slots[i].tick == t {
+            self.slots[i].felt
+        } else {
+            slot.touched
+        };
+        self.slots[i] = slot;
+        // Summed in site order, the same at every site: all users count as "own" here.
+        integrate(world, copy, &users[..self.sites], self.sites, self.dt);
+        self.now_tick = t + 1;
+    }
+
+    /// The own tool's position at tick `t` (the current tick: as just measured).
+    fn own_at(&self, t: i64) -> Quantized {
+        if t == self.now_tick {
+            self.own
+        } else {
+            self.slots[self.idx(t)].inputs[self.me]
+        }
+    }
+
+    /// Restores the copy to tick `from` and simulates again to where it was.
+    fn rollback(&mut self, world: &World, copy: &mut ObjectCopy, from: i64) -> u64 {
+        let to = self.now_tick;
+        let oldest = self.oldest_kept();
+        let from = from.max(oldest);
+        if from >= to {
+            return 0;
+        }
+        let s = self.slots[self.idx(from)];
+        let own_now = self.own;
+        *copy = s.copy;
+        self.contacts = s.contacts;
+        self.now_tick = from;
+        while self.now_tick < to {
+            // The own positions of past ticks are the ones used then.
+            self.own = self.slots[self.idx(self.now_tick)].inputs[self.me];
+            self.tick(world, copy);
+        }
+        self.own = own_now;
+        let depth = (to - from) as u64;
+        self.stats.rollbacks += 1;
+        self.stats.resimulated_ticks += depth;
+        self.stats.max_depth = self.stats.max_depth.max(depth);
+        self.stats.depths.record(depth);
+        depth
+    }
+
+    /// Compares, for every tick confirmed since the last call, the own contact of its confirmed
+    /// simulation with that of its first ([`RollbackStats::unfelt_contact_ticks`],
+    /// [`RollbackStats::phantom_contact_ticks`]). A confirmed tick is never simulated again. Called where
+    /// the frontier moves, on receiving; not per tick.
+    fn tally(&mut self) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let upto = self.confirmed_tick().min(self.now_tick);
+        let oldest = self.oldest_kept();
+        for t in self.tallied_until.max(oldest)..upto {
+            let s = &self.slots[self.idx(t)];
+            if s.tick == t {
+                self.stats.unfelt_contact_ticks += u64::from(s.touched && !s.felt);
+                self.stats.phantom_contact_ticks += u64::from(s.felt && !s.touched);
+            }
+        }
+        self.tallied_until = self.tallied_until.max(upto);
+    }
+}
+
+impl Consistency for TimeWarp {
+    fn name(&self) -> &'static str {
+        "timewarp"
+    }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.play_own(tool_pos);
+    }
+    fn physics_step(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        _own: &ContactForce,
+        _dt: f64,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.tick(world, copy);
+        self.advance_replay();
+        self.want_lag(world, copy);
+    }
+    fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
+        let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
+                                 // (Nothing before the tick this site's history starts at: it was not here.)
+        let window = (end - WINDOW_TICKS as i64).max(self.origin_tick);
+        // A peer that lost more than a window of reports asked for the first tick it lacks: every
+        // other report sends the window from there instead (while it is still kept), so the
+        // newest positions keep flowing and the peer's frontier can pass the gap.
+        let oldest = self.oldest_kept();
+        let repair = (0..self.sites)
+            .filter(|&j| j != self.me)
+            .map(|j| self.asked[j])
+            .filter(|&t| t >= oldest && t < window)
+            .min()
+            .filter(|_| !self.repaired_last.get());
+        self.repaired_last.set(repair.is_some());
+        let first = repair.unwrap_or(window);
+        let count = (end - first).min(WINDOW_TICKS as i64);
+        let mut r = ToolReport {
+            first_tick: first,
+            count: count as usize,
+            positions: [[0; 3]; WINDOW_TICKS],
+            // A repair's window ends before the frontier: the frontier (and its hash and state)
+            // is given at the window's end, a tick the sender has confirmed too, so that no
+            // report names a frontier past the last position it carries (the wire's rule,
+            // `coop_rt::msg::ToolTrack::report`: a station refused every repair before).
+            // (Nor past the last tick simulated: a site whose grid runs behind the others' knows
+            // their positions beyond its own tick, and its frontier is then a state it has not
+            // stepped to yet, with no hash to send: it sent none, and was never compared.)
+            confirmed_tick: self
+                .confirmed_tick()
+                .min(first + count)
+                .min(self.now_tick - 1),
+            confirmed_hash: 0,
+            need: [-1; MAX_SITES],
+            need_state: 0,
+            started_tick: self.started_tick,
+            state: None,
+        };
+        for (j, &want) in self.want_state.iter().enumerate() {
+            r.need_state |= u8::from(want) << j;
+        }
+        if self.state_asked.iter().any(|&a| a) {
+            let t = r.confirmed_tick;
+            let s = &self.slots[self.idx(t)];
+            r.state = (s.tick == t).then_some(Snapshot {
+                tick: t,
+                state: s.copy.state,
+                env: s.copy.env,
+                contacts: s.contacts,
+            });
+        }
+        for j in (0..self.sites).filter(|&j| j != self.me) {
+            if self.newest[j] > self.known_until[j] {
+                r.need[j] = self.known_until[j] + 1;
+            }
+        }
+        for (k, t) in (first..first + r.count as i64).enumerate() {
+            r.positions[k] = self.slots[self.idx(t)].inputs[self.me];
+        }
+        r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
+        Report::Tools(r)
+    }
+    fn receive(
+        &mut self,
+        world: &World,
+        copy: &mut ObjectCopy,
+        from: usize,
+        msg: &Report,
+        _now_s: f64,
+    ) -> Option<Adoption> {
+        let Report::Tools(r) = msg else {
+            return None;
+        };
+        if from >= self.sites || from == self.me {
+            return None;
+        }
+        self.asked[from] = r.need[self.me];
+        self.state_asked[from] = r.need_state & (1 << self.me) != 0;
+        let oldest = self.oldest_kept();
+        for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
+            let t = r.first_tick + k as i64;
+            if t <= self.known_until[from] {
+                continue;
+            }
+            if t < oldest {
+                self.stats.fallbacks += 1;
+                self.dirty_from = Some(self.dirty_from.map_or(oldest, |d| d.min(oldest)));
+                continue;
+            }
+            let i = self.idx(t);
+            self.received[i][from] = Some((t, q));
+            // Simulated with another (predicted) position: from there on it is re-simulated.
+            let s = &self.slots[i];
+            if t < self.now_tick && s.tick == t && s.inputs[from] != q {
+                self.dirty_from = Some(self.dirty_from.map_or(t, |d| d.min(t)));
+            }
+        }
+        if r.count > 0 {
+            let end = r.first_tick + r.count as i64 - 1;
+            // How late the newest position arrived (a repair of older ones says nothing of it).
+            // (Ahead of this site's tick, by the two grids' offset, it says nothing either.)
+            let late = self.now_tick - end;
+            if end > self.newest[from] && late >= 0 {
+                let late = late as f64;
+                let d = &mut self.delay_ticks[from];
+                *d = if *d == 0.0 {
+                    late
+                } else {
+                    *d + (late - *d) * DELAY_FILTER_SHARE
+                };
+            }
+            self.newest[from] = self.newest[from].max(end);
+        }
+        // Every position up to the frontier is known: a gap holds it back (the sender is asked
+        // for it), and one that left the history can never be filled: given up, counted once
+        // (while the rest of it leaves the history, report by report, it is the same gap).
+        // A gap is given up where the sender can no longer fill it either: before its history,
+        // which ends later than this site's when its grid runs ahead (stations started apart).
+        // (Given up only at this site's horizon, a gap the sender had already dropped followed
+        // that horizon forever: the frontier stayed a history behind, and no hash was compared.)
+        let senders_oldest = oldest.max(self.newest[from] - self.len() + 2);
+        let mut k = self.known_until[from];
+        if k + 1 < senders_oldest && self.newest[from] >= senders_oldest {
+            self.stats.fallbacks += u64::from(!self.given_up[from]);
+            self.given_up[from] = true;
+            k = senders_oldest - 1;
+        }
+        let pinned = k;
+        while k < self.newest[from] && self.received_at(from, k + 1).is_some() {
+            k += 1;
+        }
+        self.given_up[from] &= k == pinned;
+        self.known_until[from] = k;
+        // Ticks not all known (a gap's, and past the newest) are predicted again: one simulated
+        // with another prediction is re-simulated too, so the copy is always what the inputs known now give
+        // (and a re-simulation arrives at the same bits).
+        for t in (self.known_until[from] + 1).max(oldest)..self.now_tick {
+            let s = &self.slots[self.idx(t)];
+            if s.tick == t && s.inputs[from] != self.input(from, t).0 {
+                self.dirty_from = Some(self.dirty_from.map_or(t, |d| d.min(t)));
+                break;
+            }
+        }
+        let mut adoption = None;
+        if let Some(from_tick) = self.dirty_from.take() {
+            let before = *copy;
+            if self.rollback(world, copy, from_tick) > 0 {
+                self.replay_missed_contact(from_tick);
+                let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+                // Every force's work so far, as the copy's account has it (restored with the
+                // snapshot and re-accumulated by the re-simulation).
+                let w = |c: &ObjectCopy| c.energy.own_j + c.energy.remote_j + c.energy.env_j;
+                adoption = Some(Adoption {
+                    jump: before.state.pos - copy.state.pos,
+                    energy_j: e(&copy.state) - e(&before.state),
+                    work_j: w(copy) - w(&before),
+                    age_s: (self.now_tick - from_tick) as f64 * self.dt,
+                    clipped_j: 0.0,
+                });
+            }
+        }
+        // Confirmed state compared where both know it.
+        if r.confirmed_hash != 0 && r.confirmed_tick <= self.confirmed_tick() {
+            if let Some(h) = self.hash_at(r.confirmed_tick) {
+                self.stats.hash_checks += 1;
+                let differs = h != r.confirmed_hash;
+                self.stats.hash_mismatches += u64::from(differs);
+                // Asked for while it differs from a site before this one (and no longer when the
+                // order changes: a restart moves a site back).
+                let earlier = (r.started_tick, from) < (self.started_tick, self.me);
+                self.want_state[from] = earlier && differs;
+                if earlier && differs {
+                    if let Some(a) = self.resync(world, copy, r) {
+                        adoption = Some(adoption.map_or(a, |b| Adoption {
+                            jump: a.jump + b.jump,
+                            energy_j: a.energy_j + b.energy_j,
+                            work_j: a.work_j + b.work_j,
+                            age_s: a.age_s.max(b.age_s),
+                            clipped_j: 0.0,
+                        }));
+                        self.want_state[from] = false;
+                    }
+                }
+            }
+        }
+        self.tally();
+        adoption
+    }
+    fn peer_lost(&mut self, from: usize, _now_s: f64) {
+        // A silent site neither asks for our state nor sends its own: ask again once it is back.
+        if let (Some(asked), Some(want)) = (
+            self.state_asked.get_mut(from),
+            self.want_state.get_mut(from),
+        ) {
+            *asked = false;
+            *want = false;
+        }
+        // Nor is its delay known any more: no lag for it until it reports again.
+        if let Some(d) = self.delay_ticks.get_mut(from) {
+            *d = 0.0;
+        }
+    }
+    fn stats(&self) -> Stats {
+        Stats::Rollback(self.stats)
+    }
+    fn grid_history_ticks(&self) -> Option<u64> {
+        Some(self.history_ticks() as u64)
+    }
+    /// The copy's state, or during a replay of a missed contact the history's at the replayed
+    /// tick, its velocities at the replay's speed (so the display sees the motion it shows).
+    fn shown(&self, copy: &ObjectCopy) -> BodyState {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        match self.replay {
+            Some((t, _)) if self.slots[self.idx(t)].tick == t => {
+                let mut s = self.slots[self.idx(t)].copy.state;
+                let k = self.replay_speed(t) as f64;
+                s.vel *= k;
+                s.ang_mom *= k;
+                s
+            }
+            _ => copy.state,
+        }
+    }
+    fn start_at_tick(&mut self, tick: i64) {
+        let tick = tick.max(0);
+        // It was not there from the start: it yields (see the module docs).
+        self.started_tick = tick.unsigned_abs();
+        self.now_tick = tick;
+        self.origin_tick = tick;
+        // No position before the history's start is needed (none is simulated here): the
+        // others' are taken from `tick` on, and those before it are neither gaps nor fallbacks.
+        for j in (0..self.sites).filter(|&j| j != self.me) {
+            self.known_until[j] = tick - 1;
+            self.newest[j] = tick - 1;
+        }
+    }
+}
+
+impl TimeWarp {
+    /// GGPO's synctest: rolls the copy back `depth` ticks and re-simulates them with the same
+    /// inputs; whether it arrived at the same bits (state, friction memory) it had. Determinism is
+    /// what makes every site's confirmed state the same: this checks it on every tick it is run.
+    pub fn synctest(&mut self, world: &World, copy: &mut ObjectCopy, depth: i64) -> bool {
+        let (before, contacts) = (*copy, self.contacts);
+        let stats = self.stats;
+        self.rollback(world, copy, self.now_tick - depth);
+        self.stats = stats; // a test's rollbacks are not the method's
+        copy.state == before.state && copy.env == before.env && self.contacts == contacts
+    }
+}
+
+/// A report of a tool at `at(t)` for ticks `first..=last` (the methods' tests).
+#[cfg(test)]
+pub(crate) fn track(first: i64, last: i64, at: impl Fn(i64) -> Quantized) -> Report {
+    let mut r = ToolReport {
+        first_tick: first,
+        ..ToolReport::NONE
+    };
+    for t in first..=last {
+        r.positions[r.count] = at(t);
+        r.count += 1;
+    }
+    Report::Tools(r)
+}
+
+#[cfg(test)]
+mod tests;

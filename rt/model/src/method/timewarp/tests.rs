@@ -1,0 +1,729 @@
+use super::*;
+use crate::body::BodyState;
+use crate::contact::EnvContactState;
+use crate::scenario::Scenario;
+
+fn paper_world() -> (Scenario, World) {
+    let mut sc = Scenario::default();
+    sc.object.start_m = [0.0, 0.0, 0.01];
+    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+    sc.world.planes[0].offset_m = 0.0;
+    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    let w = sc.world();
+    (sc, w)
+}
+
+/// Site 0 of two 5 mm tools, 1 kHz, 600 ticks of history, the disk at rest at the origin on
+/// the table: the method, its copy and the world.
+fn two_tools_on_a_disk() -> (TimeWarp, ObjectCopy, World) {
+    let (sc, w) = paper_world();
+    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    (
+        TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy),
+        copy,
+        w,
+    )
+}
+
+/// [`paper_world`]'s scenario with two users resting 0.2 m either side of the disk.
+fn two_users() -> Scenario {
+    let (mut sc, _) = paper_world();
+    for (name, x, base) in [("user1", -0.2, -0.3), ("user2", 0.2, 0.3)] {
+        sc.site.push(crate::scenario::SiteSpec {
+            name: name.into(),
+            device_base_m: [base, -0.2, 0.0],
+            script: vec![crate::scenario::KeyframeSpec {
+                t_s: 0.0,
+                target_m: [x, 0.0, 0.01],
+            }],
+            ..Default::default()
+        });
+    }
+    sc
+}
+
+/// The history kept is `[timewarp] horizon_ms`, or by default what the network can delay a
+/// position by plus 100 ms; a horizon that does not cover that is refused.
+#[test]
+fn the_horizon_is_configured_or_covers_the_latest_arrival() {
+    let mut sc = two_users();
+    sc.network.delay_min_ms = 20.0;
+    sc.network.delay_max_ms = 200.0;
+    sc.network.jitter_ms = 10.0;
+    sc.site[0].report_rate_hz = 50.0; // 20 ms: 230 ms in all, + 100 ms
+    sc.validate().expect("default horizon");
+    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    assert_eq!(sc.timewarp(0, &copy).history_ticks(), 331);
+    // With loss, 11 reports lost in a row (0.3¹² < 10⁻⁶) and a round trip more: + 450 ms.
+    sc.network.loss = 0.3;
+    assert_eq!(sc.losses_in_a_row(), 11);
+    assert_eq!(sc.timewarp(0, &copy).history_ticks(), 781);
+    sc.network.loss = 0.0;
+    sc.timewarp.horizon_ms = 2000.0;
+    sc.validate().expect("a longer horizon");
+    assert_eq!(sc.timewarp(0, &copy).history_ticks(), 2001);
+    for bad in [229.0, -1.0, f64::NAN, 10_001.0] {
+        sc.timewarp.horizon_ms = bad;
+        let e = sc.validate().expect_err("refused");
+        assert_eq!(e.field, "timewarp.horizon_ms", "{e}");
+        assert!(e.rule.contains("230.0 ms"), "{e}");
+    }
+}
+
+/// `[timewarp] local_lag_share` and `local_lag_max_ms` default to the method's constants, set
+/// the site's lag, and out of range are refused with the field and the rule.
+#[test]
+fn the_local_lag_is_configured_and_checked() {
+    let mut sc = two_users();
+    sc.validate().expect("defaults");
+    assert_eq!(sc.timewarp.local_lag_share, LOCAL_LAG_SHARE);
+    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let tw = sc.timewarp(0, &copy);
+    assert_eq!(
+        (tw.lag_share, tw.lag_max),
+        (LOCAL_LAG_SHARE, LOCAL_LAG_MAX_TICKS)
+    );
+    sc.timewarp.local_lag_share = 0.0;
+    sc.timewarp.local_lag_max_ms = 150.0;
+    sc.validate().expect("no lag, a larger cap");
+    let tw = sc.timewarp(0, &copy);
+    assert_eq!((tw.lag_share, tw.lag_max), (0.0, 150));
+    for bad in [-0.1, 1.5, f64::NAN] {
+        sc.timewarp.local_lag_share = bad;
+        let e = sc.validate().expect_err("refused");
+        assert_eq!(e.field, "timewarp.local_lag_share", "{e}");
+    }
+    sc.timewarp.local_lag_share = 0.5;
+    for bad in [-1.0, 201.0, f64::INFINITY] {
+        sc.timewarp.local_lag_max_ms = bad;
+        let e = sc.validate().expect_err("refused");
+        assert_eq!(e.field, "timewarp.local_lag_max_ms", "{e}");
+        assert!(e.rule.contains("200"), "{e}");
+    }
+}
+
+/// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
+/// depth up to 50 ticks, on every tick) always arrives at the same bits.
+#[test]
+fn a_forced_rollback_on_every_tick_gives_the_same_bits() {
+    let (mut tw, mut copy, w) = two_tools_on_a_disk();
+    let mut other = [0i32; 3];
+    for k in 0..1500i64 {
+        let s = k as f64 * 1e-3;
+        let squeeze = (s * 0.02).min(0.008);
+        let carry = (s - 0.8).max(0.0) * 0.05;
+        tw.own_tool(Vec3::new(-0.045 + squeeze, carry, 0.01));
+        // The other site's tool, received with a 30-tick delay in 10-tick batches.
+        if k % 10 == 0 && k >= 30 {
+            let mut r = ToolReport {
+                first_tick: k - 40,
+                count: 10,
+                positions: [[0; 3]; WINDOW_TICKS],
+                confirmed_tick: 0,
+                confirmed_hash: 0,
+                need: [-1; MAX_SITES],
+                ..ToolReport::NONE
+            };
+            for j in 0..10 {
+                let t = (k - 40 + j) as f64 * 1e-3;
+                other = quantize(Vec3::new(
+                    0.045 - (t * 0.02).min(0.008),
+                    (t - 0.8).max(0.0) * 0.05,
+                    0.01,
+                ));
+                r.positions[j as usize] = other;
+            }
+            if r.first_tick >= 0 {
+                tw.receive(&w, &mut copy, 1, &Report::Tools(r), s);
+            }
+        }
+        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        let depth = 1 + k % 50;
+        assert!(tw.synctest(&w, &mut copy, depth), "tick {k}, depth {depth}");
+    }
+    assert!(
+        tw.rollback_stats().rollbacks > 10,
+        "the received tool caused rollbacks: {:?}",
+        tw.rollback_stats()
+    );
+    assert!(
+        copy.state.pos.y > 0.01,
+        "the squeezed disk was carried: {:?}",
+        copy.state.pos
+    );
+    let _ = other;
+}
+
+/// A remote tool knocks the disk into the own, resting tool. Learned a delay late, that
+/// contact is over before the copy can show it: its confirmed ticks count as unfelt. Learned
+/// before each tick is simulated, everything shown live is what was confirmed.
+#[test]
+fn a_contact_learned_too_late_to_show_counts_as_unfelt() {
+    let rest = |_| Vec3::new(0.06, 0.0, 0.01);
+    let prompt = knock(0, rest);
+    assert!(prompt.touched, "the knocked disk reached the own tool");
+    assert_eq!(
+        (
+            prompt.stats.unfelt_contact_ticks,
+            prompt.stats.phantom_contact_ticks
+        ),
+        (0, 0),
+        "{:?}",
+        prompt.stats
+    );
+    let late = knock(300, rest);
+    assert!(
+        late.stats.unfelt_contact_ticks > 0,
+        "the contact the copy learned of 0.3 s late: {:?}",
+        late.stats
+    );
+}
+
+/// A contact the own user missed is shown late, replayed from the confirmed history, while
+/// the hand is still where the contact had it; not once it has moved on.
+#[test]
+fn a_missed_contact_is_replayed_to_a_hand_still_there() {
+    let rest = |_| Vec3::new(0.06, 0.0, 0.01);
+    let prompt = knock(0, rest);
+    assert_eq!(
+        prompt.stats.replays, 0,
+        "nothing missed: {:?}",
+        prompt.stats
+    );
+    assert!(prompt.shown_touching_ticks > 0 && prompt.shown_was_copy);
+    let late = knock(300, rest);
+    assert_eq!(late.stats.replays, 1, "{:?}", late.stats);
+    assert!(
+        !late.shown_was_copy,
+        "the replay showed the history, not the copy"
+    );
+    assert!(
+        late.shown_touching_ticks > 0,
+        "the replayed disk met the hand: {:?}",
+        late.stats
+    );
+    assert!(late.ends_on_copy, "the replay caught up with the copy");
+    // The hand moved 5 mm away between the contact and its news: nothing is replayed.
+    let moved = knock(300, |k| {
+        Vec3::new(if k < 250 { 0.06 } else { 0.065 }, 0.0, 0.01)
+    });
+    assert!(moved.stats.unfelt_contact_ticks > 0, "{:?}", moved.stats);
+    assert_eq!(moved.stats.replays, 0, "{:?}", moved.stats);
+    assert!(moved.shown_was_copy && moved.ends_on_copy);
+}
+
+/// What [`knock`] saw.
+struct Knock {
+    stats: RollbackStats,
+    /// The copy touched the own tool at some tick.
+    touched: bool,
+    /// Ticks at which the shown object touched the own tool.
+    shown_touching_ticks: u64,
+    /// The shown object was always the copy.
+    shown_was_copy: bool,
+    /// ... and was at the end.
+    ends_on_copy: bool,
+}
+
+/// Site 0 of [`two_tools_on_a_disk`], its tool at `own(k)`; site 1's tool knocks the disk
+/// towards it (from x = -0.1 into the disk's rim at -0.04 in 0.1 s, then back), its
+/// positions arriving `delay` ticks late, 10 to a report (each one at once at 0).
+fn knock(delay: i64, own: impl Fn(i64) -> Vec3) -> Knock {
+    let (mut tw, mut copy, w) = two_tools_on_a_disk();
+    let remote = |k: i64| {
+        let s = k as f64 * 1e-3;
+        let x = if s < 0.1 {
+            -0.1 + 0.7 * s
+        } else {
+            (-0.03 - 0.7 * (s - 0.1)).max(-0.1)
+        };
+        quantize(Vec3::new(x, 0.0, 0.01))
+    };
+    let mut out = Knock {
+        stats: RollbackStats::default(),
+        touched: false,
+        shown_touching_ticks: 0,
+        shown_was_copy: true,
+        ends_on_copy: false,
+    };
+    for k in 0..1000i64 {
+        tw.own_tool(own(k));
+        let first = k - delay;
+        if first >= 0 && (delay == 0 || k % 10 == 0) {
+            let count = if delay == 0 { 1 } else { 10 };
+            let r = track((first - count + 1).max(0), first, remote);
+            tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
+        }
+        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        out.touched |= tw.contacts[0].touching();
+        let shown = tw.shown(&copy);
+        out.shown_was_copy &= shown == copy.state;
+        // The rim (0.04 m) meets the tool (0.005 m) in the plane.
+        let gap = (own(k) - shown.pos).xy().norm() - 0.045;
+        out.shown_touching_ticks += u64::from(gap < 0.0);
+        out.ends_on_copy = shown == copy.state;
+    }
+    out.stats = tw.rollback_stats();
+    out
+}
+
+/// Site 0 of [`two_tools_on_a_disk`] for `ticks` ticks, its tool measured at `own(k)`; site
+/// 1's tool at `remote(k)`, its positions arriving `delay` ticks late, 10 to a report. What
+/// the own tool's input was at each tick (from the reports), and the lag after each tick.
+fn lagged(
+    ticks: i64,
+    delay: i64,
+    own: impl Fn(i64) -> Vec3,
+    remote: impl Fn(i64) -> Vec3,
+) -> (Vec<Quantized>, Vec<u64>, TimeWarp) {
+    let (mut tw, mut copy, w) = two_tools_on_a_disk();
+    let (mut inputs, mut lags) = (Vec::new(), Vec::new());
+    for k in 0..ticks {
+        tw.own_tool(own(k));
+        let first = k - delay;
+        if first >= 9 && k % 10 == 0 {
+            let r = track(first - 9, first, |t| quantize(remote(t)));
+            tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
+        }
+        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        inputs.push(tw.own_at(k));
+        lags.push(tw.rollback_stats().local_lag_ticks);
+    }
+    (inputs, lags, tw)
+}
+
+/// Local lag: while the own tool and a partner's are within a centimetre of the object, the
+/// own tool's positions enter the physics half the partner's measured delay late (grown
+/// into at half speed), and exactly as measured again once either is away (caught up at
+/// twice the speed); never before the partner's delay is known.
+#[test]
+fn a_tool_near_the_object_with_a_partner_is_lagged_by_half_its_delay() {
+    // The rim is 40 mm from the disk's centre; 5 mm tools 50 mm from it are 5 mm off it.
+    // The own tool slides along the rim a quantum a tick (every tick's position differs),
+    // and leaves at tick 700.
+    let own = |k: i64| {
+        let x = if k < 700 { -0.05 } else { -0.1 };
+        Vec3::new(x, k as f64 * QUANTUM_M, 0.01)
+    };
+    let (inputs, lags, tw) = lagged(1000, 120, own, |_| Vec3::new(0.05, 0.0, 0.01));
+    // Before the first report (tick 129) no delay is known: no lag.
+    assert!(lags[..129].iter().all(|&l| l == 0), "{lags:?}");
+    assert!(inputs[..129]
+        .iter()
+        .enumerate()
+        .all(|(k, &q)| q == quantize(own(k as i64))));
+    // Half of 120 ticks, within the slack, reached at half speed (60 ticks in 120).
+    let lag = lags[600];
+    assert!((59..=60).contains(&lag), "lag {lag}");
+    assert!(lags[129..260].windows(2).all(|w| w[1] <= w[0] + 1));
+    for k in 400..700 {
+        assert_eq!(lags[k], lag);
+        assert_eq!(inputs[k], quantize(own(k as i64 - lag as i64)), "tick {k}");
+    }
+    // Away from the object: caught up, a tick a tick, and exactly as measured again.
+    assert!(lags[700 + lag as usize + 5..].iter().all(|&l| l == 0));
+    assert_eq!(inputs[999], quantize(own(999)));
+    let st = tw.rollback_stats();
+    assert_eq!(st.max_local_lag_ticks, lag);
+    assert!(st.lagged_ticks > 500, "{st:?}");
+}
+
+/// A partner reported lost (its link down) has no known delay: the own tool's lag for it ends.
+#[test]
+fn a_lost_partner_ends_the_lag() {
+    let (mut tw, mut copy, w) = two_tools_on_a_disk();
+    for k in 0..700i64 {
+        tw.own_tool(Vec3::new(-0.05, 0.0, 0.01));
+        let first = k - 120;
+        if (9..400).contains(&first) && k % 10 == 0 {
+            let r = track(first - 9, first, |_| quantize(Vec3::new(0.05, 0.0, 0.01)));
+            tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
+        }
+        if k == 550 {
+            assert!(
+                tw.rollback_stats().local_lag_ticks >= 59,
+                "{:?}",
+                tw.rollback_stats()
+            );
+            tw.peer_lost(1, k as f64 * 1e-3);
+        }
+        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+    }
+    assert_eq!(
+        tw.rollback_stats().local_lag_ticks,
+        0,
+        "{:?}",
+        tw.rollback_stats()
+    );
+}
+
+/// A lag is never caught up while the own tool touches the object: its positions would be
+/// played into the object at twice the speed the hand moved.
+#[test]
+fn a_touching_tool_keeps_its_lag_until_it_lets_go() {
+    // Pressing on the disk's top (at 20 mm; 1 mm deep: the table holds the disk) until tick
+    // 700, then away; the partner leaves at tick 400 (its leaving arrives at 520).
+    let own = |k: i64| {
+        let x = if k < 700 { 0.0 } else { -0.1 };
+        Vec3::new(x, 0.0, 0.024)
+    };
+    let remote = |k: i64| Vec3::new(if k < 400 { 0.05 } else { 0.2 }, 0.0, 0.01);
+    let (_, lags, _) = lagged(1000, 120, own, remote);
+    let lag = lags[519];
+    assert!(lag >= 59, "lag {lag}");
+    // Wanted no more from tick 520, held while touching: until the tool lets go in the
+    // physics (its lagged positions), `lag` ticks after it did; then caught up as fast.
+    let lets_go = 700 + lag as usize;
+    assert!(lags[520..lets_go].iter().all(|&l| l == lag), "{lags:?}");
+    assert!(lags[lets_go + lag as usize + 5..].iter().all(|&l| l == 0));
+}
+
+/// A physics process that joins the grid late (a restart, a late station) starts where the
+/// session is, not at tick 0, from a copy that is not the session's: it never simulates a
+/// tick before the one it joined at, sends no positions from before it, adopts the earlier
+/// site's confirmed state, and the two agree from then on.
+#[test]
+fn a_site_joining_the_grid_late_starts_there_and_adopts() {
+    let (sc, w) = paper_world();
+    let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let new = |i| TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start);
+    // Site 1 pushes the disk (ticks 900-1300), its physics dies at 1500 and a new one joins
+    // the grid at 2000 from the scenario's start.
+    let (crash, join) = (1500, 2000);
+    let mut sites = [(new(0), start), (new(1), start)];
+    let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+    let down = |i: usize, k: i64| i == 1 && (crash..join).contains(&k);
+    for k in 0..4000 {
+        if k == join {
+            let mut b = new(1);
+            b.set_started_tick(join as u64);
+            b.start_at_tick(join);
+            sites[1] = (b, start);
+        }
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            if down(i, k) {
+                continue;
+            }
+            for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+            }
+            tw.own_tool(sweep_into_the_disk(i, k));
+            tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+        }
+        in_flight.retain(|m| m.0 > k);
+        if k % 20 == 0 {
+            for (i, (tw, copy)) in sites.iter().enumerate() {
+                if down(i, k) {
+                    continue;
+                }
+                let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                if let Report::Tools(t) = &r {
+                    assert!(
+                        i == 0 || k < crash || t.first_tick >= join,
+                        "{}",
+                        t.first_tick
+                    );
+                }
+                in_flight.push((k + 30, i, r));
+            }
+        }
+    }
+    let [(a, ca), (b, _)] = &sites;
+    assert!(ca.state.pos.x < -0.002, "site 1 pushed the disk");
+    assert!(
+        b.slots.iter().all(|s| s.tick == i64::MIN || s.tick >= join),
+        "nothing simulated before the join"
+    );
+    let st = b.rollback_stats();
+    assert!(st.hash_mismatches > 0 && st.adopted_states >= 1, "{st:?}");
+    // Positions from before it joined are not counted as ones it could not undo.
+    assert_eq!(st.fallbacks, 0, "{st:?}");
+    let t = a.confirmed_tick().min(b.confirmed_tick()) - 1;
+    assert!(t > 3500, "both confirmed to near the end: {t}");
+    assert_eq!(
+        a.hash_at(t),
+        b.hash_at(t),
+        "the same confirmed state at {t}"
+    );
+    assert_eq!(
+        a.rollback_stats().adopted_states,
+        0,
+        "{:?}",
+        a.rollback_stats()
+    );
+}
+
+/// Stations started apart: site 1's grid runs `skew` ticks ahead of site 0's (it started
+/// first), and they hear each other only from wall tick `connect`. Reports go every 11 and 50
+/// ticks (the paper's 90 and 20 Hz) and arrive a tick later. Both compare their confirmed
+/// states, many times, and agree. Before, with 209 ticks of skew and a late connection, neither
+/// compared once: site 0 gave up the start-up gap only at its own horizon, which site 1's
+/// history had already left, so its frontier trailed a history behind for the whole session;
+/// and without a late connection the site ahead compared once or not at all, the frontier
+/// of the site behind being a tick it had not stepped to (no hash sent).
+#[test]
+fn stations_started_apart_compare_their_confirmed_states() {
+    let (sc, w) = paper_world();
+    for (skew, connect) in [(50_i64, 0_i64), (209, 1000), (-209, 1000), (400, 1500)] {
+        let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut sites = [0, 1].map(|i| {
+            (
+                TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 660, &start),
+                start,
+            )
+        });
+        let (begin, every) = ([skew.max(0), (-skew).max(0)], [11_i64, 50]);
+        let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+        for k in 0..6000 {
+            for i in (0..2).filter(|&i| k >= begin[i]) {
+                let (tw, copy) = &mut sites[i];
+                for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                    tw.receive(&w, copy, *from, r, 0.0);
+                }
+                tw.own_tool(Vec3::new(if i == 0 { -0.2 } else { 0.2 }, 0.0, 0.01));
+                tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+                if (k - begin[i]) % every[i] == 0 && k >= connect {
+                    let r = tw.report(copy, &ContactForce::default(), 0.0);
+                    in_flight.push((k + 1, i, r));
+                }
+            }
+            in_flight.retain(|m| m.0 > k);
+        }
+        for (i, (tw, _)) in sites.iter().enumerate() {
+            let st = tw.rollback_stats();
+            // A report of the other site's every 50 (or 11) ticks, from the connection on.
+            assert!(
+                st.hash_checks > 60,
+                "skew {skew}, connected at {connect}: site {i} compared: {st:?}"
+            );
+            assert_eq!(st.hash_mismatches, 0, "skew {skew}: site {i}: {st:?}");
+        }
+    }
+}
+
+/// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at
+/// tick `started_tick[i]`, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
+/// ticks arriving `delay` ticks later unless `lost(from, k)`; `seen(i, report, k)` sees every
+/// report sent.
+#[allow(clippy::too_many_arguments)]
+fn two_sites(
+    history: usize,
+    started_tick: [u64; 2],
+    ticks: i64,
+    tool: impl Fn(usize, i64) -> Vec3,
+    delay: i64,
+    lost: impl Fn(usize, i64) -> bool,
+    mut seen: impl FnMut(usize, &ToolReport, i64, &[(TimeWarp, ObjectCopy); 2]),
+) -> [(TimeWarp, ObjectCopy); 2] {
+    let (sc, w) = paper_world();
+    let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let mut sites = [0, 1].map(|i| {
+        let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start);
+        tw.set_started_tick(started_tick[i]);
+        (tw, start)
+    });
+    let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+    for k in 0..ticks {
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+            }
+            tw.own_tool(tool(i, k));
+            tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+        }
+        in_flight.retain(|m| m.0 > k);
+        if k % 20 == 0 {
+            for i in 0..2 {
+                let (tw, copy) = &sites[i];
+                let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                if let Report::Tools(t) = &r {
+                    seen(i, t, k, &sites);
+                }
+                if !lost(i, k) {
+                    in_flight.push((k + delay, i, r));
+                }
+            }
+        }
+    }
+    sites
+}
+
+/// Site 1's tool sweeps from the right into the disk's rim (x = 0.04) between ticks 900 and
+/// 1300, then back; site 0's rests left of the disk.
+fn sweep_into_the_disk(i: usize, k: i64) -> Vec3 {
+    let s = k as f64 * 1e-3;
+    let x = match (i, s) {
+        (0, _) => -0.06,
+        (_, s) if s < 0.9 => 0.08,
+        (_, s) if s < 1.3 => 0.08 - 0.1 * (s - 0.9),
+        (_, s) => (0.04 + 0.1 * (s - 1.3)).min(0.08),
+    };
+    Vec3::new(x, 0.0, 0.01)
+}
+
+/// Two sites, 100 ticks apart, reporting every 20 ticks. Site 1's tool sweeps into the disk
+/// while 400 ticks of its reports are lost (more than a report's window of 256): site 0 holds
+/// later positions and not the gap's, so its frontier waits there and it asks for the gap
+/// (`need`); site 1 sends the gap again and the confirmed states agree to the bit. Without the
+/// request (the window alone) site 0 would confirm ticks simulated with a prediction of the
+/// sweep, and every later hash would differ.
+#[test]
+fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
+    let start_x = 0.0;
+    let mut asked = false;
+    let sites = two_sites(
+        1000,
+        [0, 0],
+        3000,
+        sweep_into_the_disk,
+        100,
+        |from, k| from == 1 && (1150..1550).contains(&k),
+        |i, t, _, _| asked |= i == 0 && t.need[1] >= 0,
+    );
+    let [(a, _), (b, _)] = &sites;
+    assert!(asked, "site 0 asked for the gap");
+    let moved = start_x - sites[1].1.state.pos.x;
+    assert!(moved > 1e-3, "the sweep pushed the disk {moved} m");
+    for (name, st) in [
+        ("site 0", a.rollback_stats()),
+        ("site 1", b.rollback_stats()),
+    ] {
+        assert!(st.hash_checks > 50, "{name} compared: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "{name}: {st:?}");
+        assert_eq!(st.fallbacks, 0, "{name}: {st:?}");
+    }
+    assert_eq!(
+        a.confirmed_tick(),
+        b.confirmed_tick(),
+        "both confirmed to the last report"
+    );
+}
+
+/// A link down for longer than the history: site 0 never learns part of site 1's sweep into
+/// the disk (a fallback), so their confirmed states differ; site 1 asks site 0 (the lower
+/// number) for its state, adopts it, and from then on they agree again. A site whose physics
+/// started later (a restart) comes after one that was there: then site 0 adopts site 1's.
+#[test]
+fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
+    // Site 1 adopts site 0's state; with site 0's physics started at tick 1, the other way round.
+    for (started_tick, adopter) in [([0, 0], 1), ([1, 0], 0)] {
+        let mut asked = false;
+        let mut mismatches_at = [0u64; 2];
+        // Site 1 → site 0 is down for 1.2 s, twice the history.
+        let sites = two_sites(
+            600,
+            started_tick,
+            4000,
+            sweep_into_the_disk,
+            50,
+            |from, k| from == 1 && (1000..2200).contains(&k),
+            |i, t, k, sites| {
+                asked |= i == adopter && t.need_state == 1 << (1 - adopter);
+                if k == 3000 {
+                    mismatches_at[i] = sites[i].0.rollback_stats().hash_mismatches;
+                }
+            },
+        );
+        let [(a, ca), (b, cb)] = &sites;
+        let st = [a.rollback_stats(), b.rollback_stats()];
+        let why = format!("{started_tick:?}: {:?} {:?}", st[0], st[1]);
+        assert!(
+            st[0].fallbacks > 0,
+            "site 0 lost part of site 1's sweep: {why}"
+        );
+        assert!(
+            st[0].hash_mismatches + st[1].hash_mismatches > 0,
+            "the divergence was seen: {why}"
+        );
+        assert!(asked, "site {adopter} asked the other for its state: {why}");
+        assert!(st[adopter].adopted_states > 0, "{why}");
+        assert_eq!(st[1 - adopter].adopted_states, 0, "{why}");
+        assert_eq!(
+            [st[0].hash_mismatches, st[1].hash_mismatches],
+            mismatches_at,
+            "no mismatch in the last second: {why}"
+        );
+        assert!(st[1].hash_checks > mismatches_at[1] + 20, "{why}");
+        let t = a.confirmed_tick().min(b.confirmed_tick());
+        assert!(t > 3900, "both confirmed to the last report: {t}");
+        assert_eq!(a.hash_at(t), b.hash_at(t));
+        assert_eq!(ca.state, cb.state, "the copies are the same bits");
+        // Who adopted decides where the disk is: with site 0's state it was never swept.
+        let swept = ca.state.pos.x < -1e-3;
+        assert_eq!(swept, adopter == 0, "{:?}", ca.state.pos);
+    }
+}
+
+/// A state that would put the disk deeper into the table than every user's force could is
+/// not adopted (it would be released as kinetic energy); one at rest on it is.
+#[test]
+fn a_state_deep_in_the_table_is_not_adopted() {
+    let (_, w) = paper_world();
+    let mut sites = two_sites(
+        600,
+        [0, 0],
+        500,
+        |_, _| Vec3::new(0.2, 0.0, 0.01),
+        10,
+        |_, _| false,
+        |_, _, _, _| {},
+    );
+    let [(a, ca), (b, cb)] = &mut sites;
+    b.set_max_spring_energy(0.05);
+    let Report::Tools(mut r) = a.report(ca, &ContactForce::default(), 0.5) else {
+        panic!("a track");
+    };
+    assert!(r.confirmed_tick > 400, "{}", r.confirmed_tick);
+    let offer = |r: &mut ToolReport, z: f64| {
+        let state = BodyState::at_rest(Vec3::new(0.001, 0.0, z));
+        r.confirmed_hash = hash_state(&state);
+        r.state = Some(Snapshot {
+            tick: r.confirmed_tick,
+            state,
+            env: EnvContactState::default(),
+            contacts: [ToolContactState::default(); MAX_SITES],
+        });
+    };
+    // 5 cm into the table: ½ · 3000 N/m · (0.05 m)² ≈ 3.75 J of spring.
+    offer(&mut r, 0.01 - 0.05);
+    b.receive(&w, cb, 0, &Report::Tools(r), 0.5);
+    assert_eq!(
+        b.rollback_stats().adopted_states,
+        0,
+        "{:?}",
+        b.rollback_stats()
+    );
+    assert!(b.rollback_stats().hash_mismatches > 0);
+    offer(&mut r, 0.01);
+    b.receive(&w, cb, 0, &Report::Tools(r), 0.5);
+    assert_eq!(
+        b.rollback_stats().adopted_states,
+        1,
+        "{:?}",
+        b.rollback_stats()
+    );
+    assert_eq!(b.hash_at(r.confirmed_tick), Some(r.confirmed_hash));
+}
+
+#[test]
+fn positions_quantize_to_the_hundredth_of_a_millimetre() {
+    assert_eq!(
+        quantize(Vec3::new(0.012_345_6, -0.5, 0.0)),
+        [1235, -50_000, 0]
+    );
+    let p = position([1235, -50_000, 0]);
+    assert!((p - Vec3::new(0.01235, -0.5, 0.0)).norm() < 1e-15, "{p:?}");
+    assert_eq!(
+        quantize(p),
+        [1235, -50_000, 0],
+        "a quantized position quantizes to itself"
+    );
+}

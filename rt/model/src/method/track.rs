@@ -1,0 +1,116 @@
+//! The tool tracks `timewarp` and `coupled` exchange: positions on the session's tick grid,
+//! quantized so every site steps the same bits, and what goes with them.
+
+use crate::body::{BodyState, Vec3};
+use crate::contact::{EnvContactState, ToolContactState};
+use crate::world::MAX_SITES;
+
+/// The quantum of a tool position on the wire and in the physics, m (0.01 mm).
+pub const QUANTUM_M: f64 = 1e-5;
+
+/// Own tool positions in each report: the last this many ticks.
+pub const WINDOW_TICKS: usize = 256;
+
+/// A tool position on the tick grid, in quanta.
+pub type Quantized = [i32; 3];
+
+/// Where a tool is before anything is known of it: 10 km away, touching nothing.
+pub const UNKNOWN: Quantized = [1_000_000_000; 3];
+
+/// A received position and its tick.
+pub(crate) type Received = Option<(i64, Quantized)>;
+
+/// The fastest a tool moves in the physics, m/s: a prediction that jumps (a held position meeting
+/// the received one) must not kick the object through the contact's damping.
+pub const MAX_TOOL_SPEED_M_PER_S: f64 = 10.0;
+
+/// Quantizes a position (clamped to ±20 km, far outside any world).
+pub fn quantize(p: Vec3) -> Quantized {
+    let q = |x: f64| (x / QUANTUM_M).round().clamp(-2e9, 2e9) as i32;
+    [q(p.x), q(p.y), q(p.z)]
+}
+
+/// A quantized position in metres.
+pub fn position(q: Quantized) -> Vec3 {
+    Vec3::new(
+        f64::from(q[0]) * QUANTUM_M,
+        f64::from(q[1]) * QUANTUM_M,
+        f64::from(q[2]) * QUANTUM_M,
+    )
+}
+
+/// A site's full state at the start of one of its confirmed ticks: what a site whose confirmed
+/// history diverged from it adopts (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Snapshot {
+    /// The tick.
+    pub tick: i64,
+    /// The object.
+    pub state: BodyState,
+    /// The environment's friction memory.
+    pub env: EnvContactState,
+    /// Every tool's friction memory.
+    pub contacts: [ToolContactState; MAX_SITES],
+}
+
+// `ToolReport::need_state` has a bit per site.
+const _: () = assert!(MAX_SITES <= 8);
+
+/// What a timewarp site reports: its tool's recent positions, and its confirmed frontier's hash.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolReport {
+    /// The tick of `positions[0]`.
+    pub first_tick: i64,
+    /// How many of `positions` are filled.
+    pub count: usize,
+    /// Own tool positions, tick `first_tick + k` at `k`.
+    pub positions: [Quantized; WINDOW_TICKS],
+    /// The sender's confirmed frontier: the first tick whose inputs it does not all know.
+    pub confirmed_tick: i64,
+    /// The hash of its state at the start of that tick (0: none kept).
+    pub confirmed_hash: u64,
+    /// Per site `j`: the first tick of `j`'s positions the sender lacks though it holds later
+    /// ones (reports lost in a row for longer than the window), for `j` to send again; -1: none.
+    pub need: [i64; MAX_SITES],
+    /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender), and
+    /// it asks `j` for [`ToolReport::state`].
+    pub need_state: u8,
+    /// The session tick at which the sender's physics process started (0: at the session's start;
+    /// later: a restart, a late station). Sites are ordered by it, then by number: a site adopts
+    /// the confirmed state of one before it (see the module docs).
+    pub started_tick: u64,
+    /// The sender's state at `confirmed_tick`, sent while a site after it asks for it.
+    pub state: Option<Snapshot>,
+}
+
+impl ToolReport {
+    /// No positions and no confirmed frontier (a `coupled` state sent apart from its track).
+    pub const NONE: ToolReport = ToolReport {
+        first_tick: 0,
+        count: 0,
+        positions: [[0; 3]; WINDOW_TICKS],
+        confirmed_tick: 0,
+        confirmed_hash: 0,
+        need: [-1; MAX_SITES],
+        need_state: 0,
+        started_tick: 0,
+        state: None,
+    };
+}
+
+/// What a `coupled` site reports: its tool trajectory, its copy, and when its user's contact began.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoupledReport {
+    /// The tool positions, as `timewarp` sends them (no confirmed hash: `confirmed_hash` 0).
+    pub tools: ToolReport,
+    /// Time of `state`, s (sender's clock).
+    pub t_s: f64,
+    /// The sender's copy.
+    pub state: BodyState,
+    /// Gravity less the environment's support at `state`, m/s² (for dead reckoning).
+    pub accel: Vec3,
+    /// When the sender's user's current contact began, s; infinite: not touching.
+    pub touch_since_s: f64,
+    /// When the sender's user last touched, s; negative infinity: never.
+    pub last_touch_s: f64,
+}
