@@ -183,6 +183,7 @@ fn contact_stiffness_and_damping_are_clamped_to_the_device_scaled_by_the_workspa
         tangential_damping_n_s_per_m: 10.0,
         friction_static: 0.9,
         friction_kinetic: 0.7,
+        rotational_friction_radius_m: 0.0,
     };
     // World metres are half device metres at scale 2: the device's 1000 N/m is 500 N/m of world.
     let (out, acted) = clamp_contact(c, d.info(), 2.0);

@@ -13,14 +13,16 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use coop_model::body::{BodyState, Vec3};
-use coop_model::contact::ContactForce;
+use coop_model::body::{BodyState, MassProps, Vec3, Wrench};
+use coop_model::contact::{tool_contact, ContactForce, ContactParams, Plane, ToolContactState};
 use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
 use coop_model::method::{Consistency, ObjectCopy, Report};
 use coop_model::metrics;
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
+use coop_model::shape::Shape;
 use coop_model::sim::{self, Mode};
+use coop_model::world::{step_objects, Body, Contacts, Physics, MAX_OBJECTS};
 
 use coop_actors::scenario_file;
 
@@ -209,6 +211,130 @@ fn rollback_figures(
     Ok((costs, loads))
 }
 
+/// What one physics step of a world of several objects costs.
+#[derive(Debug, serde::Serialize)]
+pub struct WorldStepCost {
+    /// Objects in the world.
+    pub objects: usize,
+    /// Tools, each touching an object.
+    pub tools: usize,
+    /// One step: every tool's contact with every object, then the objects stepped together
+    /// (environment, every pair, Verlet), median, ns.
+    pub step_ns: f64,
+    /// ... as a share of the 1 ms physics period.
+    pub period_share: f64,
+}
+
+/// The world-step figures: `objects` boxes (4 cm, 0.1 kg) in a heap on a table, two layers, each
+/// touching its neighbours, and `tools` tool tips (5 mm) pressed 1 mm into boxes around the heap;
+/// one step computes every tool's contact with every object (held over the step) and steps the
+/// objects together with rotational friction on every contact.
+pub fn world_step_figures(quick: bool) -> Vec<WorldStepCost> {
+    let (batches, per_batch) = if quick { (3, 200) } else { (15, 2_000) };
+    let law = ContactParams {
+        stiffness_n_per_m: 3000.0,
+        damping_n_s_per_m: 30.0,
+        tangential_stiffness_n_per_m: 3000.0,
+        tangential_damping_n_s_per_m: 15.0,
+        friction_static: 0.5,
+        friction_kinetic: 0.4,
+        rotational_friction_radius_m: 0.01,
+    };
+    let planes = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let physics = Physics {
+        gravity: Vec3::new(0.0, 0.0, -9.81),
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let shape = Shape::Box {
+        half: Vec3::repeat(0.02),
+    };
+    let body = Body {
+        shape,
+        mass: MassProps {
+            mass_kg: 0.1,
+            inertia_body: shape.inertia(0.1),
+        },
+        fixed: false,
+    };
+    let mut out = Vec::new();
+    for objects in [1usize, 4, 16] {
+        for tools in [2usize, 8] {
+            let bodies = vec![body; objects];
+            // A 4 x 2 grid per layer, the second layer on the first; 1 mm into each other.
+            let start: Vec<BodyState> = (0..objects)
+                .map(|k| {
+                    let (x, y, z) = (k % 4, k / 4 % 2, k / 8);
+                    BodyState::at_rest(Vec3::new(
+                        x as f64 * 0.039,
+                        y as f64 * 0.039,
+                        0.0199 + z as f64 * 0.039,
+                    ))
+                })
+                .collect();
+            // Tool k presses into object k mod n from outside the heap's side.
+            let tips: Vec<(Vec3, usize)> = (0..tools)
+                .map(|k| {
+                    let o = k % objects;
+                    let side = if k % 2 == 0 { -1.0 } else { 1.0 };
+                    (start[o].pos + Vec3::new(side * 0.024, 0.0, 0.0), o)
+                })
+                .collect();
+            let step_ns = median(
+                (0..batches)
+                    .map(|_| {
+                        let mut states = start.clone();
+                        let mut contacts = Contacts::default();
+                        let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
+                        let t0 = Instant::now();
+                        for _ in 0..per_batch {
+                            let mut applied = [Wrench::default(); MAX_OBJECTS];
+                            for (t, (tip, _)) in tips.iter().enumerate() {
+                                for (o, s) in states.iter().enumerate() {
+                                    let c = tool_contact(
+                                        &law,
+                                        &mut memory[t][o],
+                                        &shape,
+                                        s,
+                                        &body.mass,
+                                        black_box(*tip),
+                                        Vec3::zeros(),
+                                        0.005,
+                                    );
+                                    if c.touching {
+                                        applied[o] = applied[o] + c.wrench(s.pos);
+                                    }
+                                }
+                            }
+                            step_objects(
+                                &physics,
+                                &bodies,
+                                &mut states,
+                                &mut contacts,
+                                &applied,
+                                1e-3,
+                            );
+                        }
+                        black_box(&states);
+                        t0.elapsed().as_nanos() as f64 / per_batch as f64
+                    })
+                    .collect(),
+            );
+            out.push(WorldStepCost {
+                objects,
+                tools,
+                step_ns,
+                period_share: step_ns / 1e6,
+            });
+        }
+    }
+    out
+}
+
 /// Runs the benchmark and prints its figures.
 ///
 /// # Errors
@@ -305,6 +431,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         speeds.push((mode.name(), s));
     }
     let (costs, loads) = rollback_figures(&sc, quick)?;
+    let worlds = world_step_figures(quick);
     if json {
         let v = serde_json::json!({
             "scenario": sc.name,
@@ -313,6 +440,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             "realtime_factor": speeds.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
             "rollback_cost": costs,
             "rollback_load": loads,
+            "world_step": worlds,
             "goal": "physics step < 1000 ns; paper scenario >= 100x real time; 8 users at 150 ms: p99 rollback inside the 1 ms physics period",
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -331,6 +459,16 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             println!(
                 "{} users: one {ROLLBACK_TICKS}-tick rollback {:>9.0} / {:>9.0} ns, {:>6.0} ns per re-simulated tick",
                 c.users, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns
+            );
+        }
+        println!("# a world of several objects: one physics step, every tool's contact with every object, then the objects stepped together (median)");
+        for w in &worlds {
+            println!(
+                "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period",
+                w.objects,
+                w.tools,
+                w.step_ns,
+                w.period_share * 100.0
             );
         }
         println!("# timewarp run at a constant delay (busiest site): re-simulation as a share of one core; p99 rollback = (p99 depth + 1) ticks x cost per tick (goal: 8 users at 150 ms <= 1 ms)");

@@ -136,8 +136,34 @@ pub fn step(
     dt: f64,
     mut forces: impl FnMut(&BodyState) -> Wrench,
 ) -> BodyState {
-    let half = 0.5 * dt;
     let w0 = forces(s);
+    let (mut next, half) = kick_drift(s, m, gravity, dt, &w0);
+    let w1 = forces(&next);
+    kick(&mut next, m, gravity, dt, &half, &w1);
+    next
+}
+
+/// The momenta half a step on, between [`kick_drift`] and [`kick`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct HalfStep {
+    /// Linear momentum, kg·m/s.
+    pub momentum: Vec3,
+    /// Angular momentum, kg·m²/s.
+    pub ang_mom: Vec3,
+}
+
+/// The first half of [`step`]: the half kick with the wrench `w0` at the start pose, and the drift.
+/// Returns the pose at the end of the step (its momenta the half step's until [`kick`]). Bodies whose
+/// wrenches depend on one another's poses (contacts between them) are stepped by calling this for
+/// every body, then evaluating every end wrench, then [`kick`] for every body.
+pub fn kick_drift(
+    s: &BodyState,
+    m: &MassProps,
+    gravity: Vec3,
+    dt: f64,
+    w0: &Wrench,
+) -> (BodyState, HalfStep) {
+    let half = 0.5 * dt;
     let p_half = m.mass_kg * s.vel + (w0.force + m.mass_kg * gravity) * half;
     let l_half = s.ang_mom + w0.torque * half;
     let vel_half = p_half / m.mass_kg;
@@ -154,10 +180,27 @@ pub fn step(
         ..next
     };
     next.rot = UnitQuaternion::from_scaled_axis(mid.omega(m) * dt) * s.rot;
-    let w1 = forces(&next);
-    next.vel = (p_half + (w1.force + m.mass_kg * gravity) * half) / m.mass_kg;
-    next.ang_mom = l_half + w1.torque * half;
-    next
+    (
+        next,
+        HalfStep {
+            momentum: p_half,
+            ang_mom: l_half,
+        },
+    )
+}
+
+/// The second half of [`step`]: the half kick with the wrench `w1` at the end pose.
+pub fn kick(
+    next: &mut BodyState,
+    m: &MassProps,
+    gravity: Vec3,
+    dt: f64,
+    half_step: &HalfStep,
+    w1: &Wrench,
+) {
+    let half = 0.5 * dt;
+    next.vel = (half_step.momentum + (w1.force + m.mass_kg * gravity) * half) / m.mass_kg;
+    next.ang_mom = half_step.ang_mom + w1.torque * half;
 }
 
 #[cfg(test)]

@@ -33,6 +33,12 @@ pub struct ContactParams {
     pub friction_static: f64,
     /// Kinetic friction coefficient μ_k (≤ μ_s).
     pub friction_kinetic: f64,
+    /// Rotational friction: the radius of the contact patch over which friction resists turning
+    /// about the contact normal, m. The patch sticks by a torsional spring of the tangential
+    /// stiffness and damping times r², and slips at μ F_n r. 0 (the default): none, as the paper
+    /// neglects it; an object that carries another off its centre needs it (else nothing holds it
+    /// from turning under the load).
+    pub rotational_friction_radius_m: f64,
 }
 
 impl Default for ContactParams {
@@ -45,6 +51,7 @@ impl Default for ContactParams {
             tangential_damping_n_s_per_m: 4.0,
             friction_static: 0.8,
             friction_kinetic: 0.6,
+            rotational_friction_radius_m: 0.0,
         }
     }
 }
@@ -101,6 +108,59 @@ fn friction(
         true,
         dir * (c.friction_kinetic * f_n / c.tangential_stiffness_n_per_m),
     )
+}
+
+/// A unit vector at right angles to the unit vector `n`, the same bits wherever it is computed:
+/// along `n` × the world axis least aligned with `n`.
+fn across(n: Vec3) -> Vec3 {
+    let (x, y, z) = (n.x.abs(), n.y.abs(), n.z.abs());
+    let axis = if x <= y && x <= z {
+        Vec3::x()
+    } else if y <= z {
+        Vec3::y()
+    } else {
+        Vec3::z()
+    };
+    n.cross(&axis).normalize()
+}
+
+/// `t` in the plane at right angles to the unit `n`, unit length (`None`: `t` is along `n`).
+fn in_plane(t: Vec3, n: Vec3) -> Option<Vec3> {
+    let p = t - n * t.dot(&n);
+    let len = p.norm();
+    (len > 1e-9).then(|| p / len)
+}
+
+/// Rotational friction about the unit normal `n` ([`ContactParams::rotational_friction_radius_m`]):
+/// the torque about `n` on the object whose reference direction is now `t_obj` (world), held by
+/// its stick spring to the other body's reference `t_other` (world), with `spin` the other's
+/// angular velocity about `n` less the object's and `f_n` the normal force. Returns the torque, N·m,
+/// and the other's reference after a slip (the spring stretched to hold the kinetic torque), or
+/// `None` while it sticks. Only `+ − × ÷ sqrt`: the same bits at every site.
+fn twist(
+    c: &ContactParams,
+    t_other: Vec3,
+    t_obj: Vec3,
+    spin: f64,
+    n: Vec3,
+    f_n: f64,
+) -> (f64, Option<Vec3>) {
+    let r = c.rotational_friction_radius_m;
+    let (Some(u), Some(v)) = (in_plane(t_other, n), in_plane(t_obj, n)) else {
+        return (0.0, None);
+    };
+    let k = c.tangential_stiffness_n_per_m * r * r;
+    // sin of the angle the object must turn about n to line up with the other's reference.
+    let sin = v.cross(&u).dot(&n);
+    let torque = k * sin + c.tangential_damping_n_s_per_m * r * r * spin;
+    if torque.abs() <= c.friction_static * f_n * r {
+        return (torque, None);
+    }
+    let slip = (c.friction_kinetic * f_n * r).copysign(torque);
+    // The other's reference turned so that the spring alone holds the slipping torque.
+    let s = (slip / k).clamp(-1.0, 1.0);
+    let cos = (1.0 - s * s).sqrt();
+    (slip, Some(v * cos + n.cross(&v) * s))
 }
 
 /// Friction memory of one tool contact: the stick point on the object, in body coordinates.
@@ -186,10 +246,12 @@ pub struct Plane {
 /// Most environment planes a scene may have.
 pub const MAX_PLANES: usize = 6;
 
-/// Friction memory of the environment contacts: one world stick point per plane.
+/// Friction memory of the environment contacts: one world stick point per plane, and with
+/// rotational friction a reference direction per plane, in the world and on the body.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EnvContactState {
     anchors: [Option<Vec3>; MAX_PLANES],
+    twist: [Option<(Vec3, Vec3)>; MAX_PLANES],
 }
 
 impl EnvContactState {
@@ -206,9 +268,18 @@ impl EnvContactState {
         self.anchors
     }
 
-    /// The memory with these stick points (from a snapshot).
+    /// The memory with these stick points (from a snapshot; no rotational friction memory).
     pub fn from_anchors(anchors: [Option<Vec3>; MAX_PLANES]) -> Self {
-        Self { anchors }
+        Self {
+            anchors,
+            twist: [None; MAX_PLANES],
+        }
+    }
+
+    /// Whether it holds rotational friction memory, which [`EnvContactState::anchors`] does not
+    /// carry.
+    pub fn twists(&self) -> bool {
+        self.twist.iter().any(Option::is_some)
     }
 }
 
@@ -239,7 +310,13 @@ pub fn environment_wrench(
     }
     let omega = body.omega(mass);
     let velocity_at = |q: Vec3| body.vel + omega.cross(&(q - body.pos));
-    for (plane, anchor) in planes.iter().zip(state.anchors.iter_mut()).take(MAX_PLANES) {
+    let spin_of = |n: Vec3| omega.dot(&n);
+    for ((plane, anchor), twist_memory) in planes
+        .iter()
+        .zip(state.anchors.iter_mut())
+        .zip(state.twist.iter_mut())
+        .take(MAX_PLANES)
+    {
         let n = plane.normal;
         let (mut deepest, mut weight, mut centre) = (0.0f64, 0.0, Vec3::zeros());
         let mut touching_points = [Vec3::zeros(); 16];
@@ -263,6 +340,7 @@ pub fn environment_wrench(
         }
         if deepest <= 0.0 {
             *anchor = None;
+            *twist_memory = None;
             continue;
         }
         touching = true;
@@ -294,6 +372,17 @@ pub fn environment_wrench(
         let a = anchor.unwrap_or(patch);
         let (f_t, slipped, stretch) = friction(c, a, patch, -v, n, f_n);
         *anchor = Some(if slipped { patch + stretch } else { a });
+        let mut turning = Wrench::default();
+        if c.rotational_friction_radius_m > 0.0 {
+            let (world_ref, body_ref) = twist_memory.unwrap_or_else(|| {
+                let t = across(n);
+                (t, body.rot.inverse() * t)
+            });
+            let (torque, slipped_ref) =
+                twist(c, world_ref, body.rot * body_ref, -spin_of(n), n, f_n);
+            *twist_memory = Some((slipped_ref.unwrap_or(world_ref), body_ref));
+            turning.torque = n * torque;
+        }
         total = total
             + Wrench::at_point(n * f_spring, p, body.pos)
             + Wrench::at_point(f_t, patch, body.pos)
@@ -301,8 +390,193 @@ pub fn environment_wrench(
                 force: damping.force * scale,
                 torque: damping.torque * scale,
             };
+        if c.rotational_friction_radius_m > 0.0 {
+            total = total + turning;
+        }
     }
     (total, touching)
+}
+
+/// Friction memory of one object–object contact: its stick point on each of the two objects, in
+/// that object's body coordinates (both move with their objects; the friction spring stretches
+/// between them).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PairContactState {
+    anchors: Option<(Vec3, Vec3)>,
+    /// With rotational friction: a reference direction on each, body coordinates.
+    twist: Option<(Vec3, Vec3)>,
+}
+
+impl PairContactState {
+    /// Whether the two objects touched at the last contact computation.
+    pub fn touching(&self) -> bool {
+        self.anchors.is_some()
+    }
+
+    /// The stick points, on the first object and on the second, body coordinates (`None`: not
+    /// touching): what a snapshot carries.
+    pub fn anchors(&self) -> Option<(Vec3, Vec3)> {
+        self.anchors
+    }
+
+    /// The rotational friction memory: a reference direction on each object, body coordinates.
+    pub fn twist(&self) -> Option<(Vec3, Vec3)> {
+        self.twist
+    }
+
+    /// The memory with these stick points and reference directions (from a snapshot).
+    pub fn from_parts(anchors: Option<(Vec3, Vec3)>, twist: Option<(Vec3, Vec3)>) -> Self {
+        Self { anchors, twist }
+    }
+}
+
+/// One object of a contact pair: its shape, state and mass.
+#[derive(Debug, Clone, Copy)]
+pub struct PairSide<'a> {
+    /// Shape.
+    pub shape: &'a Shape,
+    /// State.
+    pub body: &'a BodyState,
+    /// Mass properties.
+    pub mass: &'a MassProps,
+}
+
+/// Most points an object–object contact weighs: every contact point of either shape.
+const PAIR_POINTS: usize = 32;
+
+/// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
+/// `a`, the wrench on `b`, and whether they touch.
+///
+/// The environment's law (see [`environment_wrench`]) between two moving bodies. Each shape's
+/// contact points ([`Shape::contact_points`]) inside the other are the touching points, each with
+/// its depth and the other's outward normal there; the normal force is K times the *deepest*
+/// penetration along the depth-weighted mean normal, at the depth-weighted centre of pressure;
+/// damping is shared by the touching points, each resisting the two bodies' relative normal
+/// velocity there, and never pulls; friction is one stick spring between a point on each body, set
+/// where the contact began (the touching points' centre). Whatever acts on `b` is exactly the
+/// negative of what acts on `a`, at the same points: momentum is conserved to the bit.
+///
+/// A box's or a cylinder's contact points are its corners and rim points: a face or a corner
+/// resting on another shape is found, two edges crossing each other between their ends are not.
+pub fn pair_wrench(
+    c: &ContactParams,
+    state: &mut PairContactState,
+    a: PairSide<'_>,
+    b: PairSide<'_>,
+) -> (Wrench, Wrench, bool) {
+    let none = (Wrench::default(), Wrench::default(), false);
+    let reach = a.shape.bounding_radius() + b.shape.bounding_radius();
+    if (a.body.pos - b.body.pos).norm_squared() > reach * reach {
+        *state = PairContactState::default();
+        return none;
+    }
+    // (point, normal pushing `a` away from `b`, depth)
+    let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0f64); PAIR_POINTS];
+    let mut n_touch = 0usize;
+    // The points of `from` inside `into`; `sign` +1 where `from` is `a`, -1 where it is `b`.
+    let mut gather = |from: &PairSide<'_>, into: &PairSide<'_>, sign: f64| {
+        let mut local = [Vec3::zeros(); 16];
+        let (count, margin) = from.shape.contact_points(&mut local);
+        let (r_from, inv_into) = (from.body.rot, into.body.rot.inverse());
+        for q in &local[..count] {
+            let world = from.body.pos + r_from * q;
+            let (d, n_body) = into
+                .shape
+                .signed_distance(inv_into * (world - into.body.pos));
+            let depth = margin - d;
+            if depth > 0.0 && n_touch < PAIR_POINTS {
+                let out_of_into = into.body.rot * n_body;
+                points[n_touch] = (world - out_of_into * margin, out_of_into * sign, depth);
+                n_touch += 1;
+            }
+        }
+    };
+    gather(&a, &b, 1.0);
+    gather(&b, &a, -1.0);
+    if n_touch == 0 {
+        *state = PairContactState::default();
+        return none;
+    }
+    let touching = &points[..n_touch];
+    let (mut deepest, mut weight) = (0.0f64, 0.0);
+    let (mut centre, mut normal, mut patch) = (Vec3::zeros(), Vec3::zeros(), Vec3::zeros());
+    for &(p, n, depth) in touching {
+        deepest = deepest.max(depth);
+        weight += depth;
+        centre += p * depth;
+        normal += n * depth;
+        patch += p;
+    }
+    let p = centre / weight;
+    let n = normal.normalize();
+    let patch = patch / n_touch as f64;
+    let (omega_a, omega_b) = (a.body.omega(a.mass), b.body.omega(b.mass));
+    // The velocity of `a` relative to `b` at world point `q`.
+    let relative = |q: Vec3| {
+        a.body.vel + omega_a.cross(&(q - a.body.pos))
+            - b.body.vel
+            - omega_b.cross(&(q - b.body.pos))
+    };
+    let f_spring = c.stiffness_n_per_m * deepest;
+    let share = c.damping_n_s_per_m / n_touch as f64;
+    let (mut damp_a, mut damp_b, mut f_damp_total) = (Wrench::default(), Wrench::default(), 0.0);
+    for &(q, _, _) in touching {
+        let f = -share * relative(q).dot(&n);
+        f_damp_total += f;
+        damp_a = damp_a + Wrench::at_point(n * f, q, a.body.pos);
+        damp_b = damp_b + Wrench::at_point(-(n * f), q, b.body.pos);
+    }
+    // Never pulling: limit the damping so the total normal force stays >= 0.
+    let scale = if f_spring + f_damp_total < 0.0 && f_damp_total < 0.0 {
+        -f_spring / f_damp_total
+    } else {
+        1.0
+    };
+    let f_n = f_spring + f_damp_total * scale;
+    let (on_a, on_b) = state.anchors.map_or((patch, patch), |(qa, qb)| {
+        (a.body.pos + a.body.rot * qa, b.body.pos + b.body.rot * qb)
+    });
+    let (f_t, slipped, stretch) = friction(c, on_b, on_a, -relative(patch), n, f_n);
+    let on_a = if slipped { on_b - stretch } else { on_a };
+    let stuck = Some((
+        a.body.rot.inverse() * (on_a - a.body.pos),
+        b.body.rot.inverse() * (on_b - b.body.pos),
+    ));
+    state.anchors = stuck;
+    // Rotational friction: a couple, equal and opposite.
+    let mut turning = Vec3::zeros();
+    if c.rotational_friction_radius_m > 0.0 {
+        let (ref_a, ref_b) = state.twist.unwrap_or_else(|| {
+            let t = across(n);
+            (a.body.rot.inverse() * t, b.body.rot.inverse() * t)
+        });
+        let spin = (omega_b - omega_a).dot(&n);
+        let (torque, slipped_ref) = twist(c, b.body.rot * ref_b, a.body.rot * ref_a, spin, n, f_n);
+        let ref_b = slipped_ref.map_or(ref_b, |t| b.body.rot.inverse() * t);
+        state.twist = Some((ref_a, ref_b));
+        turning = n * torque;
+    }
+    let scaled = |w: Wrench| Wrench {
+        force: w.force * scale,
+        torque: w.torque * scale,
+    };
+    // Friction acts on both at one point, the touching points' centre, as the environment's does:
+    // equal and opposite at the same point, so angular momentum is conserved too.
+    let w_a = Wrench::at_point(n * f_spring, p, a.body.pos)
+        + Wrench::at_point(f_t, patch, a.body.pos)
+        + Wrench {
+            force: Vec3::zeros(),
+            torque: turning,
+        }
+        + scaled(damp_a);
+    let w_b = Wrench::at_point(-(n * f_spring), p, b.body.pos)
+        + Wrench::at_point(-f_t, patch, b.body.pos)
+        + Wrench {
+            force: Vec3::zeros(),
+            torque: -turning,
+        }
+        + scaled(damp_b);
+    (w_a, w_b, true)
 }
 
 #[cfg(test)]
@@ -318,6 +592,7 @@ mod tests {
             tangential_damping_n_s_per_m: 5.0,
             friction_static: 0.6,
             friction_kinetic: 0.5,
+            rotational_friction_radius_m: 0.0,
         }
     }
 

@@ -475,6 +475,7 @@ mod tests {
                 tangential_damping_n_s_per_m: 3.0,
                 friction_static: 0.9,
                 friction_kinetic: 0.7,
+                rotational_friction_radius_m: 0.0,
             },
             stale_limit_s: 0.1,
             stale_ramp_s: 0.05,

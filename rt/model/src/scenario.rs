@@ -446,7 +446,14 @@ fn validate_contact(c: &ContactParams, at: &str) -> Result<(), ScenarioError> {
     .map_err(|e| ScenarioError {
         rule: format!("{} (no more than friction_static)", e.rule),
         ..e
-    })
+    })?;
+    bounded(
+        &format!("{at}.rotational_friction_radius_m"),
+        c.rotational_friction_radius_m,
+        0.0,
+        0.5,
+        "m",
+    )
 }
 
 /// The rule for scenario and site names, which key expressions and segment names carry: 1 to 48
@@ -524,6 +531,13 @@ impl Scenario {
             )?;
         }
         validate_contact(&self.contact, "contact")?;
+        if self.contact.rotational_friction_radius_m != 0.0 {
+            return Err(err(
+                "contact.rotational_friction_radius_m",
+                self.contact.rotational_friction_radius_m,
+                "must be 0: a tool's tip touches an object at a point",
+            ));
+        }
         self.display.validate()?;
         validate_contact(&self.environment_contact, "environment_contact")?;
         let n = &self.network;

@@ -105,6 +105,33 @@ impl Shape {
         }
     }
 
+    /// The body-frame points that can touch another object, and the margin around them: a sphere
+    /// is its centre with its radius, a box or a cylinder its [`Shape::probe_points`] with none.
+    /// The deepest point of the shape into another lies `margin` from a point, against that other's
+    /// surface normal.
+    pub fn contact_points(&self, out: &mut [Vec3; 16]) -> (usize, f64) {
+        match *self {
+            Shape::Sphere { radius } => {
+                out[0] = Vec3::zeros();
+                (1, radius)
+            }
+            _ => (self.probe_points(out), 0.0),
+        }
+    }
+
+    /// The radius of the smallest sphere about the centre of mass that holds the shape, m: two
+    /// objects farther apart than the sum of theirs cannot touch.
+    pub fn bounding_radius(&self) -> f64 {
+        match *self {
+            Shape::Sphere { radius } => radius,
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => (radius * radius + half_height * half_height).sqrt(),
+            Shape::Box { half } => half.norm(),
+        }
+    }
+
     /// Principal moments of inertia of the solid shape of mass `m`, kg·m².
     pub fn inertia(&self, m: f64) -> Vec3 {
         match *self {

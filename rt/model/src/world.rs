@@ -1,8 +1,11 @@
 //! The world every site shares: its object, gravity and the environment's planes, and the
 //! geometry of the object against those planes that every method and the servo agree on.
 
-use crate::body::{BodyState, MassProps, Vec3};
-use crate::contact::{ContactParams, Plane, MAX_PLANES};
+use crate::body::{self, BodyState, HalfStep, MassProps, Vec3, Wrench};
+use crate::contact::{
+    environment_wrench, pair_wrench, ContactParams, EnvContactState, PairContactState, PairSide,
+    Plane, MAX_PLANES,
+};
 use crate::shape::Shape;
 
 /// Most sites a session may have.
@@ -83,6 +86,168 @@ pub fn push_out_of_environment(world: &World, s: &mut BodyState) {
     }
 }
 
+/// Most objects a world may have: every table of per-object and per-pair state is this long, so
+/// stepping a world allocates nothing.
+pub const MAX_OBJECTS: usize = 16;
+
+/// Object pairs in a world of [`MAX_OBJECTS`].
+pub const MAX_PAIRS: usize = MAX_OBJECTS * (MAX_OBJECTS - 1) / 2;
+
+/// One object of a world: its shape, its mass, and whether it is a fixture (it does not move; it
+/// still touches the others).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Body {
+    /// Shape.
+    pub shape: Shape,
+    /// Mass properties.
+    pub mass: MassProps,
+    /// A fixture: never moved.
+    pub fixed: bool,
+}
+
+/// Where the pair of objects `i < j` keeps its friction memory among a world's [`MAX_PAIRS`]:
+/// pairs in the order (0, 1), (0, 2), …, (1, 2), … — the order every site steps them in.
+pub fn pair_index(i: usize, j: usize) -> usize {
+    debug_assert!(i < j && j < MAX_OBJECTS);
+    i * (2 * MAX_OBJECTS - i - 1) / 2 + (j - i - 1)
+}
+
+/// The friction memory of every contact between the objects and with the environment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Contacts {
+    /// Per object, its contacts with the planes.
+    pub env: [EnvContactState; MAX_OBJECTS],
+    /// Per pair ([`pair_index`]), their contact.
+    pub pairs: [PairContactState; MAX_PAIRS],
+}
+
+impl Default for Contacts {
+    fn default() -> Self {
+        Self {
+            env: [EnvContactState::default(); MAX_OBJECTS],
+            pairs: [PairContactState::default(); MAX_PAIRS],
+        }
+    }
+}
+
+/// The laws and fields several objects step under.
+#[derive(Debug, Clone, Copy)]
+pub struct Physics<'a> {
+    /// Gravity, m/s².
+    pub gravity: Vec3,
+    /// The environment's planes.
+    pub planes: &'a [Plane],
+    /// Object–environment contact law.
+    pub env_contact: &'a ContactParams,
+    /// Object–object contact law.
+    pub object_contact: &'a ContactParams,
+}
+
+/// Every object's applied wrench at the poses `states`: the environment's on each object in
+/// object order, then each pair's in [`pair_index`] order, then `applied` (the tools', held over
+/// the step). The order is fixed, so every site sums the same floating-point terms in the same
+/// order and gets the same bits.
+fn wrenches(
+    physics: &Physics<'_>,
+    bodies: &[Body],
+    states: &[BodyState],
+    contacts: &mut Contacts,
+    applied: &[Wrench],
+    out: &mut [Wrench; MAX_OBJECTS],
+) {
+    let n = bodies.len().min(MAX_OBJECTS);
+    for (k, w) in out.iter_mut().enumerate().take(n) {
+        *w = if bodies[k].fixed {
+            Wrench::default()
+        } else {
+            environment_wrench(
+                physics.env_contact,
+                &mut contacts.env[k],
+                physics.planes,
+                &bodies[k].shape,
+                &states[k],
+                &bodies[k].mass,
+            )
+            .0
+        };
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            let memory = &mut contacts.pairs[pair_index(i, j)];
+            if bodies[i].fixed && bodies[j].fixed {
+                *memory = PairContactState::default();
+                continue;
+            }
+            let side = |k: usize| PairSide {
+                shape: &bodies[k].shape,
+                body: &states[k],
+                mass: &bodies[k].mass,
+            };
+            let (on_i, on_j, _) = pair_wrench(physics.object_contact, memory, side(i), side(j));
+            out[i] = out[i] + on_i;
+            out[j] = out[j] + on_j;
+        }
+    }
+    for (w, a) in out.iter_mut().zip(applied).take(n) {
+        *w = *w + *a;
+    }
+}
+
+/// Steps `states` (one per body of `bodies`) by `dt` together: velocity Verlet ([`body::step`])
+/// with every object's wrench evaluated at every object's start poses, every object drifted, and
+/// every wrench evaluated again at the end poses, so a contact between two objects acts on both
+/// from the same poses. Fixtures do not move. `applied` adds a wrench per object (a tool's,
+/// held over the step). Allocates nothing.
+pub fn step_objects(
+    physics: &Physics<'_>,
+    bodies: &[Body],
+    states: &mut [BodyState],
+    contacts: &mut Contacts,
+    applied: &[Wrench],
+    dt: f64,
+) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    let n = bodies.len().min(states.len()).min(MAX_OBJECTS);
+    let mut w = [Wrench::default(); MAX_OBJECTS];
+    let mut half = [HalfStep::default(); MAX_OBJECTS];
+    wrenches(
+        physics,
+        &bodies[..n],
+        &states[..n],
+        contacts,
+        applied,
+        &mut w,
+    );
+    for k in 0..n {
+        if !bodies[k].fixed {
+            let (next, h) =
+                body::kick_drift(&states[k], &bodies[k].mass, physics.gravity, dt, &w[k]);
+            states[k] = next;
+            half[k] = h;
+        }
+    }
+    wrenches(
+        physics,
+        &bodies[..n],
+        &states[..n],
+        contacts,
+        applied,
+        &mut w,
+    );
+    for k in 0..n {
+        if !bodies[k].fixed {
+            body::kick(
+                &mut states[k],
+                &bodies[k].mass,
+                physics.gravity,
+                dt,
+                &half[k],
+                &w[k],
+            );
+        }
+    }
+}
+
 /// Worlds for the model's unit tests.
 #[cfg(test)]
 pub(crate) mod fixtures {
@@ -118,6 +283,7 @@ pub(crate) mod fixtures {
                 tangential_damping_n_s_per_m: 5.0,
                 friction_static: 0.6,
                 friction_kinetic: 0.5,
+                rotational_friction_radius_m: 0.0,
             },
         }
     }

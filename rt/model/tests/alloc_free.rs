@@ -24,6 +24,7 @@ fn contact() -> ContactParams {
         tangential_damping_n_s_per_m: 3.0,
         friction_static: 0.9,
         friction_kinetic: 0.7,
+        rotational_friction_radius_m: 0.0,
     }
 }
 
@@ -135,5 +136,68 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
         servo.display_stats().corrections >= 50,
         "{:?}",
         servo.display_stats()
+    );
+}
+
+/// Stepping the largest world allocates nothing: sixteen objects in a heap on the table, every
+/// pair and plane contact with rotational friction, and a wrench on each.
+#[test]
+fn a_world_of_the_most_objects_steps_without_allocating() {
+    use coop_model::body::Wrench;
+    use coop_model::world::{step_objects, Body, Contacts, Physics, MAX_OBJECTS};
+    let law = ContactParams {
+        rotational_friction_radius_m: 0.01,
+        ..contact()
+    };
+    let planes = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let physics = Physics {
+        gravity: Vec3::new(0.0, 0.0, -9.81),
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let shape = Shape::Box {
+        half: Vec3::new(0.02, 0.02, 0.015),
+    };
+    let body = Body {
+        shape,
+        mass: MassProps {
+            mass_kg: 0.1,
+            inertia_body: shape.inertia(0.1),
+        },
+        fixed: false,
+    };
+    let bodies = [body; MAX_OBJECTS];
+    let mut states: [BodyState; MAX_OBJECTS] = std::array::from_fn(|k| {
+        BodyState::at_rest(Vec3::new(
+            (k % 4) as f64 * 0.039,
+            (k / 4 % 2) as f64 * 0.039,
+            0.015 + (k / 8) as f64 * 0.029,
+        ))
+    });
+    let applied = [Wrench {
+        force: Vec3::new(0.01, 0.0, 0.0),
+        torque: Vec3::zeros(),
+    }; MAX_OBJECTS];
+    let mut contacts = Contacts::default();
+    let n = allocations(|| {
+        for _ in 0..500 {
+            step_objects(
+                &physics,
+                &bodies,
+                &mut states,
+                &mut contacts,
+                &applied,
+                1e-3,
+            );
+        }
+    });
+    assert_eq!(n, 0, "stepping {MAX_OBJECTS} objects allocated {n} times");
+    assert!(
+        contacts.pairs.iter().any(|p| p.touching()),
+        "the heap touches"
     );
 }

@@ -224,6 +224,7 @@ mod tests {
                 tangential_damping_n_s_per_m: 15.0,
                 friction_static: 0.35,
                 friction_kinetic: 0.3,
+                rotational_friction_radius_m: 0.0,
             },
         }
     }

@@ -1,0 +1,407 @@
+//! Several objects that touch each other (`world::step_objects`, `contact::pair_wrench`): a stack
+//! rests, a box rests on a fixture, a collision conserves momentum and gains no energy, the same
+//! inputs give the same bits, and one object steps exactly as the single-body step does.
+
+use coop_model::body::{self, BodyState, MassProps, Vec3, Wrench};
+use coop_model::contact::{environment_wrench, ContactParams, EnvContactState, Plane};
+use coop_model::shape::Shape;
+use coop_model::world::{pair_index, step_objects, Body, Contacts, Physics};
+
+const DT: f64 = 1e-3;
+
+/// The table's law (`paper.toml`'s environment contact).
+fn law() -> ContactParams {
+    ContactParams {
+        stiffness_n_per_m: 3000.0,
+        damping_n_s_per_m: 30.0,
+        tangential_stiffness_n_per_m: 3000.0,
+        tangential_damping_n_s_per_m: 15.0,
+        friction_static: 0.35,
+        friction_kinetic: 0.3,
+        rotational_friction_radius_m: 0.0,
+    }
+}
+
+fn solid(shape: Shape, mass_kg: f64) -> Body {
+    Body {
+        shape,
+        mass: MassProps {
+            mass_kg,
+            inertia_body: shape.inertia(mass_kg),
+        },
+        fixed: false,
+    }
+}
+
+fn table() -> [Plane; 1] {
+    [Plane {
+        normal: Vec3::y(),
+        offset: 0.0,
+    }]
+}
+
+/// Steps `states` for `seconds` under `physics`; the largest distance any object moved from where
+/// it was after `settle_s`, m.
+fn run(
+    physics: &Physics<'_>,
+    bodies: &[Body],
+    states: &mut [BodyState],
+    contacts: &mut Contacts,
+    settle_s: f64,
+    seconds: f64,
+) -> f64 {
+    let applied = [Wrench::default(); 16];
+    let settle = (settle_s / DT).round() as usize;
+    let mut rested: Vec<BodyState> = states.to_vec();
+    let mut worst: f64 = 0.0;
+    for k in 0..(seconds / DT).round() as usize {
+        step_objects(physics, bodies, states, contacts, &applied, DT);
+        if k + 1 == settle {
+            rested = states.to_vec();
+        }
+        if k + 1 > settle {
+            for (s, r) in states.iter().zip(&rested) {
+                worst = worst.max((s.pos - r.pos).norm());
+            }
+        }
+    }
+    worst
+}
+
+/// The stack the next two tests rest on a table tilted 10° (gravity tilted; static friction, 0.35,
+/// holds up to 19°): a small box on a larger one, off its centre, so friction must hold both
+/// along the slope and the lower box from turning under its load. Steps it 11 s, rotational
+/// friction over a patch of `radius_m`; the most either moved in the last 10 s, m, and the states.
+fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
+    let planes = table();
+    let law = ContactParams {
+        rotational_friction_radius_m: radius_m,
+        ..law()
+    };
+    let (sin, cos) = 10f64.to_radians().sin_cos();
+    let physics = Physics {
+        gravity: Vec3::new(9.81 * sin, -9.81 * cos, 0.0),
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let bodies = [
+        solid(
+            Shape::Box {
+                half: Vec3::new(0.05, 0.02, 0.05),
+            },
+            0.2,
+        ),
+        solid(
+            Shape::Box {
+                half: Vec3::new(0.03, 0.02, 0.03),
+            },
+            0.1,
+        ),
+    ];
+    let mut states = [
+        BodyState::at_rest(Vec3::new(0.0, 0.02, 0.0)),
+        BodyState::at_rest(Vec3::new(0.005, 0.06, -0.004)),
+    ];
+    let mut contacts = Contacts::default();
+    let moved = run(&physics, &bodies, &mut states, &mut contacts, 1.0, 11.0);
+    (moved, states, contacts)
+}
+
+/// With rotational friction the stack rests: after a second to settle, neither box moves by more
+/// than 0.1 mm over 10 s (no creep, no jitter), each sunk where its support carries its weight,
+/// the top box still where it was put.
+#[test]
+fn a_stack_of_two_boxes_rests_on_a_slope() {
+    let (moved, states, contacts) = slope_stack(0.02);
+    assert!(moved <= 1e-4, "moved {:.3} mm while resting", moved * 1e3);
+    // The table carries the whole stack's weight with K times its deepest penetration (a corner:
+    // the off-centre load tilts the lower box a little).
+    let cos = 10f64.to_radians().cos();
+    let mut corners = [Vec3::zeros(); 16];
+    let count = Shape::Box {
+        half: Vec3::new(0.05, 0.02, 0.05),
+    }
+    .probe_points(&mut corners);
+    let deepest = corners[..count]
+        .iter()
+        .map(|c| -(states[0].pos + states[0].rot * c).y)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let carried = 3000.0 * deepest / (0.3 * 9.81 * cos);
+    assert!(
+        (carried - 1.0).abs() < 0.01,
+        "the table carries {carried} of the stack"
+    );
+    // The top box sits on the lower one's top face, sunk in by its weight's share at most.
+    let gap = states[1].pos.y - 0.02 - (states[0].pos.y + 0.02);
+    assert!(
+        gap < 0.0 && gap > -2e-3,
+        "the top box's bottom is {gap} m off the lower's top"
+    );
+    assert!(contacts.pairs[pair_index(0, 1)].touching());
+    assert!(
+        (states[1].pos.x - 0.005).abs() < 1e-3,
+        "{:?}",
+        states[1].pos
+    );
+    assert!(states[0].rot.angle() < 1e-2 && states[1].rot.angle() < 1e-2);
+}
+
+/// Without it (the paper's law: rotational friction negligible), nothing holds the lower box from
+/// turning under the off-centre load: it swings about the table's normal and the top box with it.
+#[test]
+fn without_rotational_friction_a_box_turns_under_an_off_centre_load() {
+    let (moved, states, _) = slope_stack(0.0);
+    assert!(moved > 1e-3, "moved {:.3} mm", moved * 1e3);
+    assert!(
+        states.iter().any(|s| s.rot.angle() > 0.01),
+        "{:?}",
+        states.map(|s| s.rot.angle())
+    );
+}
+
+/// A cylinder standing on a fixture (a fixed box, no table): it rests, the fixture never moves.
+#[test]
+fn an_object_rests_on_a_fixture() {
+    let law = law();
+    let physics = Physics {
+        gravity: Vec3::new(0.0, -9.81, 0.0),
+        planes: &[],
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let fixture = Body {
+        fixed: true,
+        ..solid(
+            Shape::Box {
+                half: Vec3::new(0.1, 0.01, 0.1),
+            },
+            1.0,
+        )
+    };
+    // A can standing on its end (its axis, body z, turned to world y).
+    let can = solid(
+        Shape::Cylinder {
+            radius: 0.03,
+            half_height: 0.05,
+        },
+        0.15,
+    );
+    let upright =
+        nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), -std::f64::consts::FRAC_PI_2);
+    let bodies = [fixture, can];
+    let fixed_at = BodyState::at_rest(Vec3::zeros());
+    let mut states = [
+        fixed_at,
+        BodyState {
+            rot: upright,
+            ..BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0))
+        },
+    ];
+    let mut contacts = Contacts::default();
+    let moved = run(&physics, &bodies, &mut states, &mut contacts, 1.0, 11.0);
+    assert!(moved <= 1e-4, "moved {:.3} mm while resting", moved * 1e3);
+    assert_eq!(states[0], fixed_at, "a fixture never moves");
+    assert!(
+        states[1].pos.y > 0.059 && states[1].pos.y < 0.06,
+        "{:?}",
+        states[1].pos
+    );
+}
+
+/// Two balls meeting head on in free space, off centre: momentum (linear and angular, about the
+/// origin) is the same after as before to rounding, kinetic energy is never more, and they part.
+#[test]
+fn a_collision_conserves_momentum_and_gains_no_energy() {
+    let law = law();
+    let physics = Physics {
+        gravity: Vec3::zeros(),
+        planes: &[],
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let bodies = [
+        solid(Shape::Sphere { radius: 0.03 }, 0.2),
+        solid(Shape::Sphere { radius: 0.02 }, 0.05),
+    ];
+    let mut states = [
+        BodyState {
+            vel: Vec3::new(0.5, 0.0, 0.0),
+            ..BodyState::at_rest(Vec3::new(-0.1, 0.0, 0.0))
+        },
+        BodyState {
+            vel: Vec3::new(-0.8, 0.0, 0.0),
+            ..BodyState::at_rest(Vec3::new(0.1, 0.02, 0.0))
+        },
+    ];
+    let momentum = |s: &[BodyState]| -> (Vec3, Vec3) {
+        s.iter()
+            .zip(&bodies)
+            .fold((Vec3::zeros(), Vec3::zeros()), |(p, l), (s, b)| {
+                let mv = s.vel * b.mass.mass_kg;
+                (p + mv, l + s.pos.cross(&mv) + s.ang_mom)
+            })
+    };
+    let energy = |s: &[BodyState]| -> f64 {
+        s.iter()
+            .zip(&bodies)
+            .map(|(s, b)| s.kinetic_energy(&b.mass))
+            .sum()
+    };
+    let (p0, l0, e0) = (momentum(&states).0, momentum(&states).1, energy(&states));
+    let mut contacts = Contacts::default();
+    let mut touched = false;
+    let applied = [Wrench::default(); 2];
+    for _ in 0..400 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &applied, DT);
+        touched |= contacts.pairs[pair_index(0, 1)].touching();
+        assert!(energy(&states) <= e0 + 1e-12, "gained energy");
+    }
+    let (p1, l1) = momentum(&states);
+    assert!(touched, "they met");
+    assert!((p1 - p0).norm() < 1e-12, "{p0:?} -> {p1:?}");
+    assert!((l1 - l0).norm() < 1e-12, "{l0:?} -> {l1:?}");
+    assert!(!contacts.pairs[pair_index(0, 1)].touching());
+    let apart = (states[1].vel - states[0].vel).dot(&(states[1].pos - states[0].pos));
+    assert!(apart > 0.0, "they part: {states:?}");
+    assert!(energy(&states) < e0, "the contact's damping took some");
+}
+
+/// Sixteen objects dropped on the table in a heap, twice: the same bits both times.
+#[test]
+fn the_same_world_steps_to_the_same_bits() {
+    let (planes, law) = (table(), law());
+    let physics = Physics {
+        gravity: Vec3::new(0.0, -9.81, 0.0),
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let shapes = [
+        Shape::Sphere { radius: 0.02 },
+        Shape::Box {
+            half: Vec3::new(0.02, 0.015, 0.025),
+        },
+        Shape::Cylinder {
+            radius: 0.02,
+            half_height: 0.01,
+        },
+    ];
+    let bodies: Vec<Body> = (0..16)
+        .map(|k| solid(shapes[k % 3], 0.05 + 0.01 * k as f64))
+        .collect();
+    let start: Vec<BodyState> = (0..16)
+        .map(|k| {
+            let (x, z) = ((k % 4) as f64 * 0.045, (k / 4) as f64 * 0.045);
+            BodyState::at_rest(Vec3::new(
+                x + 0.003 * (k % 3) as f64,
+                0.03 + 0.02 * (k % 2) as f64,
+                z,
+            ))
+        })
+        .collect();
+    let once = || {
+        let mut states = start.clone();
+        let mut contacts = Contacts::default();
+        run(&physics, &bodies, &mut states, &mut contacts, 0.5, 1.0);
+        (states, contacts)
+    };
+    let (a, b) = (once(), once());
+    assert_eq!(a, b);
+    assert!(a.1.pairs.iter().any(|p| p.touching()), "the heap touches");
+}
+
+/// One object on a table steps to the same bits as the single-body step with the environment.
+#[test]
+fn one_object_steps_as_the_single_body_step_does() {
+    let (planes, law) = (table(), law());
+    let g = Vec3::new(0.0, -3.27, 0.0);
+    let physics = Physics {
+        gravity: g,
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    let disk = solid(
+        Shape::Cylinder {
+            radius: 0.04,
+            half_height: 0.01,
+        },
+        0.1,
+    );
+    let tilted = nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), 1.4);
+    let start = BodyState {
+        rot: tilted,
+        vel: Vec3::new(0.3, 0.0, 0.1),
+        ..BodyState::at_rest(Vec3::new(0.0, 0.045, 0.0))
+    };
+    let push = Wrench {
+        force: Vec3::new(0.2, 0.0, 0.0),
+        torque: Vec3::new(0.0, 0.001, 0.0),
+    };
+    let (mut single, mut env) = (start, EnvContactState::default());
+    let (mut states, mut contacts) = ([start], Contacts::default());
+    for _ in 0..3000 {
+        single = body::step(&single, &disk.mass, g, DT, |s| {
+            environment_wrench(&law, &mut env, &planes, &disk.shape, s, &disk.mass).0 + push
+        });
+        step_objects(&physics, &[disk], &mut states, &mut contacts, &[push], DT);
+    }
+    assert_eq!(states[0], single);
+    assert_eq!(contacts.env[0], env);
+}
+
+/// A disk lying on the table, twisted about the table's normal by a torque: below the rotational
+/// friction's static limit (μ_s F_n r) it turns by the torsional spring's stretch only and stops;
+/// above it, it spins up under the torque less the kinetic limit (μ_k F_n r).
+#[test]
+fn rotational_friction_holds_below_its_limit_and_slips_above_it() {
+    let planes = table();
+    let law = ContactParams {
+        rotational_friction_radius_m: 0.02,
+        ..law()
+    };
+    let g = 9.81;
+    let physics = Physics {
+        gravity: Vec3::new(0.0, -g, 0.0),
+        planes: &planes,
+        env_contact: &law,
+        object_contact: &law,
+    };
+    // A disk lying flat: its axis (body z) along the table's normal (world y).
+    let disk = solid(
+        Shape::Cylinder {
+            radius: 0.04,
+            half_height: 0.01,
+        },
+        0.1,
+    );
+    let flat =
+        nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), -std::f64::consts::FRAC_PI_2);
+    let at_rest = BodyState {
+        rot: flat,
+        ..BodyState::at_rest(Vec3::new(0.0, 0.01 - 0.1 * g / 3000.0, 0.0))
+    };
+    let limit = law.friction_static * 0.1 * g * 0.02;
+    let spin = |torque: f64, seconds: f64| {
+        let (mut states, mut contacts) = ([at_rest], Contacts::default());
+        let twist = Wrench {
+            force: Vec3::zeros(),
+            torque: Vec3::new(0.0, torque, 0.0),
+        };
+        for _ in 0..(seconds / DT).round() as usize {
+            step_objects(&physics, &[disk], &mut states, &mut contacts, &[twist], DT);
+        }
+        states[0].omega(&disk.mass).y
+    };
+    let held = spin(0.5 * limit, 2.0);
+    assert!(held.abs() < 1e-6, "held: spinning at {held} rad/s");
+    let slipping = spin(2.0 * limit, 0.5);
+    let inertia_y = disk.mass.inertia_body.z;
+    let kinetic = law.friction_kinetic * 0.1 * g * 0.02;
+    let expected = (2.0 * limit - kinetic) / inertia_y * 0.5;
+    assert!(
+        slipping > 0.8 * expected && slipping < 1.05 * expected,
+        "slipping: {slipping} rad/s, about {expected} expected"
+    );
+}
