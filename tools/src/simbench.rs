@@ -13,7 +13,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use coop_model::body::{BodyState, MassProps, Vec3, Wrench};
+use coop_model::body::{BodyState, Vec3, Wrench};
 use coop_model::contact::{tool_contact, ContactForce, ContactParams, Plane, ToolContactState};
 use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
 use coop_model::method::{Consistency, ObjectCopy, Report};
@@ -22,7 +22,7 @@ use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::shape::Shape;
 use coop_model::sim::{self, Mode};
-use coop_model::world::{step_objects, Body, Contacts, Physics, MAX_OBJECTS};
+use coop_model::world::{cube_heap, step_objects, Body, Contacts, Physics, MAX_OBJECTS};
 
 use coop_actors::scenario_file;
 
@@ -228,54 +228,27 @@ pub struct WorldStepCost {
 /// The world-step figures: `objects` boxes (4 cm, 0.1 kg) in a heap on a table, two layers, each
 /// touching its neighbours, and `tools` tool tips (5 mm) pressed 1 mm into boxes around the heap;
 /// one step computes every tool's contact with every object (held over the step) and steps the
-/// objects together with rotational friction on every contact.
-pub fn world_step_figures(quick: bool) -> Vec<WorldStepCost> {
+/// objects together, every contact under `sc`'s environment law with rotational friction.
+pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
     let (batches, per_batch) = if quick { (3, 200) } else { (15, 2_000) };
     let law = ContactParams {
-        stiffness_n_per_m: 3000.0,
-        damping_n_s_per_m: 30.0,
-        tangential_stiffness_n_per_m: 3000.0,
-        tangential_damping_n_s_per_m: 15.0,
-        friction_static: 0.5,
-        friction_kinetic: 0.4,
         rotational_friction_radius_m: 0.01,
+        ..sc.environment_contact
     };
-    let planes = [Plane {
+    let table = [Plane {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let physics = Physics {
-        gravity: Vec3::new(0.0, 0.0, -9.81),
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
+    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
     let shape = Shape::Box {
         half: Vec3::repeat(0.02),
     };
-    let body = Body {
-        shape,
-        mass: MassProps {
-            mass_kg: 0.1,
-            inertia_body: shape.inertia(0.1),
-        },
-        fixed: false,
-    };
+    let body = Body::solid(shape, 0.1);
     let mut out = Vec::new();
     for objects in [1usize, 4, 16] {
         for tools in [2usize, 8] {
             let bodies = vec![body; objects];
-            // A 4 x 2 grid per layer, the second layer on the first; 1 mm into each other.
-            let start: Vec<BodyState> = (0..objects)
-                .map(|k| {
-                    let (x, y, z) = (k % 4, k / 4 % 2, k / 8);
-                    BodyState::at_rest(Vec3::new(
-                        x as f64 * 0.039,
-                        y as f64 * 0.039,
-                        0.0199 + z as f64 * 0.039,
-                    ))
-                })
-                .collect();
+            let start = cube_heap(objects, 0.02);
             // Tool k presses into object k mod n from outside the heap's side.
             let tips: Vec<(Vec3, usize)> = (0..tools)
                 .map(|k| {
@@ -287,14 +260,14 @@ pub fn world_step_figures(quick: bool) -> Vec<WorldStepCost> {
             let step_ns = median(
                 (0..batches)
                     .map(|_| {
-                        let mut states = start.clone();
+                        let mut states = start;
                         let mut contacts = Contacts::default();
                         let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
                         let t0 = Instant::now();
                         for _ in 0..per_batch {
                             let mut applied = [Wrench::default(); MAX_OBJECTS];
                             for (t, (tip, _)) in tips.iter().enumerate() {
-                                for (o, s) in states.iter().enumerate() {
+                                for (o, s) in states[..objects].iter().enumerate() {
                                     let c = tool_contact(
                                         &law,
                                         &mut memory[t][o],
@@ -313,7 +286,7 @@ pub fn world_step_figures(quick: bool) -> Vec<WorldStepCost> {
                             step_objects(
                                 &physics,
                                 &bodies,
-                                &mut states,
+                                &mut states[..objects],
                                 &mut contacts,
                                 &applied,
                                 1e-3,
@@ -431,7 +404,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         speeds.push((mode.name(), s));
     }
     let (costs, loads) = rollback_figures(&sc, quick)?;
-    let worlds = world_step_figures(quick);
+    let worlds = world_step_figures(&sc, quick);
     if json {
         let v = serde_json::json!({
             "scenario": sc.name,

@@ -11,7 +11,7 @@
 use nalgebra::UnitQuaternion;
 
 use crate::body::{BodyState, MassProps, Vec3, Wrench};
-use crate::shape::Shape;
+use crate::shape::{Shape, MAX_CONTACT_POINTS};
 
 /// Contact law parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -442,7 +442,7 @@ pub struct PairSide<'a> {
 }
 
 /// Most points an object–object contact weighs: every contact point of either shape.
-const PAIR_POINTS: usize = 32;
+const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
 
 /// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
 /// `a`, the wrench on `b`, and whether they touch.
@@ -475,7 +475,7 @@ pub fn pair_wrench(
     let mut n_touch = 0usize;
     // The points of `from` inside `into`; `sign` +1 where `from` is `a`, -1 where it is `b`.
     let mut gather = |from: &PairSide<'_>, into: &PairSide<'_>, sign: f64| {
-        let mut local = [Vec3::zeros(); 16];
+        let mut local = [Vec3::zeros(); MAX_CONTACT_POINTS];
         let (count, margin) = from.shape.contact_points(&mut local);
         let (r_from, inv_into) = (from.body.rot, into.body.rot.inverse());
         for q in &local[..count] {
@@ -508,7 +508,16 @@ pub fn pair_wrench(
         patch += p;
     }
     let p = centre / weight;
-    let n = normal.normalize();
+    // Opposite normals of equal depth (two faces flush, rounding leaving points of each a hair
+    // inside the other) sum to nothing: the deepest point's own normal then.
+    let n = if normal.norm() > 1e-9 * weight {
+        normal.normalize()
+    } else {
+        touching
+            .iter()
+            .fold(touching[0], |best, t| if t.2 > best.2 { *t } else { best })
+            .1
+    };
     let patch = patch / n_touch as f64;
     let (omega_a, omega_b) = (a.body.omega(a.mass), b.body.omega(b.mass));
     // The velocity of `a` relative to `b` at world point `q`.

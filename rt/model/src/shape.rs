@@ -6,6 +6,9 @@
 
 use crate::body::Vec3;
 
+/// Most points [`Shape::contact_points`] gives (a cylinder's 18).
+pub const MAX_CONTACT_POINTS: usize = 18;
+
 /// A convex object shape, centred on its centre of mass.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Shape {
@@ -106,16 +109,37 @@ impl Shape {
     }
 
     /// The body-frame points that can touch another object, and the margin around them: a sphere
-    /// is its centre with its radius, a box or a cylinder its [`Shape::probe_points`] with none.
-    /// The deepest point of the shape into another lies `margin` from a point, against that other's
-    /// surface normal.
-    pub fn contact_points(&self, out: &mut [Vec3; 16]) -> (usize, f64) {
+    /// is its centre with its radius; a box its corners and its faces' centres, a cylinder its
+    /// [`Shape::probe_points`] and its caps' centres, with none. The deepest point of the shape
+    /// into another lies `margin` from a point, against that other's surface normal. (A face
+    /// lying flat on another of the same size has its corners on the other's side faces, at
+    /// depth 0: its centre is the point that finds it.)
+    pub fn contact_points(&self, out: &mut [Vec3; MAX_CONTACT_POINTS]) -> (usize, f64) {
+        let mut probes = [Vec3::zeros(); 16];
         match *self {
             Shape::Sphere { radius } => {
                 out[0] = Vec3::zeros();
                 (1, radius)
             }
-            _ => (self.probe_points(out), 0.0),
+            Shape::Cylinder { half_height, .. } => {
+                let n = self.probe_points(&mut probes);
+                out[..n].copy_from_slice(&probes[..n]);
+                out[n] = Vec3::new(0.0, 0.0, half_height);
+                out[n + 1] = Vec3::new(0.0, 0.0, -half_height);
+                (n + 2, 0.0)
+            }
+            Shape::Box { half } => {
+                let n = self.probe_points(&mut probes);
+                out[..n].copy_from_slice(&probes[..n]);
+                for axis in 0..3 {
+                    for (k, sign) in [1.0, -1.0].into_iter().enumerate() {
+                        let mut c = Vec3::zeros();
+                        c[axis] = sign * half[axis];
+                        out[n + 2 * axis + k] = c;
+                    }
+                }
+                (n + 6, 0.0)
+            }
         }
     }
 

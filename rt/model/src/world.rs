@@ -105,6 +105,39 @@ pub struct Body {
     pub fixed: bool,
 }
 
+impl Body {
+    /// A movable solid of uniform density: `shape`, `mass_kg`.
+    pub fn solid(shape: Shape, mass_kg: f64) -> Self {
+        Self {
+            shape,
+            mass: MassProps {
+                mass_kg,
+                inertia_body: shape.inertia(mass_kg),
+            },
+            fixed: false,
+        }
+    }
+}
+
+/// `count` (at most [`MAX_OBJECTS`]) cubes of half size `half_m`, resting on a table through the
+/// origin (normal +z) in a heap: rows of four, two rows to a layer, layers on layers, each
+/// pressed 1 mm into its neighbours; the rest of the array at the origin. The scene the physics
+/// benchmark times and the allocation test steps.
+pub fn cube_heap(count: usize, half_m: f64) -> [BodyState; MAX_OBJECTS] {
+    let pitch = 2.0 * half_m - 1e-3;
+    std::array::from_fn(|k| {
+        if k >= count {
+            return BodyState::at_rest(Vec3::zeros());
+        }
+        let (x, y, z) = (k % 4, k / 4 % 2, k / 8);
+        BodyState::at_rest(Vec3::new(
+            x as f64 * pitch,
+            y as f64 * pitch,
+            half_m - 1e-4 + z as f64 * pitch,
+        ))
+    })
+}
+
 /// Where the pair of objects `i < j` keeps its friction memory among a world's [`MAX_PAIRS`]:
 /// pairs in the order (0, 1), (0, 2), …, (1, 2), … — the order every site steps them in.
 pub fn pair_index(i: usize, j: usize) -> usize {
@@ -141,6 +174,18 @@ pub struct Physics<'a> {
     pub env_contact: &'a ContactParams,
     /// Object–object contact law.
     pub object_contact: &'a ContactParams,
+}
+
+impl<'a> Physics<'a> {
+    /// One contact law for the environment and between the objects.
+    pub fn uniform(gravity: Vec3, planes: &'a [Plane], law: &'a ContactParams) -> Self {
+        Self {
+            gravity,
+            planes,
+            env_contact: law,
+            object_contact: law,
+        }
+    }
 }
 
 /// Every object's applied wrench at the poses `states`: the environment's on each object in
@@ -210,41 +255,26 @@ pub fn step_objects(
     let n = bodies.len().min(states.len()).min(MAX_OBJECTS);
     let mut w = [Wrench::default(); MAX_OBJECTS];
     let mut half = [HalfStep::default(); MAX_OBJECTS];
-    wrenches(
-        physics,
-        &bodies[..n],
-        &states[..n],
-        contacts,
-        applied,
-        &mut w,
-    );
-    for k in 0..n {
-        if !bodies[k].fixed {
-            let (next, h) =
-                body::kick_drift(&states[k], &bodies[k].mass, physics.gravity, dt, &w[k]);
-            states[k] = next;
-            half[k] = h;
-        }
+    let bodies = &bodies[..n];
+    let evaluate =
+        |states: &[BodyState], contacts: &mut Contacts, w: &mut [Wrench; MAX_OBJECTS]| {
+            wrenches(physics, bodies, states, contacts, applied, w);
+        };
+    evaluate(&states[..n], contacts, &mut w);
+    for k in (0..n).filter(|&k| !bodies[k].fixed) {
+        (states[k], half[k]) =
+            body::kick_drift(&states[k], &bodies[k].mass, physics.gravity, dt, &w[k]);
     }
-    wrenches(
-        physics,
-        &bodies[..n],
-        &states[..n],
-        contacts,
-        applied,
-        &mut w,
-    );
-    for k in 0..n {
-        if !bodies[k].fixed {
-            body::kick(
-                &mut states[k],
-                &bodies[k].mass,
-                physics.gravity,
-                dt,
-                &half[k],
-                &w[k],
-            );
-        }
+    evaluate(&states[..n], contacts, &mut w);
+    for k in (0..n).filter(|&k| !bodies[k].fixed) {
+        body::kick(
+            &mut states[k],
+            &bodies[k].mass,
+            physics.gravity,
+            dt,
+            &half[k],
+            &w[k],
+        );
     }
 }
 

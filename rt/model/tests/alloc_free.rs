@@ -144,40 +144,23 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
 #[test]
 fn a_world_of_the_most_objects_steps_without_allocating() {
     use coop_model::body::Wrench;
-    use coop_model::world::{step_objects, Body, Contacts, Physics, MAX_OBJECTS};
+    use coop_model::world::{cube_heap, step_objects, Body, Contacts, Physics, MAX_OBJECTS};
     let law = ContactParams {
         rotational_friction_radius_m: 0.01,
         ..contact()
     };
-    let planes = [Plane {
+    let table = [Plane {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let physics = Physics {
-        gravity: Vec3::new(0.0, 0.0, -9.81),
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
-    let shape = Shape::Box {
-        half: Vec3::new(0.02, 0.02, 0.015),
-    };
-    let body = Body {
-        shape,
-        mass: MassProps {
-            mass_kg: 0.1,
-            inertia_body: shape.inertia(0.1),
+    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
+    let bodies = [Body::solid(
+        Shape::Box {
+            half: Vec3::repeat(0.02),
         },
-        fixed: false,
-    };
-    let bodies = [body; MAX_OBJECTS];
-    let mut states: [BodyState; MAX_OBJECTS] = std::array::from_fn(|k| {
-        BodyState::at_rest(Vec3::new(
-            (k % 4) as f64 * 0.039,
-            (k / 4 % 2) as f64 * 0.039,
-            0.015 + (k / 8) as f64 * 0.029,
-        ))
-    });
+        0.1,
+    ); MAX_OBJECTS];
+    let mut states = cube_heap(MAX_OBJECTS, 0.02);
     let applied = [Wrench {
         force: Vec3::new(0.01, 0.0, 0.0),
         torque: Vec3::zeros(),

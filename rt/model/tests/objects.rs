@@ -2,35 +2,37 @@
 //! rests, a box rests on a fixture, a collision conserves momentum and gains no energy, the same
 //! inputs give the same bits, and one object steps exactly as the single-body step does.
 
-use coop_model::body::{self, BodyState, MassProps, Vec3, Wrench};
+use coop_model::body::{self, BodyState, Vec3, Wrench};
 use coop_model::contact::{environment_wrench, ContactParams, EnvContactState, Plane};
 use coop_model::shape::Shape;
 use coop_model::world::{pair_index, step_objects, Body, Contacts, Physics};
 
 const DT: f64 = 1e-3;
 
-/// The table's law (`paper.toml`'s environment contact).
+/// Boxes on a table and on each other: stiff, well damped, wood-on-wood friction, no rotational
+/// friction (the tests that need it set it).
 fn law() -> ContactParams {
     ContactParams {
         stiffness_n_per_m: 3000.0,
         damping_n_s_per_m: 30.0,
         tangential_stiffness_n_per_m: 3000.0,
         tangential_damping_n_s_per_m: 15.0,
-        friction_static: 0.35,
-        friction_kinetic: 0.3,
+        friction_static: 0.5,
+        friction_kinetic: 0.4,
         rotational_friction_radius_m: 0.0,
     }
 }
 
-fn solid(shape: Shape, mass_kg: f64) -> Body {
-    Body {
-        shape,
-        mass: MassProps {
-            mass_kg,
-            inertia_body: shape.inertia(mass_kg),
-        },
-        fixed: false,
-    }
+/// A cylinder of `radius`, `half_height` and `mass_kg`, and the turn that stands its axis (body z)
+/// along world y, the table's normal.
+fn along_y(radius: f64, half_height: f64, mass_kg: f64) -> (Body, nalgebra::UnitQuaternion<f64>) {
+    let shape = Shape::Cylinder {
+        radius,
+        half_height,
+    };
+    let turn =
+        nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), -std::f64::consts::FRAC_PI_2);
+    (Body::solid(shape, mass_kg), turn)
 }
 
 fn table() -> [Plane; 1] {
@@ -68,8 +70,8 @@ fn run(
     worst
 }
 
-/// The stack the next two tests rest on a table tilted 10° (gravity tilted; static friction, 0.35,
-/// holds up to 19°): a small box on a larger one, off its centre, so friction must hold both
+/// The stack the next two tests rest on a table tilted 10° (gravity tilted; static friction, 0.5,
+/// holds up to 26°): a small box on a larger one, off its centre, so friction must hold both
 /// along the slope and the lower box from turning under its load. Steps it 11 s, rotational
 /// friction over a patch of `radius_m`; the most either moved in the last 10 s, m, and the states.
 fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
@@ -79,20 +81,15 @@ fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
         ..law()
     };
     let (sin, cos) = 10f64.to_radians().sin_cos();
-    let physics = Physics {
-        gravity: Vec3::new(9.81 * sin, -9.81 * cos, 0.0),
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
+    let physics = Physics::uniform(Vec3::new(9.81 * sin, -9.81 * cos, 0.0), &planes, &law);
     let bodies = [
-        solid(
+        Body::solid(
             Shape::Box {
                 half: Vec3::new(0.05, 0.02, 0.05),
             },
             0.2,
         ),
-        solid(
+        Body::solid(
             Shape::Box {
                 half: Vec3::new(0.03, 0.02, 0.03),
             },
@@ -164,31 +161,18 @@ fn without_rotational_friction_a_box_turns_under_an_off_centre_load() {
 #[test]
 fn an_object_rests_on_a_fixture() {
     let law = law();
-    let physics = Physics {
-        gravity: Vec3::new(0.0, -9.81, 0.0),
-        planes: &[],
-        env_contact: &law,
-        object_contact: &law,
-    };
+    let physics = Physics::uniform(Vec3::new(0.0, -9.81, 0.0), &[], &law);
     let fixture = Body {
         fixed: true,
-        ..solid(
+        ..Body::solid(
             Shape::Box {
                 half: Vec3::new(0.1, 0.01, 0.1),
             },
             1.0,
         )
     };
-    // A can standing on its end (its axis, body z, turned to world y).
-    let can = solid(
-        Shape::Cylinder {
-            radius: 0.03,
-            half_height: 0.05,
-        },
-        0.15,
-    );
-    let upright =
-        nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), -std::f64::consts::FRAC_PI_2);
+    // A can standing on its end.
+    let (can, upright) = along_y(0.03, 0.05, 0.15);
     let bodies = [fixture, can];
     let fixed_at = BodyState::at_rest(Vec3::zeros());
     let mut states = [
@@ -214,15 +198,10 @@ fn an_object_rests_on_a_fixture() {
 #[test]
 fn a_collision_conserves_momentum_and_gains_no_energy() {
     let law = law();
-    let physics = Physics {
-        gravity: Vec3::zeros(),
-        planes: &[],
-        env_contact: &law,
-        object_contact: &law,
-    };
+    let physics = Physics::uniform(Vec3::zeros(), &[], &law);
     let bodies = [
-        solid(Shape::Sphere { radius: 0.03 }, 0.2),
-        solid(Shape::Sphere { radius: 0.02 }, 0.05),
+        Body::solid(Shape::Sphere { radius: 0.03 }, 0.2),
+        Body::solid(Shape::Sphere { radius: 0.02 }, 0.05),
     ];
     let mut states = [
         BodyState {
@@ -271,12 +250,7 @@ fn a_collision_conserves_momentum_and_gains_no_energy() {
 #[test]
 fn the_same_world_steps_to_the_same_bits() {
     let (planes, law) = (table(), law());
-    let physics = Physics {
-        gravity: Vec3::new(0.0, -9.81, 0.0),
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
+    let physics = Physics::uniform(Vec3::new(0.0, -9.81, 0.0), &planes, &law);
     let shapes = [
         Shape::Sphere { radius: 0.02 },
         Shape::Box {
@@ -288,7 +262,7 @@ fn the_same_world_steps_to_the_same_bits() {
         },
     ];
     let bodies: Vec<Body> = (0..16)
-        .map(|k| solid(shapes[k % 3], 0.05 + 0.01 * k as f64))
+        .map(|k| Body::solid(shapes[k % 3], 0.05 + 0.01 * k as f64))
         .collect();
     let start: Vec<BodyState> = (0..16)
         .map(|k| {
@@ -316,13 +290,8 @@ fn the_same_world_steps_to_the_same_bits() {
 fn one_object_steps_as_the_single_body_step_does() {
     let (planes, law) = (table(), law());
     let g = Vec3::new(0.0, -3.27, 0.0);
-    let physics = Physics {
-        gravity: g,
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
-    let disk = solid(
+    let physics = Physics::uniform(g, &planes, &law);
+    let disk = Body::solid(
         Shape::Cylinder {
             radius: 0.04,
             half_height: 0.01,
@@ -362,22 +331,9 @@ fn rotational_friction_holds_below_its_limit_and_slips_above_it() {
         ..law()
     };
     let g = 9.81;
-    let physics = Physics {
-        gravity: Vec3::new(0.0, -g, 0.0),
-        planes: &planes,
-        env_contact: &law,
-        object_contact: &law,
-    };
-    // A disk lying flat: its axis (body z) along the table's normal (world y).
-    let disk = solid(
-        Shape::Cylinder {
-            radius: 0.04,
-            half_height: 0.01,
-        },
-        0.1,
-    );
-    let flat =
-        nalgebra::UnitQuaternion::from_axis_angle(&Vec3::x_axis(), -std::f64::consts::FRAC_PI_2);
+    let physics = Physics::uniform(Vec3::new(0.0, -g, 0.0), &planes, &law);
+    // A disk lying flat.
+    let (disk, flat) = along_y(0.04, 0.01, 0.1);
     let at_rest = BodyState {
         rot: flat,
         ..BodyState::at_rest(Vec3::new(0.0, 0.01 - 0.1 * g / 3000.0, 0.0))
@@ -404,4 +360,51 @@ fn rotational_friction_holds_below_its_limit_and_slips_above_it() {
         slipping > 0.8 * expected && slipping < 1.05 * expected,
         "slipping: {slipping} rad/s, about {expected} expected"
     );
+}
+
+/// Equal shapes flush face to face, 1 mm into each other (a row of equal boxes, two coins stacked
+/// exactly): every corner or rim point lies on the other's side faces at depth 0, and rounding
+/// leaves some a hair inside with opposite normals. The contact is found at its real depth along
+/// the faces' normal, finite.
+#[test]
+fn flush_faces_of_equal_shapes_touch_at_their_depth() {
+    use coop_model::contact::{pair_wrench, PairContactState, PairSide};
+    let law = law();
+    let cube = Body::solid(
+        Shape::Box {
+            half: Vec3::repeat(0.02),
+        },
+        0.1,
+    );
+    let coin = Body::solid(
+        Shape::Cylinder {
+            radius: 0.02,
+            half_height: 0.003,
+        },
+        0.01,
+    );
+    for (body, apart) in [
+        (cube, Vec3::new(0.039, 0.0, 0.0)),
+        (cube, Vec3::new(0.0, 0.0, 0.039)),
+        (coin, Vec3::new(0.0, 0.0, 0.005)),
+    ] {
+        let a = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.0199));
+        let b = BodyState::at_rest(a.pos + apart);
+        let side = |s| PairSide {
+            shape: &body.shape,
+            body: s,
+            mass: &body.mass,
+        };
+        let mut memory = PairContactState::default();
+        let (on_a, on_b, touching) = pair_wrench(&law, &mut memory, side(&a), side(&b));
+        let push = -apart.normalize() * (law.stiffness_n_per_m * 1e-3);
+        assert!(touching, "{apart:?}");
+        assert!(on_a.is_finite() && on_b.is_finite(), "{on_a:?}");
+        assert!(
+            (on_a.force - push).norm() < 1e-6 * push.norm(),
+            "{:?} not {push:?}",
+            on_a.force
+        );
+        assert_eq!(on_b.force, -on_a.force);
+    }
 }
