@@ -441,6 +441,194 @@ pub struct PairSide<'a> {
     pub mass: &'a MassProps,
 }
 
+/// What the separating-axis test of two boxes found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+// NB: returned by value on the physics path, where nothing allocates: the points are not boxed.
+#[allow(clippy::large_enum_variant)]
+enum BoxOverlap {
+    /// An axis separates them: they do not touch.
+    Apart,
+    /// They overlap least along a face's normal: the other box's face most against it, clipped
+    /// to that face's sides, its points below the face (`count` of `points`: point, normal
+    /// pushing the first box away from the second, depth).
+    Faces {
+        /// Touching points.
+        points: [(Vec3, Vec3, f64); 8],
+        /// How many.
+        count: usize,
+    },
+    /// They overlap least along the cross product of an edge of each (two edges crossing): the
+    /// contact is at the middle of the edges' closest points, `normal` pushing the first box away
+    /// from the second, `depth` the overlap along it.
+    Edges {
+        /// World point.
+        point: Vec3,
+        /// Unit normal, from the second box towards the first.
+        normal: Vec3,
+        /// Overlap, m.
+        depth: f64,
+    },
+}
+
+/// An edge axis wins only where it overlaps less than every face axis by this share: near a tie
+/// the face contact is the one that rests (and the choice does not flicker step to step).
+const EDGE_AXIS_MARGIN: f64 = 0.95;
+
+/// The separating-axis test of two boxes (half extents `ha`, `hb`): their 3 + 3 face normals and
+/// the 9 cross products of an edge of each. Only `+ − × ÷ sqrt`.
+fn box_box_axes(a: &BodyState, ha: Vec3, b: &BodyState, hb: Vec3) -> BoxOverlap {
+    let (ra, rb) = (a.rot.to_rotation_matrix(), b.rot.to_rotation_matrix());
+    let axes_a = [ra * Vec3::x(), ra * Vec3::y(), ra * Vec3::z()];
+    let axes_b = [rb * Vec3::x(), rb * Vec3::y(), rb * Vec3::z()];
+    let d = b.pos - a.pos;
+    // The overlap of the boxes' projections on the unit axis `l`, and `l` turned to point from
+    // `a` to `b`.
+    let overlap = |l: Vec3| {
+        let reach =
+            |axes: &[Vec3; 3], h: Vec3| (0..3).map(|k| h[k] * axes[k].dot(&l).abs()).sum::<f64>();
+        let along = l.dot(&d);
+        let l = if along < 0.0 { -l } else { l };
+        (reach(&axes_a, ha) + reach(&axes_b, hb) - along.abs(), l)
+    };
+    let mut best_face = f64::INFINITY;
+    // (the first box's axis: 0-2, the second's: 3-5, the axis turned from `a` to `b`)
+    let mut best_face_axis = (0, Vec3::zeros());
+    for (k, l) in axes_a.iter().chain(&axes_b).enumerate() {
+        let (o, l) = overlap(*l);
+        if o <= 0.0 {
+            return BoxOverlap::Apart;
+        }
+        if o < best_face {
+            (best_face, best_face_axis) = (o, (k, l));
+        }
+    }
+    let mut best_edge: Option<(f64, Vec3, usize, usize)> = None;
+    for (i, ea) in axes_a.iter().enumerate() {
+        for (j, eb) in axes_b.iter().enumerate() {
+            let c = ea.cross(eb);
+            let len = c.norm();
+            if len < 1e-9 {
+                continue; // parallel edges: a face axis covers them
+            }
+            let (o, l) = overlap(c / len);
+            if o <= 0.0 {
+                return BoxOverlap::Apart;
+            }
+            if best_edge.is_none_or(|(best, ..)| o < best) {
+                best_edge = Some((o, l, i, j));
+            }
+        }
+    }
+    let Some((depth, l, i, j)) = best_edge.filter(|(o, ..)| *o < EDGE_AXIS_MARGIN * best_face)
+    else {
+        return faces(a.pos, &axes_a, ha, b.pos, &axes_b, hb, best_face_axis);
+    };
+    // The edge of each box along its axis i (j) nearest the other along `l`.
+    let edge = |centre: Vec3, axes: &[Vec3; 3], h: Vec3, along: usize, towards: Vec3| {
+        (0..3).filter(|&k| k != along).fold(centre, |p, k| {
+            p + axes[k] * (h[k] * axes[k].dot(&towards).signum())
+        })
+    };
+    let pa = edge(a.pos, &axes_a, ha, i, l);
+    let pb = edge(b.pos, &axes_b, hb, j, -l);
+    let (u, v) = (axes_a[i], axes_b[j]);
+    // Closest points of the lines pa + s u and pb + t v (unit u, v, not parallel), each kept on
+    // its edge.
+    let w = pa - pb;
+    let (uv, uw, vw) = (u.dot(&v), u.dot(&w), v.dot(&w));
+    let den = 1.0 - uv * uv;
+    let s = ((uv * vw - uw) / den).clamp(-ha[i], ha[i]);
+    let t = ((vw - uv * uw) / den).clamp(-hb[j], hb[j]);
+    BoxOverlap::Edges {
+        point: (pa + u * s + pb + v * t) * 0.5,
+        normal: -l,
+        depth,
+    }
+}
+
+/// The face contact of two boxes (centres `ca`, `cb`, axes, half extents) overlapping least along
+/// face axis `axis` (0-2 the first box's, 3-5 the second's; `l` that axis turned from the first
+/// towards the second): the reference face is that box's face towards the other, the incident
+/// face the other box's face most against it; the incident face's corners are clipped to the
+/// reference face's sides (Sutherland–Hodgman, at most 8 points), and those below the reference
+/// face touch, as deep as they are below it.
+fn faces(
+    ca: Vec3,
+    axes_a: &[Vec3; 3],
+    ha: Vec3,
+    cb: Vec3,
+    axes_b: &[Vec3; 3],
+    hb: Vec3,
+    (axis, l): (usize, Vec3),
+) -> BoxOverlap {
+    // Reference box r, incident box i; `n` out of the reference face, towards the incident box.
+    let a_is_reference = axis < 3;
+    let (cr, axes_r, hr, ci, axes_i, hi, k, n) = if a_is_reference {
+        (ca, axes_a, ha, cb, axes_b, hb, axis, l)
+    } else {
+        (cb, axes_b, hb, ca, axes_a, ha, axis - 3, -l)
+    };
+    let face_centre = cr + n * hr[k];
+    let (u1, u2) = ((k + 1) % 3, (k + 2) % 3);
+    // The incident face: the incident box's face whose outward normal is most against `n`.
+    let m = (0..3).fold(0, |best, q| {
+        if axes_i[q].dot(&n).abs() > axes_i[best].dot(&n).abs() {
+            q
+        } else {
+            best
+        }
+    });
+    let out_i = axes_i[m] * -axes_i[m].dot(&n).signum();
+    let centre_i = ci + out_i * hi[m];
+    let (m1, m2) = ((m + 1) % 3, (m + 2) % 3);
+    let (e1, e2) = (axes_i[m1] * hi[m1], axes_i[m2] * hi[m2]);
+    let mut poly = [Vec3::zeros(); 8];
+    poly[..4].copy_from_slice(&[
+        centre_i + e1 + e2,
+        centre_i - e1 + e2,
+        centre_i - e1 - e2,
+        centre_i + e1 - e2,
+    ]);
+    let mut len = 4;
+    // Clip to the four side planes of the reference face: side · (p − face centre) <= extent.
+    for (side, extent) in [
+        (axes_r[u1], hr[u1]),
+        (-axes_r[u1], hr[u1]),
+        (axes_r[u2], hr[u2]),
+        (-axes_r[u2], hr[u2]),
+    ] {
+        let mut out = [Vec3::zeros(); 8];
+        let mut kept = 0;
+        let inside = |p: &Vec3| extent - side.dot(&(p - face_centre));
+        for q in 0..len {
+            let (p, next) = (poly[q], poly[(q + 1) % len]);
+            let (dp, dn) = (inside(&p), inside(&next));
+            if dp >= 0.0 && kept < 8 {
+                out[kept] = p;
+                kept += 1;
+            }
+            if (dp >= 0.0) != (dn >= 0.0) && kept < 8 {
+                out[kept] = p + (next - p) * (dp / (dp - dn));
+                kept += 1;
+            }
+        }
+        poly = out;
+        len = kept;
+    }
+    // Pushing the first box away from the second.
+    let normal_a = if a_is_reference { -n } else { n };
+    let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0); 8];
+    let mut count = 0;
+    for p in &poly[..len] {
+        let depth = -n.dot(&(p - face_centre));
+        if depth > 0.0 {
+            points[count] = (*p, normal_a, depth);
+            count += 1;
+        }
+    }
+    BoxOverlap::Faces { points, count }
+}
+
 /// Most points an object–object contact weighs: every contact point of either shape.
 const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
 
@@ -456,8 +644,10 @@ const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
 /// where the contact began (the touching points' centre). Whatever acts on `b` is exactly the
 /// negative of what acts on `a`, at the same points: momentum is conserved to the bit.
 ///
-/// A box's or a cylinder's contact points are its corners and rim points: a face or a corner
-/// resting on another shape is found, two edges crossing each other between their ends are not.
+/// Two boxes' touching points come from the separating-axis test instead: the other box's face
+/// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
+/// which no corner of either finds). Two cylinders, or a cylinder and a box, crossing edge over
+/// edge between their ends are not found.
 pub fn pair_wrench(
     c: &ContactParams,
     state: &mut PairContactState,
@@ -473,6 +663,31 @@ pub fn pair_wrench(
     // (point, normal pushing `a` away from `b`, depth)
     let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0f64); PAIR_POINTS];
     let mut n_touch = 0usize;
+    // Two boxes: the separating-axis test, then the clipped face contact or the crossing of two
+    // edges (which no corner or face centre of either finds: two bars crossed).
+    if let (Shape::Box { half: ha }, Shape::Box { half: hb }) = (*a.shape, *b.shape) {
+        match box_box_axes(a.body, ha, b.body, hb) {
+            BoxOverlap::Apart => {
+                *state = PairContactState::default();
+                return none;
+            }
+            BoxOverlap::Edges {
+                point,
+                normal,
+                depth,
+            } => {
+                points[0] = (point, normal, depth);
+                n_touch = 1;
+            }
+            BoxOverlap::Faces {
+                points: found,
+                count,
+            } => {
+                points[..count].copy_from_slice(&found[..count]);
+                n_touch = count;
+            }
+        }
+    }
     // The points of `from` inside `into`; `sign` +1 where `from` is `a`, -1 where it is `b`.
     let mut gather = |from: &PairSide<'_>, into: &PairSide<'_>, sign: f64| {
         let mut local = [Vec3::zeros(); MAX_CONTACT_POINTS];
@@ -491,8 +706,10 @@ pub fn pair_wrench(
             }
         }
     };
-    gather(&a, &b, 1.0);
-    gather(&b, &a, -1.0);
+    if !matches!((a.shape, b.shape), (Shape::Box { .. }, Shape::Box { .. })) {
+        gather(&a, &b, 1.0);
+        gather(&b, &a, -1.0);
+    }
     if n_touch == 0 {
         *state = PairContactState::default();
         return none;

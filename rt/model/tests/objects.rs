@@ -408,3 +408,63 @@ fn flush_faces_of_equal_shapes_touch_at_their_depth() {
         assert_eq!(on_b.force, -on_a.force);
     }
 }
+
+/// Two bars crossed, 1 mm into each other, where no corner or face centre of either is inside
+/// the other: flat bars crossing away from both their centres (the face contact clipped to the
+/// crossing's square), and bars turned 45° about their lengths crossing ridge on ridge (two
+/// edges). Each is found at its depth, pushing the bars apart along the vertical.
+#[test]
+fn crossed_bars_touch_where_they_cross() {
+    use coop_model::contact::{pair_wrench, PairContactState, PairSide};
+    use nalgebra::UnitQuaternion;
+    let law = law();
+    let (along_x, along_z) = (Vec3::new(0.1, 0.01, 0.01), Vec3::new(0.01, 0.01, 0.1));
+    let bar = |half: Vec3| Body::solid(Shape::Box { half }, 0.2);
+    let ridge = 0.01 * std::f64::consts::SQRT_2;
+    let quarter = std::f64::consts::FRAC_PI_4;
+    let cases = [
+        (
+            "flat",
+            BodyState::at_rest(Vec3::zeros()),
+            BodyState::at_rest(Vec3::new(0.05, 0.019, 0.05)),
+        ),
+        (
+            "ridge on ridge",
+            BodyState {
+                rot: UnitQuaternion::from_axis_angle(&Vec3::x_axis(), quarter),
+                ..BodyState::at_rest(Vec3::zeros())
+            },
+            BodyState {
+                rot: UnitQuaternion::from_axis_angle(&Vec3::z_axis(), quarter),
+                ..BodyState::at_rest(Vec3::new(0.0, 2.0 * ridge - 1e-3, 0.0))
+            },
+        ),
+    ];
+    for (name, lower, upper) in cases {
+        let (a, b) = (bar(along_x), bar(along_z));
+        let mut memory = PairContactState::default();
+        let (on_lower, on_upper, touching) = pair_wrench(
+            &law,
+            &mut memory,
+            PairSide {
+                shape: &a.shape,
+                body: &lower,
+                mass: &a.mass,
+            },
+            PairSide {
+                shape: &b.shape,
+                body: &upper,
+                mass: &b.mass,
+            },
+        );
+        assert!(touching, "{name}: not found");
+        let up = on_upper.force;
+        assert!(
+            (up.y - law.stiffness_n_per_m * 1e-3).abs() < 1e-6
+                && up.x.abs() < 1e-9
+                && up.z.abs() < 1e-9,
+            "{name}: {up:?}"
+        );
+        assert_eq!(on_lower.force, -up, "{name}");
+    }
+}
