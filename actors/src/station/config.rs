@@ -377,6 +377,16 @@ impl StationConfig {
                 );
             }
         }
+        let twist = scenario.environment_contact.rotational_friction_radius_m;
+        if scenario.method == MethodName::Timewarp && twist != 0.0 {
+            // A confirmed state a site adopts travels as the ring's and the wire's snapshot,
+            // which carries the friction stick points but not the rotational friction's memory:
+            // the adopting site would go on from another state than the one it adopted.
+            bail!(
+                "environment_contact.rotational_friction_radius_m = {twist} (scenario {:?}): method timewarp on stations cannot carry rotational friction's memory in the states sites adopt; the simulator runs it (sim), stations run it with another method",
+                scenario.name
+            );
+        }
         let name = self
             .station
             .clone()
@@ -765,6 +775,31 @@ mod tests {
                     && err.contains("must equal site[0]'s"),
                 "{err}"
             );
+        }
+    }
+
+    /// A timewarp station refuses a table with rotational friction (its adopted states could not
+    /// carry that friction's memory); other methods take it.
+    #[test]
+    fn timewarp_stations_refuse_rotational_friction_they_cannot_carry() {
+        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
+        sc.environment_contact.rotational_friction_radius_m = 0.01;
+        for m in MethodName::ALL {
+            let c = StationConfig {
+                method: Some(m),
+                ..StationConfig::default()
+            };
+            let got = c.resolve_with(None, sc.clone());
+            if m == MethodName::Timewarp {
+                let err = format!("{:#}", got.expect_err("refused"));
+                assert!(
+                    err.contains("environment_contact.rotational_friction_radius_m = 0.01")
+                        && err.contains("method timewarp on stations"),
+                    "{err}"
+                );
+            } else {
+                got.expect("other methods take it");
+            }
         }
     }
 

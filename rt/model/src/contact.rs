@@ -201,6 +201,13 @@ pub fn tool_contact(
     tool_vel: Vec3,
     tool_radius: f64,
 ) -> ContactForce {
+    // A tip beyond the shape's bounding sphere cannot touch: the same answer as below, without
+    // the rotation and the distance (in a world of many objects most tools are far from most).
+    let reach = shape.bounding_radius() + tool_radius;
+    if (tool_pos - body.pos).norm_squared() > reach * reach {
+        state.anchor_body = None;
+        return ContactForce::default();
+    }
     let inv: UnitQuaternion<f64> = body.rot.inverse();
     let (dist, n_body) = shape.signed_distance(inv * (tool_pos - body.pos));
     let depth = tool_radius - dist;
