@@ -20,9 +20,8 @@ use coop_model::method::{Consistency, ObjectCopy, Report};
 use coop_model::metrics;
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
-use coop_model::shape::Shape;
 use coop_model::sim::{self, Mode};
-use coop_model::world::{cube_heap, step_objects, Body, Contacts, Physics, MAX_OBJECTS};
+use coop_model::world::{cube_heap, step_objects, Contacts, Physics, MAX_OBJECTS};
 
 use coop_actors::scenario_file;
 
@@ -219,10 +218,12 @@ pub struct WorldStepCost {
     /// Tools, each touching an object.
     pub tools: usize,
     /// One step: every tool's contact with every object, then the objects stepped together
-    /// (environment, every pair, Verlet), median, ns.
+    /// (environment, every pair, Verlet), median, ns: objects at rest and untouched sleep.
     pub step_ns: f64,
     /// ... as a share of the 1 ms physics period.
     pub period_share: f64,
+    /// The same with nothing asleep, ns.
+    pub step_awake_ns: f64,
 }
 
 /// The world-step figures: `objects` boxes (4 cm, 0.1 kg) in a heap on a table, two layers, each
@@ -239,16 +240,29 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
-    let shape = Shape::Box {
-        half: Vec3::repeat(0.02),
+    let sleeping = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
+    let awake = Physics {
+        sleep_after_steps: 0,
+        ..sleeping
     };
-    let body = Body::solid(shape, 0.1);
+
     let mut out = Vec::new();
     for objects in [1usize, 4, 16] {
         for tools in [2usize, 8] {
-            let bodies = vec![body; objects];
-            let start = cube_heap(objects, 0.02);
+            // Set down and settled (untimed): a world mid-session, not one just placed.
+            let (bodies, mut start) = cube_heap(objects, 0.02, 0.1);
+            let (bodies, mut settled) = (&bodies[..objects], Contacts::default());
+            for _ in 0..1500 {
+                let none = [Wrench::default(); MAX_OBJECTS];
+                step_objects(
+                    &sleeping,
+                    bodies,
+                    &mut start[..objects],
+                    &mut settled,
+                    &none,
+                    1e-3,
+                );
+            }
             // Tool k presses into object k mod n from outside the heap's side.
             let tips: Vec<(Vec3, usize)> = (0..tools)
                 .map(|k| {
@@ -257,51 +271,54 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
                     (start[o].pos + Vec3::new(side * 0.024, 0.0, 0.0), o)
                 })
                 .collect();
-            let step_ns = median(
-                (0..batches)
-                    .map(|_| {
-                        let mut states = start;
-                        let mut contacts = Contacts::default();
-                        let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
-                        let t0 = Instant::now();
-                        for _ in 0..per_batch {
-                            let mut applied = [Wrench::default(); MAX_OBJECTS];
-                            for (t, (tip, _)) in tips.iter().enumerate() {
-                                for (o, s) in states[..objects].iter().enumerate() {
-                                    let c = tool_contact(
-                                        &law,
-                                        &mut memory[t][o],
-                                        &shape,
-                                        s,
-                                        &body.mass,
-                                        black_box(*tip),
-                                        Vec3::zeros(),
-                                        0.005,
-                                    );
-                                    if c.touching {
-                                        applied[o] = applied[o] + c.wrench(s.pos);
+            let time = |physics: &Physics<'_>| {
+                median(
+                    (0..batches)
+                        .map(|_| {
+                            let (mut states, mut contacts) = (start, settled);
+                            let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
+                            let t0 = Instant::now();
+                            for _ in 0..per_batch {
+                                let mut applied = [Wrench::default(); MAX_OBJECTS];
+                                for (t, (tip, _)) in tips.iter().enumerate() {
+                                    for (o, s) in states[..objects].iter().enumerate() {
+                                        let c = tool_contact(
+                                            &law,
+                                            &mut memory[t][o],
+                                            &bodies[o].shape,
+                                            s,
+                                            &bodies[o].mass,
+                                            black_box(*tip),
+                                            Vec3::zeros(),
+                                            0.005,
+                                        );
+                                        if c.touching {
+                                            applied[o] = applied[o] + c.wrench(s.pos);
+                                        }
                                     }
                                 }
+                                step_objects(
+                                    physics,
+                                    bodies,
+                                    &mut states[..objects],
+                                    &mut contacts,
+                                    &applied,
+                                    1e-3,
+                                );
                             }
-                            step_objects(
-                                &physics,
-                                &bodies,
-                                &mut states[..objects],
-                                &mut contacts,
-                                &applied,
-                                1e-3,
-                            );
-                        }
-                        black_box(&states);
-                        t0.elapsed().as_nanos() as f64 / per_batch as f64
-                    })
-                    .collect(),
-            );
+                            black_box(&states);
+                            t0.elapsed().as_nanos() as f64 / per_batch as f64
+                        })
+                        .collect(),
+                )
+            };
+            let (step_ns, step_awake_ns) = (time(&sleeping), time(&awake));
             out.push(WorldStepCost {
                 objects,
                 tools,
                 step_ns,
                 period_share: step_ns / 1e6,
+                step_awake_ns,
             });
         }
     }
@@ -434,14 +451,15 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                 c.users, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns
             );
         }
-        println!("# a world of several objects: one physics step, every tool's contact with every object, then the objects stepped together (median)");
+        println!("# a world of several objects (cubes set down in a heap, tools pressing some): one physics step, every tool's contact with every object, then the objects stepped together (median); resting untouched objects sleep, and with nothing asleep");
         for w in &worlds {
             println!(
-                "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period",
+                "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period; nothing asleep {:>8.0} ns",
                 w.objects,
                 w.tools,
                 w.step_ns,
-                w.period_share * 100.0
+                w.period_share * 100.0,
+                w.step_awake_ns
             );
         }
         println!("# timewarp run at a constant delay (busiest site): re-simulation as a share of one core; p99 rollback = (p99 depth + 1) ticks x cost per tick (goal: 8 users at 150 ms <= 1 ms)");

@@ -119,13 +119,24 @@ impl Body {
     }
 }
 
-/// `count` (at most [`MAX_OBJECTS`]) cubes of half size `half_m`, resting on a table through the
-/// origin (normal +z) in a heap: rows of four, two rows to a layer, layers on layers, each
-/// pressed 1 mm into its neighbours; the rest of the array at the origin. The scene the physics
-/// benchmark times and the allocation test steps.
-pub fn cube_heap(count: usize, half_m: f64) -> [BodyState; MAX_OBJECTS] {
-    let pitch = 2.0 * half_m - 1e-3;
-    std::array::from_fn(|k| {
+/// `count` (at most [`MAX_OBJECTS`]) cubes of half size `half_m` and `mass_kg` set down on a
+/// table through the origin (normal +z) in a heap: rows of four, two rows to a layer, 0.5 mm
+/// apart, each layer resting on the one below (0.1 mm into it, as into the table); the rest of
+/// the arrays such cubes at the origin. The scene the physics benchmark times and the allocation
+/// and sleeping tests step.
+pub fn cube_heap(
+    count: usize,
+    half_m: f64,
+    mass_kg: f64,
+) -> ([Body; MAX_OBJECTS], [BodyState; MAX_OBJECTS]) {
+    let cube = Body::solid(
+        Shape::Box {
+            half: Vec3::repeat(half_m),
+        },
+        mass_kg,
+    );
+    let (pitch, layer) = (2.0 * half_m + 5e-4, 2.0 * half_m - 1e-4);
+    let states = std::array::from_fn(|k| {
         if k >= count {
             return BodyState::at_rest(Vec3::zeros());
         }
@@ -133,9 +144,10 @@ pub fn cube_heap(count: usize, half_m: f64) -> [BodyState; MAX_OBJECTS] {
         BodyState::at_rest(Vec3::new(
             x as f64 * pitch,
             y as f64 * pitch,
-            half_m - 1e-4 + z as f64 * pitch,
+            half_m - 1e-4 + z as f64 * layer,
         ))
-    })
+    });
+    ([cube; MAX_OBJECTS], states)
 }
 
 /// Where the pair of objects `i < j` keeps its friction memory among a world's [`MAX_PAIRS`]:
@@ -145,13 +157,18 @@ pub fn pair_index(i: usize, j: usize) -> usize {
     i * (2 * MAX_OBJECTS - i - 1) / 2 + (j - i - 1)
 }
 
-/// The friction memory of every contact between the objects and with the environment.
+/// The memory of a world's contacts: the friction memory of every contact between the objects and
+/// with the environment, and how long each object has been still (whether it sleeps). Part of the
+/// world's state: a rollback restores it with the bodies.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Contacts {
     /// Per object, its contacts with the planes.
     pub env: [EnvContactState; MAX_OBJECTS],
     /// Per pair ([`pair_index`]), their contact.
     pub pairs: [PairContactState; MAX_PAIRS],
+    /// Per object, the steps in a row it has been still ([`STILL_SPEED_M_PER_S`],
+    /// [`STILL_SPIN_RAD_PER_S`]); at [`Physics::sleep_after_steps`] it sleeps.
+    pub still: [u32; MAX_OBJECTS],
 }
 
 impl Default for Contacts {
@@ -159,9 +176,17 @@ impl Default for Contacts {
         Self {
             env: [EnvContactState::default(); MAX_OBJECTS],
             pairs: [PairContactState::default(); MAX_PAIRS],
+            still: [0; MAX_OBJECTS],
         }
     }
 }
+
+/// An object slower than this, m/s...
+pub const STILL_SPEED_M_PER_S: f64 = 1e-5;
+/// ...and turning slower than this, rad/s, is still.
+pub const STILL_SPIN_RAD_PER_S: f64 = 1e-3;
+/// Steps an object must be still before it sleeps, by default (0.1 s at 1 kHz).
+pub const SLEEP_AFTER_STEPS: u32 = 100;
 
 /// The laws and fields several objects step under.
 #[derive(Debug, Clone, Copy)]
@@ -174,6 +199,10 @@ pub struct Physics<'a> {
     pub env_contact: &'a ContactParams,
     /// Object–object contact law.
     pub object_contact: &'a ContactParams,
+    /// An object still for this many steps in a row sleeps: it is not stepped, nor its contacts
+    /// with the planes or with other sleepers evaluated, until a wrench is applied to it or an
+    /// object that moved touches it (0: nothing sleeps). A resting stack costs nothing then.
+    pub sleep_after_steps: u32,
 }
 
 impl<'a> Physics<'a> {
@@ -184,6 +213,7 @@ impl<'a> Physics<'a> {
             planes,
             env_contact: law,
             object_contact: law,
+            sleep_after_steps: SLEEP_AFTER_STEPS,
         }
     }
 }
@@ -196,13 +226,14 @@ fn wrenches(
     physics: &Physics<'_>,
     bodies: &[Body],
     states: &[BodyState],
+    frozen: &[bool; MAX_OBJECTS],
     contacts: &mut Contacts,
     applied: &[Wrench],
     out: &mut [Wrench; MAX_OBJECTS],
 ) {
     let n = bodies.len().min(MAX_OBJECTS);
     for (k, w) in out.iter_mut().enumerate().take(n) {
-        *w = if bodies[k].fixed {
+        *w = if frozen[k] {
             Wrench::default()
         } else {
             environment_wrench(
@@ -222,6 +253,9 @@ fn wrenches(
             if bodies[i].fixed && bodies[j].fixed {
                 *memory = PairContactState::default();
                 continue;
+            }
+            if frozen[i] && frozen[j] {
+                continue; // two sleepers (or a sleeper on a fixture): their contact as it was
             }
             let side = |k: usize| PairSide {
                 shape: &bodies[k].shape,
@@ -253,20 +287,21 @@ pub fn step_objects(
 ) {
     // REAL-TIME: no allocation, no lock, no logging, no syscalls.
     let n = bodies.len().min(states.len()).min(MAX_OBJECTS);
+    let bodies = &bodies[..n];
+    let frozen = sleepers(physics, bodies, contacts, applied);
     let mut w = [Wrench::default(); MAX_OBJECTS];
     let mut half = [HalfStep::default(); MAX_OBJECTS];
-    let bodies = &bodies[..n];
     let evaluate =
         |states: &[BodyState], contacts: &mut Contacts, w: &mut [Wrench; MAX_OBJECTS]| {
-            wrenches(physics, bodies, states, contacts, applied, w);
+            wrenches(physics, bodies, states, &frozen, contacts, applied, w);
         };
     evaluate(&states[..n], contacts, &mut w);
-    for k in (0..n).filter(|&k| !bodies[k].fixed) {
+    for k in (0..n).filter(|&k| !frozen[k]) {
         (states[k], half[k]) =
             body::kick_drift(&states[k], &bodies[k].mass, physics.gravity, dt, &w[k]);
     }
     evaluate(&states[..n], contacts, &mut w);
-    for k in (0..n).filter(|&k| !bodies[k].fixed) {
+    for k in (0..n).filter(|&k| !frozen[k]) {
         body::kick(
             &mut states[k],
             &bodies[k].mass,
@@ -275,7 +310,52 @@ pub fn step_objects(
             &half[k],
             &w[k],
         );
+        let still = states[k].vel.norm() < STILL_SPEED_M_PER_S
+            && states[k].omega(&bodies[k].mass).norm() < STILL_SPIN_RAD_PER_S;
+        contacts.still[k] = if still {
+            contacts.still[k].saturating_add(1)
+        } else {
+            0
+        };
     }
+}
+
+/// Which objects do not move this step: the fixtures and the sleepers. An object sleeps once it
+/// has been still for `physics.sleep_after_steps` steps. A wrench applied to it wakes it and its
+/// count starts again; an object that moved in the last step touching it (as the contact memory
+/// has it) wakes it until it has been still for one step again (a box set down on a sleeping one
+/// wakes it while it moves, and both sleep once it rests). A still object not yet asleep wakes
+/// nothing, so a resting stack falls asleep whole. Every site decides the same from the same
+/// state.
+fn sleepers(
+    physics: &Physics<'_>,
+    bodies: &[Body],
+    contacts: &mut Contacts,
+    applied: &[Wrench],
+) -> [bool; MAX_OBJECTS] {
+    let n = bodies.len();
+    let after = physics.sleep_after_steps;
+    for (still, a) in contacts.still.iter_mut().zip(applied).take(n) {
+        if *a != Wrench::default() {
+            *still = 0;
+        }
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            if !contacts.pairs[pair_index(i, j)].touching() {
+                continue;
+            }
+            let moved = |k: usize| !bodies[k].fixed && contacts.still[k] == 0;
+            let (wake_i, wake_j) = (moved(j), moved(i));
+            if wake_i {
+                contacts.still[i] = contacts.still[i].min(after.saturating_sub(1));
+            }
+            if wake_j {
+                contacts.still[j] = contacts.still[j].min(after.saturating_sub(1));
+            }
+        }
+    }
+    std::array::from_fn(|k| k < n && (bodies[k].fixed || (after > 0 && contacts.still[k] >= after)))
 }
 
 /// Worlds for the model's unit tests.

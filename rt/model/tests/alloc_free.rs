@@ -144,7 +144,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
 #[test]
 fn a_world_of_the_most_objects_steps_without_allocating() {
     use coop_model::body::Wrench;
-    use coop_model::world::{cube_heap, step_objects, Body, Contacts, Physics, MAX_OBJECTS};
+    use coop_model::world::{cube_heap, step_objects, Contacts, Physics, MAX_OBJECTS};
     let law = ContactParams {
         rotational_friction_radius_m: 0.01,
         ..contact()
@@ -154,13 +154,7 @@ fn a_world_of_the_most_objects_steps_without_allocating() {
         offset: 0.0,
     }];
     let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
-    let bodies = [Body::solid(
-        Shape::Box {
-            half: Vec3::repeat(0.02),
-        },
-        0.1,
-    ); MAX_OBJECTS];
-    let mut states = cube_heap(MAX_OBJECTS, 0.02);
+    let (bodies, mut states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
     let applied = [Wrench {
         force: Vec3::new(0.01, 0.0, 0.0),
         torque: Vec3::zeros(),

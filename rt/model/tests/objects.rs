@@ -468,3 +468,56 @@ fn crossed_bars_touch_where_they_cross() {
         assert_eq!(on_lower.force, -up, "{name}");
     }
 }
+
+/// A heap of sixteen cubes left alone on the table falls asleep: after it settles every cube
+/// sleeps and steps change no bit. A push on a top cube wakes it; the cube it slides on wakes
+/// while it moves; the heap sleeps again once all rest.
+#[test]
+fn a_resting_heap_sleeps_and_wakes_when_pushed() {
+    use coop_model::world::{cube_heap, MAX_OBJECTS, SLEEP_AFTER_STEPS};
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let law = ContactParams {
+        rotational_friction_radius_m: 0.01,
+        ..law()
+    };
+    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
+    let (bodies, mut states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
+    let mut contacts = Contacts::default();
+    let none = [Wrench::default(); MAX_OBJECTS];
+    let asleep = |c: &Contacts| c.still.iter().filter(|&&s| s >= SLEEP_AFTER_STEPS).count();
+    for _ in 0..3000 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+    }
+    assert_eq!(asleep(&contacts), MAX_OBJECTS, "{:?}", contacts.still);
+    let (rested, memory) = (states, contacts);
+    for _ in 0..500 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+    }
+    assert_eq!(
+        (states, contacts),
+        (rested, memory),
+        "a sleeping heap does not change"
+    );
+    // Cube 11 (on cube 3, at the heap's -y side) pushed outwards along -y for 0.1 s: it slides
+    // on cube 3, which wakes while it moves.
+    let mut push = none;
+    push[11].force = Vec3::new(0.0, -0.7, 0.0);
+    let mut woke = false;
+    for _ in 0..100 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &push, DT);
+        woke |= contacts.still[3] < SLEEP_AFTER_STEPS;
+    }
+    assert!(woke, "the cube under the moving one woke");
+    assert!(
+        rested[11].pos.y - states[11].pos.y > 5e-3,
+        "{:?}",
+        states[11].pos
+    );
+    for _ in 0..3000 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+    }
+    assert_eq!(asleep(&contacts), MAX_OBJECTS, "{:?}", contacts.still);
+}
