@@ -136,7 +136,12 @@ fn in_plane(t: Vec3, n: Vec3) -> Option<Vec3> {
 /// its stick spring to the other body's reference `t_other` (world), with `spin` the other's
 /// angular velocity about `n` less the object's and `f_n` the normal force. Returns the torque, N·m,
 /// and the other's reference after a slip (the spring stretched to hold the kinetic torque), or
-/// `None` while it sticks. Only `+ − × ÷ sqrt`: the same bits at every site.
+/// `None` while it sticks.
+///
+/// The spring's stretch is measured by 2 tan(θ/2) of the angle θ between the references, which
+/// is θ for small angles and grows without bound towards half a turn: the spring holds any torque
+/// up to the static limit (a sine would hold at most its stiffness, and past a quarter turn
+/// less). Only `+ − × ÷ sqrt`: the same bits at every site.
 fn twist(
     c: &ContactParams,
     t_other: Vec3,
@@ -150,17 +155,23 @@ fn twist(
         return (0.0, None);
     };
     let k = c.tangential_stiffness_n_per_m * r * r;
-    // sin of the angle the object must turn about n to line up with the other's reference.
-    let sin = v.cross(&u).dot(&n);
-    let torque = k * sin + c.tangential_damping_n_s_per_m * r * r * spin;
+    // tan(θ/2) of the angle the object must turn about n to line up with the other's reference.
+    let (sin, cos) = (v.cross(&u).dot(&n), v.dot(&u));
+    let half_turned = 1.0 + cos <= 1e-12;
+    let torque = if half_turned {
+        f64::INFINITY.copysign(sin)
+    } else {
+        2.0 * k * sin / (1.0 + cos) + c.tangential_damping_n_s_per_m * r * r * spin
+    };
     if torque.abs() <= c.friction_static * f_n * r {
         return (torque, None);
     }
-    let slip = (c.friction_kinetic * f_n * r).copysign(torque);
-    // The other's reference turned so that the spring alone holds the slipping torque.
-    let s = (slip / k).clamp(-1.0, 1.0);
-    let cos = (1.0 - s * s).sqrt();
-    (slip, Some(v * cos + n.cross(&v) * s))
+    let slip = (c.friction_kinetic * f_n * r).copysign(if half_turned { sin } else { torque });
+    // The other's reference turned so that the spring alone holds the slipping torque:
+    // tan(θ/2) = slip / 2k.
+    let t = slip / (2.0 * k);
+    let (cos_new, sin_new) = ((1.0 - t * t) / (1.0 + t * t), 2.0 * t / (1.0 + t * t));
+    (slip, Some(v * cos_new + n.cross(&v) * sin_new))
 }
 
 /// Friction memory of one tool contact: the stick point on the object, in body coordinates.
@@ -262,11 +273,15 @@ pub struct EnvContactState {
 }
 
 impl EnvContactState {
-    /// Moves every stick point by `delta`: when a copy adopts another pose, its contacts' memory must
-    /// move with the object, or the friction springs would drag it back to where it was.
-    pub fn shift(&mut self, delta: Vec3) {
+    /// Moves every stick point by `delta` and turns every rotational friction reference by `turn`:
+    /// when a copy adopts another pose (moved by `delta`, turned by `turn`), its contacts' memory
+    /// must move with the object, or the friction springs would drag it back to where it was.
+    pub fn shift(&mut self, delta: Vec3, turn: UnitQuaternion<f64>) {
         for a in self.anchors.iter_mut().flatten() {
             *a += delta;
+        }
+        for (world_ref, _) in self.twist.iter_mut().flatten() {
+            *world_ref = turn * *world_ref;
         }
     }
 
@@ -281,12 +296,6 @@ impl EnvContactState {
             anchors,
             twist: [None; MAX_PLANES],
         }
-    }
-
-    /// Whether it holds rotational friction memory, which [`EnvContactState::anchors`] does not
-    /// carry.
-    pub fn twists(&self) -> bool {
-        self.twist.iter().any(Option::is_some)
     }
 }
 
@@ -421,7 +430,7 @@ impl PairContactState {
     }
 
     /// The stick points, on the first object and on the second, body coordinates (`None`: not
-    /// touching): what a snapshot carries.
+    /// touching): what a snapshot of the world would carry.
     pub fn anchors(&self) -> Option<(Vec3, Vec3)> {
         self.anchors
     }
@@ -544,8 +553,10 @@ fn box_box_axes(a: &BodyState, ha: Vec3, b: &BodyState, hb: Vec3) -> BoxOverlap 
     let w = pa - pb;
     let (uv, uw, vw) = (u.dot(&v), u.dot(&w), v.dot(&w));
     let den = 1.0 - uv * uv;
+    // Each clamped in turn, the other recomputed from it, so both stay on their edges.
     let s = ((uv * vw - uw) / den).clamp(-ha[i], ha[i]);
-    let t = ((vw - uv * uw) / den).clamp(-hb[j], hb[j]);
+    let t = (vw + s * uv).clamp(-hb[j], hb[j]);
+    let s = (t * uv - uw).clamp(-ha[i], ha[i]);
     BoxOverlap::Edges {
         point: (pa + u * s + pb + v * t) * 0.5,
         normal: -l,
@@ -649,7 +660,8 @@ const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
 /// damping is shared by the touching points, each resisting the two bodies' relative normal
 /// velocity there, and never pulls; friction is one stick spring between a point on each body, set
 /// where the contact began (the touching points' centre). Whatever acts on `b` is exactly the
-/// negative of what acts on `a`, at the same points: momentum is conserved to the bit.
+/// negative of what acts on `a`, at the same points: the pair's forces conserve momentum, linear
+/// and angular.
 ///
 /// Two boxes' touching points come from the separating-axis test instead: the other box's face
 /// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
@@ -816,6 +828,44 @@ pub fn pair_wrench(
 mod tests {
     use super::*;
     use crate::body::step;
+
+    /// An adoption that turns the copy turns its rotational friction memory with it: the twist
+    /// spring is as stretched after as before (none), where memory left behind would pull the
+    /// copy back towards its old orientation.
+    #[test]
+    fn an_adopted_turn_carries_the_twist_memory_along() {
+        let law = ContactParams {
+            rotational_friction_radius_m: 0.02,
+            ..params()
+        };
+        let (shape, mass) = disk();
+        let plane = [Plane {
+            normal: Vec3::z(),
+            offset: 0.0,
+        }];
+        let resting = BodyState::at_rest(Vec3::new(0.0, 0.0, 0.0099));
+        let mut memory = EnvContactState::default();
+        let (before, _) = environment_wrench(&law, &mut memory, &plane, &shape, &resting, &mass);
+        let turn = UnitQuaternion::from_axis_angle(&Vec3::z_axis(), 0.5);
+        let turned = BodyState {
+            rot: turn * resting.rot,
+            ..resting
+        };
+        let torque_after = |memory: &mut EnvContactState| {
+            environment_wrench(&law, memory, &plane, &shape, &turned, &mass)
+                .0
+                .torque
+                .z
+        };
+        let (mut carried, mut left) = (memory, memory);
+        carried.shift(Vec3::zeros(), turn);
+        left.shift(Vec3::zeros(), UnitQuaternion::identity());
+        assert!((torque_after(&mut carried) - before.torque.z).abs() < 1e-12);
+        assert!(
+            torque_after(&mut left).abs() > 1e-3,
+            "left behind, it pulls back"
+        );
+    }
 
     fn params() -> ContactParams {
         ContactParams {

@@ -322,11 +322,12 @@ pub fn step_objects(
 
 /// Which objects do not move this step: the fixtures and the sleepers. An object sleeps once it
 /// has been still for `physics.sleep_after_steps` steps. A wrench applied to it wakes it and its
-/// count starts again; an object that moved in the last step touching it (as the contact memory
-/// has it) wakes it until it has been still for one step again (a box set down on a sleeping one
-/// wakes it while it moves, and both sleep once it rests). A still object not yet asleep wakes
-/// nothing, so a resting stack falls asleep whole. Every site decides the same from the same
-/// state.
+/// count starts again; an awake object touching it (as the contact memory of the last step has
+/// it) wakes it until it has been still for one step again: a row pushed at one end wakes down
+/// the row, a box set down on a sleeping one wakes it until both rest, and a resting stack falls
+/// asleep when its last member has been still long enough. A sleeper newly touched holds like a
+/// fixture for that one step (its reaction is not applied to it). Every site decides the same
+/// from the same state.
 fn sleepers(
     physics: &Physics<'_>,
     bodies: &[Body],
@@ -345,7 +346,7 @@ fn sleepers(
             if !contacts.pairs[pair_index(i, j)].touching() {
                 continue;
             }
-            let moved = |k: usize| !bodies[k].fixed && contacts.still[k] == 0;
+            let moved = |k: usize| !bodies[k].fixed && contacts.still[k] < after;
             let (wake_i, wake_j) = (moved(j), moved(i));
             if wake_i {
                 contacts.still[i] = contacts.still[i].min(after.saturating_sub(1));

@@ -521,3 +521,94 @@ fn a_resting_heap_sleeps_and_wakes_when_pushed() {
     }
     assert_eq!(asleep(&contacts), MAX_OBJECTS, "{:?}", contacts.still);
 }
+
+/// Under a heavy load the rotational friction's kinetic limit (μ_k F_n r) is more than its
+/// spring's stiffness (K_t r², the most a spring measured by the sine of its twist could hold): a
+/// torque between the two is still held (the spring stretches as far as it must), and one above
+/// the static limit slips.
+#[test]
+fn rotational_friction_holds_a_heavy_load_up_to_its_limit() {
+    let planes = table();
+    let law = ContactParams {
+        tangential_stiffness_n_per_m: 200.0,
+        rotational_friction_radius_m: 0.02,
+        ..law()
+    };
+    let g = 9.81;
+    let physics = Physics::uniform(Vec3::new(0.0, -g, 0.0), &planes, &law);
+    let (disk, flat) = along_y(0.04, 0.01, 2.0);
+    let stiffness = law.tangential_stiffness_n_per_m * 0.02 * 0.02;
+    let limit = law.friction_static * 2.0 * g * 0.02;
+    let kinetic = law.friction_kinetic * 2.0 * g * 0.02;
+    let torque = 0.85 * kinetic;
+    assert!(
+        torque > 1.5 * stiffness,
+        "the case: {torque} N·m, {stiffness} N·m/rad"
+    );
+    let spin = |torque: f64| {
+        let mut states = [BodyState {
+            rot: flat,
+            ..BodyState::at_rest(Vec3::new(0.0, 0.01 - 2.0 * g / 3000.0, 0.0))
+        }];
+        let mut contacts = Contacts::default();
+        // Ramped in over 2 s (quasi-static: no overshoot past the static limit), then held 2 s.
+        for k in 0..4000 {
+            let twist = Wrench {
+                force: Vec3::zeros(),
+                torque: Vec3::new(0.0, torque * (k as f64 / 2000.0).min(1.0), 0.0),
+            };
+            step_objects(&physics, &[disk], &mut states, &mut contacts, &[twist], DT);
+        }
+        let turned = (states[0].rot * flat.inverse()).angle();
+        (states[0].omega(&disk.mass).y, turned)
+    };
+    // Held where the spring balances it: 2 K_t r² tan(θ/2) = torque.
+    let (held, turned) = spin(torque);
+    let balance = 2.0 * (torque / (2.0 * stiffness)).atan();
+    assert!(
+        held.abs() < 0.05 && (turned - balance).abs() < 0.1,
+        "held: spinning at {held} rad/s, turned {turned} rad, balanced at {balance}"
+    );
+    assert!(spin(1.5 * limit).0 > 1.0, "slips above the limit");
+}
+
+/// Three cubes in a row, asleep; the first pushed into the second, the second into the third:
+/// each awake cube wakes the one it touches, and the whole row moves.
+#[test]
+fn a_push_down_a_row_wakes_every_sleeper_in_it() {
+    use coop_model::world::SLEEP_AFTER_STEPS;
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let law = law();
+    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
+    let cube = Body::solid(
+        Shape::Box {
+            half: Vec3::repeat(0.02),
+        },
+        0.1,
+    );
+    let bodies = [cube; 3];
+    let mut states: [BodyState; 3] =
+        std::array::from_fn(|k| BodyState::at_rest(Vec3::new(k as f64 * 0.0405, 0.0, 0.0199)));
+    let mut contacts = Contacts::default();
+    let none = [Wrench::default(); 3];
+    for _ in 0..1000 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+    }
+    assert!(
+        contacts.still[..3].iter().all(|&s| s >= SLEEP_AFTER_STEPS),
+        "{:?}",
+        contacts.still
+    );
+    let rested = states;
+    // Three times the row's friction (0.5 × 3 × 0.98 N) on the first cube, along +x, for 0.3 s.
+    let mut push = none;
+    push[0].force = Vec3::new(4.5, 0.0, 0.0);
+    for _ in 0..300 {
+        step_objects(&physics, &bodies, &mut states, &mut contacts, &push, DT);
+    }
+    let moved = states[2].pos.x - rested[2].pos.x;
+    assert!(moved > 1e-2, "the last cube moved {moved} m");
+}

@@ -505,7 +505,8 @@ impl Consistency for Coupled {
             clipped_j,
         };
         copy.energy.adoption_j += adoption.energy_j;
-        copy.env.shift(new.pos - copy.state.pos);
+        copy.env
+            .shift(new.pos - copy.state.pos, new.rot * copy.state.rot.inverse());
         copy.state = new;
         Some(adoption)
     }

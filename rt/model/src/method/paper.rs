@@ -215,7 +215,8 @@ impl Consistency for Paper {
             clipped_j,
         };
         copy.energy.adoption_j += adoption.energy_j;
-        copy.env.shift(new.pos - copy.state.pos);
+        copy.env
+            .shift(new.pos - copy.state.pos, new.rot * copy.state.rot.inverse());
         copy.state = new;
         let mine = copy.included.get(self.me).copied().unwrap_or(-1.0);
         copy.included = included;
