@@ -223,6 +223,7 @@ fn timewarp_over_real_rings_rolls_back_without_allocating_and_agrees_at_confirme
             .physics
             .method_stats()
             .rollback()
+            .copied()
             .expect("timewarp has stats");
         let tr = s.physics.tracks;
         assert!(tr.late_periods > 0 && tr.caught_up_ticks > 0, "{tr:?}");

@@ -116,7 +116,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
         tw.physics_step(&world, &mut copy, &ContactForce::default(), dt);
         copy.time_s = k as f64 * dt;
     }
-    let before = tw.stats().rollback().unwrap_or_default();
+    let before = tw.stats().rollback().copied().unwrap_or_default();
     // Site 1's tool was 0.01 mm further in from tick now − 500 on: re-simulate 500 ticks.
     let mut moved = touching(1);
     moved[0] -= 1;
@@ -127,7 +127,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
         let t0 = Instant::now();
         t.receive(&world, &mut c, 1, black_box(&late), now as f64 * dt);
         let ns = t0.elapsed().as_nanos() as f64;
-        let after = t.stats().rollback().unwrap_or_default();
+        let after = t.stats().rollback().copied().unwrap_or_default();
         let depth = after.resimulated_ticks - before.resimulated_ticks;
         if depth != ROLLBACK_TICKS as u64 {
             anyhow::bail!(

@@ -825,7 +825,7 @@ pub fn pair_wrench(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::body::step;
 
@@ -867,7 +867,8 @@ mod tests {
         );
     }
 
-    fn params() -> ContactParams {
+    /// A firm, damped law with grippy friction: the model's tests' table.
+    pub(crate) fn params() -> ContactParams {
         ContactParams {
             stiffness_n_per_m: 2000.0,
             damping_n_s_per_m: 5.0,

@@ -458,7 +458,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         result
             .mech_energy
             .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
-        result.rollback.push(s.method.stats().rollback());
+        result.rollback.push(s.method.stats().rollback().copied());
         result.force_steps.push(ForceSteps {
             display: *s.servo.display_stats(),
             ..s.force_steps

@@ -387,15 +387,7 @@ pub(crate) mod fixtures {
             gravity: Vec3::new(0.0, -9.81 / 3.0, 0.0),
             planes,
             plane_count: 1,
-            env_contact: ContactParams {
-                stiffness_n_per_m: 2000.0,
-                damping_n_s_per_m: 5.0,
-                tangential_stiffness_n_per_m: 2000.0,
-                tangential_damping_n_s_per_m: 5.0,
-                friction_static: 0.6,
-                friction_kinetic: 0.5,
-                rotational_friction_radius_m: 0.0,
-            },
+            env_contact: crate::contact::tests::params(),
         }
     }
 

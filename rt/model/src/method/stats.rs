@@ -21,10 +21,11 @@ pub enum Stats {
 }
 
 impl Stats {
-    /// The rollback figures, for a method that rolls back.
-    pub fn rollback(&self) -> Option<RollbackStats> {
+    /// The rollback figures, for a method that rolls back (lent: the physics loop reads them every
+    /// tick, and they hold a histogram).
+    pub fn rollback(&self) -> Option<&RollbackStats> {
         match self {
-            Stats::Rollback(s) => Some(*s),
+            Stats::Rollback(s) => Some(s),
             _ => None,
         }
     }
