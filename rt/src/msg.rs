@@ -1021,10 +1021,10 @@ mod tests {
         use coop_model::contact::ContactForce;
         use coop_model::method::track::quantize;
         use coop_model::method::TimeWarp;
-        use coop_model::method::{Consistency, ObjectCopy, MAX_SITES};
+        use coop_model::method::{Consistency, WorldCopy, MAX_SITES};
         let sc = coop_model::scenario::Scenario::default();
         let world = sc.world();
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy);
@@ -1042,11 +1042,11 @@ mod tests {
                 r.positions[..50].fill(quantize(Vec3::new(0.1, 0.0, 0.01)));
                 tw.receive(&world, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
             }
-            tw.physics_step(&world, &mut copy, &none, 1e-3);
+            tw.physics_step(&world, &mut copy, &[none], 1e-3);
         }
         // Repairs alternate with the newest window.
         let repair = (0..2)
-            .find_map(|_| match tw.report(&copy, &none, 1.0) {
+            .find_map(|_| match tw.report(&copy, &[none], 1.0) {
                 Report::Tools(r) if r.first_tick == 500 => Some(r),
                 _ => None,
             })

@@ -5,7 +5,7 @@
 //! process.
 
 use coop_model::contact::ContactForce;
-use coop_model::method::{Consistency, ObjectCopy};
+use coop_model::method::{Consistency, ObjectCopy, WorldCopy};
 use coop_model::world::World;
 
 use coop_model::body::{BodyState, Vec3};
@@ -21,7 +21,9 @@ pub struct PhysicsLoop {
     site: usize,
     method: Box<dyn Consistency>,
     world: World,
-    copy: ObjectCopy,
+    copy: WorldCopy,
+    /// The copy before the step or report being taken (restored if it made the copy non-finite).
+    before: WorldCopy,
     own: ContactForce,
     own_t_ns: u64,
     tool: ToolSample,
@@ -139,7 +141,7 @@ impl PhysicsLoop {
         site: usize,
         method: Box<dyn Consistency>,
         world: World,
-        copy: ObjectCopy,
+        copy: WorldCopy,
         rings: PhysicsRings,
         timing: PhysicsTiming,
     ) -> Self {
@@ -148,6 +150,7 @@ impl PhysicsLoop {
             site,
             method,
             world,
+            before: copy.clone(),
             copy,
             own: ContactForce::default(),
             own_t_ns: 0,
@@ -228,7 +231,7 @@ impl PhysicsLoop {
                 self.ticks.done = due - 1;
                 self.ticks.joined = self.ticks.done;
                 if let Some(s) = state {
-                    self.copy = ObjectCopy::new(s);
+                    *self.copy.first_mut() = ObjectCopy::new(s);
                 }
                 self.method
                     .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
@@ -281,21 +284,21 @@ impl PhysicsLoop {
                 // so a local lag counts ticks).
                 self.method.own_tool(Vec3::from(self.tool.tool_pos));
             }
-            self.copy.time_s = now_s - self.period_ns as f64 * 1e-9;
-            let before = self.copy;
+            self.copy.set_time(now_s - self.period_ns as f64 * 1e-9);
+            self.before.copy_from(&self.copy);
             self.method.physics_step(
                 &self.world,
                 &mut self.copy,
-                &self.own,
+                std::slice::from_ref(&self.own),
                 self.period_ns as f64 * 1e-9,
             );
             if !sane(&self.world, &self.copy) {
-                self.copy = before;
+                self.copy.copy_from(&self.before);
                 self.nonfinite_kept += 1;
             }
             self.ticks.done += u64::from(self.ticks.on_grid);
         }
-        self.copy.time_s = now_s;
+        self.copy.set_time(now_s);
         self.seq += 1;
         if self
             .objects
@@ -303,7 +306,7 @@ impl PhysicsLoop {
                 now_ns,
                 self.seq,
                 // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                &self.method.shown(&self.copy),
+                &self.method.shown(&self.copy, 0),
                 self.adoptions,
                 self.own_t_ns,
             ))
@@ -321,7 +324,9 @@ impl PhysicsLoop {
                 .next_report_ns
                 .max(now_ns.saturating_sub(self.report_period_ns))
                 + self.report_period_ns;
-            let report = self.method.report(&self.copy, &self.own, now_s);
+            let report = self
+                .method
+                .report(&self.copy, std::slice::from_ref(&self.own), now_s);
             let tools = match &report {
                 Report::Tools(r) => Some(r),
                 Report::Coupled(c) => Some(&c.tools),
@@ -372,12 +377,12 @@ impl PhysicsLoop {
     /// jump (an adoption, or a rollback that moved the copy) is counted and traced.
     fn take(&mut self, from: usize, msg: &Report, now_ns: u64, now_s: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let before = self.copy;
+        self.before.copy_from(&self.copy);
         let adopted = self
             .method
             .receive(&self.world, &mut self.copy, from, msg, now_s);
         if !sane(&self.world, &self.copy) {
-            self.copy = before;
+            self.copy.copy_from(&self.before);
             self.nonfinite_kept += 1;
             return;
         }
@@ -395,7 +400,7 @@ impl PhysicsLoop {
         let mut r = TraceRecord::new(
             kind,
             now_ns,
-            &self.copy.state,
+            &self.copy.first().state,
             &self.tool,
             self.own.force + self.method.remote_force(),
         );
@@ -465,14 +470,14 @@ impl PhysicsLoop {
         ObjectSample::new(
             now_ns,
             self.seq,
-            &self.copy.state,
+            &self.copy.first().state,
             self.adoptions,
             self.own_t_ns,
         )
     }
 
     /// The copy this site believes.
-    pub fn copy(&self) -> &ObjectCopy {
+    pub fn copy(&self) -> &WorldCopy {
         &self.copy
     }
     /// Adoptions so far.
@@ -483,12 +488,13 @@ impl PhysicsLoop {
 
 /// A copy physics may keep: every number finite, its energy too (a finite state can still hold
 /// an angular momentum whose next rotation step is NaN).
-fn sane(world: &World, copy: &ObjectCopy) -> bool {
-    copy.state.is_finite()
-        && copy
-            .state
-            .mechanical_energy(&world.mass, world.gravity)
-            .is_finite()
+fn sane(world: &World, copy: &WorldCopy) -> bool {
+    copy.objects().iter().zip(world.bodies()).all(|(o, b)| {
+        o.state.is_finite()
+            && o.state
+                .mechanical_energy(&b.mass, world.gravity)
+                .is_finite()
+    })
 }
 
 /// The first point of the grid `last + k * period` (k ≥ 1) after `now`.

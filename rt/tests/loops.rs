@@ -63,7 +63,7 @@ fn rig_with<D: CartesianDevice>(
     make: impl FnOnce(&Scenario) -> D,
 ) -> Rig<D> {
     let mut sc = Scenario::default();
-    sc.object.start_m = [0.0, 0.0, 0.0099];
+    sc.objects[0].start_m = [0.0, 0.0, 0.0099];
     sc.world.planes[0].normal = [0.0, 0.0, 1.0];
     sc.world.planes[0].offset_m = 0.0;
     sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
@@ -174,7 +174,7 @@ fn a_push_flows_through_the_rings_and_reports_go_out() {
     );
     assert!(traced_touch, "the trace shows the push on the object");
     assert!(touched, "the servo felt the disk");
-    let x = r.physics.copy().state.pos.x;
+    let x = r.physics.copy().first().state.pos.x;
     assert!(
         x > 0.005,
         "physics moved the disk with the servo's contact: x = {x}"
@@ -192,7 +192,7 @@ fn a_hostile_report_is_rejected_and_changes_nothing() {
         r.physics.step(k * MS);
         r.servo.step(k * MS, None);
     }
-    let before = r.physics.copy().state;
+    let before = r.physics.copy().first().state;
     let mut bad = SiteReport {
         kind: 1,
         t_ns: 200 * MS,
@@ -209,7 +209,7 @@ fn a_hostile_report_is_rejected_and_changes_nothing() {
     r.physics.step(101 * MS);
     assert_eq!(r.physics.rejected, 2);
     assert_eq!(r.physics.adoptions(), 0);
-    let after = r.physics.copy().state;
+    let after = r.physics.copy().first().state;
     assert!(after.is_finite() && (after.pos - before.pos).norm() < 1e-3);
 }
 
@@ -405,7 +405,7 @@ fn an_adoption_that_would_make_the_copy_non_finite_keeps_the_copy() {
         r.physics.step(k * MS);
         r.servo.step(k * MS, None);
     }
-    let before = r.physics.copy().state;
+    let before = r.physics.copy().first().state;
     let mut absurd = SiteReport {
         kind: 1,
         t_ns: 100 * MS,
@@ -424,7 +424,7 @@ fn an_adoption_that_would_make_the_copy_non_finite_keeps_the_copy() {
     }
     assert_eq!(r.physics.nonfinite_kept, 1);
     assert_eq!(r.physics.adoptions(), 0);
-    let after = r.physics.copy().state;
+    let after = r.physics.copy().first().state;
     assert!(
         after.is_finite() && (after.pos - before.pos).norm() < 1e-2,
         "{after:?}"

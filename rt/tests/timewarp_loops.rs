@@ -10,7 +10,7 @@ use std::collections::VecDeque;
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::method::Consistency;
-use coop_model::method::ObjectCopy;
+use coop_model::method::WorldCopy;
 use coop_model::scenario::{MethodName, Scenario, SiteSpec};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming, MAX_CATCH_UP_TICKS};
@@ -53,7 +53,7 @@ type Segments = (
 
 fn scenario() -> Scenario {
     let mut sc = Scenario::default();
-    sc.object.start_m = [0.0, 0.0, 0.01];
+    sc.objects[0].start_m = [0.0, 0.0, 0.01];
     sc.world.planes[0].normal = [0.0, 0.0, 1.0];
     sc.world.planes[0].offset_m = 0.0;
     sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
@@ -196,12 +196,15 @@ fn on_the_grid_carried_and_together(sites: &[Site; 2], last: u64) {
             "{tr:?}"
         );
         assert!(
-            s.physics.copy().state.pos.y > 0.01,
+            s.physics.copy().first().state.pos.y > 0.01,
             "site {i}: the squeezed disk was carried: {:?}",
-            s.physics.copy().state.pos
+            s.physics.copy().first().state.pos
         );
     }
-    let (a, b) = (sites[0].physics.copy().state, sites[1].physics.copy().state);
+    let (a, b) = (
+        sites[0].physics.copy().first().state,
+        sites[1].physics.copy().first().state,
+    );
     assert!(
         (a.pos - b.pos).norm() < 0.01,
         "the copies agree within 10 mm: {:?} vs {:?}",
@@ -262,7 +265,7 @@ fn a_missed_contact_is_replayed_without_allocating() {
     sc.network.delay_min_ms = LATE as f64;
     sc.network.delay_max_ms = LATE as f64;
     let world = sc.world();
-    let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     let mut tw = sc.timewarp(0, &copy);
     // Site 1's tool sweeps into the disk's rim from the left (0.1 s), then back; site 0's rests
     // 15 mm right of the rim.
@@ -295,8 +298,8 @@ fn a_missed_contact_is_replayed_without_allocating() {
             if let Some(r) = &report {
                 tw.receive(&world, &mut copy, 1, r, k as f64 * 1e-3);
             }
-            tw.physics_step(&world, &mut copy, &ContactForce::default(), 1e-3);
-            shown_apart += u32::from(tw.shown(&copy) != copy.state);
+            tw.physics_step(&world, &mut copy, &[ContactForce::default()], 1e-3);
+            shown_apart += u32::from(tw.shown(&copy, 0) != copy.first().state);
         });
     }
     let st = tw.rollback_stats();

@@ -31,7 +31,7 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
     let mut sc = Scenario::default();
     // A disk on a table, centred where the device's hand is (placement identity): the hand is in
     // contact from the start, so the servo commands a force.
-    sc.object.start_m = OBJECT;
+    sc.objects[0].start_m = OBJECT;
     sc.world.planes[0].normal = [0.0, 0.0, 1.0];
     sc.world.planes[0].offset_m = 0.0;
     sc.site.push(SiteSpec {

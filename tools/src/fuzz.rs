@@ -24,7 +24,7 @@ use anyhow::bail;
 use clap::{Parser, ValueEnum};
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
-use coop_model::method::{ObjectCopy, Report};
+use coop_model::method::{Report, WorldCopy};
 use coop_model::rng::Rng;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode};
@@ -295,7 +295,7 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
     let mut rng = Rng::new(a.seed);
     let mut inbound = Inbound::new(sites.clone(), bounds);
     let mut method = sc.method(0, MethodName::Paper);
-    let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(-0.05, 0.0, 0.01)));
+    let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(-0.05, 0.0, 0.01)));
     let mut now: u64 = 1_000_000_000_000;
     let mut seq = 0u64;
     let mut out = Outcome::default();
@@ -341,11 +341,11 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
         }
         out.deep += 1;
         let now_s = now as f64 * 1e-9;
-        copy.time_s = now_s;
-        let before = copy;
+        copy.set_time(now_s);
+        let before = copy.clone();
         method.receive(&world, &mut copy, from, &msg, now_s);
-        method.physics_step(&world, &mut copy, &ContactForce::default(), 1e-3);
-        let s = copy.state;
+        method.physics_step(&world, &mut copy, &[ContactForce::default()], 1e-3);
+        let s = copy.first().state;
         if !s.is_finite() || s.pos.norm() > bounds.extent_m * 2.0 {
             let after = s;
             copy = before;
@@ -433,7 +433,10 @@ fn scenario_target(a: &Args, progress: &AtomicU64) -> Outcome {
         };
         out.accepted += 1;
         let w = sc.world();
-        if !(w.mass.mass_kg > 0.0 && w.mass.inertia_body.iter().all(|x| *x > 0.0)) {
+        let massive = |b: &coop_model::world::Body| {
+            b.mass.mass_kg > 0.0 && b.mass.inertia_body.iter().all(|x| *x > 0.0)
+        };
+        if !w.bodies().iter().all(massive) {
             return implausible(out, || format!("input {i}: a world without mass: {t}"));
         }
         // A sample of the accepted scenarios, simulated briefly: nothing may blow up.

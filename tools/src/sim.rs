@@ -170,6 +170,8 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         } => {
             let mut sc = scenario_file::load(&scenario)?;
             if let Some(m) = method {
+                sc.check_method(m)
+                    .map_err(|e| anyhow::anyhow!("--method: {e}"))?;
                 sc.method = m;
             }
             if let Some(s) = seed {
@@ -188,8 +190,8 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             json,
             out,
         } => {
-            let methods = chosen(methods)?;
             let sc = scenario_file::load(&scenario)?;
+            let methods = kept(&sc, chosen(methods)?)?;
             let reference = run_mode(&sc, Mode::Reference);
             let mut all = vec![metrics::compute(&sc, &reference, &reference)];
             for method in methods {
@@ -218,8 +220,8 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             json,
             out,
         } => {
-            let methods = chosen(methods)?;
             let sc = scenario_file::load(&scenario)?;
+            let methods = kept(&sc, chosen(methods)?)?;
             crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
         }
         Command::Bench {
@@ -245,6 +247,23 @@ fn chosen(methods: Vec<MethodName>) -> anyhow::Result<Vec<MethodName>> {
         }
     }
     Ok(methods)
+}
+
+/// Of `methods`, those that can keep `sc`'s world ([`Scenario::check_method`]); the others are
+/// named on stderr. None left is an error.
+fn kept(sc: &Scenario, methods: Vec<MethodName>) -> anyhow::Result<Vec<MethodName>> {
+    let (ok, not): (Vec<_>, Vec<_>) = methods
+        .into_iter()
+        .partition(|&m| sc.check_method(m).is_ok());
+    for m in &not {
+        if let Err(e) = sc.check_method(*m) {
+            eprintln!("# skipped: {e}");
+        }
+    }
+    if ok.is_empty() {
+        anyhow::bail!("--methods: none of the methods given can keep this scenario's world");
+    }
+    Ok(ok)
 }
 
 /// One line per site of a method that rolls back.
@@ -346,7 +365,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             phases.join(", ")
         );
     }
-    let radius = sc.object.radius_m;
+    let radius = sc.objects[0].radius_m;
     println!(
         "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown); bounded = corrections the no-gain bound scaled back",
         all.iter()

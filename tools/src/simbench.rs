@@ -13,15 +13,15 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use coop_model::body::{BodyState, Vec3, Wrench};
+use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::{tool_contact, ContactForce, ContactParams, Plane, ToolContactState};
 use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
-use coop_model::method::{Consistency, ObjectCopy, Report};
+use coop_model::method::{integrate, Consistency, Report, WorldCopy};
 use coop_model::metrics;
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::sim::{self, Mode};
-use coop_model::world::{cube_heap, step_objects, Contacts, Physics, MAX_OBJECTS};
+use coop_model::world::{cube_heap, World, MAX_OBJECTS, SLEEP_AFTER_STEPS};
 
 use coop_actors::scenario_file;
 
@@ -48,7 +48,7 @@ pub fn eight_users(base: &Scenario) -> Scenario {
     sc.name = format!("{}-eight-users", base.name);
     sc.duration_s = 6.0;
     sc.phase.clear();
-    let c = Vec3::from(base.object.start_m);
+    let c = Vec3::from(base.objects[0].start_m);
     let templates = [&base.site[0], &base.site[base.site.len().min(2) - 1]];
     sc.site = (0..8)
         .map(|k| {
@@ -60,7 +60,7 @@ pub fn eight_users(base: &Scenario) -> Scenario {
             s.device_base_m = at(Vec3::new(c.x, c.y, 0.0) + u * 0.3);
             s.elbow = if k % 2 == 0 { 1.0 } else { -1.0 };
             let away = c + u * 0.15;
-            let press = c + u * (base.object.radius_m + s.tool_radius_m - 0.003);
+            let press = c + u * (base.objects[0].radius_m + s.tool_radius_m - 0.003);
             let carried = |p: Vec3| p + Vec3::new(0.0, 0.03, 0.0);
             let key = |t_s: f64, p: Vec3| KeyframeSpec {
                 t_s,
@@ -86,13 +86,13 @@ pub fn eight_users(base: &Scenario) -> Scenario {
 /// rollback's time, ns (one per batch).
 fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> {
     let world = sc.world();
-    let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
+    let start = BodyState::at_rest(Vec3::from(sc.objects[0].start_m));
     let n = sc.site.len();
     // Every tool 1 mm into the object from its own side.
     let touching = |j: usize| {
         let a = std::f64::consts::TAU * j as f64 / n as f64;
         let u = -Vec3::new(a.cos(), a.sin(), 0.0);
-        quantize(start.pos + u * (sc.object.radius_m + sc.site[j].tool_radius_m - 0.001))
+        quantize(start.pos + u * (sc.objects[0].radius_m + sc.site[j].tool_radius_m - 0.001))
     };
     let report = |first_tick: i64, count: usize, q: [i32; 3]| {
         Report::Tools(ToolReport {
@@ -102,7 +102,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
             ..ToolReport::NONE
         })
     };
-    let mut copy = ObjectCopy::new(start);
+    let mut copy = WorldCopy::one(start);
     let mut tw = sc.timewarp(0, &copy);
     let dt = 1.0 / sc.site[0].physics_rate_hz;
     // Every other tool known at tick 0 only: predicted (held) there for the whole history.
@@ -113,8 +113,8 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
     for k in 0..now {
         let q = touching(0);
         tw.own_tool(Vec3::new(f64::from(q[0]), f64::from(q[1]), f64::from(q[2])) * QUANTUM_M);
-        tw.physics_step(&world, &mut copy, &ContactForce::default(), dt);
-        copy.time_s = k as f64 * dt;
+        tw.physics_step(&world, &mut copy, &[ContactForce::default()], dt);
+        copy.set_time(k as f64 * dt);
     }
     let before = tw.stats().rollback().copied().unwrap_or_default();
     // Site 1's tool was 0.01 mm further in from tick now − 500 on: re-simulate 500 ticks.
@@ -123,7 +123,7 @@ fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> 
     let late = report(now - ROLLBACK_TICKS, WINDOW_TICKS, moved);
     let mut times = Vec::with_capacity(batches);
     for _ in 0..batches {
-        let (mut t, mut c) = (tw.clone(), copy);
+        let (mut t, mut c) = (tw.clone(), copy.clone());
         let t0 = Instant::now();
         t.receive(&world, &mut c, 1, black_box(&late), now as f64 * dt);
         let ns = t0.elapsed().as_nanos() as f64;
@@ -240,29 +240,24 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let sleeping = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
-    let awake = Physics {
-        sleep_after_steps: 0,
-        ..sleeping
-    };
-
     let mut out = Vec::new();
     for objects in [1usize, 4, 16] {
         for tools in [2usize, 8] {
+            let (bodies, states) = cube_heap(objects, 0.02, 0.1);
+            let mut sleeping =
+                World::new(&bodies[..objects], Vec3::new(0.0, 0.0, -9.81), &table, law);
+            // A lone object sleeps too here: the figures compare like with like.
+            sleeping.sleep_after_steps = SLEEP_AFTER_STEPS;
+            let awake = World {
+                sleep_after_steps: 0,
+                ..sleeping
+            };
             // Set down and settled (untimed): a world mid-session, not one just placed.
-            let (bodies, mut start) = cube_heap(objects, 0.02, 0.1);
-            let (bodies, mut settled) = (&bodies[..objects], Contacts::default());
+            let mut settled = WorldCopy::new(&states[..objects]);
             for _ in 0..1500 {
-                let none = [Wrench::default(); MAX_OBJECTS];
-                step_objects(
-                    &sleeping,
-                    bodies,
-                    &mut start[..objects],
-                    &mut settled,
-                    &none,
-                    1e-3,
-                );
+                integrate(&sleeping, &mut settled, &[], 0, 0, 1e-3, &mut []);
             }
+            let start: Vec<BodyState> = settled.objects().iter().map(|o| o.state).collect();
             // Tool k presses into object k mod n from outside the heap's side.
             let tips: Vec<(Vec3, usize)> = (0..tools)
                 .map(|k| {
@@ -271,42 +266,33 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
                     (start[o].pos + Vec3::new(side * 0.024, 0.0, 0.0), o)
                 })
                 .collect();
-            let time = |physics: &Physics<'_>| {
+            let time = |world: &World| {
                 median(
                     (0..batches)
                         .map(|_| {
-                            let (mut states, mut contacts) = (start, settled);
+                            let mut copy = settled.clone();
                             let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
+                            let mut users = [ContactForce::default(); 8 * MAX_OBJECTS];
                             let t0 = Instant::now();
                             for _ in 0..per_batch {
-                                let mut applied = [Wrench::default(); MAX_OBJECTS];
                                 for (t, (tip, _)) in tips.iter().enumerate() {
-                                    for (o, s) in states[..objects].iter().enumerate() {
-                                        let c = tool_contact(
+                                    for (o, c) in copy.objects().iter().enumerate() {
+                                        users[o * tools + t] = tool_contact(
                                             &law,
                                             &mut memory[t][o],
                                             &bodies[o].shape,
-                                            s,
+                                            &c.state,
                                             &bodies[o].mass,
                                             black_box(*tip),
                                             Vec3::zeros(),
                                             0.005,
                                         );
-                                        if c.touching {
-                                            applied[o] = applied[o] + c.wrench(s.pos);
-                                        }
                                     }
                                 }
-                                step_objects(
-                                    physics,
-                                    bodies,
-                                    &mut states[..objects],
-                                    &mut contacts,
-                                    &applied,
-                                    1e-3,
-                                );
+                                let users = &users[..objects * tools];
+                                integrate(world, &mut copy, users, tools, tools, 1e-3, &mut []);
                             }
-                            black_box(&states);
+                            black_box(&copy);
                             t0.elapsed().as_nanos() as f64 / per_batch as f64
                         })
                         .collect(),
@@ -335,11 +321,11 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
     let (batches, per_batch) = if quick { (5, 2_000) } else { (21, 50_000) };
 
     // Physics: one object resting on the table with the own user pushing it (contact + environment).
-    let start = BodyState::at_rest(Vec3::from(sc.object.start_m));
+    let start = BodyState::at_rest(Vec3::from(sc.objects[0].start_m));
     let mut method = sc.method(0, MethodName::Paper);
     let push = ContactForce {
         force: Vec3::new(0.3, 0.05, 0.0),
-        point: start.pos - Vec3::new(sc.object.radius_m, 0.0, 0.0),
+        point: start.pos - Vec3::new(sc.objects[0].radius_m, 0.0, 0.0),
         depth: 5e-4,
         touching: true,
         slipping: false,
@@ -348,10 +334,10 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
     let physics_ns = median(
         (0..batches)
             .map(|_| {
-                let mut copy = ObjectCopy::new(start);
+                let mut copy = WorldCopy::one(start);
                 let t0 = Instant::now();
                 for _ in 0..per_batch {
-                    method.physics_step(&world, &mut copy, black_box(&push), dt);
+                    method.physics_step(&world, &mut copy, black_box(&[push]), dt);
                 }
                 black_box(&copy);
                 t0.elapsed().as_nanos() as f64 / per_batch as f64
@@ -365,7 +351,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
     let mut force_loop = sc.force_loop(0);
     let q = arm
         .inverse(
-            start.pos - Vec3::new(sc.object.radius_m + 0.004, 0.0, 0.0),
+            start.pos - Vec3::new(sc.objects[0].radius_m + 0.004, 0.0, 0.0),
             sc.site[0].elbow,
         )
         .unwrap_or_else(|| {
@@ -384,13 +370,12 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                             dt_s: dt,
                             tool_pos: arm.forward(&q),
                             tool_vel: arm.jacobian(&q) * Vec3::zeros(),
-                            object: &start,
+                            objects: std::slice::from_ref(&start),
                             object_time_s: k as f64 * dt,
                             adopted: false,
                             stopping: false,
                         },
-                        &world.shape,
-                        &world.mass,
+                        world.bodies(),
                     );
                     let f_m = Vec3::new(0.1, 0.0, 0.0);
                     black_box(force_loop.step(out.f_desired, out.scale, f_m, &q, dt));

@@ -82,7 +82,7 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
         "session failed: {}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let o = &scenario.object;
+    let o = &scenario.objects[0];
     let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
     let mut arrows = 0;
     for site in &scenario.site {
@@ -326,7 +326,7 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
         );
     }
     // The reference copy: its own entity, the object's real size, its own (grey) colour.
-    let o = &scenario.object;
+    let o = &scenario.objects[0];
     let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
     let entities = &v["entities"];
     assert_eq!(

@@ -32,7 +32,7 @@ fn paper() -> Scenario {
 /// paper's method does at 100–150 ms); one thrown twice as far has been given energy.
 fn left_world(sc: &Scenario, r: &RunResult) -> Option<String> {
     let world = sc.world();
-    let size = sc.object.radius_m.max(sc.object.half_height_m);
+    let size = sc.objects[0].radius_m.max(sc.objects[0].half_height_m);
     for (i, site) in r.sites.iter().enumerate() {
         for (k, p) in site.obj_pos.iter().enumerate() {
             let t = r.t[k];

@@ -116,7 +116,7 @@ fn a_session_through_a_router_over_mutual_tls_refuses_impostors() {
     // What the impostors say a site's object is: the disk 0.10 m towards the users from where it
     // starts (inside the world, where the scripts never take it).
     let index = |site: &str| sc.site.iter().position(|s| s.name == site).expect("a site");
-    let start_m = sc.object.start_m;
+    let start_m = sc.objects[0].start_m;
     let forged_pos = [start_m[0], start_m[1] - 0.10, start_m[2]];
     let forged_arg = format!("{},{},{}", forged_pos[0], forged_pos[1], forged_pos[2]);
 

@@ -112,7 +112,7 @@ fn same_seed_gives_byte_identical_outputs() {
 #[test]
 fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
     let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
-    let radius = sc.object.radius_m;
+    let radius = sc.objects[0].radius_m;
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
     let naive = metrics::compute(
         &sc,

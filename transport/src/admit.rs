@@ -128,7 +128,8 @@ impl Bounds {
     /// the scenario expects (its link's maximum plus jitter) plus three of its slowest report
     /// periods plus 100 ms.
     pub fn from_scenario(sc: &Scenario, max_age_ms: Option<f64>) -> Self {
-        let o = &sc.object;
+        // (Stations run one object: the first.)
+        let o = &sc.objects[0];
         let size = o
             .radius_m
             .max(o.half_height_m)
@@ -147,7 +148,7 @@ impl Bounds {
         // The fastest the users and gravity can make the object across the whole world, twice.
         let accel = force_n / o.mass_kg + g;
         let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
-        let mass = sc.world().mass;
+        let mass = sc.world().bodies[0].mass;
         let i_max = mass.inertia_body.max();
         let r_min = [o.radius_m, o.half_height_m]
             .into_iter()

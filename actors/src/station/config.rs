@@ -377,6 +377,14 @@ impl StationConfig {
                 );
             }
         }
+        if scenario.objects.len() > 1 {
+            // The rings, the wire and the recordings carry one object's state so far.
+            bail!(
+                "object = {} objects (scenario {:?}): stations run a world of one object so far; the simulator runs several (sim)",
+                scenario.objects.len(),
+                scenario.name
+            );
+        }
         let twist = scenario.environment_contact.rotational_friction_radius_m;
         if scenario.method == MethodName::Timewarp && twist != 0.0 {
             // A confirmed state a site adopts travels as the ring's and the wire's snapshot,

@@ -647,8 +647,9 @@ fn faces(
     BoxOverlap::Faces { points, count }
 }
 
-/// Most points an object–object contact weighs: every contact point of either shape.
-const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
+/// Most points an object–object contact weighs: every contact point of either shape, and the
+/// points of each facing the other ([`Shape::facing_points`]).
+const PAIR_POINTS: usize = 2 * (MAX_CONTACT_POINTS + 2);
 
 /// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
 /// `a`, the wrench on `b`, and whether they touch.
@@ -665,8 +666,9 @@ const PAIR_POINTS: usize = 2 * MAX_CONTACT_POINTS;
 ///
 /// Two boxes' touching points come from the separating-axis test instead: the other box's face
 /// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
-/// which no corner of either finds). Two cylinders, or a cylinder and a box, crossing edge over
-/// edge between their ends are not found.
+/// which no corner of either finds). A cylinder adds the points of its side and rim facing the
+/// other's centre ([`Shape::facing_points`]); a cylinder's side crossing a box's edge between its
+/// ends, or another cylinder's side at an angle away from both centres, is still not found.
 pub fn pair_wrench(
     c: &ContactParams,
     state: &mut PairContactState,
@@ -709,10 +711,13 @@ pub fn pair_wrench(
     }
     // The points of `from` inside `into`; `sign` +1 where `from` is `a`, -1 where it is `b`.
     let mut gather = |from: &PairSide<'_>, into: &PairSide<'_>, sign: f64| {
-        let mut local = [Vec3::zeros(); MAX_CONTACT_POINTS];
-        let (count, margin) = from.shape.contact_points(&mut local);
+        let mut fixed = [Vec3::zeros(); MAX_CONTACT_POINTS];
+        let (count, margin) = from.shape.contact_points(&mut fixed);
         let (r_from, inv_into) = (from.body.rot, into.body.rot.inverse());
-        for q in &local[..count] {
+        let mut facing = [Vec3::zeros(); 2];
+        let toward = r_from.inverse() * (into.body.pos - from.body.pos);
+        let facing_count = from.shape.facing_points(toward, &mut facing);
+        for q in fixed[..count].iter().chain(&facing[..facing_count]) {
             let world = from.body.pos + r_from * q;
             let (d, n_body) = into
                 .shape

@@ -108,7 +108,7 @@ pub struct DisplayStats {
 }
 
 /// The displayed object: the copy plus an offset that absorbs corrections and decays smoothly.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct DisplayedObject {
     /// The copy's state and time at the last tick, to tell a correction from motion.
     last: Option<(BodyState, f64, Vec3)>,
@@ -492,13 +492,12 @@ mod tests {
                 dt_s: 1e-3,
                 tool_pos: tool,
                 tool_vel: vel,
-                object: obj,
+                objects: std::slice::from_ref(obj),
                 object_time_s: now,
                 adopted: false,
                 stopping: false,
             },
-            &SHAPE,
-            &mass(),
+            &[crate::world::Body::solid(SHAPE, mass().mass_kg)],
         );
         (out.f_desired, out.f_simulated)
     }

@@ -443,15 +443,28 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
 /// See the module docs ("energy beyond the users' work").
 fn energy_beyond_users(scenario: &Scenario, run: &RunResult) -> f64 {
     let world = scenario.world();
-    let m = world.mass.mass_kg;
-    let e = |pos: Vec3, vel: Vec3| 0.5 * m * vel.norm_squared() - m * world.gravity.dot(&pos);
+    let e = |k: usize, pos: Vec3, vel: Vec3| {
+        let m = world.bodies[k].mass.mass_kg;
+        0.5 * m * vel.norm_squared() - m * world.gravity.dot(&pos)
+    };
     let given: f64 = run.energy.iter().map(|a| a.users_positive_j).sum();
-    let start = Vec3::from(scenario.object.start_m);
-    let e0 = e(start, Vec3::zeros());
+    let starts = scenario.start_states();
+    let e0 = (1..starts.len()).fold(e(0, starts[0].pos, starts[0].vel), |a, k| {
+        a + e(k, starts[k].pos, starts[k].vel)
+    });
     run.sites
         .iter()
-        .flat_map(|s| s.obj_pos.iter().zip(&s.obj_vel))
-        .map(|(&p, &v)| e(p, v) - e0 - given)
+        .flat_map(|s| {
+            (0..s.obj_pos.len()).map(move |i| {
+                s.others
+                    .iter()
+                    .enumerate()
+                    .fold(e(0, s.obj_pos[i], s.obj_vel[i]), |a, (k, o)| {
+                        a + e(k + 1, o.pos[i], o.vel[i])
+                    })
+            })
+        })
+        .map(|total| total - e0 - given)
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
@@ -495,7 +508,7 @@ fn phase_happened(
     }
     if p.lifted_m > 0.0 {
         // z is up (the scenarios' convention: the table is z = 0).
-        let rest = Vec3::from(sc.object.start_m).z;
+        let rest = Vec3::from(sc.objects[0].start_m).z;
         let top = (first..=last)
             .map(|k| s.obj_pos[k].z)
             .fold(f64::NEG_INFINITY, f64::max);

@@ -2,17 +2,17 @@
 //! the network, and the task phases to check. Parsed from TOML by the tools (serde, behind this
 //! crate's `serde` feature); validated here, with errors that name the field, the value and the rule.
 
-use crate::body::{BodyState, MassProps, Vec3};
-use crate::contact::{ContactParams, Plane, MAX_PLANES};
+use crate::body::{BodyState, Vec3};
+use crate::contact::{pair_wrench, ContactParams, PairContactState, PairSide, Plane, MAX_PLANES};
 use crate::controller::ControllerParams;
 use crate::device::{HandParams, ScaraParams};
-use crate::method::{Consistency, Coupled, Naive, ObjectCopy, Paper, TimeWarp};
+use crate::method::{Consistency, Coupled, Naive, Paper, TimeWarp, WorldCopy};
 pub use crate::rules::ScenarioError;
 use crate::rules::{bounded, err, finite3, in_closed, in_range};
 use crate::servo::ServoParams;
 use crate::shape::Shape;
 use crate::user::Keyframe;
-use crate::world::{World, MAX_SITES};
+use crate::world::{Body, World, MAX_OBJECTS, MAX_SITES};
 
 #[cfg(feature = "serde")]
 use serde::{Deserialize, Serialize};
@@ -95,14 +95,20 @@ pub struct Scenario {
     pub dead_reckoning_order: u8,
     /// Trace rows per second.
     pub sample_rate_hz: f64,
-    /// The object.
-    pub object: ObjectSpec,
+    /// The objects (`[object]` for one, `[[object]]` for several), 1 to [`MAX_OBJECTS`].
+    #[cfg_attr(
+        feature = "serde",
+        serde(rename = "object", deserialize_with = "one_or_many")
+    )]
+    pub objects: Vec<ObjectSpec>,
     /// Gravity and environment.
     pub world: WorldSpec,
     /// Tool–object contact law.
     pub contact: ContactParams,
     /// Object–environment contact law.
     pub environment_contact: ContactParams,
+    /// Object–object contact law (default: `environment_contact`'s).
+    pub object_contact: Option<ContactParams>,
     /// Every link between sites (emulated network).
     pub network: LinkSpec,
     /// The sites, 1 to 8.
@@ -155,7 +161,7 @@ pub const MAX_LOCAL_LAG_MS: f64 = 200.0;
 /// The longest `timewarp.horizon_ms`, ms.
 pub const MAX_HORIZON_MS: f64 = 10_000.0;
 
-/// The object.
+/// An object.
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
@@ -163,6 +169,8 @@ pub const MAX_HORIZON_MS: f64 = 10_000.0;
     serde(deny_unknown_fields, default)
 )]
 pub struct ObjectSpec {
+    /// Its name ([`NAME_RULE`]); a lone object's defaults to `object`, each of several needs one.
+    pub name: String,
     /// Shape.
     pub shape: ShapeName,
     /// Radius (sphere, cylinder), m.
@@ -175,6 +183,36 @@ pub struct ObjectSpec {
     pub mass_kg: f64,
     /// Initial centre of mass, m.
     pub start_m: [f64; 3],
+    /// Initial orientation: turns about the world's x, then y, then z axis (roll, pitch, yaw), °.
+    pub start_rpy_deg: [f64; 3],
+    /// Initial velocity, m/s.
+    pub velocity_m_per_s: [f64; 3],
+    /// Initial angular velocity, world, rad/s.
+    pub angular_velocity_rad_per_s: [f64; 3],
+    /// A fixture: it never moves (tools and objects still touch it).
+    pub fixed: bool,
+}
+
+/// `[object]` (one object) or `[[object]]` (several).
+#[cfg(feature = "serde")]
+fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<ObjectSpec>, D::Error> {
+    use serde::de::{value, MapAccess, SeqAccess, Visitor};
+    struct OneOrMany;
+    impl<'de> Visitor<'de> for OneOrMany {
+        type Value = Vec<ObjectSpec>;
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("an [object] table or [[object]] tables")
+        }
+        fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+            Ok(vec![ObjectSpec::deserialize(
+                value::MapAccessDeserializer::new(map),
+            )?])
+        }
+        fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+            Vec::deserialize(value::SeqAccessDeserializer::new(seq))
+        }
+    }
+    d.deserialize_any(OneOrMany)
 }
 
 /// Gravity and the environment.
@@ -315,13 +353,14 @@ impl Default for Scenario {
             method: MethodName::Paper,
             dead_reckoning_order: 2,
             sample_rate_hz: 200.0,
-            object: ObjectSpec::default(),
+            objects: vec![ObjectSpec::default()],
             world: WorldSpec::default(),
             contact: ContactParams::default(),
             environment_contact: ContactParams {
                 stiffness_n_per_m: 2000.0,
                 ..ContactParams::default()
             },
+            object_contact: None,
             network: LinkSpec::default(),
             site: Vec::new(),
             phase: Vec::new(),
@@ -331,15 +370,38 @@ impl Default for Scenario {
     }
 }
 
+impl ObjectSpec {
+    /// Its shape.
+    pub fn shape(&self) -> Shape {
+        match self.shape {
+            ShapeName::Sphere => Shape::Sphere {
+                radius: self.radius_m,
+            },
+            ShapeName::Cylinder => Shape::Cylinder {
+                radius: self.radius_m,
+                half_height: self.half_height_m,
+            },
+            ShapeName::Box => Shape::Box {
+                half: Vec3::from(self.half_extents_m),
+            },
+        }
+    }
+}
+
 impl Default for ObjectSpec {
     fn default() -> Self {
         Self {
+            name: String::new(),
             shape: ShapeName::Cylinder,
             radius_m: 0.04,
             half_height_m: 0.01,
             half_extents_m: [0.04, 0.04, 0.04],
             mass_kg: 0.1,
             start_m: [0.0, 0.0, 0.0],
+            start_rpy_deg: [0.0; 3],
+            velocity_m_per_s: [0.0; 3],
+            angular_velocity_rad_per_s: [0.0; 3],
+            fixed: false,
         }
     }
 }
@@ -487,21 +549,8 @@ impl Scenario {
             ));
         }
         bounded("sample_rate_hz", self.sample_rate_hz, 1.0, 10_000.0, "Hz")?;
-        let o = &self.object;
-        bounded("object.mass_kg", o.mass_kg, 1e-3, 1000.0, "kg")?;
-        match o.shape {
-            ShapeName::Sphere => bounded("object.radius_m", o.radius_m, 1e-3, 10.0, "m")?,
-            ShapeName::Cylinder => {
-                bounded("object.radius_m", o.radius_m, 1e-3, 10.0, "m")?;
-                bounded("object.half_height_m", o.half_height_m, 1e-3, 10.0, "m")?;
-            }
-            ShapeName::Box => {
-                for (i, h) in o.half_extents_m.iter().enumerate() {
-                    bounded(&format!("object.half_extents_m[{i}]"), *h, 1e-3, 10.0, "m")?;
-                }
-            }
-        }
-        finite3("object.start_m", &o.start_m, 100.0)?;
+        self.validate_objects()?;
+        self.check_method(self.method)?;
         finite3(
             "world.gravity_m_per_s2",
             &self.world.gravity_m_per_s2,
@@ -540,6 +589,9 @@ impl Scenario {
         }
         self.display.validate()?;
         validate_contact(&self.environment_contact, "environment_contact")?;
+        if let Some(c) = &self.object_contact {
+            validate_contact(c, "object_contact")?;
+        }
         let n = &self.network;
         in_closed("network.delay_min_ms", n.delay_min_ms, 0.0, 10_000.0)?;
         in_closed(
@@ -763,13 +815,28 @@ impl Scenario {
     /// object and throws it out of the world.
     fn validate_stability(&self) -> Result<(), ScenarioError> {
         let (c, e) = (&self.contact, &self.environment_contact);
+        let o = self.object_law();
         let users = self.site.len() as f64;
         let planes = self.world.planes.len().min(2) as f64;
+        // With several objects, one may be pressed between two others (a stack's middle box).
+        let neighbours = if self.objects.len() > 1 { 2.0 } else { 0.0 };
         let k = users * c.stiffness_n_per_m.max(c.tangential_stiffness_n_per_m)
-            + planes * e.stiffness_n_per_m.max(e.tangential_stiffness_n_per_m);
+            + planes * e.stiffness_n_per_m.max(e.tangential_stiffness_n_per_m)
+            + neighbours * o.stiffness_n_per_m.max(o.tangential_stiffness_n_per_m);
         let d = users * c.damping_n_s_per_m.max(c.tangential_damping_n_s_per_m)
-            + planes * e.damping_n_s_per_m.max(e.tangential_damping_n_s_per_m);
-        let m = self.object.mass_kg;
+            + planes * e.damping_n_s_per_m.max(e.tangential_damping_n_s_per_m)
+            + neighbours * o.damping_n_s_per_m.max(o.tangential_damping_n_s_per_m);
+        // The lightest object that moves is the fastest.
+        let (lightest, m) = self
+            .objects
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| !o.fixed)
+            .map(|(i, o)| (i, o.mass_kg))
+            .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        if !m.is_finite() {
+            return Ok(()); // nothing moves
+        }
         let (omega2, gamma) = (k / m, d / m);
         // The roots of λ² + γλ + ω² = 0: complex (|λ| = ω) or real (the larger one).
         let disc = gamma * gamma / 4.0 - omega2;
@@ -778,6 +845,19 @@ impl Scenario {
         } else {
             omega2.sqrt()
         };
+        let (mass_field, laws, what) = if self.objects.len() > 1 {
+            (
+                format!("{}.mass_kg", self.object_field(lightest)),
+                "contact, environment_contact and object_contact",
+                "every tool, two planes and two other objects at once",
+            )
+        } else {
+            (
+                "object.mass_kg".to_string(),
+                "contact and environment_contact",
+                "every tool and two planes at once",
+            )
+        };
         for (i, s) in self.site.iter().enumerate() {
             let dt = 1.0 / s.physics_rate_hz;
             if lambda * dt > 1.0 || !lambda.is_finite() {
@@ -785,9 +865,9 @@ impl Scenario {
                     format!("site[{i}].physics_rate_hz"),
                     s.physics_rate_hz,
                     format!(
-                        "too slow for the contacts: with object.mass_kg = {m}, contact and \
-                         environment_contact stiffness {k:.0} N/m and damping {d:.1} N·s/m in all \
-                         (every tool and two planes at once), the fastest mode is {lambda:.0} 1/s, \
+                        "too slow for the contacts: with {mass_field} = {m}, {laws} \
+                         stiffness {k:.0} N/m and damping {d:.1} N·s/m in all \
+                         ({what}), the fastest mode is {lambda:.0} 1/s, \
                          and the rule |λ|·dt ≤ 1 needs at least {:.0} Hz (or softer contacts, or \
                          a heavier object)",
                         lambda.ceil()
@@ -801,68 +881,228 @@ impl Scenario {
     /// The object must start outside every plane of the environment (up to 1 mm of contact sag):
     /// a start inside a wall would be ejected by the penalty force at kilometres per second.
     fn validate_start(&self) -> Result<(), ScenarioError> {
-        let o = &self.object;
-        let start = Vec3::from(o.start_m);
-        for (i, p) in self.world.planes.iter().enumerate() {
-            let n = Vec3::from(p.normal).normalize();
-            // How far the object reaches towards the plane (identity orientation at start).
-            let extent = match o.shape {
-                ShapeName::Sphere => o.radius_m,
-                ShapeName::Cylinder => {
-                    o.radius_m * (n.x * n.x + n.y * n.y).sqrt() + o.half_height_m * n.z.abs()
+        let states = self.start_states();
+        for (k, o) in self.objects.iter().enumerate() {
+            let inv = states[k].rot.inverse();
+            let start = Vec3::from(o.start_m);
+            for (i, p) in self.world.planes.iter().enumerate() {
+                let n_world = Vec3::from(p.normal).normalize();
+                // How far the object reaches towards the plane, in its own axes.
+                let n = inv * n_world;
+                let extent = match o.shape {
+                    ShapeName::Sphere => o.radius_m,
+                    ShapeName::Cylinder => {
+                        o.radius_m * (n.x * n.x + n.y * n.y).sqrt() + o.half_height_m * n.z.abs()
+                    }
+                    ShapeName::Box => Vec3::from(o.half_extents_m).dot(&n.abs()),
+                };
+                let depth = p.offset_m + extent - n_world.dot(&start);
+                if depth > 1e-3 || !depth.is_finite() {
+                    return Err(err(
+                        format!("{}.start_m", self.object_field(k)),
+                        o.start_m,
+                        format!(
+                            "starts {:.1} mm inside world.planes[{i}]: the object must start \
+                             outside the environment (at most 1 mm of contact)",
+                            depth * 1e3
+                        ),
+                    ));
                 }
-                ShapeName::Box => Vec3::from(o.half_extents_m).dot(&n.abs()),
-            };
-            let depth = p.offset_m + extent - n.dot(&start);
-            if depth > 1e-3 || !depth.is_finite() {
+            }
+        }
+        // Nor inside another object: the pair's penalty spring would throw them apart.
+        let world = self.world();
+        let probe = ContactParams {
+            stiffness_n_per_m: 1.0,
+            damping_n_s_per_m: 0.0,
+            tangential_stiffness_n_per_m: 0.0,
+            tangential_damping_n_s_per_m: 0.0,
+            friction_static: 0.0,
+            friction_kinetic: 0.0,
+            ..ContactParams::default()
+        };
+        let bodies = world.bodies();
+        for i in 0..bodies.len() {
+            for j in i + 1..bodies.len() {
+                let side = |k: usize| PairSide {
+                    shape: &bodies[k].shape,
+                    body: &states[k],
+                    mass: &bodies[k].mass,
+                };
+                let mut memory = PairContactState::default();
+                // With a unit stiffness, the force is the overlap summed over the contact points.
+                let (on_i, _, _) = pair_wrench(&probe, &mut memory, side(i), side(j));
+                let overlap = on_i.force.norm();
+                if overlap > 1e-3 || !overlap.is_finite() {
+                    return Err(err(
+                        format!("{}.start_m", self.object_field(j)),
+                        self.objects[j].start_m,
+                        format!(
+                            "starts {:.1} mm inside {} ({:?}): objects must start apart (at \
+                             most 1 mm of contact)",
+                            overlap * 1e3,
+                            self.object_field(i),
+                            self.object_name(i),
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Every object: sizes, masses, start, names, and at most [`MAX_OBJECTS`].
+    fn validate_objects(&self) -> Result<(), ScenarioError> {
+        if self.objects.is_empty() || self.objects.len() > MAX_OBJECTS {
+            return Err(err(
+                "object",
+                self.objects.len(),
+                format!("a scenario has 1 to {MAX_OBJECTS} objects"),
+            ));
+        }
+        for (k, o) in self.objects.iter().enumerate() {
+            let f = self.object_field(k);
+            let at = |name: &str| format!("{f}.{name}");
+            if self.objects.len() > 1 || !o.name.is_empty() {
+                if !valid_name(&o.name) {
+                    return Err(err(
+                        at("name"),
+                        &o.name,
+                        format!("{NAME_RULE} (each of several objects needs one)"),
+                    ));
+                }
+                if self.objects[..k].iter().any(|p| p.name == o.name) {
+                    return Err(err(at("name"), &o.name, "object names must be unique"));
+                }
+            }
+            bounded(&at("mass_kg"), o.mass_kg, 1e-3, 1000.0, "kg")?;
+            match o.shape {
+                ShapeName::Sphere => bounded(&at("radius_m"), o.radius_m, 1e-3, 10.0, "m")?,
+                ShapeName::Cylinder => {
+                    bounded(&at("radius_m"), o.radius_m, 1e-3, 10.0, "m")?;
+                    bounded(&at("half_height_m"), o.half_height_m, 1e-3, 10.0, "m")?;
+                }
+                ShapeName::Box => {
+                    for (i, h) in o.half_extents_m.iter().enumerate() {
+                        bounded(&at(&format!("half_extents_m[{i}]")), *h, 1e-3, 10.0, "m")?;
+                    }
+                }
+            }
+            finite3(&at("start_m"), &o.start_m, 100.0)?;
+            finite3(&at("start_rpy_deg"), &o.start_rpy_deg, 360.0)?;
+            finite3(&at("velocity_m_per_s"), &o.velocity_m_per_s, 10.0)?;
+            finite3(
+                &at("angular_velocity_rad_per_s"),
+                &o.angular_velocity_rad_per_s,
+                100.0,
+            )?;
+            if o.fixed
+                && (o.velocity_m_per_s != [0.0; 3] || o.angular_velocity_rad_per_s != [0.0; 3])
+            {
                 return Err(err(
-                    "object.start_m",
-                    o.start_m,
-                    format!(
-                        "starts {:.1} mm inside world.planes[{i}]: the object must start outside \
-                         the environment (at most 1 mm of contact)",
-                        depth * 1e3
-                    ),
+                    at("velocity_m_per_s"),
+                    o.velocity_m_per_s,
+                    "must be 0 (with angular_velocity_rad_per_s) for a fixture (fixed = true)",
                 ));
             }
         }
         Ok(())
     }
 
+    /// Whether method `name` can keep this scenario's world: every method keeps one object;
+    /// only `timewarp` (which steps the whole world from every tool) keeps several so far.
+    ///
+    /// # Errors
+    /// A [`ScenarioError`] naming the objects and the method.
+    pub fn check_method(&self, name: MethodName) -> Result<(), ScenarioError> {
+        if self.objects.len() > 1 && name != MethodName::Timewarp {
+            return Err(err(
+                "method",
+                name.as_str(),
+                format!(
+                    "keeps a world of one object so far; this scenario has {} (timewarp keeps \
+                     several)",
+                    self.objects.len()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// How object `k` is named in errors: `object` when it is the only one, `object[k]`.
+    pub fn object_field(&self, k: usize) -> String {
+        if self.objects.len() > 1 {
+            format!("object[{k}]")
+        } else {
+            "object".to_string()
+        }
+    }
+
+    /// Object `k`'s name: its own, or `object` for a lone object without one.
+    pub fn object_name(&self, k: usize) -> &str {
+        match self.objects[k].name.as_str() {
+            "" => "object",
+            n => n,
+        }
+    }
+
+    /// The object–object contact law: `object_contact`, or `environment_contact`'s.
+    pub fn object_law(&self) -> ContactParams {
+        self.object_contact.unwrap_or(self.environment_contact)
+    }
+
+    /// Every object's state at the start.
+    pub fn start_states(&self) -> Vec<BodyState> {
+        self.objects
+            .iter()
+            .map(|o| {
+                let [roll, pitch, yaw] = o.start_rpy_deg.map(f64::to_radians);
+                let rot = nalgebra::UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+                let shape = o.shape();
+                let inertia = shape.inertia(o.mass_kg);
+                let omega = Vec3::from(o.angular_velocity_rad_per_s);
+                // L = R I Rᵀ ω.
+                let ang_mom = rot * (inertia.component_mul(&(rot.inverse() * omega)));
+                BodyState {
+                    pos: Vec3::from(o.start_m),
+                    rot,
+                    vel: Vec3::from(o.velocity_m_per_s),
+                    ang_mom,
+                }
+            })
+            .collect()
+    }
+
     /// The world every site shares.
     pub fn world(&self) -> World {
-        let o = &self.object;
-        let shape = match o.shape {
-            ShapeName::Sphere => Shape::Sphere { radius: o.radius_m },
-            ShapeName::Cylinder => Shape::Cylinder {
-                radius: o.radius_m,
-                half_height: o.half_height_m,
-            },
-            ShapeName::Box => Shape::Box {
-                half: Vec3::from(o.half_extents_m),
-            },
-        };
-        let mut planes = [Plane {
-            normal: Vec3::y(),
-            offset: f64::NEG_INFINITY,
-        }; MAX_PLANES];
-        for (slot, p) in planes.iter_mut().zip(&self.world.planes) {
-            let n = Vec3::from(p.normal);
-            *slot = Plane {
-                normal: n / n.norm(),
-                offset: p.offset_m,
-            };
-        }
+        let bodies: Vec<Body> = self
+            .objects
+            .iter()
+            .map(|o| Body {
+                fixed: o.fixed,
+                ..Body::solid(o.shape(), o.mass_kg)
+            })
+            .collect();
+        let planes: Vec<Plane> = self
+            .world
+            .planes
+            .iter()
+            .map(|p| {
+                let n = Vec3::from(p.normal);
+                Plane {
+                    normal: n / n.norm(),
+                    offset: p.offset_m,
+                }
+            })
+            .collect();
         World {
-            shape,
-            mass: MassProps {
-                mass_kg: o.mass_kg,
-                inertia_body: shape.inertia(o.mass_kg),
-            },
-            gravity: Vec3::from(self.world.gravity_m_per_s2),
-            planes,
-            plane_count: self.world.planes.len().min(MAX_PLANES),
-            env_contact: self.environment_contact,
+            object_contact: self.object_law(),
+            ..World::new(
+                &bodies,
+                Vec3::from(self.world.gravity_m_per_s2),
+                &planes,
+                self.environment_contact,
+            )
         }
     }
 
@@ -888,13 +1128,13 @@ impl Scenario {
     }
 
     /// A site's copy of the world at the scenario's start, time 0.
-    pub fn start_copy(&self) -> ObjectCopy {
-        ObjectCopy::new(BodyState::at_rest(Vec3::from(self.object.start_m)))
+    pub fn start_copy(&self) -> WorldCopy {
+        WorldCopy::new(&self.start_states())
     }
 
     /// Site `i`'s `timewarp` method, starting from `copy`: the common tick is the physics step (every
     /// site's must be the same), the horizon is [`Self::timewarp_horizon_s`].
-    pub fn timewarp(&self, i: usize, copy: &ObjectCopy) -> TimeWarp {
+    pub fn timewarp(&self, i: usize, copy: &WorldCopy) -> TimeWarp {
         let dt = 1.0 / self.site[i].physics_rate_hz;
         let horizon_s = self.timewarp_horizon_s();
         let radii = self.tool_radii();
@@ -918,7 +1158,8 @@ impl Scenario {
             .iter()
             .map(|s| s.controller.max_force_n)
             .sum::<f64>()
-            + self.object.mass_kg * Vec3::from(self.world.gravity_m_per_s2).norm();
+            + self.objects.iter().map(|o| o.mass_kg).sum::<f64>()
+                * Vec3::from(self.world.gravity_m_per_s2).norm();
         let k = self.environment_contact.stiffness_n_per_m;
         let planes = self.world.planes.len().max(1) as f64;
         tw.set_max_spring_energy(planes * 0.5 * press * press / k);

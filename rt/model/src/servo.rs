@@ -17,12 +17,12 @@
 //!   passivity controller adding damping when the display's deviation from the simulated contact
 //!   would inject energy into the user.
 
-use crate::body::{BodyState, MassProps, Vec3};
+use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
 use crate::display::{
     DisplayParams, DisplayStats, DisplayedObject, PassivityObserver, StepLimiter,
 };
-use crate::shape::Shape;
+use crate::world::{Body, MAX_OBJECTS};
 
 /// Servo parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,8 +53,8 @@ pub struct ServoInput<'a> {
     pub tool_pos: Vec3,
     /// Tool velocity, world, m/s.
     pub tool_vel: Vec3,
-    /// Newest object state.
-    pub object: &'a BodyState,
+    /// Newest state of each object of the world, in its order.
+    pub objects: &'a [BodyState],
     /// Its time, s.
     pub object_time_s: f64,
     /// Whether physics adopted a remote state since the last tick (for the bounded adoption step
@@ -72,8 +72,9 @@ pub struct ServoOutput {
     /// The force the copy's own contact puts on the hand after the stale ramp (what F_h would be
     /// without the display stages), world, N.
     pub f_simulated: Vec3,
-    /// The tool's contact on the object (force on the object), for physics.
-    pub contact: ContactForce,
+    /// The tool's contact on each object (force on the object), for physics; past the world's
+    /// objects, none.
+    pub contacts: [ContactForce; MAX_OBJECTS],
     /// Tool position, world.
     pub tool_pos: Vec3,
     /// Tool velocity, world.
@@ -87,10 +88,10 @@ pub struct ServoOutput {
 pub struct Servo {
     /// Parameters.
     pub params: ServoParams,
-    contact: ToolContactState,
+    contact: [ToolContactState; MAX_OBJECTS],
     scale: f64,
-    displayed: DisplayedObject,
-    display_contact: ToolContactState,
+    displayed: [DisplayedObject; MAX_OBJECTS],
+    display_contact: [ToolContactState; MAX_OBJECTS],
     limiter: StepLimiter,
     observer: PassivityObserver,
     stats: DisplayStats,
@@ -103,10 +104,10 @@ impl Servo {
     pub fn new(params: ServoParams) -> Self {
         Self {
             params,
-            contact: ToolContactState::default(),
+            contact: [ToolContactState::default(); MAX_OBJECTS],
             scale: 1.0,
-            displayed: DisplayedObject::default(),
-            display_contact: ToolContactState::default(),
+            displayed: [DisplayedObject::default(); MAX_OBJECTS],
+            display_contact: [ToolContactState::default(); MAX_OBJECTS],
             limiter: StepLimiter::default(),
             observer: PassivityObserver::default(),
             stats: DisplayStats::default(),
@@ -121,21 +122,29 @@ impl Servo {
     }
 
     /// One tick.
-    pub fn step(&mut self, inp: &ServoInput<'_>, shape: &Shape, mass: &MassProps) -> ServoOutput {
+    pub fn step(&mut self, inp: &ServoInput<'_>, bodies: &[Body]) -> ServoOutput {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let p = &self.params;
         let (tool_pos, tool_vel) = (inp.tool_pos, inp.tool_vel);
-        let synced = self.display_contact == self.contact;
-        let contact = tool_contact(
-            &p.contact,
-            &mut self.contact,
-            shape,
-            inp.object,
-            mass,
-            tool_pos,
-            tool_vel,
-            p.tool_radius_m,
-        );
+        let n = bodies.len().min(inp.objects.len()).clamp(1, MAX_OBJECTS);
+        let synced: [bool; MAX_OBJECTS] =
+            std::array::from_fn(|k| self.display_contact[k] == self.contact[k]);
+        let mut contacts = [ContactForce::default(); MAX_OBJECTS];
+        for k in 0..n {
+            contacts[k] = tool_contact(
+                &p.contact,
+                &mut self.contact[k],
+                &bodies[k].shape,
+                &inp.objects[k],
+                &bodies[k].mass,
+                tool_pos,
+                tool_vel,
+                p.tool_radius_m,
+            );
+        }
+        // Every object's force on the tool, summed in the world's order.
+        let total =
+            |c: &[ContactForce; MAX_OBJECTS]| c[1..n].iter().fold(c[0].force, |a, c| a + c.force);
         // Stale world: ramp the display to zero, and back once fresh.
         let stale = inp.stopping || inp.now_s - inp.object_time_s > p.stale_limit_s;
         let rate = inp.dt_s / p.stale_ramp_s.max(1e-9);
@@ -145,50 +154,54 @@ impl Servo {
             (self.scale + rate).min(1.0)
         };
         if !p.display.enabled {
-            return self.bounded_adoption_step(inp, contact);
+            return self.bounded_adoption_step(inp, total(&contacts), contacts);
         }
-        // The displayed object: a stale world (no state yet, or none fresh) has nothing to blend
+        // The displayed objects: a stale world (no state yet, or none fresh) has nothing to blend
         // from, so the first fresh state is displayed as it is.
         if stale {
-            self.displayed = DisplayedObject::default();
+            self.displayed = [DisplayedObject::default(); MAX_OBJECTS];
         }
         let d = &p.display;
-        let was_copy = self.displayed.is_copy();
-        let (shown, _corrected) = self.displayed.update(
-            d,
-            inp.object,
-            inp.object_time_s,
-            inp.dt_s,
-            mass,
-            &mut self.stats,
-        );
-        // The copy's contact serves the display while they agree (pose and friction memory); the
-        // display keeps its own stick point after a blend until it slips or lets go, so that
-        // switching back never steps the tangential force.
-        let shown_contact = if self.displayed.is_copy() && (synced || stale) {
-            self.display_contact = self.contact;
-            contact
-        } else {
-            tool_contact(
-                &p.contact,
-                &mut self.display_contact,
-                shape,
-                &shown,
-                mass,
-                tool_pos,
-                tool_vel,
-                p.tool_radius_m,
-            )
-        };
+        let was_copy = self.displayed[..n].iter().all(DisplayedObject::is_copy);
+        let mut shown_contacts = [ContactForce::default(); MAX_OBJECTS];
+        for k in 0..n {
+            let (shown, _corrected) = self.displayed[k].update(
+                d,
+                &inp.objects[k],
+                inp.object_time_s,
+                inp.dt_s,
+                &bodies[k].mass,
+                &mut self.stats,
+            );
+            // The copy's contact serves the display while they agree (pose and friction memory);
+            // the display keeps its own stick point after a blend until it slips or lets go, so
+            // that switching back never steps the tangential force.
+            shown_contacts[k] = if self.displayed[k].is_copy() && (synced[k] || stale) {
+                self.display_contact[k] = self.contact[k];
+                contacts[k]
+            } else {
+                tool_contact(
+                    &p.contact,
+                    &mut self.display_contact[k],
+                    &bodies[k].shape,
+                    &shown,
+                    &bodies[k].mass,
+                    tool_pos,
+                    tool_vel,
+                    p.tool_radius_m,
+                )
+            };
+        }
+        let is_copy = self.displayed[..n].iter().all(DisplayedObject::is_copy);
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
         // (0 − F rather than −F: no contact displays +0, not −0, as before the display stages.)
         let (f_target, f_sim) = (
-            Vec3::zeros() - shown_contact.force,
-            Vec3::zeros() - contact.force,
+            Vec3::zeros() - total(&shown_contacts),
+            Vec3::zeros() - total(&contacts),
         );
         // While a correction is blended out, every step is limited; otherwise the contact's own
         // change is rendered as it is.
-        let blending = !(was_copy && self.displayed.is_copy());
+        let blending = !(was_copy && is_copy);
         let base = if blending {
             self.limiter.last()
         } else {
@@ -214,7 +227,7 @@ impl Servo {
         ServoOutput {
             f_desired,
             f_simulated: f_sim * self.scale,
-            contact,
+            contacts,
             tool_pos,
             tool_vel,
             scale: self.scale,
@@ -227,12 +240,13 @@ impl Servo {
     fn bounded_adoption_step(
         &mut self,
         inp: &ServoInput<'_>,
-        contact: ContactForce,
+        force: Vec3,
+        contacts: [ContactForce; MAX_OBJECTS],
     ) -> ServoOutput {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let p = &self.params;
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
-        let f_true = -contact.force * self.scale;
+        let f_true = -force * self.scale;
         if inp.adopted {
             self.blend = self.last_display - f_true;
         }
@@ -249,7 +263,7 @@ impl Servo {
         ServoOutput {
             f_desired,
             f_simulated: f_true,
-            contact,
+            contacts,
             tool_pos: inp.tool_pos,
             tool_vel: inp.tool_vel,
             scale: self.scale,

@@ -143,6 +143,31 @@ impl Shape {
         }
     }
 
+    /// The body-frame points of the shape that face a point `toward` (body frame) beyond the
+    /// fixed [`Shape::contact_points`]: for a cylinder, the point of its side facing it at its
+    /// height (clamped to the side) and the rim point facing it on the cap nearer it. Two upright
+    /// cylinders side by side touch along their sides, between the rim points sampled (which lie
+    /// in the other's cap planes, at depth 0): these find them, and a cylinder's rim crossing
+    /// another's. None for the other shapes (a sphere's centre, a box's corners and faces do).
+    pub fn facing_points(&self, toward: Vec3, out: &mut [Vec3; 2]) -> usize {
+        match *self {
+            Shape::Cylinder {
+                radius,
+                half_height,
+            } => {
+                let across = (toward.x * toward.x + toward.y * toward.y).sqrt();
+                if across < 1e-12 {
+                    return 0; // on the axis: the caps' centres face it
+                }
+                let (x, y) = (radius * toward.x / across, radius * toward.y / across);
+                out[0] = Vec3::new(x, y, toward.z.clamp(-half_height, half_height));
+                out[1] = Vec3::new(x, y, half_height.copysign(toward.z));
+                2
+            }
+            Shape::Sphere { .. } | Shape::Box { .. } => 0,
+        }
+    }
+
     /// The radius of the smallest sphere about the centre of mass that holds the shape, m: two
     /// objects farther apart than the sum of theirs cannot touch.
     pub fn bounding_radius(&self) -> f64 {

@@ -20,11 +20,12 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::device::{Plant, ScaraForceLoop};
 use crate::link::DueQueue;
-use crate::method::{integrate, Consistency, EnergyAccount, ObjectCopy, Report};
+use crate::method::{integrate, Consistency, EnergyAccount, Report, WorldCopy};
 use crate::rng::Rng;
 use crate::scenario::{MethodName, Scenario};
 use crate::servo::{Servo, ServoInput};
 use crate::user::{target_at, Keyframe};
+use crate::world::{MAX_OBJECTS, MAX_SITES};
 
 /// Largest plant integration step: 100 µs (the grip spring's period is ~20 ms).
 pub const PLANT_STEP_NS: u64 = 100_000;
@@ -65,8 +66,21 @@ pub struct SiteTrace {
     pub f_measured: Vec<Vec3>,
     /// Sum of the users' contact forces acting on this site's copy, N.
     pub f_on_object: Vec<Vec3>,
-    /// Whether this site's user touches the object.
+    /// Whether this site's user touches an object.
     pub touching: Vec<bool>,
+    /// The world's other objects (the second on), as this site believes them.
+    pub others: Vec<ObjectTrace>,
+}
+
+/// One object's trace at a site: rows at the scenario's sample rate.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ObjectTrace {
+    /// Centre of mass, m.
+    pub pos: Vec<Vec3>,
+    /// Velocity, m/s.
+    pub vel: Vec<Vec3>,
+    /// Orientation (unit quaternion w, x, y, z).
+    pub rot: Vec<[f64; 4]>,
 }
 
 /// A site adopted a received state.
@@ -177,8 +191,9 @@ struct Site {
     /// A recorded hand driving the tool by position, instead of the plant.
     replay: Option<crate::replay::Trajectory>,
     tau: Vec3,
-    own: ContactForce,
-    copy: ObjectCopy,
+    /// The own tool's contact with each object.
+    own: [ContactForce; MAX_OBJECTS],
+    copy: WorldCopy,
     method: Box<dyn Consistency>,
     noise: Rng,
     period_servo: u64,
@@ -204,6 +219,17 @@ impl Site {
     }
 }
 
+/// The objects' mechanical energy, J (in the world's order: for one object, its own).
+fn mechanical_energy(world: &crate::world::World, copy: &WorldCopy) -> f64 {
+    let mut e = copy
+        .objects()
+        .iter()
+        .zip(world.bodies())
+        .map(|(o, b)| o.state.mechanical_energy(&b.mass, world.gravity));
+    let first = e.next().unwrap_or(0.0);
+    e.fold(first, |a, b| a + b)
+}
+
 fn period_ns(rate_hz: f64) -> u64 {
     ((1e9 / rate_hz).round() as u64).max(1)
 }
@@ -226,7 +252,8 @@ pub fn site_method(scenario: &Scenario, mode: Mode, i: usize) -> Box<dyn Consist
 /// The scenario must be valid ([`Scenario::validate`]).
 pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> RunResult {
     let world = scenario.world();
-    let start = BodyState::at_rest(Vec3::from(scenario.object.start_m));
+    let start = scenario.start_copy();
+    let objects = start.len();
     let mut sites: Vec<Site> = (0..scenario.site.len())
         .map(|i| {
             let spec = &scenario.site[i];
@@ -241,8 +268,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 force_loop: scenario.force_loop(i),
                 replay: spec.hand_trajectory.clone(),
                 tau: Vec3::zeros(),
-                own: ContactForce::default(),
-                copy: ObjectCopy::new(start),
+                own: [ContactForce::default(); MAX_OBJECTS],
+                copy: start.clone(),
                 method: site_method(scenario, mode, i),
                 noise: Rng::derive(scenario.seed, 1000 + i as u64),
                 period_servo: period_ns(spec.servo_rate_hz),
@@ -261,7 +288,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         .collect();
     let n = sites.len();
     // Reference: one shared copy stepped at the fastest physics rate.
-    let mut shared = ObjectCopy::new(start);
+    let mut shared = start.clone();
     let ref_period = sites
         .iter()
         .map(|s| s.period_physics)
@@ -278,10 +305,16 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
     let period_sample = period_ns(scenario.sample_rate_hz);
     let mut next_sample = 0u64;
     let mut result = RunResult {
-        sites: vec![SiteTrace::default(); n],
+        sites: vec![
+            SiteTrace {
+                others: vec![ObjectTrace::default(); objects - 1],
+                ..SiteTrace::default()
+            };
+            n
+        ],
         ..RunResult::empty(mode)
     };
-    let e0 = start.mechanical_energy(&world.mass, world.gravity);
+    let e0 = mechanical_energy(&world, &start);
     let mut next_progress = 0u64;
     let reference = mode == Mode::Reference;
 
@@ -340,12 +373,23 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             }
         }
         if reference && next_ref == t {
-            let mut users = [ContactForce::default(); crate::world::MAX_SITES];
-            for (u, s) in users.iter_mut().zip(&sites) {
-                *u = s.own;
+            let mut users = [ContactForce::default(); MAX_SITES * MAX_OBJECTS];
+            for k in 0..objects {
+                for (i, s) in sites.iter().enumerate() {
+                    users[k * n + i] = s.own[k];
+                }
             }
-            integrate(&world, &mut shared, &users[..n], n, ns_to_s(ref_period));
-            shared.time_s = ns_to_s(t);
+            let users = &users[..objects * n];
+            integrate(
+                &world,
+                &mut shared,
+                users,
+                n,
+                n,
+                ns_to_s(ref_period),
+                &mut [],
+            );
+            shared.set_time(ns_to_s(t));
             next_ref += ref_period;
         }
         for i in 0..n {
@@ -353,9 +397,10 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             if s.next_physics == t {
                 if !reference {
                     s.method.own_tool(s.tool_pos(t));
+                    let dt = ns_to_s(s.period_physics);
                     s.method
-                        .physics_step(&world, &mut s.copy, &s.own, ns_to_s(s.period_physics));
-                    s.copy.time_s = ns_to_s(t);
+                        .physics_step(&world, &mut s.copy, &s.own[..objects], dt);
+                    s.copy.set_time(ns_to_s(t));
                 }
                 s.next_physics += s.period_physics;
             }
@@ -369,7 +414,10 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 };
                 let copy = if reference { &shared } else { &s.copy };
                 // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                let shown = s.method.shown(copy);
+                let mut shown = [BodyState::at_rest(Vec3::zeros()); MAX_OBJECTS];
+                for (k, o) in shown.iter_mut().enumerate().take(objects) {
+                    *o = s.method.shown(copy, k);
+                }
                 let (tool_pos, tool_vel) = match &s.replay {
                     Some(r) => r.at(ns_to_s(t)),
                     None => {
@@ -386,13 +434,12 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                         dt_s: ns_to_s(s.period_servo),
                         tool_pos,
                         tool_vel,
-                        object: &shown,
-                        object_time_s: copy.time_s,
+                        objects: &shown[..objects],
+                        object_time_s: copy.first().time_s,
                         adopted: !s.pending_adoptions.is_empty(),
                         stopping: false,
                     },
-                    &world.shape,
-                    &world.mass,
+                    world.bodies(),
                 );
                 let step_n = (out.f_desired - s.last_f_desired).norm();
                 for k in s.pending_adoptions.drain(..) {
@@ -408,13 +455,13 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                     ns_to_s(s.period_servo),
                 );
                 s.tau = tau;
-                s.own = out.contact;
+                s.own = out.contacts;
                 s.last_f_desired = out.f_desired;
                 s.last_f_measured = f_measured;
                 s.next_servo += s.period_servo;
             }
             if !reference && s.next_report == t {
-                let msg = s.method.report(&s.copy, &s.own, ns_to_s(t));
+                let msg = s.method.report(&s.copy, &s.own[..objects], ns_to_s(t));
                 for to in (0..n).filter(|&to| to != i) {
                     messages.0 += 1;
                     let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
@@ -431,18 +478,30 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             for (i, s) in sites.iter().enumerate() {
                 let copy = if reference { &shared } else { &s.copy };
                 let tr = &mut result.sites[i];
-                tr.obj_pos.push(copy.state.pos);
-                tr.obj_vel.push(copy.state.vel);
-                let q = copy.state.rot.quaternion();
+                let first = &copy.first().state;
+                tr.obj_pos.push(first.pos);
+                tr.obj_vel.push(first.vel);
+                let q = first.rot.quaternion();
                 tr.obj_rot.push([q.w, q.i, q.j, q.k]);
+                for (o, c) in tr.others.iter_mut().zip(&copy.objects()[1..]) {
+                    o.pos.push(c.state.pos);
+                    o.vel.push(c.state.vel);
+                    let q = c.state.rot.quaternion();
+                    o.rot.push([q.w, q.i, q.j, q.k]);
+                }
                 tr.tool_pos.push(s.tool_pos(t));
                 tr.f_desired.push(s.last_f_desired);
                 tr.f_measured.push(s.last_f_measured);
-                tr.touching.push(s.own.touching);
+                tr.touching.push(s.own.iter().any(|c| c.touching));
+                let own = |s: &Site| {
+                    s.own[1..objects]
+                        .iter()
+                        .fold(s.own[0].force, |a, c| a + c.force)
+                };
                 let on_object = if reference {
-                    sites.iter().map(|o| o.own.force).sum()
+                    sites.iter().map(own).sum()
                 } else {
-                    s.own.force + s.method.remote_force()
+                    own(s) + s.method.remote_force()
                 };
                 tr.f_on_object.push(on_object);
             }
@@ -454,10 +513,16 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
     result.messages = messages;
     for s in &sites {
         let copy = if reference { &shared } else { &s.copy };
-        result.energy.push(copy.energy);
+        result.energy.push(
+            copy.objects()
+                .iter()
+                .map(|o| o.energy)
+                .reduce(|a, b| a.plus(&b))
+                .unwrap_or_default(),
+        );
         result
             .mech_energy
-            .push((e0, copy.state.mechanical_energy(&world.mass, world.gravity)));
+            .push((e0, mechanical_energy(&world, copy)));
         result.rollback.push(s.method.stats().rollback().copied());
         result.force_steps.push(ForceSteps {
             display: *s.servo.display_stats(),
@@ -474,8 +539,16 @@ impl RunResult {
     pub fn trace_csv(&self) -> String {
         use std::fmt::Write;
         let mut out = String::from(
-            "t_s,site,obj_x,obj_y,obj_z,tool_x,tool_y,tool_z,fd_x,fd_y,fd_z,fm_x,fm_y,fm_z,fobj_x,fobj_y,fobj_z,touching,vel_x,vel_y,vel_z,q_w,q_x,q_y,q_z\n",
+            "t_s,site,obj_x,obj_y,obj_z,tool_x,tool_y,tool_z,fd_x,fd_y,fd_z,fm_x,fm_y,fm_z,fobj_x,fobj_y,fobj_z,touching,vel_x,vel_y,vel_z,q_w,q_x,q_y,q_z",
         );
+        // A world of several objects: each other object's position, velocity and orientation.
+        let others = self.sites.first().map_or(0, |s| s.others.len());
+        for k in 1..=others {
+            for c in ["x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz"] {
+                let _ = write!(out, ",obj{k}_{c}");
+            }
+        }
+        out.push('\n');
         for (k, t) in self.t.iter().enumerate() {
             for (i, s) in self.sites.iter().enumerate() {
                 let _ = write!(out, "{t:.6},{i}");
@@ -490,11 +563,20 @@ impl RunResult {
                 }
                 let _ = write!(out, ",{}", u8::from(s.touching[k]));
                 let (v, q) = (s.obj_vel[k], s.obj_rot[k]);
-                let _ = writeln!(
+                let _ = write!(
                     out,
                     ",{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9}",
                     v.x, v.y, v.z, q[0], q[1], q[2], q[3]
                 );
+                for o in &s.others {
+                    let (p, v, q) = (o.pos[k], o.vel[k], o.rot[k]);
+                    let _ = write!(
+                        out,
+                        ",{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9},{:.9}",
+                        p.x, p.y, p.z, v.x, v.y, v.z, q[0], q[1], q[2], q[3]
+                    );
+                }
+                out.push('\n');
             }
         }
         out

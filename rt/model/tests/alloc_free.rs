@@ -2,13 +2,13 @@
 //! them every tick. A counting global allocator watches thousands of servo steps, physics steps of
 //! both methods, and paper adoptions with replay.
 
-use coop_model::body::{BodyState, MassProps, Vec3};
-use coop_model::contact::{ContactForce, ContactParams, Plane, MAX_PLANES};
+use coop_model::body::{BodyState, Vec3};
+use coop_model::contact::{ContactForce, ContactParams, Plane};
 use coop_model::device::{ScaraForceLoop, ScaraParams};
-use coop_model::method::{Consistency, Naive, ObjectCopy, Paper, Report, MAX_SITES};
+use coop_model::method::{Consistency, Naive, Paper, Report, WorldCopy, MAX_SITES};
 use coop_model::servo::{Servo, ServoInput, ServoParams};
 use coop_model::shape::Shape;
-use coop_model::world::World;
+use coop_model::world::{Body, World};
 
 // The one counting allocator of the workspace's tests (a dev-dependency on coop-rt would break this
 // crate's purity, so the file is included rather than imported).
@@ -33,22 +33,15 @@ fn world() -> World {
         radius: 0.04,
         half_height: 0.01,
     };
-    let mut planes = [Plane {
-        normal: Vec3::z(),
-        offset: f64::NEG_INFINITY,
-    }; MAX_PLANES];
-    planes[0].offset = 0.0;
-    World {
-        shape,
-        mass: MassProps {
-            mass_kg: 0.1,
-            inertia_body: shape.inertia(0.1),
-        },
-        gravity: Vec3::new(0.0, 0.0, -3.27),
-        planes,
-        plane_count: 1,
-        env_contact: contact(),
-    }
+    World::new(
+        &[Body::solid(shape, 0.1)],
+        Vec3::new(0.0, 0.0, -3.27),
+        &[Plane {
+            normal: Vec3::z(),
+            offset: 0.0,
+        }],
+        contact(),
+    )
 }
 
 #[test]
@@ -84,38 +77,38 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
         .expect("reachable");
     let mut paper = Paper::new(2, 0);
     let mut naive = Naive::default();
-    let (mut a, mut b) = (ObjectCopy::new(start), ObjectCopy::new(start));
+    let (mut a, mut b) = (WorldCopy::one(start), WorldCopy::one(start));
     let mut included = [-1.0; MAX_SITES];
     let n = allocations(|| {
         for k in 0..5_000 {
             let now = k as f64 * 1e-3;
             // A correction every 97 ticks: the display blends it out (its second contact runs).
             if k % 97 == 0 {
-                a.state.pos.x += 2e-3;
+                a.first_mut().state.pos.x += 2e-3;
             }
             let inp = ServoInput {
                 now_s: now,
                 dt_s: 1e-3,
                 tool_pos: arm.forward(&q),
                 tool_vel: arm.jacobian(&q) * Vec3::zeros(),
-                object: &a.state,
+                objects: std::slice::from_ref(&a.first().state),
                 object_time_s: if k % 1000 < 900 { now } else { now - 1.0 }, // stale ramps too
                 adopted: k % 7 == 0,
                 stopping: false,
             };
-            plain.step(&inp, &w.shape, &w.mass);
-            let out = servo.step(&inp, &w.shape, &w.mass);
+            plain.step(&inp, w.bodies());
+            let out = servo.step(&inp, w.bodies());
             force_loop.step(out.f_desired, out.scale, Vec3::zeros(), &q, 1e-3);
-            let own: ContactForce = out.contact;
-            paper.physics_step(&w, &mut a, &own, 1e-3);
-            naive.physics_step(&w, &mut b, &own, 1e-3);
+            let own: &[ContactForce] = &out.contacts[..w.object_count];
+            paper.physics_step(&w, &mut a, own, 1e-3);
+            naive.physics_step(&w, &mut b, own, 1e-3);
             naive.receive(
                 &w,
                 &mut b,
                 1,
                 &Report::Force {
                     t_s: now,
-                    force: own,
+                    force: own[0],
                     given_j: 0.01,
                 },
                 now,
@@ -123,7 +116,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
             included[1] = now;
             let msg = Report::State {
                 t_s: now,
-                state: b.state,
+                state: b.first().state,
                 accel: Vec3::zeros(),
                 included,
             };
@@ -140,11 +133,11 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
 }
 
 /// Stepping the largest world allocates nothing: sixteen objects in a heap on the table, every
-/// pair and plane contact with rotational friction, and a wrench on each.
+/// pair and plane contact with rotational friction, and a force on each.
 #[test]
 fn a_world_of_the_most_objects_steps_without_allocating() {
-    use coop_model::body::Wrench;
-    use coop_model::world::{cube_heap, step_objects, Contacts, Physics, MAX_OBJECTS};
+    use coop_model::method::integrate;
+    use coop_model::world::{cube_heap, MAX_OBJECTS};
     let law = ContactParams {
         rotational_friction_radius_m: 0.01,
         ..contact()
@@ -153,28 +146,29 @@ fn a_world_of_the_most_objects_steps_without_allocating() {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
-    let (bodies, mut states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
-    let applied = [Wrench {
-        force: Vec3::new(0.01, 0.0, 0.0),
-        torque: Vec3::zeros(),
-    }; MAX_OBJECTS];
-    let mut contacts = Contacts::default();
+    let (bodies, states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
+    let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, law);
+    // Made before the counting window: a copy allocates its tables once, stepping it never.
+    let mut copy = WorldCopy::new(&states);
+    // A force through each object's centre (one tool per object), as the wrench was.
+    let mut users = [ContactForce::default(); MAX_OBJECTS];
     let n = allocations(|| {
         for _ in 0..500 {
-            step_objects(
-                &physics,
-                &bodies,
-                &mut states,
-                &mut contacts,
-                &applied,
-                1e-3,
-            );
+            for (u, o) in users.iter_mut().zip(copy.objects()) {
+                *u = ContactForce {
+                    force: Vec3::new(0.01, 0.0, 0.0),
+                    point: o.state.pos,
+                    depth: 1e-3,
+                    touching: true,
+                    slipping: false,
+                };
+            }
+            integrate(&world, &mut copy, &users, 1, 1, 1e-3, &mut []);
         }
     });
     assert_eq!(n, 0, "stepping {MAX_OBJECTS} objects allocated {n} times");
     assert!(
-        contacts.pairs.iter().any(|p| p.touching()),
+        copy.pairs().iter().any(|p| p.touching()),
         "the heap touches"
     );
 }

@@ -1,11 +1,14 @@
-//! Several objects that touch each other (`world::step_objects`, `contact::pair_wrench`): a stack
+//! Several objects that touch each other (`method::integrate`, `contact::pair_wrench`): a stack
 //! rests, a box rests on a fixture, a collision conserves momentum and gains no energy, the same
 //! inputs give the same bits, and one object steps exactly as the single-body step does.
 
 use coop_model::body::{self, BodyState, Vec3, Wrench};
-use coop_model::contact::{environment_wrench, ContactParams, EnvContactState, Plane};
+use coop_model::contact::{
+    environment_wrench, ContactForce, ContactParams, EnvContactState, Plane,
+};
+use coop_model::method::{integrate, WorldCopy};
 use coop_model::shape::Shape;
-use coop_model::world::{pair_index, step_objects, Body, Contacts, Physics};
+use coop_model::world::{pair_index, Body, World};
 
 const DT: f64 = 1e-3;
 
@@ -42,28 +45,57 @@ fn table() -> [Plane; 1] {
     }]
 }
 
-/// Steps `states` for `seconds` under `physics`; the largest distance any object moved from where
-/// it was after `settle_s`, m.
-fn run(
-    physics: &Physics<'_>,
-    bodies: &[Body],
-    states: &mut [BodyState],
-    contacts: &mut Contacts,
-    settle_s: f64,
-    seconds: f64,
-) -> f64 {
-    let applied = [Wrench::default(); 16];
+/// Every object's state in `copy`, in the world's order.
+fn states(copy: &WorldCopy) -> Vec<BodyState> {
+    copy.objects().iter().map(|o| o.state).collect()
+}
+
+/// A tool's contact pushing an object at `s` with `force` through its centre of mass (a wrench
+/// of `force` and no torque).
+fn through_centre(force: Vec3, s: &BodyState) -> ContactForce {
+    ContactForce {
+        force,
+        point: s.pos,
+        depth: 1e-3,
+        touching: true,
+        slipping: false,
+    }
+}
+
+/// A pure torque `torque` about world y on an object at `s`, as two tools' contacts: opposite
+/// forces 2 cm either side of its centre (a couple; a contact carries a force at a point, not a
+/// torque).
+fn twist_about_y(torque: f64, s: &BodyState) -> [ContactForce; 2] {
+    let (arm, force) = (
+        Vec3::new(0.02, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -torque / 0.04),
+    );
+    [
+        ContactForce {
+            point: s.pos + arm,
+            ..through_centre(force, s)
+        },
+        ContactForce {
+            point: s.pos - arm,
+            ..through_centre(-force, s)
+        },
+    ]
+}
+
+/// Steps `copy` for `seconds` in `world`, nothing applied; the largest distance any object moved
+/// from where it was after `settle_s`, m.
+fn run(world: &World, copy: &mut WorldCopy, settle_s: f64, seconds: f64) -> f64 {
     let settle = (settle_s / DT).round() as usize;
-    let mut rested: Vec<BodyState> = states.to_vec();
+    let mut rested: Vec<BodyState> = states(copy);
     let mut worst: f64 = 0.0;
     for k in 0..(seconds / DT).round() as usize {
-        step_objects(physics, bodies, states, contacts, &applied, DT);
+        integrate(world, copy, &[], 0, 0, DT, &mut []);
         if k + 1 == settle {
-            rested = states.to_vec();
+            rested = states(copy);
         }
         if k + 1 > settle {
-            for (s, r) in states.iter().zip(&rested) {
-                worst = worst.max((s.pos - r.pos).norm());
+            for (o, r) in copy.objects().iter().zip(&rested) {
+                worst = worst.max((o.state.pos - r.pos).norm());
             }
         }
     }
@@ -74,14 +106,14 @@ fn run(
 /// holds up to 26°): a small box on a larger one, off its centre, so friction must hold both
 /// along the slope and the lower box from turning under its load. Steps it 11 s, rotational
 /// friction over a patch of `radius_m`; the most either moved in the last 10 s, m, and the states.
-fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
+fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], WorldCopy) {
     let planes = table();
     let law = ContactParams {
         rotational_friction_radius_m: radius_m,
         ..law()
     };
     let (sin, cos) = 10f64.to_radians().sin_cos();
-    let physics = Physics::uniform(Vec3::new(9.81 * sin, -9.81 * cos, 0.0), &planes, &law);
+    let gravity = Vec3::new(9.81 * sin, -9.81 * cos, 0.0);
     let bodies = [
         Body::solid(
             Shape::Box {
@@ -96,13 +128,14 @@ fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
             0.1,
         ),
     ];
-    let mut states = [
+    let world = World::new(&bodies, gravity, &planes, law);
+    let mut copy = WorldCopy::new(&[
         BodyState::at_rest(Vec3::new(0.0, 0.02, 0.0)),
         BodyState::at_rest(Vec3::new(0.005, 0.06, -0.004)),
-    ];
-    let mut contacts = Contacts::default();
-    let moved = run(&physics, &bodies, &mut states, &mut contacts, 1.0, 11.0);
-    (moved, states, contacts)
+    ]);
+    let moved = run(&world, &mut copy, 1.0, 11.0);
+    let states = [copy.objects()[0].state, copy.objects()[1].state];
+    (moved, states, copy)
 }
 
 /// With rotational friction the stack rests: after a second to settle, neither box moves by more
@@ -110,7 +143,7 @@ fn slope_stack(radius_m: f64) -> (f64, [BodyState; 2], Contacts) {
 /// the top box still where it was put.
 #[test]
 fn a_stack_of_two_boxes_rests_on_a_slope() {
-    let (moved, states, contacts) = slope_stack(0.02);
+    let (moved, states, copy) = slope_stack(0.02);
     assert!(moved <= 1e-4, "moved {:.3} mm while resting", moved * 1e3);
     // The table carries the whole stack's weight with K times its deepest penetration (a corner:
     // the off-centre load tilts the lower box a little).
@@ -135,7 +168,7 @@ fn a_stack_of_two_boxes_rests_on_a_slope() {
         gap < 0.0 && gap > -2e-3,
         "the top box's bottom is {gap} m off the lower's top"
     );
-    assert!(contacts.pairs[pair_index(0, 1)].touching());
+    assert!(copy.pairs()[pair_index(0, 1, 2)].touching());
     assert!(
         (states[1].pos.x - 0.005).abs() < 1e-3,
         "{:?}",
@@ -160,8 +193,6 @@ fn without_rotational_friction_a_box_turns_under_an_off_centre_load() {
 /// A cylinder standing on a fixture (a fixed box, no table): it rests, the fixture never moves.
 #[test]
 fn an_object_rests_on_a_fixture() {
-    let law = law();
-    let physics = Physics::uniform(Vec3::new(0.0, -9.81, 0.0), &[], &law);
     let fixture = Body {
         fixed: true,
         ..Body::solid(
@@ -173,17 +204,17 @@ fn an_object_rests_on_a_fixture() {
     };
     // A can standing on its end.
     let (can, upright) = along_y(0.03, 0.05, 0.15);
-    let bodies = [fixture, can];
+    let world = World::new(&[fixture, can], Vec3::new(0.0, -9.81, 0.0), &[], law());
     let fixed_at = BodyState::at_rest(Vec3::zeros());
-    let mut states = [
+    let mut copy = WorldCopy::new(&[
         fixed_at,
         BodyState {
             rot: upright,
             ..BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0))
         },
-    ];
-    let mut contacts = Contacts::default();
-    let moved = run(&physics, &bodies, &mut states, &mut contacts, 1.0, 11.0);
+    ]);
+    let moved = run(&world, &mut copy, 1.0, 11.0);
+    let states = states(&copy);
     assert!(moved <= 1e-4, "moved {:.3} mm while resting", moved * 1e3);
     assert_eq!(states[0], fixed_at, "a fixture never moves");
     assert!(
@@ -197,13 +228,12 @@ fn an_object_rests_on_a_fixture() {
 /// origin) is the same after as before to rounding, kinetic energy is never more, and they part.
 #[test]
 fn a_collision_conserves_momentum_and_gains_no_energy() {
-    let law = law();
-    let physics = Physics::uniform(Vec3::zeros(), &[], &law);
     let bodies = [
         Body::solid(Shape::Sphere { radius: 0.03 }, 0.2),
         Body::solid(Shape::Sphere { radius: 0.02 }, 0.05),
     ];
-    let mut states = [
+    let world = World::new(&bodies, Vec3::zeros(), &[], law());
+    let start = [
         BodyState {
             vel: Vec3::new(0.5, 0.0, 0.0),
             ..BodyState::at_rest(Vec3::new(-0.1, 0.0, 0.0))
@@ -227,20 +257,20 @@ fn a_collision_conserves_momentum_and_gains_no_energy() {
             .map(|(s, b)| s.kinetic_energy(&b.mass))
             .sum()
     };
-    let (p0, l0, e0) = (momentum(&states).0, momentum(&states).1, energy(&states));
-    let mut contacts = Contacts::default();
+    let (p0, l0, e0) = (momentum(&start).0, momentum(&start).1, energy(&start));
+    let mut copy = WorldCopy::new(&start);
     let mut touched = false;
-    let applied = [Wrench::default(); 2];
     for _ in 0..400 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &applied, DT);
-        touched |= contacts.pairs[pair_index(0, 1)].touching();
-        assert!(energy(&states) <= e0 + 1e-12, "gained energy");
+        integrate(&world, &mut copy, &[], 0, 0, DT, &mut []);
+        touched |= copy.pairs()[pair_index(0, 1, 2)].touching();
+        assert!(energy(&states(&copy)) <= e0 + 1e-12, "gained energy");
     }
+    let states = states(&copy);
     let (p1, l1) = momentum(&states);
     assert!(touched, "they met");
     assert!((p1 - p0).norm() < 1e-12, "{p0:?} -> {p1:?}");
     assert!((l1 - l0).norm() < 1e-12, "{l0:?} -> {l1:?}");
-    assert!(!contacts.pairs[pair_index(0, 1)].touching());
+    assert!(!copy.pairs()[pair_index(0, 1, 2)].touching());
     let apart = (states[1].vel - states[0].vel).dot(&(states[1].pos - states[0].pos));
     assert!(apart > 0.0, "they part: {states:?}");
     assert!(energy(&states) < e0, "the contact's damping took some");
@@ -249,8 +279,6 @@ fn a_collision_conserves_momentum_and_gains_no_energy() {
 /// Sixteen objects dropped on the table in a heap, twice: the same bits both times.
 #[test]
 fn the_same_world_steps_to_the_same_bits() {
-    let (planes, law) = (table(), law());
-    let physics = Physics::uniform(Vec3::new(0.0, -9.81, 0.0), &planes, &law);
     let shapes = [
         Shape::Sphere { radius: 0.02 },
         Shape::Box {
@@ -264,6 +292,7 @@ fn the_same_world_steps_to_the_same_bits() {
     let bodies: Vec<Body> = (0..16)
         .map(|k| Body::solid(shapes[k % 3], 0.05 + 0.01 * k as f64))
         .collect();
+    let world = World::new(&bodies, Vec3::new(0.0, -9.81, 0.0), &table(), law());
     let start: Vec<BodyState> = (0..16)
         .map(|k| {
             let (x, z) = ((k % 4) as f64 * 0.045, (k / 4) as f64 * 0.045);
@@ -275,14 +304,13 @@ fn the_same_world_steps_to_the_same_bits() {
         })
         .collect();
     let once = || {
-        let mut states = start.clone();
-        let mut contacts = Contacts::default();
-        run(&physics, &bodies, &mut states, &mut contacts, 0.5, 1.0);
-        (states, contacts)
+        let mut copy = WorldCopy::new(&start);
+        run(&world, &mut copy, 0.5, 1.0);
+        copy
     };
     let (a, b) = (once(), once());
     assert_eq!(a, b);
-    assert!(a.1.pairs.iter().any(|p| p.touching()), "the heap touches");
+    assert!(a.pairs().iter().any(|p| p.touching()), "the heap touches");
 }
 
 /// One object on a table steps to the same bits as the single-body step with the environment.
@@ -290,7 +318,6 @@ fn the_same_world_steps_to_the_same_bits() {
 fn one_object_steps_as_the_single_body_step_does() {
     let (planes, law) = (table(), law());
     let g = Vec3::new(0.0, -3.27, 0.0);
-    let physics = Physics::uniform(g, &planes, &law);
     let disk = Body::solid(
         Shape::Cylinder {
             radius: 0.04,
@@ -304,20 +331,30 @@ fn one_object_steps_as_the_single_body_step_does() {
         vel: Vec3::new(0.3, 0.0, 0.1),
         ..BodyState::at_rest(Vec3::new(0.0, 0.045, 0.0))
     };
-    let push = Wrench {
-        force: Vec3::new(0.2, 0.0, 0.0),
-        torque: Vec3::new(0.0, 0.001, 0.0),
+    let world = World::new(&[disk], g, &planes, law);
+    // A tool's push, 0.2 N along x at a point 5 mm off the centre along z (0.001 N·m about y
+    // where the step starts), that point following the disk from step to step.
+    let push = |s: &BodyState| ContactForce {
+        point: s.pos + Vec3::new(0.0, 0.0, 0.005),
+        ..through_centre(Vec3::new(0.2, 0.0, 0.0), s)
     };
     let (mut single, mut env) = (start, EnvContactState::default());
-    let (mut states, mut contacts) = ([start], Contacts::default());
+    let mut copy = WorldCopy::one(start);
     for _ in 0..3000 {
+        let tool = push(&single);
         single = body::step(&single, &disk.mass, g, DT, |s| {
-            environment_wrench(&law, &mut env, &planes, &disk.shape, s, &disk.mass).0 + push
+            // The terms `integrate` sums, in its order: the own users', the remote users' (none),
+            // the environment's.
+            Wrench::default()
+                + tool.wrench(s.pos)
+                + Wrench::default()
+                + environment_wrench(&law, &mut env, &planes, &disk.shape, s, &disk.mass).0
         });
-        step_objects(&physics, &[disk], &mut states, &mut contacts, &[push], DT);
+        let tool = push(&copy.first().state);
+        integrate(&world, &mut copy, &[tool], 1, 1, DT, &mut []);
     }
-    assert_eq!(states[0], single);
-    assert_eq!(contacts.env[0], env);
+    assert_eq!(copy.first().state, single);
+    assert_eq!(copy.first().env, env);
 }
 
 /// A disk lying on the table, twisted about the table's normal by a torque: below the rotational
@@ -331,24 +368,21 @@ fn rotational_friction_holds_below_its_limit_and_slips_above_it() {
         ..law()
     };
     let g = 9.81;
-    let physics = Physics::uniform(Vec3::new(0.0, -g, 0.0), &planes, &law);
     // A disk lying flat.
     let (disk, flat) = along_y(0.04, 0.01, 0.1);
+    let world = World::new(&[disk], Vec3::new(0.0, -g, 0.0), &planes, law);
     let at_rest = BodyState {
         rot: flat,
         ..BodyState::at_rest(Vec3::new(0.0, 0.01 - 0.1 * g / 3000.0, 0.0))
     };
     let limit = law.friction_static * 0.1 * g * 0.02;
     let spin = |torque: f64, seconds: f64| {
-        let (mut states, mut contacts) = ([at_rest], Contacts::default());
-        let twist = Wrench {
-            force: Vec3::zeros(),
-            torque: Vec3::new(0.0, torque, 0.0),
-        };
+        let mut copy = WorldCopy::one(at_rest);
         for _ in 0..(seconds / DT).round() as usize {
-            step_objects(&physics, &[disk], &mut states, &mut contacts, &[twist], DT);
+            let twist = twist_about_y(torque, &copy.first().state);
+            integrate(&world, &mut copy, &twist, 2, 2, DT, &mut []);
         }
-        states[0].omega(&disk.mass).y
+        copy.first().state.omega(&disk.mass).y
     };
     let held = spin(0.5 * limit, 2.0);
     assert!(held.abs() < 1e-6, "held: spinning at {held} rad/s");
@@ -483,43 +517,46 @@ fn a_resting_heap_sleeps_and_wakes_when_pushed() {
         rotational_friction_radius_m: 0.01,
         ..law()
     };
-    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
-    let (bodies, mut states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
-    let mut contacts = Contacts::default();
-    let none = [Wrench::default(); MAX_OBJECTS];
-    let asleep = |c: &Contacts| c.still.iter().filter(|&&s| s >= SLEEP_AFTER_STEPS).count();
+    let (bodies, states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
+    let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, law);
+    let mut copy = WorldCopy::new(&states);
+    let asleep = |c: &WorldCopy| {
+        c.still()
+            .iter()
+            .filter(|&&s| s >= SLEEP_AFTER_STEPS)
+            .count()
+    };
     for _ in 0..3000 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+        integrate(&world, &mut copy, &[], 0, 0, DT, &mut []);
     }
-    assert_eq!(asleep(&contacts), MAX_OBJECTS, "{:?}", contacts.still);
-    let (rested, memory) = (states, contacts);
+    assert_eq!(asleep(&copy), MAX_OBJECTS, "{:?}", copy.still());
+    let rested = copy.clone();
     for _ in 0..500 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+        integrate(&world, &mut copy, &[], 0, 0, DT, &mut []);
     }
-    assert_eq!(
-        (states, contacts),
-        (rested, memory),
-        "a sleeping heap does not change"
-    );
+    // Nothing changes but the copy's time.
+    let mut expected = rested.clone();
+    expected.set_time(copy.first().time_s);
+    assert_eq!(copy, expected, "a sleeping heap does not change");
     // Cube 11 (on cube 3, at the heap's -y side) pushed outwards along -y for 0.1 s: it slides
     // on cube 3, which wakes while it moves.
-    let mut push = none;
-    push[11].force = Vec3::new(0.0, -0.7, 0.0);
+    let mut push = [ContactForce::default(); MAX_OBJECTS];
     let mut woke = false;
     for _ in 0..100 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &push, DT);
-        woke |= contacts.still[3] < SLEEP_AFTER_STEPS;
+        push[11] = through_centre(Vec3::new(0.0, -0.7, 0.0), &copy.objects()[11].state);
+        integrate(&world, &mut copy, &push, 1, 1, DT, &mut []);
+        woke |= copy.still()[3] < SLEEP_AFTER_STEPS;
     }
     assert!(woke, "the cube under the moving one woke");
+    let pushed = copy.objects()[11].state.pos;
     assert!(
-        rested[11].pos.y - states[11].pos.y > 5e-3,
-        "{:?}",
-        states[11].pos
+        rested.objects()[11].state.pos.y - pushed.y > 5e-3,
+        "{pushed:?}"
     );
     for _ in 0..3000 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+        integrate(&world, &mut copy, &[], 0, 0, DT, &mut []);
     }
-    assert_eq!(asleep(&contacts), MAX_OBJECTS, "{:?}", contacts.still);
+    assert_eq!(asleep(&copy), MAX_OBJECTS, "{:?}", copy.still());
 }
 
 /// Under a heavy load the rotational friction's kinetic limit (μ_k F_n r) is more than its
@@ -535,8 +572,8 @@ fn rotational_friction_holds_a_heavy_load_up_to_its_limit() {
         ..law()
     };
     let g = 9.81;
-    let physics = Physics::uniform(Vec3::new(0.0, -g, 0.0), &planes, &law);
     let (disk, flat) = along_y(0.04, 0.01, 2.0);
+    let world = World::new(&[disk], Vec3::new(0.0, -g, 0.0), &planes, law);
     let stiffness = law.tangential_stiffness_n_per_m * 0.02 * 0.02;
     let limit = law.friction_static * 2.0 * g * 0.02;
     let kinetic = law.friction_kinetic * 2.0 * g * 0.02;
@@ -546,21 +583,19 @@ fn rotational_friction_holds_a_heavy_load_up_to_its_limit() {
         "the case: {torque} N·m, {stiffness} N·m/rad"
     );
     let spin = |torque: f64| {
-        let mut states = [BodyState {
+        let mut copy = WorldCopy::one(BodyState {
             rot: flat,
             ..BodyState::at_rest(Vec3::new(0.0, 0.01 - 2.0 * g / 3000.0, 0.0))
-        }];
-        let mut contacts = Contacts::default();
+        });
         // Ramped in over 2 s (quasi-static: no overshoot past the static limit), then held 2 s.
         for k in 0..4000 {
-            let twist = Wrench {
-                force: Vec3::zeros(),
-                torque: Vec3::new(0.0, torque * (k as f64 / 2000.0).min(1.0), 0.0),
-            };
-            step_objects(&physics, &[disk], &mut states, &mut contacts, &[twist], DT);
+            let ramped = torque * (k as f64 / 2000.0).min(1.0);
+            let twist = twist_about_y(ramped, &copy.first().state);
+            integrate(&world, &mut copy, &twist, 2, 2, DT, &mut []);
         }
-        let turned = (states[0].rot * flat.inverse()).angle();
-        (states[0].omega(&disk.mass).y, turned)
+        let s = copy.first().state;
+        let turned = (s.rot * flat.inverse()).angle();
+        (s.omega(&disk.mass).y, turned)
     };
     // Held where the spring balances it: 2 K_t r² tan(θ/2) = torque.
     let (held, turned) = spin(torque);
@@ -581,34 +616,31 @@ fn a_push_down_a_row_wakes_every_sleeper_in_it() {
         normal: Vec3::z(),
         offset: 0.0,
     }];
-    let law = law();
-    let physics = Physics::uniform(Vec3::new(0.0, 0.0, -9.81), &table, &law);
     let cube = Body::solid(
         Shape::Box {
             half: Vec3::repeat(0.02),
         },
         0.1,
     );
-    let bodies = [cube; 3];
-    let mut states: [BodyState; 3] =
+    let world = World::new(&[cube; 3], Vec3::new(0.0, 0.0, -9.81), &table, law());
+    let start: [BodyState; 3] =
         std::array::from_fn(|k| BodyState::at_rest(Vec3::new(k as f64 * 0.0405, 0.0, 0.0199)));
-    let mut contacts = Contacts::default();
-    let none = [Wrench::default(); 3];
+    let mut copy = WorldCopy::new(&start);
     for _ in 0..1000 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &none, DT);
+        integrate(&world, &mut copy, &[], 0, 0, DT, &mut []);
     }
     assert!(
-        contacts.still[..3].iter().all(|&s| s >= SLEEP_AFTER_STEPS),
+        copy.still().iter().all(|&s| s >= SLEEP_AFTER_STEPS),
         "{:?}",
-        contacts.still
+        copy.still()
     );
-    let rested = states;
+    let rested = states(&copy);
     // Three times the row's friction (0.5 × 3 × 0.98 N) on the first cube, along +x, for 0.3 s.
-    let mut push = none;
-    push[0].force = Vec3::new(4.5, 0.0, 0.0);
+    let mut push = [ContactForce::default(); 3];
     for _ in 0..300 {
-        step_objects(&physics, &bodies, &mut states, &mut contacts, &push, DT);
+        push[0] = through_centre(Vec3::new(4.5, 0.0, 0.0), &copy.objects()[0].state);
+        integrate(&world, &mut copy, &push, 1, 1, DT, &mut []);
     }
-    let moved = states[2].pos.x - rested[2].pos.x;
+    let moved = copy.objects()[2].state.pos.x - rested[2].pos.x;
     assert!(moved > 1e-2, "the last cube moved {moved} m");
 }

@@ -184,7 +184,8 @@ impl Scene {
     /// Site `index` of `scenario` (`None`: no such site), in its [`site_colour`].
     pub fn from_scenario(scenario: &Scenario, index: usize) -> Option<Self> {
         let site = scenario.site.get(index)?;
-        let o = &scenario.object;
+        // (Stations run one object: the first.)
+        let o = &scenario.objects[0];
         Some(Self {
             site: site.name.clone(),
             colour: site_colour(index),
@@ -411,12 +412,12 @@ mod tests {
                     ..Default::default()
                 },
             ],
-            object: coop_model::scenario::ObjectSpec {
+            objects: vec![coop_model::scenario::ObjectSpec {
                 shape: ShapeName::Cylinder,
                 radius_m: 0.04,
                 half_height_m: 0.01,
                 ..Default::default()
-            },
+            }],
             world: coop_model::scenario::WorldSpec {
                 planes: vec![coop_model::scenario::PlaneSpec {
                     normal: [0.0, 0.0, 1.0],

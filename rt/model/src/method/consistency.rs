@@ -4,7 +4,7 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::world::World;
 
-use super::copy::ObjectCopy;
+use super::copy::WorldCopy;
 use super::report::{Adoption, Report};
 use super::stats::Stats;
 
@@ -12,15 +12,15 @@ use super::stats::Stats;
 pub trait Consistency: std::fmt::Debug + Send {
     /// Its name, as in scenario files.
     fn name(&self) -> &'static str;
-    /// Integrates `copy` by `dt` with the own user's (held) contact `own`.
-    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64);
+    /// Integrates `copy` by `dt` with the own user's (held) contact `own` with each object.
+    fn physics_step(&mut self, world: &World, copy: &mut WorldCopy, own: &[ContactForce], dt: f64);
     /// The report this site sends now.
-    fn report(&self, copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report;
+    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64) -> Report;
     /// Handles a report from site `from`; `Some` when the local copy jumped to a received state.
     fn receive(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
+        copy: &mut WorldCopy,
         from: usize,
         msg: &Report,
         now_s: f64,
@@ -57,10 +57,11 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn start_at_tick(&mut self, tick: i64) {
         let _ = tick;
     }
-    /// The object state the own user is shown (the servo renders against it): the copy's,
-    /// unless the method replays a contact the user missed (`timewarp`: see [`crate::method::timewarp`]).
-    fn shown(&self, copy: &ObjectCopy) -> BodyState {
-        copy.state
+    /// The state of object `k` the own user is shown (the servo renders against it): the
+    /// copy's, unless the method replays a contact the user missed (`timewarp`: see
+    /// [`crate::method::timewarp`]).
+    fn shown(&self, copy: &WorldCopy, k: usize) -> BodyState {
+        copy.objects()[k].state
     }
 }
 

@@ -46,7 +46,7 @@ use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState
 use crate::world::{World, MAX_SITES};
 
 use super::consistency::Consistency;
-use super::copy::{integrate, ObjectCopy};
+use super::copy::{integrate, WorldCopy};
 use super::reckon::dead_reckon_passive;
 use super::report::{Adoption, Report};
 use super::stats::Stats;
@@ -342,11 +342,12 @@ impl Consistency for Coupled {
     fn physics_step(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
-        _own: &ContactForce,
+        world_copy: &mut WorldCopy,
+        _own: &[ContactForce],
         _dt: f64,
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let copy = world_copy.first();
         let t = self.now_tick;
         let mut users = [ContactForce::default(); MAX_SITES];
         let mut remote = Vec3::zeros();
@@ -384,9 +385,9 @@ impl Consistency for Coupled {
             *user = tool_contact(
                 &self.contact,
                 &mut self.contacts[j],
-                &world.shape,
+                &world.bodies[0].shape,
                 &copy.state,
-                &world.mass,
+                &world.bodies[0].mass,
                 p,
                 v,
                 self.radii[j],
@@ -408,13 +409,23 @@ impl Consistency for Coupled {
         self.pick_leader();
         let before = copy.energy.users_positive_j;
         // Summed in site order; every user acts on this copy.
-        integrate(world, copy, &users[..self.sites], self.sites, self.dt);
-        self.tank_j += copy.energy.users_positive_j - before;
+        let sites = self.sites;
+        integrate(
+            world,
+            world_copy,
+            &users[..sites],
+            sites,
+            sites,
+            self.dt,
+            &mut [],
+        );
+        self.tank_j += world_copy.first().energy.users_positive_j - before;
         self.remote_force = remote;
         self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize] = self.own;
         self.now_tick = t + 1;
     }
-    fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64) -> Report {
+        let copy = copy.first();
         let end = self.now_tick;
         let first = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         let mut tools = ToolReport {
@@ -437,7 +448,7 @@ impl Consistency for Coupled {
     fn receive(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
+        copy: &mut WorldCopy,
         from: usize,
         msg: &Report,
         now_s: f64,
@@ -445,6 +456,7 @@ impl Consistency for Coupled {
         if from >= self.sites || from == self.me {
             return None;
         }
+        let copy = copy.first_mut();
         let r = match msg {
             // A station sends its tools as a track and its state apart (two rings, two keys).
             Report::Tools(tools) => {
@@ -470,7 +482,7 @@ impl Consistency for Coupled {
         let mut target = dead_reckon_passive(world, &r.state, r.accel, now_s - r.t_s, 2);
         // Along the normal of a plane the local copy rests on, its contact is local physics.
         for plane in world.planes() {
-            if crate::world::plane_depth(world, plane, &copy.state) > -1e-4 {
+            if crate::world::plane_depth(&world.bodies[0].shape, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
                 target.pos += n * (copy.state.pos - target.pos).dot(&n);
                 target.vel += n * (copy.state.vel - target.vel).dot(&n);
@@ -496,7 +508,7 @@ impl Consistency for Coupled {
         let beyond_leader = e_new - e_copy.max(e_leader);
         let taken = (e_copy - e_new).max(0.0);
         self.tank_j = (self.tank_j - beyond_leader.max(0.0) + taken).max(0.0);
-        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let e = |s: &BodyState| s.mechanical_energy(&world.bodies[0].mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
@@ -531,28 +543,29 @@ mod tests {
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut c = Coupled::new(0, 2, 1e-3, sc.contact, radii, 600);
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
         let r = Report::Coupled(CoupledReport {
             tools: ToolReport::NONE,
             t_s: 1.0,
             state: sent,
-            accel: crate::world::supported_gravity(&w, &sent),
+            accel: crate::world::supported_gravity(&w, &w.bodies[0].shape, &sent),
             touch_since_s: 0.9,
             last_touch_s: 0.9,
         });
         let e = |s: &BodyState| crate::method::tank::stored_energy(&w, s);
-        let before = e(&copy.state);
+        let before = e(&copy.first().state);
         assert!(c.receive(&w, &mut copy, 1, &r, 1.5).is_some(), "pulled");
         let mut on_surface = sent;
-        crate::world::push_out_of_environment(&w, &mut on_surface);
+        crate::world::push_out_of_environment(&w, &w.bodies[0].shape, &mut on_surface);
         assert!(e(&on_surface) > before, "the leader's state holds more");
         assert!(
-            e(&copy.state) <= e(&on_surface) + crate::method::reckon::DEAD_RECKONING_SLACK_J,
+            e(&copy.first().state)
+                <= e(&on_surface) + crate::method::reckon::DEAD_RECKONING_SLACK_J,
             "{} J after the pull, {} J sent",
-            e(&copy.state),
+            e(&copy.first().state),
             e(&on_surface)
         );
-        assert!(e(&copy.state) > before, "pulled up towards it");
+        assert!(e(&copy.first().state) > before, "pulled up towards it");
     }
 
     /// Site 0 of two, 1 kHz, playing at most 600 ticks late, receives site 1's tool (far from the
@@ -566,9 +579,9 @@ mod tests {
     #[test]
     fn the_playout_follows_the_arrivals_measured() {
         let mut sc = Scenario::default();
-        sc.object.start_m = [0.0, 0.0, 0.01];
+        sc.objects[0].start_m = [0.0, 0.0, 0.01];
         let world = sc.world();
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut c = Coupled::new(0, 2, 1e-3, sc.contact, radii, 600);
@@ -590,7 +603,7 @@ mod tests {
                     .is_none());
             }
             c.own_tool(Vec3::new(-0.2, 0.0, 0.01));
-            c.physics_step(&world, &mut copy, &ContactForce::default(), 1e-3);
+            c.physics_step(&world, &mut copy, &[ContactForce::default()], 1e-3);
             if t == 0 {
                 assert_eq!(c.site_playout_ticks(1), 600.0, "nothing measured yet");
             }

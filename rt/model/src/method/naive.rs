@@ -5,7 +5,7 @@ use crate::contact::ContactForce;
 use crate::world::{World, MAX_SITES};
 
 use super::consistency::{Consistency, LOST_FADE_S};
-use super::copy::{integrate, ObjectCopy};
+use super::copy::{integrate, WorldCopy};
 use super::report::{Adoption, Report};
 
 /// Eq. 8 across the network: own force plus the latest received forces; forces are exchanged.
@@ -58,20 +58,21 @@ impl Consistency for Naive {
     fn name(&self) -> &'static str {
         "naive"
     }
-    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+    fn physics_step(&mut self, world: &World, copy: &mut WorldCopy, own: &[ContactForce], dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let mut users = [ContactForce::default(); MAX_SITES + 1];
         // Per received force: its site and its torque about the centre of mass at the step's start.
         let mut sites = [(0usize, Vec3::zeros()); MAX_SITES + 1];
-        users[0] = *own;
+        users[0] = own[0];
         let mut n = 1;
-        let before = copy.state;
-        let omega = before.omega(&world.mass);
+        let mass = &world.bodies[0].mass;
+        let before = copy.first().state;
+        let omega = before.omega(mass);
         for (k, slot) in self.remote.iter_mut().enumerate() {
             let Some((_, f)) = slot else { continue };
             let mut f = *f;
             if let Some(at) = self.lost_at[k] {
-                let left = 1.0 - (copy.time_s - at) / LOST_FADE_S;
+                let left = 1.0 - (copy.first().time_s - at) / LOST_FADE_S;
                 if left <= 0.0 {
                     *slot = None;
                     self.lost_at[k] = None;
@@ -84,17 +85,18 @@ impl Consistency for Naive {
             let torque = f.wrench(before.pos).torque;
             let power = f.force.dot(&before.vel) + torque.dot(&omega);
             if self.spent_j[k] > self.allowed_j[k] && power > 0.0 {
-                copy.energy.remote_denied_j += power * dt;
+                copy.first_mut().energy.remote_denied_j += power * dt;
                 continue;
             }
             users[n] = f;
             sites[n] = (k, torque);
             n += 1;
         }
-        integrate(world, copy, &users[..n], 1, dt);
+        integrate(world, copy, &users[..n], n, 1, dt, &mut []);
         // What each received force did (the step's mean motion, as `integrate` counts work).
-        let dx = copy.state.pos - before.pos;
-        let omega_mid = (omega + copy.state.omega(&world.mass)) * 0.5;
+        let after = copy.first().state;
+        let dx = after.pos - before.pos;
+        let omega_mid = (omega + after.omega(mass)) * 0.5;
         for (f, &(k, torque)) in users[1..n].iter().zip(&sites[1..n]) {
             let w = f.force.dot(&dx) + torque.dot(&omega_mid) * dt;
             self.spent_j[k] += w.max(0.0);
@@ -107,17 +109,17 @@ impl Consistency for Naive {
             }
         }
     }
-    fn report(&self, copy: &ObjectCopy, own: &ContactForce, now_s: f64) -> Report {
+    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64) -> Report {
         Report::Force {
             t_s: now_s,
-            force: *own,
-            given_j: copy.energy.own_positive_j,
+            force: own[0],
+            given_j: copy.first().energy.own_positive_j,
         }
     }
     fn receive(
         &mut self,
         _w: &World,
-        _c: &mut ObjectCopy,
+        _c: &mut WorldCopy,
         from: usize,
         msg: &Report,
         _now: f64,
@@ -153,7 +155,7 @@ mod tests {
     fn a_lost_sites_force_fades_out_instead_of_freezing() {
         let w = world();
         let mut naive = Naive::default();
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 1.0)));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 1.0)));
         let push = ContactForce {
             force: Vec3::new(1.0, 0.0, 0.0),
             point: Vec3::new(0.0, 0.0, 1.0),
@@ -172,8 +174,8 @@ mod tests {
         let none = ContactForce::default();
         let mut seen = Vec::new();
         for k in 1..=200 {
-            copy.time_s = k as f64 * 1e-3;
-            naive.physics_step(&w, &mut copy, &none, 1e-3);
+            copy.set_time(k as f64 * 1e-3);
+            naive.physics_step(&w, &mut copy, &[none], 1e-3);
             seen.push(naive.remote_force().x);
         }
         assert_eq!(naive.remote_force(), Vec3::zeros(), "gone after the fade");
@@ -221,10 +223,10 @@ mod tests {
                 vel,
                 ..BodyState::at_rest(Vec3::new(0.0, 1.0, 0.0))
             };
-            let mut copy = ObjectCopy::new(start);
+            let mut copy = WorldCopy::one(start);
             for k in 0..steps {
                 if k % every == 0 {
-                    let now = copy.time_s;
+                    let now = copy.first().time_s;
                     let msg = Report::Force {
                         t_s: now,
                         force: push(force),
@@ -232,10 +234,10 @@ mod tests {
                     };
                     naive.receive(&w, &mut copy, 1, &msg, now);
                 }
-                naive.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+                naive.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
             }
-            let e = |s: &BodyState| s.mechanical_energy(&w.mass, w.gravity);
-            (e(&copy.state) - e(&start), copy)
+            let e = |s: &BodyState| s.mechanical_energy(&w.bodies[0].mass, w.gravity);
+            (e(&copy.first().state) - e(&start), copy)
         };
         let run = |vel: Vec3, force: f64, given_j: f64, steps: usize| {
             reported(vel, force, given_j, steps, 10)
@@ -246,22 +248,26 @@ mod tests {
         // At most one report period (10 ms at up to 0.2 m/s) beyond it.
         assert!(gain <= most + 2e-3, "gained {gain} J, {given} J given");
         assert!(gain > given, "the given work is used: {gain} J");
-        assert!(copy.energy.remote_denied_j > 0.0);
+        assert!(copy.first().energy.remote_denied_j > 0.0);
         // Ample: Eq. 8 unchanged, 1 N on 0.1 kg for 0.1 s.
         let (_, copy) = run(Vec3::zeros(), 1.0, 10.0, 100);
         assert!(
-            (copy.state.vel.x - 1.0).abs() < 0.01,
+            (copy.first().state.vel.x - 1.0).abs() < 0.01,
             "{}",
-            copy.state.vel.x
+            copy.first().state.vel.x
         );
-        assert_eq!(copy.energy.remote_denied_j, 0.0);
+        assert_eq!(copy.first().energy.remote_denied_j, 0.0);
         // Reported once, its next report still on the way (a 2 s delay): the force stops doing
         // work as soon as it has done here what its user gave, not when a report shows it.
         let (gain, _) = reported(Vec3::zeros(), 1.0, given, 2000, 4000);
         assert!(gain <= most + 1e-3, "gained {gain} J, {given} J given");
         // Taking energy needs nothing given: a copy at 1 m/s stopped by a 1 N brake in 0.1 s.
         let (gain, copy) = run(Vec3::new(1.0, 0.0, 0.0), -1.0, 0.0, 100);
-        assert!(copy.state.vel.x.abs() < 0.01, "{}", copy.state.vel.x);
+        assert!(
+            copy.first().state.vel.x.abs() < 0.01,
+            "{}",
+            copy.first().state.vel.x
+        );
         assert!(gain < -0.04, "{gain}");
     }
 }

@@ -6,7 +6,7 @@ use crate::world::{plane_depth, World, MAX_SITES};
 use nalgebra::UnitQuaternion;
 
 use super::consistency::Consistency;
-use super::copy::{integrate, ObjectCopy};
+use super::copy::{integrate, WorldCopy};
 use super::reckon::dead_reckon_passive;
 use super::report::{Adoption, Report};
 
@@ -102,10 +102,22 @@ impl Consistency for Paper {
             t.pos = tool_pos;
         }
     }
-    fn physics_step(&mut self, world: &World, copy: &mut ObjectCopy, own: &ContactForce, dt: f64) {
+    fn physics_step(&mut self, world: &World, copy: &mut WorldCopy, own: &[ContactForce], dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let work_before = copy.energy.own_j;
-        let impulse = integrate(world, copy, std::slice::from_ref(own), 1, dt);
+        let own = &own[0];
+        let work_before = copy.first().energy.own_j;
+        let mut impulse = [crate::body::Wrench::default()];
+        integrate(
+            world,
+            copy,
+            std::slice::from_ref(own),
+            1,
+            1,
+            dt,
+            &mut impulse,
+        );
+        let [impulse] = impulse;
+        let copy = copy.first_mut();
         self.tank_j += (copy.energy.own_j - work_before).max(0.0);
         if own.touching {
             self.log[self.log_next] = (
@@ -122,7 +134,8 @@ impl Consistency for Paper {
             }
         }
     }
-    fn report(&self, copy: &ObjectCopy, _own: &ContactForce, now_s: f64) -> Report {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64) -> Report {
+        let copy = copy.first();
         Report::State {
             t_s: now_s,
             state: copy.state,
@@ -133,11 +146,13 @@ impl Consistency for Paper {
     fn receive(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
+        copy: &mut WorldCopy,
         from: usize,
         msg: &Report,
         now_s: f64,
     ) -> Option<Adoption> {
+        let copy = copy.first_mut();
+        let body = &world.bodies[0];
         let Report::State {
             t_s,
             state,
@@ -167,7 +182,7 @@ impl Consistency for Paper {
         let given = new;
         // Replay our own impulses the sender had not seen.
         let seen_until = included.get(self.me).copied().unwrap_or(f64::NEG_INFINITY);
-        let inv_i = new.inv_inertia_world(&world.mass);
+        let inv_i = new.inv_inertia_world(&body.mass);
         let mut own_work_j = 0.0;
         for k in 0..self.log_len {
             let (t_end, t_mid, dp, dl, w) = self.log[(self.log_next + LOG_CAP - 1 - k) % LOG_CAP];
@@ -177,7 +192,7 @@ impl Consistency for Paper {
             own_work_j += w;
             // The impulse acted over its step: it has moved the object for (now − step middle).
             let age = (now_s - t_mid).max(0.0);
-            let dv = dp / world.mass.mass_kg;
+            let dv = dp / body.mass.mass_kg;
             new.vel += dv;
             new.pos += dv * age;
             new.ang_mom += dl;
@@ -185,7 +200,7 @@ impl Consistency for Paper {
         }
         let mut base = given;
         for plane in world.planes() {
-            if plane_depth(world, plane, &copy.state) > -1e-4 {
+            if plane_depth(&body.shape, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
                 for s in [&mut new, &mut base] {
                     s.pos += n * (copy.state.pos - s.pos).dot(&n);
@@ -206,7 +221,7 @@ impl Consistency for Paper {
             own_work_j.min(self.tank_j),
         );
         self.tank_j = (self.tank_j - spent_j).max(0.0);
-        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
+        let e = |s: &BodyState| s.mechanical_energy(&body.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
@@ -242,7 +257,7 @@ mod tests {
             ..world()
         };
         let mut m = Paper::new(2, 0);
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::zeros()));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::zeros()));
         let msg = |t: f64, x: f64, mine: f64, theirs: f64| {
             let mut included = [-1.0; MAX_SITES];
             included[0] = mine;
@@ -259,7 +274,10 @@ mod tests {
                 .is_some(),
             "newer contribution"
         );
-        assert_eq!((copy.state.pos.x, copy.included[1]), (0.5, 0.9));
+        assert_eq!(
+            (copy.first().state.pos.x, copy.first().included[1]),
+            (0.5, 0.9)
+        );
         assert!(
             m.receive(&w, &mut copy, 1, &msg(0.9, 0.7, -1.0, 0.95), 1.1)
                 .is_none(),
@@ -273,34 +291,37 @@ mod tests {
         // Our own user pushes: +0.1 m/s at t = 1.0 (impulse 0.01 N·s on 0.1 kg).
         let push = ContactForce {
             force: Vec3::new(1.0, 0.0, 0.0),
-            point: copy.state.pos,
+            point: copy.first().state.pos,
             depth: 0.001,
             touching: true,
             slipping: false,
         };
-        copy.time_s = 0.99;
-        m.physics_step(&w, &mut copy, &push, 0.01);
-        assert!((copy.state.vel.x - 0.1).abs() < 1e-9);
+        copy.set_time(0.99);
+        m.physics_step(&w, &mut copy, &[push], 0.01);
+        assert!((copy.first().state.vel.x - 0.1).abs() < 1e-9);
         // A state from site 1 that has not seen our push: adopted, and our push replayed on it.
         assert!(m
             .receive(&w, &mut copy, 1, &msg(1.2, 0.6, -1.0, 1.1), 1.2)
             .is_some());
         assert!(
-            (copy.state.vel.x - 0.1).abs() < 1e-9,
+            (copy.first().state.vel.x - 0.1).abs() < 1e-9,
             "own impulse replayed: {:?}",
-            copy.state.vel
+            copy.first().state.vel
         );
         // Pushed during [0.99, 1.0]: it has moved the object for 1.2 − 0.995 s.
         assert!(
-            (copy.state.pos.x - (0.6 + 0.1 * 0.205)).abs() < 1e-9,
+            (copy.first().state.pos.x - (0.6 + 0.1 * 0.205)).abs() < 1e-9,
             "{:?}",
-            copy.state.pos
+            copy.first().state.pos
         );
         // One that has seen it: adopted as it is.
         assert!(m
             .receive(&w, &mut copy, 1, &msg(1.3, 0.65, 1.0, 1.25), 1.3)
             .is_some());
-        assert!(copy.state.vel.x.abs() < 1e-12 && (copy.state.pos.x - 0.65).abs() < 1e-12);
+        assert!(
+            copy.first().state.vel.x.abs() < 1e-12
+                && (copy.first().state.pos.x - 0.65).abs() < 1e-12
+        );
     }
 
     /// A state reported resting on the table (within the support's band) but leaving it fast, as a
@@ -309,14 +330,14 @@ mod tests {
     #[test]
     fn paper_never_adopts_more_energy_than_the_state_sent() {
         let (w, sent) = on_a_table(Vec3::new(0.0, 0.87, 0.0));
-        let accel = supported_gravity(&w, &sent);
+        let accel = supported_gravity(&w, &w.bodies[0].shape, &sent);
         assert!(accel.norm() < 1e-12, "reported as resting: {accel:?}");
         let reckoned = dead_reckon(&w, &sent, accel, 0.5, 2);
         assert!(reckoned.pos.y > 0.4, "unslowed: {:?}", reckoned.pos);
         let mut m = Paper::new(2, 0);
         // This copy's disk is off the table (an earlier adoption lifted it): nothing of the
         // local state is kept along the table's normal.
-        let mut copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
         let mut included = [-1.0; MAX_SITES];
         included[1] = 1.0;
         let msg = Report::State {
@@ -328,14 +349,18 @@ mod tests {
         assert!(m.receive(&w, &mut copy, 1, &msg, 1.5).is_some());
         // (The sent state as the reckoner puts it: on the table's surface.)
         let mut on_surface = sent;
-        push_out_of_environment(&w, &mut on_surface);
+        push_out_of_environment(&w, &w.bodies[0].shape, &mut on_surface);
         let e = |s: &BodyState| crate::method::tank::stored_energy(&w, s);
         assert!(
-            e(&copy.state) <= e(&on_surface) + DEAD_RECKONING_SLACK_J,
+            e(&copy.first().state) <= e(&on_surface) + DEAD_RECKONING_SLACK_J,
             "{} J adopted, {} J sent",
-            e(&copy.state),
+            e(&copy.first().state),
             e(&on_surface)
         );
-        assert!(copy.state.pos.y < 0.1, "{:?}", copy.state.pos);
+        assert!(
+            copy.first().state.pos.y < 0.1,
+            "{:?}",
+            copy.first().state.pos
+        );
     }
 }

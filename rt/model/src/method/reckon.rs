@@ -17,7 +17,7 @@ pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8
     if order == 0 || dt <= 0.0 {
         return *s;
     }
-    let omega = s.omega(&world.mass);
+    let omega = s.omega(&world.bodies[0].mass);
     let mut out = BodyState {
         pos: s.pos + s.vel * dt,
         rot: UnitQuaternion::from_scaled_axis(omega * dt) * s.rot,
@@ -28,7 +28,7 @@ pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8
         out.vel += accel * dt;
         slide_with_friction(world, s, accel, dt, &mut out);
     }
-    push_out_of_environment(world, &mut out);
+    push_out_of_environment(world, &world.bodies[0].shape, &mut out);
     out
 }
 
@@ -46,7 +46,7 @@ pub fn dead_reckon_passive(
 ) -> BodyState {
     let new = dead_reckon(world, s, accel, dt, order);
     let mut sent = *s;
-    push_out_of_environment(world, &mut sent);
+    push_out_of_environment(world, &world.bodies[0].shape, &mut sent);
     super::tank::bound_gain(world, &sent, &new, DEAD_RECKONING_SLACK_J, None)
         .map_or(new, |(bounded, _)| bounded)
 }
@@ -57,7 +57,7 @@ fn slide_with_friction(world: &World, s: &BodyState, accel: Vec3, dt: f64, out: 
     for plane in world.planes() {
         let n = plane.normal;
         let support = -(world.gravity.dot(&n));
-        if support <= 0.0 || plane_depth(world, plane, s) <= -1e-4 {
+        if support <= 0.0 || plane_depth(&world.bodies[0].shape, plane, s) <= -1e-4 {
             continue;
         }
         let v_t = s.vel - n * s.vel.dot(&n);
@@ -116,7 +116,7 @@ mod tests {
     #[test]
     fn dead_reckoning_slides_to_a_stop() {
         let (w, s) = on_a_table(Vec3::new(0.2, 0.0, 0.0));
-        let a = supported_gravity(&w, &s);
+        let a = supported_gravity(&w, &w.bodies[0].shape, &s);
         assert!(a.norm() < 1e-12, "a table carries all of gravity: {a:?}");
         let decel = w.env_contact.friction_kinetic * 9.81 / 3.0;
         let stop = 0.2 * 0.2 / (2.0 * decel);

@@ -32,7 +32,7 @@ use crate::world::{plane_depth, World};
 
 /// Kinetic, gravitational and environment-spring energy of `s`, J (see the module docs).
 pub fn stored_energy(world: &World, s: &BodyState) -> f64 {
-    s.mechanical_energy(&world.mass, world.gravity) + spring_energy(world, s)
+    s.mechanical_energy(&world.bodies[0].mass, world.gravity) + spring_energy(world, s)
 }
 
 /// The environment's penalty springs' energy at `s`: ½ K d² per plane, J.
@@ -41,7 +41,7 @@ pub fn spring_energy(world: &World, s: &BodyState) -> f64 {
     world
         .planes()
         .iter()
-        .map(|plane| plane_depth(world, plane, s).max(0.0))
+        .map(|plane| plane_depth(&world.bodies[0].shape, plane, s).max(0.0))
         .fold(0.0, |e, d| e + 0.5 * k * d * d)
 }
 
@@ -118,7 +118,7 @@ pub struct ToolSpring {
 impl ToolSpring {
     /// ½ K d², d the tool's penetration into the object at `s`, J.
     pub fn energy(&self, world: &World, s: &BodyState) -> f64 {
-        let (dist, _) = world
+        let (dist, _) = world.bodies[0]
             .shape
             .signed_distance(s.rot.inverse() * (self.pos - s.pos));
         let d = (self.radius_m - dist).max(0.0);
@@ -194,30 +194,27 @@ pub fn bound_gain(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::{MassProps, Vec3};
-    use crate::contact::{ContactParams, Plane, MAX_PLANES};
+    use crate::body::Vec3;
+    use crate::contact::{ContactParams, Plane};
     use crate::shape::Shape;
 
     fn world() -> World {
         let shape = Shape::Sphere { radius: 0.05 };
-        let mut planes = [Plane {
-            normal: Vec3::z(),
-            offset: 0.0,
-        }; MAX_PLANES];
-        planes[1] = Plane {
-            normal: Vec3::x(),
-            offset: -0.25,
-        };
-        World {
-            shape,
-            mass: MassProps {
-                mass_kg: 0.1,
-                inertia_body: shape.inertia(0.1),
+        let planes = [
+            Plane {
+                normal: Vec3::z(),
+                offset: 0.0,
             },
-            gravity: Vec3::new(0.0, 0.0, -3.27),
-            planes,
-            plane_count: 2,
-            env_contact: ContactParams {
+            Plane {
+                normal: Vec3::x(),
+                offset: -0.25,
+            },
+        ];
+        World::new(
+            &[crate::world::Body::solid(shape, 0.1)],
+            Vec3::new(0.0, 0.0, -3.27),
+            &planes,
+            ContactParams {
                 stiffness_n_per_m: 3000.0,
                 damping_n_s_per_m: 30.0,
                 tangential_stiffness_n_per_m: 3000.0,
@@ -226,7 +223,7 @@ mod tests {
                 friction_kinetic: 0.3,
                 rotational_friction_radius_m: 0.0,
             },
-        }
+        )
     }
 
     /// A state inside a wall holds the wall's spring energy; moving there is a gain.

@@ -9,10 +9,14 @@ impl TimeWarp {
     pub(super) fn resync(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
+        copy: &mut WorldCopy,
         r: &ToolReport,
     ) -> Option<Adoption> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        // (A snapshot carries one object: a world of several is not resynchronised.)
+        if copy.len() != 1 {
+            return None;
+        }
         let snap = r
             .state
             .filter(|s| s.tick == r.confirmed_tick && hash_state(&s.state) == r.confirmed_hash)?;
@@ -23,37 +27,44 @@ impl TimeWarp {
         {
             return None;
         }
-        let before = *copy;
-        let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
-        let slot = &mut self.slots[i];
+        let before = Before::of(world, copy);
+        let e = |s: &BodyState| s.mechanical_energy(&world.bodies[0].mass, world.gravity);
+        let kept = self.worlds[i].first_mut();
         // The jump is energy no force of the history accounts for.
-        slot.copy.energy.adoption_j += e(&snap.state) - e(&slot.copy.state);
-        slot.copy.state = snap.state;
-        slot.copy.env = snap.env;
-        slot.contacts = snap.contacts;
+        kept.energy.adoption_j += e(&snap.state) - e(&kept.state);
+        kept.state = snap.state;
+        kept.env = snap.env;
+        let n = self.tools_len();
+        self.tools[i * n..i * n + MAX_SITES].copy_from_slice(&snap.contacts);
         self.rollback(world, copy, snap.tick);
         self.stats.adopted_states += 1;
-        // Every force's work so far, as the re-simulated account has it (as in `receive`).
-        let w = |c: &ObjectCopy| c.energy.own_j + c.energy.remote_j + c.energy.env_j;
-        Some(Adoption {
-            jump: before.state.pos - copy.state.pos,
-            energy_j: e(&copy.state) - e(&before.state),
-            work_j: w(copy) - w(&before),
-            age_s: (self.now_tick - snap.tick) as f64 * self.dt,
-            clipped_j: 0.0,
-        })
+        Some(before.adoption(world, copy, (self.now_tick - snap.tick) as f64 * self.dt))
     }
 
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
     pub(super) fn hash_at(&self, t: i64) -> Option<u64> {
-        let s = &self.slots[self.idx(t)];
-        (s.tick == t).then(|| hash_state(&s.copy.state))
+        let i = self.idx(t);
+        (self.slots[i].tick == t).then(|| hash_world(&self.worlds[i]))
     }
 }
 
+/// FNV-1a 64 of every object's state's bits, in the world's order (of a world of one object:
+/// [`hash_state`] of its state).
+pub fn hash_world(copy: &WorldCopy) -> u64 {
+    copy.objects()
+        .iter()
+        .fold(FNV_OFFSET, |h, o| fnv(h, &o.state))
+}
+
+const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
 /// FNV-1a 64 of a state's bits.
 pub fn hash_state(s: &BodyState) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    fnv(FNV_OFFSET, s)
+}
+
+/// FNV-1a 64 of a state's bits, from `h`.
+fn fnv(mut h: u64, s: &BodyState) -> u64 {
     let words = s
         .pos
         .iter()

@@ -64,18 +64,18 @@ impl TimeWarp {
     /// The local lag wanted from the next tick on: the configured share of the largest measured
     /// delay of the sites whose tools (as last simulated) are within [`LOCAL_LAG_NEAR_M`] of the
     /// object while the own tool (as measured) is too; none otherwise.
-    pub(super) fn want_lag(&mut self, world: &World, copy: &ObjectCopy) {
+    pub(super) fn want_lag(&mut self, world: &World, copy: &WorldCopy) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let body = &copy.state;
-        let inv = body.rot.inverse();
         let near = |q: Quantized, radius: f64| {
             q != UNKNOWN
-                && world
-                    .shape
-                    .signed_distance(inv * (position(q) - body.pos))
-                    .0
-                    - radius
-                    <= LOCAL_LAG_NEAR_M
+                && copy.objects().iter().zip(world.bodies()).any(|(o, b)| {
+                    let body = &o.state;
+                    b.shape
+                        .signed_distance(body.rot.inverse() * (position(q) - body.pos))
+                        .0
+                        - radius
+                        <= LOCAL_LAG_NEAR_M
+                })
         };
         let measured = self.measured[(self.measured_count - 1).max(0) as usize % MEASURED_RING];
         let last = &self.slots[self.idx(self.now_tick - 1)];
@@ -111,7 +111,7 @@ impl TimeWarp {
         };
         let step = if lag < want - LAG_SLACK_BELOW_HALF_TICKS {
             LAG_GROW_HALF_TICKS
-        } else if lag > want + above && !self.contacts[self.me].touching() {
+        } else if lag > want + above && !Self::touches(&self.contacts, self.me) {
             LAG_SHRINK_HALF_TICKS
         } else {
             2

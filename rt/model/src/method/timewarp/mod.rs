@@ -76,7 +76,7 @@ mod lag;
 mod predict;
 mod replay;
 
-pub use hash::hash_state;
+pub use hash::{hash_state, hash_world};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
 pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_LAG_TICKS};
 pub use predict::{EXTRAPOLATE_TICKS, REACH_TICKS, REACH_TIME_TICKS, REACH_VELOCITY_TICKS};
@@ -86,10 +86,10 @@ pub use replay::{
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
-use crate::world::{World, MAX_SITES};
+use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
 use super::consistency::Consistency;
-use super::copy::{integrate, ObjectCopy};
+use super::copy::{integrate, WorldCopy};
 use super::report::{Adoption, Report};
 use super::stats::{RollbackStats, Stats};
 use super::track::{
@@ -97,12 +97,11 @@ use super::track::{
     QUANTUM_M, UNKNOWN, WINDOW_TICKS,
 };
 
-/// One tick's record: the state at its start, and the inputs used in it.
+/// One tick's record: the inputs used in it (the state at its start is kept beside it, in
+/// [`TimeWarp::worlds`] and [`TimeWarp::tools`]).
 #[derive(Debug, Clone, Copy)]
 struct Slot {
     tick: i64,
-    copy: ObjectCopy,
-    contacts: [ToolContactState; MAX_SITES],
     inputs: [Quantized; MAX_SITES],
     /// Per site: whether `inputs` held a received (true) or predicted (false) position.
     known: [bool; MAX_SITES],
@@ -122,6 +121,16 @@ pub struct TimeWarp {
     radii: [f64; MAX_SITES],
     /// Ring of slots, tick `t` at `t % len`.
     slots: Box<[Slot]>,
+    /// Per slot, the copy at the start of its tick.
+    worlds: Box<[WorldCopy]>,
+    /// Per slot, every tool's friction memory with every object at the start of its tick
+    /// ([`Self::tools_len`] each, as [`Self::contacts`]).
+    tools: Box<[ToolContactState]>,
+    /// Every tool's friction memory with every object: object `k`'s with site `j`'s tool at
+    /// `k * MAX_SITES + j`.
+    contacts: Box<[ToolContactState]>,
+    /// Every tool's contact with every object in the tick being simulated (as `contacts`).
+    users: Box<[ContactForce]>,
     /// The tick the copy is at the start of (the next to simulate).
     now_tick: i64,
     /// Per site: received positions with their ticks (ring like `slots`).
@@ -146,7 +155,6 @@ pub struct TimeWarp {
     started_tick: u64,
     /// The most environment-spring energy an adopted state may hold, J.
     max_spring_j: f64,
-    contacts: [ToolContactState; MAX_SITES],
     /// The oldest tick a received position changed since the last rollback.
     dirty_from: Option<i64>,
     /// The own tool's position at the tick being simulated: the measured one, `lag` ticks late.
@@ -185,13 +193,12 @@ impl TimeWarp {
         contact: ContactParams,
         radii: [f64; MAX_SITES],
         horizon_ticks: usize,
-        copy: &ObjectCopy,
+        copy: &WorldCopy,
     ) -> Self {
         let len = horizon_ticks.max(WINDOW_TICKS) + 1;
+        let tools_len = MAX_SITES * copy.len();
         let slot = Slot {
             tick: i64::MIN,
-            copy: *copy,
-            contacts: [ToolContactState::default(); MAX_SITES],
             inputs: [UNKNOWN; MAX_SITES],
             known: [false; MAX_SITES],
             felt: false,
@@ -204,6 +211,10 @@ impl TimeWarp {
             contact,
             radii,
             slots: vec![slot; len].into_boxed_slice(),
+            worlds: vec![copy.clone(); len].into_boxed_slice(),
+            tools: vec![ToolContactState::default(); len * tools_len].into_boxed_slice(),
+            contacts: vec![ToolContactState::default(); tools_len].into_boxed_slice(),
+            users: vec![ContactForce::default(); tools_len].into_boxed_slice(),
             now_tick: 0,
             received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
             known_until: [-1; MAX_SITES],
@@ -215,7 +226,6 @@ impl TimeWarp {
             state_asked: [false; MAX_SITES],
             started_tick: 0,
             max_spring_j: f64::INFINITY,
-            contacts: [ToolContactState::default(); MAX_SITES],
             dirty_from: None,
             own: [0; 3],
             measured: vec![[0; 3]; MEASURED_RING].into_boxed_slice(),
@@ -284,22 +294,45 @@ impl TimeWarp {
             .unwrap_or(self.now_tick)
     }
 
+    /// Every tool's friction memory with every object, per slot.
+    fn tools_len(&self) -> usize {
+        self.contacts.len()
+    }
+
+    /// Whether site `j`'s tool touches any object, as the tools' friction memory `tools` has it.
+    fn touches(tools: &[ToolContactState], j: usize) -> bool {
+        tools
+            .iter()
+            .skip(j)
+            .step_by(MAX_SITES)
+            .any(|c| c.touching())
+    }
+
+    /// The tools' friction memory at the start of the tick in slot `i`.
+    fn tools_at(&self, i: usize) -> &[ToolContactState] {
+        let n = self.tools_len();
+        &self.tools[i * n..(i + 1) * n]
+    }
+
     /// Simulates tick `self.now_tick` on `copy` and keeps its record.
-    fn tick(&mut self, world: &World, copy: &mut ObjectCopy) {
+    fn tick(&mut self, world: &World, copy: &mut WorldCopy) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let t = self.now_tick;
         let prev = self.slots[self.idx(t - 1)];
+        let i = self.idx(t);
+        self.worlds[i].copy_from(copy);
+        let n = self.tools_len();
+        self.tools[i * n..(i + 1) * n].copy_from_slice(&self.contacts);
         let mut slot = Slot {
             tick: t,
-            copy: *copy,
-            contacts: self.contacts,
             inputs: [[0; 3]; MAX_SITES],
             known: [false; MAX_SITES],
             felt: false,
             touched: false,
         };
-        let mut users = [ContactForce::default(); MAX_SITES];
-        for (j, user) in users.iter_mut().enumerate().take(self.sites) {
+        let objects = copy.len().min(world.bodies().len());
+        let sites = self.sites;
+        for j in 0..sites {
             let (q, known) = if j == self.me {
                 (self.own_at(t), true)
             } else {
@@ -319,19 +352,20 @@ impl TimeWarp {
             } else {
                 Vec3::zeros()
             };
-            *user = tool_contact(
-                &self.contact,
-                &mut self.contacts[j],
-                &world.shape,
-                &copy.state,
-                &world.mass,
-                p,
-                v,
-                self.radii[j],
-            );
+            for (k, body) in world.bodies()[..objects].iter().enumerate() {
+                self.users[k * sites + j] = tool_contact(
+                    &self.contact,
+                    &mut self.contacts[k * MAX_SITES + j],
+                    &body.shape,
+                    &copy.objects()[k].state,
+                    &body.mass,
+                    p,
+                    v,
+                    self.radii[j],
+                );
+            }
         }
-        let i = self.idx(t);
-        slot.touched = users[self.me].touching;
+        slot.touched = (0..objects).any(|k| self.users[k * sites + self.me].touching);
         // A re-simulation keeps what the first simulation of the tick showed.
         slot.felt = if self.slots[i].tick == t {
             self.slots[i].felt
@@ -340,7 +374,8 @@ impl TimeWarp {
         };
         self.slots[i] = slot;
         // Summed in site order, the same at every site: all users count as "own" here.
-        integrate(world, copy, &users[..self.sites], self.sites, self.dt);
+        let users = &self.users[..objects * sites];
+        integrate(world, copy, users, sites, sites, self.dt, &mut []);
         self.now_tick = t + 1;
     }
 
@@ -354,17 +389,20 @@ impl TimeWarp {
     }
 
     /// Restores the copy to tick `from` and simulates again to where it was.
-    fn rollback(&mut self, world: &World, copy: &mut ObjectCopy, from: i64) -> u64 {
+    fn rollback(&mut self, world: &World, copy: &mut WorldCopy, from: i64) -> u64 {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let to = self.now_tick;
         let oldest = self.oldest_kept();
         let from = from.max(oldest);
         if from >= to {
             return 0;
         }
-        let s = self.slots[self.idx(from)];
+        let i = self.idx(from);
         let own_now = self.own;
-        *copy = s.copy;
-        self.contacts = s.contacts;
+        copy.copy_from(&self.worlds[i]);
+        let n = self.tools_len();
+        self.contacts
+            .copy_from_slice(&self.tools[i * n..(i + 1) * n]);
         self.now_tick = from;
         while self.now_tick < to {
             // The own positions of past ticks are the ones used then.
@@ -410,8 +448,8 @@ impl Consistency for TimeWarp {
     fn physics_step(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
-        _own: &ContactForce,
+        copy: &mut WorldCopy,
+        _own: &[ContactForce],
         _dt: f64,
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
@@ -419,7 +457,7 @@ impl Consistency for TimeWarp {
         self.advance_replay();
         self.want_lag(world, copy);
     }
-    fn report(&self, _copy: &ObjectCopy, _own: &ContactForce, _now_s: f64) -> Report {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], _now_s: f64) -> Report {
         let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
                                  // (Nothing before the tick this site's history starts at: it was not here.)
         let window = (end - WINDOW_TICKS as i64).max(self.origin_tick);
@@ -460,14 +498,18 @@ impl Consistency for TimeWarp {
         for (j, &want) in self.want_state.iter().enumerate() {
             r.need_state |= u8::from(want) << j;
         }
-        if self.state_asked.iter().any(|&a| a) {
+        // (A snapshot carries one object: a world of several is not resynchronised.)
+        if self.state_asked.iter().any(|&a| a) && copy.len() == 1 {
             let t = r.confirmed_tick;
-            let s = &self.slots[self.idx(t)];
+            let i = self.idx(t);
+            let s = &self.slots[i];
+            let mut contacts = [ToolContactState::default(); MAX_SITES];
+            contacts.copy_from_slice(&self.tools_at(i)[..MAX_SITES]);
             r.state = (s.tick == t).then_some(Snapshot {
                 tick: t,
-                state: s.copy.state,
-                env: s.copy.env,
-                contacts: s.contacts,
+                state: self.worlds[i].first().state,
+                env: self.worlds[i].first().env,
+                contacts,
             });
         }
         for j in (0..self.sites).filter(|&j| j != self.me) {
@@ -484,7 +526,7 @@ impl Consistency for TimeWarp {
     fn receive(
         &mut self,
         world: &World,
-        copy: &mut ObjectCopy,
+        copy: &mut WorldCopy,
         from: usize,
         msg: &Report,
         _now_s: f64,
@@ -564,20 +606,14 @@ impl Consistency for TimeWarp {
         }
         let mut adoption = None;
         if let Some(from_tick) = self.dirty_from.take() {
-            let before = *copy;
+            let before = Before::of(world, copy);
             if self.rollback(world, copy, from_tick) > 0 {
                 self.replay_missed_contact(from_tick);
-                let e = |s: &BodyState| s.mechanical_energy(&world.mass, world.gravity);
-                // Every force's work so far, as the copy's account has it (restored with the
-                // snapshot and re-accumulated by the re-simulation).
-                let w = |c: &ObjectCopy| c.energy.own_j + c.energy.remote_j + c.energy.env_j;
-                adoption = Some(Adoption {
-                    jump: before.state.pos - copy.state.pos,
-                    energy_j: e(&copy.state) - e(&before.state),
-                    work_j: w(copy) - w(&before),
-                    age_s: (self.now_tick - from_tick) as f64 * self.dt,
-                    clipped_j: 0.0,
-                });
+                adoption = Some(before.adoption(
+                    world,
+                    copy,
+                    (self.now_tick - from_tick) as f64 * self.dt,
+                ));
             }
         }
         // Confirmed state compared where both know it.
@@ -629,17 +665,17 @@ impl Consistency for TimeWarp {
     }
     /// The copy's state, or during a replay of a missed contact the history's at the replayed
     /// tick, its velocities at the replay's speed (so the display sees the motion it shows).
-    fn shown(&self, copy: &ObjectCopy) -> BodyState {
+    fn shown(&self, copy: &WorldCopy, k: usize) -> BodyState {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         match self.replay {
             Some((t, _)) if self.slots[self.idx(t)].tick == t => {
-                let mut s = self.slots[self.idx(t)].copy.state;
+                let mut s = self.worlds[self.idx(t)].objects()[k].state;
                 let k = self.replay_speed(t) as f64;
                 s.vel *= k;
                 s.ang_mom *= k;
                 s
             }
-            _ => copy.state,
+            _ => copy.objects()[k].state,
         }
     }
     fn start_at_tick(&mut self, tick: i64) {
@@ -661,12 +697,82 @@ impl TimeWarp {
     /// GGPO's synctest: rolls the copy back `depth` ticks and re-simulates them with the same
     /// inputs; whether it arrived at the same bits (state, friction memory) it had. Determinism is
     /// what makes every site's confirmed state the same: this checks it on every tick it is run.
-    pub fn synctest(&mut self, world: &World, copy: &mut ObjectCopy, depth: i64) -> bool {
-        let (before, contacts) = (*copy, self.contacts);
+    /// (A test's tool: it allocates.)
+    pub fn synctest(&mut self, world: &World, copy: &mut WorldCopy, depth: i64) -> bool {
+        let (before, contacts) = (copy.clone(), self.contacts.clone());
         let stats = self.stats;
         self.rollback(world, copy, self.now_tick - depth);
         self.stats = stats; // a test's rollbacks are not the method's
-        copy.state == before.state && copy.env == before.env && self.contacts == contacts
+        let same = |a: &WorldCopy, b: &WorldCopy| {
+            a.pairs() == b.pairs()
+                && a.still() == b.still()
+                && a.objects()
+                    .iter()
+                    .zip(b.objects())
+                    .all(|(x, y)| x.state == y.state && x.env == y.env)
+        };
+        same(copy, &before) && self.contacts == contacts
+    }
+}
+
+/// What an adoption (a rollback that moved the copy, a state adopted) is measured against: the
+/// copy before it, per object, without copying the world.
+pub(super) struct Before {
+    pos: [Vec3; MAX_OBJECTS],
+    energy_j: f64,
+    work_j: f64,
+}
+
+impl Before {
+    /// Every force's work so far, as the copy's account has it (restored with a snapshot and
+    /// re-accumulated by the re-simulation), J.
+    fn work(copy: &WorldCopy) -> f64 {
+        copy.objects()
+            .iter()
+            .map(|c| c.energy.own_j + c.energy.remote_j + c.energy.env_j)
+            .sum()
+    }
+
+    /// The objects' mechanical energy, J.
+    fn energy(world: &World, copy: &WorldCopy) -> f64 {
+        copy.objects()
+            .iter()
+            .zip(world.bodies())
+            .map(|(c, b)| c.state.mechanical_energy(&b.mass, world.gravity))
+            .sum()
+    }
+
+    pub(super) fn of(world: &World, copy: &WorldCopy) -> Self {
+        let mut pos = [Vec3::zeros(); MAX_OBJECTS];
+        for (p, c) in pos.iter_mut().zip(copy.objects()) {
+            *p = c.state.pos;
+        }
+        Self {
+            pos,
+            energy_j: Self::energy(world, copy),
+            work_j: Self::work(copy),
+        }
+    }
+
+    /// The adoption that made `copy` of what it was, `age_s` back: its jump is the object's that
+    /// moved most (before − after).
+    pub(super) fn adoption(&self, world: &World, copy: &WorldCopy, age_s: f64) -> Adoption {
+        let jump = copy
+            .objects()
+            .iter()
+            .zip(&self.pos)
+            .map(|(c, p)| p - c.state.pos)
+            .fold(
+                Vec3::zeros(),
+                |a, b| if b.norm() > a.norm() { b } else { a },
+            );
+        Adoption {
+            jump,
+            energy_j: Self::energy(world, copy) - self.energy_j,
+            work_j: Self::work(copy) - self.work_j,
+            age_s,
+            clipped_j: 0.0,
+        }
     }
 }
 

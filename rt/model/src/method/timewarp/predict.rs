@@ -56,7 +56,7 @@ impl TimeWarp {
         };
         let at = |t: i64| self.received_at(j, t);
         let at_last = &self.slots[self.idx(last)];
-        let free = at_last.tick == last && !at_last.contacts[j].touching();
+        let free = at_last.tick == last && !Self::touches(self.tools_at(self.idx(last)), j);
         if free {
             return (
                 self.reach(p, at(last - REACH_VELOCITY_TICKS), t - last),

@@ -33,7 +33,7 @@ impl TimeWarp {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         // Only a free object's knock: in a grasp (another tool on the object) the history
         // replayed would be felt against hands that are all moving on.
-        let touched_now = self.contacts[..self.sites].iter().any(|c| c.touching());
+        let touched_now = self.contacts.iter().any(|c| c.touching());
         if self.replay.is_some() || touched_now {
             return;
         }
@@ -72,8 +72,9 @@ impl TimeWarp {
         t += self.replay_speed(t);
         let kept = self.slots[self.idx(t)].tick == t;
         let away = (position(self.own) - position(then)).norm() > REPLAY_REACH_M;
-        self.replay = (t < self.now_tick && kept && !away && !self.contacts[self.me].touching())
-            .then_some((t, then));
+        self.replay =
+            (t < self.now_tick && kept && !away && !Self::touches(&self.contacts, self.me))
+                .then_some((t, then));
     }
 
     /// How many ticks of history a live tick replays from tick `t` on: one while the own tool

@@ -5,7 +5,7 @@ use crate::scenario::Scenario;
 
 fn paper_world() -> (Scenario, World) {
     let mut sc = Scenario::default();
-    sc.object.start_m = [0.0, 0.0, 0.01];
+    sc.objects[0].start_m = [0.0, 0.0, 0.01];
     sc.world.planes[0].normal = [0.0, 0.0, 1.0];
     sc.world.planes[0].offset_m = 0.0;
     sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
@@ -15,9 +15,9 @@ fn paper_world() -> (Scenario, World) {
 
 /// Site 0 of two 5 mm tools, 1 kHz, 600 ticks of history, the disk at rest at the origin on
 /// the table: the method, its copy and the world.
-fn two_tools_on_a_disk() -> (TimeWarp, ObjectCopy, World) {
+fn two_tools_on_a_disk() -> (TimeWarp, WorldCopy, World) {
     let (sc, w) = paper_world();
-    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     let mut radii = [0.0; MAX_SITES];
     radii[..2].fill(0.005);
     (
@@ -54,7 +54,7 @@ fn the_horizon_is_configured_or_covers_the_latest_arrival() {
     sc.network.jitter_ms = 10.0;
     sc.site[0].report_rate_hz = 50.0; // 20 ms: 230 ms in all, + 100 ms
     sc.validate().expect("default horizon");
-    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     assert_eq!(sc.timewarp(0, &copy).history_ticks(), 331);
     // With loss, 11 reports lost in a row (0.3¹² < 10⁻⁶) and a round trip more: + 450 ms.
     sc.network.loss = 0.3;
@@ -79,7 +79,7 @@ fn the_local_lag_is_configured_and_checked() {
     let mut sc = two_users();
     sc.validate().expect("defaults");
     assert_eq!(sc.timewarp.local_lag_share, LOCAL_LAG_SHARE);
-    let copy = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     let tw = sc.timewarp(0, &copy);
     assert_eq!(
         (tw.lag_share, tw.lag_max),
@@ -139,7 +139,7 @@ fn a_forced_rollback_on_every_tick_gives_the_same_bits() {
                 tw.receive(&w, &mut copy, 1, &Report::Tools(r), s);
             }
         }
-        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
         let depth = 1 + k % 50;
         assert!(tw.synctest(&w, &mut copy, depth), "tick {k}, depth {depth}");
     }
@@ -149,9 +149,9 @@ fn a_forced_rollback_on_every_tick_gives_the_same_bits() {
         tw.rollback_stats()
     );
     assert!(
-        copy.state.pos.y > 0.01,
+        copy.first().state.pos.y > 0.01,
         "the squeezed disk was carried: {:?}",
-        copy.state.pos
+        copy.first().state.pos
     );
     let _ = other;
 }
@@ -256,14 +256,14 @@ fn knock(delay: i64, own: impl Fn(i64) -> Vec3) -> Knock {
             let r = track((first - count + 1).max(0), first, remote);
             tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
         }
-        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
         out.touched |= tw.contacts[0].touching();
-        let shown = tw.shown(&copy);
-        out.shown_was_copy &= shown == copy.state;
+        let shown = tw.shown(&copy, 0);
+        out.shown_was_copy &= shown == copy.first().state;
         // The rim (0.04 m) meets the tool (0.005 m) in the plane.
         let gap = (own(k) - shown.pos).xy().norm() - 0.045;
         out.shown_touching_ticks += u64::from(gap < 0.0);
-        out.ends_on_copy = shown == copy.state;
+        out.ends_on_copy = shown == copy.first().state;
     }
     out.stats = tw.rollback_stats();
     out
@@ -287,7 +287,7 @@ fn lagged(
             let r = track(first - 9, first, |t| quantize(remote(t)));
             tw.receive(&w, &mut copy, 1, &r, k as f64 * 1e-3);
         }
-        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
         inputs.push(tw.own_at(k));
         lags.push(tw.rollback_stats().local_lag_ticks);
     }
@@ -349,7 +349,7 @@ fn a_lost_partner_ends_the_lag() {
             );
             tw.peer_lost(1, k as f64 * 1e-3);
         }
-        tw.physics_step(&w, &mut copy, &ContactForce::default(), 1e-3);
+        tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
     }
     assert_eq!(
         tw.rollback_stats().local_lag_ticks,
@@ -387,14 +387,14 @@ fn a_touching_tool_keeps_its_lag_until_it_lets_go() {
 #[test]
 fn a_site_joining_the_grid_late_starts_there_and_adopts() {
     let (sc, w) = paper_world();
-    let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     let mut radii = [0.0; MAX_SITES];
     radii[..2].fill(0.005);
     let new = |i| TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start);
     // Site 1 pushes the disk (ticks 900-1300), its physics dies at 1500 and a new one joins
     // the grid at 2000 from the scenario's start.
     let (crash, join) = (1500, 2000);
-    let mut sites = [(new(0), start), (new(1), start)];
+    let mut sites = [(new(0), start.clone()), (new(1), start.clone())];
     let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
     let down = |i: usize, k: i64| i == 1 && (crash..join).contains(&k);
     for k in 0..4000 {
@@ -402,7 +402,7 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
             let mut b = new(1);
             b.set_started_tick(join as u64);
             b.start_at_tick(join);
-            sites[1] = (b, start);
+            sites[1] = (b, start.clone());
         }
         for (i, (tw, copy)) in sites.iter_mut().enumerate() {
             if down(i, k) {
@@ -412,7 +412,7 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
                 tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
             }
             tw.own_tool(sweep_into_the_disk(i, k));
-            tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+            tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
         }
         in_flight.retain(|m| m.0 > k);
         if k % 20 == 0 {
@@ -420,7 +420,7 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
                 if down(i, k) {
                     continue;
                 }
-                let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                let r = tw.report(copy, &[ContactForce::default()], k as f64 * 1e-3);
                 if let Report::Tools(t) = &r {
                     assert!(
                         i == 0 || k < crash || t.first_tick >= join,
@@ -433,7 +433,7 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
         }
     }
     let [(a, ca), (b, _)] = &sites;
-    assert!(ca.state.pos.x < -0.002, "site 1 pushed the disk");
+    assert!(ca.first().state.pos.x < -0.002, "site 1 pushed the disk");
     assert!(
         b.slots.iter().all(|s| s.tick == i64::MIN || s.tick >= join),
         "nothing simulated before the join"
@@ -469,13 +469,13 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
 fn stations_started_apart_compare_their_confirmed_states() {
     let (sc, w) = paper_world();
     for (skew, connect) in [(50_i64, 0_i64), (209, 1000), (-209, 1000), (400, 1500)] {
-        let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
         let mut radii = [0.0; MAX_SITES];
         radii[..2].fill(0.005);
         let mut sites = [0, 1].map(|i| {
             (
                 TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 660, &start),
-                start,
+                start.clone(),
             )
         });
         let (begin, every) = ([skew.max(0), (-skew).max(0)], [11_i64, 50]);
@@ -487,9 +487,9 @@ fn stations_started_apart_compare_their_confirmed_states() {
                     tw.receive(&w, copy, *from, r, 0.0);
                 }
                 tw.own_tool(Vec3::new(if i == 0 { -0.2 } else { 0.2 }, 0.0, 0.01));
-                tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+                tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
                 if (k - begin[i]) % every[i] == 0 && k >= connect {
-                    let r = tw.report(copy, &ContactForce::default(), 0.0);
+                    let r = tw.report(copy, &[ContactForce::default()], 0.0);
                     in_flight.push((k + 1, i, r));
                 }
             }
@@ -519,16 +519,16 @@ fn two_sites(
     tool: impl Fn(usize, i64) -> Vec3,
     delay: i64,
     lost: impl Fn(usize, i64) -> bool,
-    mut seen: impl FnMut(usize, &ToolReport, i64, &[(TimeWarp, ObjectCopy); 2]),
-) -> [(TimeWarp, ObjectCopy); 2] {
+    mut seen: impl FnMut(usize, &ToolReport, i64, &[(TimeWarp, WorldCopy); 2]),
+) -> [(TimeWarp, WorldCopy); 2] {
     let (sc, w) = paper_world();
-    let start = ObjectCopy::new(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
     let mut radii = [0.0; MAX_SITES];
     radii[..2].fill(0.005);
     let mut sites = [0, 1].map(|i| {
         let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start);
         tw.set_started_tick(started_tick[i]);
-        (tw, start)
+        (tw, start.clone())
     });
     let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
     for k in 0..ticks {
@@ -537,13 +537,13 @@ fn two_sites(
                 tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
             }
             tw.own_tool(tool(i, k));
-            tw.physics_step(&w, copy, &ContactForce::default(), 1e-3);
+            tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
         }
         in_flight.retain(|m| m.0 > k);
         if k % 20 == 0 {
             for i in 0..2 {
                 let (tw, copy) = &sites[i];
-                let r = tw.report(copy, &ContactForce::default(), k as f64 * 1e-3);
+                let r = tw.report(copy, &[ContactForce::default()], k as f64 * 1e-3);
                 if let Report::Tools(t) = &r {
                     seen(i, t, k, &sites);
                 }
@@ -590,7 +590,7 @@ fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
     );
     let [(a, _), (b, _)] = &sites;
     assert!(asked, "site 0 asked for the gap");
-    let moved = start_x - sites[1].1.state.pos.x;
+    let moved = start_x - sites[1].1.first().state.pos.x;
     assert!(moved > 1e-3, "the sweep pushed the disk {moved} m");
     for (name, st) in [
         ("site 0", a.rollback_stats()),
@@ -655,10 +655,14 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
         let t = a.confirmed_tick().min(b.confirmed_tick());
         assert!(t > 3900, "both confirmed to the last report: {t}");
         assert_eq!(a.hash_at(t), b.hash_at(t));
-        assert_eq!(ca.state, cb.state, "the copies are the same bits");
+        assert_eq!(
+            ca.first().state,
+            cb.first().state,
+            "the copies are the same bits"
+        );
         // Who adopted decides where the disk is: with site 0's state it was never swept.
-        let swept = ca.state.pos.x < -1e-3;
-        assert_eq!(swept, adopter == 0, "{:?}", ca.state.pos);
+        let swept = ca.first().state.pos.x < -1e-3;
+        assert_eq!(swept, adopter == 0, "{:?}", ca.first().state.pos);
     }
 }
 
@@ -678,7 +682,7 @@ fn a_state_deep_in_the_table_is_not_adopted() {
     );
     let [(a, ca), (b, cb)] = &mut sites;
     b.set_max_spring_energy(0.05);
-    let Report::Tools(mut r) = a.report(ca, &ContactForce::default(), 0.5) else {
+    let Report::Tools(mut r) = a.report(ca, &[ContactForce::default()], 0.5) else {
         panic!("a track");
     };
     assert!(r.confirmed_tick > 400, "{}", r.confirmed_tick);
