@@ -211,12 +211,20 @@ pub struct Metrics {
 }
 
 /// The inter-site divergence of `r` at sample `k`: the largest distance between any two sites'
-/// copies of the object, m.
+/// copies of any object, m.
 pub fn divergence(r: &RunResult, k: usize) -> f64 {
+    let objects = r.sites.first().map_or(1, |s| s.objects());
+    (0..objects)
+        .map(|o| object_divergence(r, o, k))
+        .fold(0.0, f64::max)
+}
+
+/// The largest distance between any two sites' copies of object `o` at sample `k`, m.
+pub fn object_divergence(r: &RunResult, o: usize, k: usize) -> f64 {
     let mut d: f64 = 0.0;
     for (i, a) in r.sites.iter().enumerate() {
         for b in &r.sites[i + 1..] {
-            d = d.max((a.obj_pos[k] - b.obj_pos[k]).norm());
+            d = d.max((a.object_pos(o)[k] - b.object_pos(o)[k]).norm());
         }
     }
     d
@@ -270,10 +278,15 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         .and_then(|k| run.sites.iter().position(|s| s.touching[k]))
         .unwrap_or(0);
     let dt = 1.0 / scenario.sample_rate_hz;
-    let pos = &run.sites[author].obj_pos;
+    let at = &run.sites[author];
     let settled = (1..samples)
         .rev()
-        .find(|&k| (pos[k] - pos[k - 1]).norm() / dt > 1e-3)
+        .find(|&k| {
+            (0..at.objects()).any(|o| {
+                let pos = at.object_pos(o);
+                (pos[k] - pos[k - 1]).norm() / dt > 1e-3
+            })
+        })
         .map_or(0.0, |k| run.t[k]);
     let slowest_report = scenario
         .site
@@ -299,7 +312,12 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let errs = (0..samples).map(|k| (s.obj_pos[k] - reference.sites[i].obj_pos[k]).norm());
+            // Every object's error, the worst at each sample.
+            let errs = (0..samples).map(|k| {
+                (0..s.objects())
+                    .map(|o| (s.object_pos(o)[k] - reference.sites[i].object_pos(o)[k]).norm())
+                    .fold(0.0, f64::max)
+            });
             let adoptions: Vec<_> = run.adoptions.iter().filter(|a| a.site == i).collect();
             let e = run.energy[i];
             let (e0, e1) = run.mech_energy[i];
@@ -503,14 +521,23 @@ fn phase_happened(
     if p.no_contact.contains(me) && window.iter().any(|&k| s.touching[k]) {
         return false;
     }
-    if (s.obj_pos[last] - s.obj_pos[first]).norm() < p.object_moves_m {
+    // The object the phase names (the first by default).
+    let o = sc.phase_object(p);
+    let pos = s.object_pos(o);
+    if (pos[last] - pos[first]).norm() < p.object_moves_m {
         return false;
+    }
+    if let Some([lo, hi]) = p.region_m {
+        let inside = |q: &Vec3| (0..3).all(|a| q[a] >= lo[a] && q[a] <= hi[a]);
+        if !window.iter().all(|&k| inside(&pos[k])) {
+            return false;
+        }
     }
     if p.lifted_m > 0.0 {
         // z is up (the scenarios' convention: the table is z = 0).
-        let rest = Vec3::from(sc.objects[0].start_m).z;
+        let rest = Vec3::from(sc.objects[o].start_m).z;
         let top = (first..=last)
-            .map(|k| s.obj_pos[k].z)
+            .map(|k| pos[k].z)
             .fold(f64::NEG_INFINITY, f64::max);
         if top < rest + p.lifted_m {
             return false;

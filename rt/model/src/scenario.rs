@@ -341,6 +341,12 @@ pub struct PhaseSpec {
     pub object_moves_m: f64,
     /// Each site's copy must rise this far above its start height in the window, m (0 = no check).
     pub lifted_m: f64,
+    /// The object `object_moves_m`, `lifted_m` and `region_m` are about, by name (empty: the
+    /// first).
+    pub object: String,
+    /// Each site's copy of the object stays inside this box (lowest corner, highest corner, m)
+    /// through the window: where it must rest (on another object, on a plane), or stay.
+    pub region_m: Option<[[f64; 3]; 2]>,
 }
 
 impl Default for Scenario {
@@ -464,6 +470,8 @@ impl Default for PhaseSpec {
             min_force_n: 0.0,
             object_moves_m: 0.0,
             lifted_m: 0.0,
+            object: String::new(),
+            region_m: None,
         }
     }
 }
@@ -750,6 +758,26 @@ impl Scenario {
                 }
             }
             in_closed(&at("min_force_n"), p.min_force_n, 0.0, 1000.0)?;
+            if !p.object.is_empty()
+                && !(0..self.objects.len()).any(|k| self.object_name(k) == p.object)
+            {
+                return Err(err(
+                    at("object"),
+                    &p.object,
+                    "names no object of this scenario",
+                ));
+            }
+            if let Some([lo, hi]) = &p.region_m {
+                finite3(&at("region_m[0]"), lo, 100.0)?;
+                finite3(&at("region_m[1]"), hi, 100.0)?;
+                if lo.iter().zip(hi).any(|(a, b)| a > b) {
+                    return Err(err(
+                        at("region_m"),
+                        format!("{lo:?} .. {hi:?}"),
+                        "the second corner must be at least the first in x, y and z",
+                    ));
+                }
+            }
             in_closed(&at("object_moves_m"), p.object_moves_m, 0.0, 100.0)?;
             in_closed(&at("lifted_m"), p.lifted_m, 0.0, 100.0)?;
         }
@@ -1044,6 +1072,13 @@ impl Scenario {
             "" => "object",
             n => n,
         }
+    }
+
+    /// The object phase `p` is about: the one it names, else the first.
+    pub fn phase_object(&self, p: &PhaseSpec) -> usize {
+        (0..self.objects.len())
+            .find(|&k| self.object_name(k) == p.object)
+            .unwrap_or(0)
     }
 
     /// The object–object contact law: `object_contact`, or `environment_contact`'s.

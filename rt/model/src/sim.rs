@@ -72,6 +72,21 @@ pub struct SiteTrace {
     pub others: Vec<ObjectTrace>,
 }
 
+impl SiteTrace {
+    /// Object `k`'s positions (the world's order; 0 is the first), m.
+    pub fn object_pos(&self, k: usize) -> &[Vec3] {
+        match k {
+            0 => &self.obj_pos,
+            _ => &self.others[k - 1].pos,
+        }
+    }
+
+    /// How many objects it traces.
+    pub fn objects(&self) -> usize {
+        1 + self.others.len()
+    }
+}
+
 /// One object's trace at a site: rows at the scenario's sample rate.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ObjectTrace {

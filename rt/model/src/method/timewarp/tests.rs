@@ -731,3 +731,121 @@ fn positions_quantize_to_the_hundredth_of_a_millimetre() {
         "a quantized position quantizes to itself"
     );
 }
+
+/// Three sites, a world of four pucks in a row on the table, touching: each site's tool pushes
+/// the row from its own side at its own time, and its positions reach the others late, one of
+/// them at the edge of the history (a rollback there restores the oldest state kept). A forced
+/// rollback on every tick (of every depth to 40 ticks, and to the history's edge every 50th)
+/// arrives at the same bits, and once every position is known the three sites' confirmed worlds
+/// are the same bits: shipped rollback engines desynchronised only with three or more peers at
+/// the window's edge.
+#[test]
+fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
+    use crate::contact::Plane;
+    use crate::shape::Shape;
+    use crate::world::Body;
+    let (sc, _) = paper_world();
+    let puck = Body::solid(
+        Shape::Cylinder {
+            radius: 0.02,
+            half_height: 0.01,
+        },
+        0.1,
+    );
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let w = World::new(
+        &[puck; 4],
+        Vec3::new(0.0, 0.0, -3.27),
+        &table,
+        sc.environment_contact,
+    );
+    let states: Vec<BodyState> = (0..4)
+        .map(|k| BodyState::at_rest(Vec3::new(-0.06 + 0.0401 * k as f64, 0.0, 0.01)))
+        .collect();
+    let start = WorldCopy::new(&states);
+    const HISTORY: usize = 300;
+    // Site j's positions reach site i after DELAY[j][i] ticks: one pair at the history's edge.
+    const DELAY: [[i64; 3]; 3] = [[0, 20, 45], [30, 0, 290], [285, 60, 0]];
+    let mut radii = [0.0; MAX_SITES];
+    radii[..3].fill(0.005);
+    let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
+        .map(|i| {
+            (
+                TimeWarp::new(i, 3, 1e-3, sc.contact, radii, HISTORY, &start),
+                start.clone(),
+            )
+        })
+        .collect();
+    // Site 0 pushes the row's left end (0.1–0.5 s), site 1 its right end (0.6–1.0 s), site 2
+    // pokes the second puck from behind (0.3–0.7 s); all rest far away otherwise.
+    let tool = |i: usize, t: f64| -> Vec3 {
+        let ramp = |from: f64, to: f64| ((t - from) / (to - from)).clamp(0.0, 1.0);
+        match i {
+            0 => Vec3::new(-0.12 + 0.05 * ramp(0.1, 0.5), 0.0, 0.01),
+            1 => Vec3::new(0.15 - 0.04 * ramp(0.6, 1.0), 0.0, 0.01),
+            _ => Vec3::new(-0.02, -0.06 + 0.035 * ramp(0.3, 0.7), 0.01),
+        }
+    };
+    let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
+    let end = 2000i64;
+    for k in 0..end {
+        let t = k as f64 * 1e-3;
+        let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
+        in_flight.retain(|m| m.0 > k);
+        for (_, from, to, r) in due {
+            let (tw, copy) = &mut sites[to];
+            tw.receive(&w, copy, from, &r, t);
+        }
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            tw.own_tool(tool(i, t));
+            tw.physics_step(&w, copy, &[ContactForce::default(); 4], 1e-3);
+            if i == 0 {
+                let depth = if k % 50 == 49 {
+                    (HISTORY as i64 - 1).min(k)
+                } else {
+                    1 + k % 40
+                };
+                assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
+            }
+            if k % 10 == 9 {
+                let r = tw.report(copy, &[ContactForce::default(); 4], t);
+                for to in (0..3).filter(|&to| to != i) {
+                    in_flight.push((k + DELAY[i][to], i, to, r));
+                }
+            }
+        }
+    }
+    let moved: f64 = (0..4)
+        .map(|o| (sites[0].1.objects()[o].state.pos - states[o].pos).norm())
+        .fold(0.0, f64::max);
+    assert!(moved > 0.01, "the tools moved the row: {moved} m");
+    let confirmed = sites
+        .iter()
+        .map(|(tw, _)| tw.confirmed_tick())
+        .min()
+        .unwrap();
+    assert!(confirmed > end - 400, "confirmed up to tick {confirmed}");
+    let hashes: Vec<_> = sites
+        .iter()
+        .map(|(tw, _)| tw.hash_at(confirmed - 1))
+        .collect();
+    assert!(hashes[0].is_some(), "tick {confirmed} is kept");
+    assert!(
+        hashes.iter().all(|h| *h == hashes[0]),
+        "the confirmed worlds differ: {hashes:?}"
+    );
+    for (i, (tw, _)) in sites.iter().enumerate() {
+        let st = tw.rollback_stats();
+        assert!(st.rollbacks > 10, "site {i} rolled back: {st:?}");
+        assert!(st.hash_checks > 0, "site {i} compared hashes: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
+    }
+    let deepest = sites
+        .iter()
+        .map(|(tw, _)| tw.rollback_stats().max_depth)
+        .max();
+    assert!(deepest >= Some(280), "rolled back to the edge: {deepest:?}");
+}
