@@ -144,11 +144,12 @@ impl Shape {
     }
 
     /// The body-frame points of the shape that face a point `toward` (body frame) beyond the
-    /// fixed [`Shape::contact_points`]: for a cylinder, the point of its side facing it at its
-    /// height (clamped to the side) and the rim point facing it on the cap nearer it. Two upright
-    /// cylinders side by side touch along their sides, between the rim points sampled (which lie
-    /// in the other's cap planes, at depth 0): these find them, and a cylinder's rim crossing
-    /// another's. None for the other shapes (a sphere's centre, a box's corners and faces do).
+    /// fixed [`Shape::contact_points`]: for a cylinder whose side faces it (it lies farther from
+    /// the axis than along it), the point of its side facing it at its height (clamped to the
+    /// side) and the rim point facing it on the cap nearer it. Two upright cylinders side by side
+    /// touch along their sides, between the rim points sampled (which lie in the other's cap
+    /// planes, at depth 0): these find them, and a cylinder's rim crossing another's. None for
+    /// the other shapes (a sphere's centre, a box's corners and faces do).
     pub fn facing_points(&self, toward: Vec3, out: &mut [Vec3; 2]) -> usize {
         match *self {
             Shape::Cylinder {
@@ -156,8 +157,11 @@ impl Shape {
                 half_height,
             } => {
                 let across = (toward.x * toward.x + toward.y * toward.y).sqrt();
-                if across < 1e-12 {
-                    return 0; // on the axis: the caps' centres face it
+                if across <= toward.z.abs() {
+                    // Nearer the axis than the side (a cup on a tray): the caps' rims and centres
+                    // face it; one more rim point, at an azimuth the least sideways offset picks,
+                    // would tilt the contact's centre of pressure towards it.
+                    return 0;
                 }
                 let (x, y) = (radius * toward.x / across, radius * toward.y / across);
                 out[0] = Vec3::new(x, y, toward.z.clamp(-half_height, half_height));
