@@ -717,7 +717,15 @@ pub fn pair_wrench(
         let mut facing = [Vec3::zeros(); 2];
         let toward = r_from.inverse() * (into.body.pos - from.body.pos);
         let facing_count = from.shape.facing_points(toward, &mut facing);
+        // A point farther from `into`'s centre than its bounding sphere and the margin is not
+        // inside it: the same answer without the rotation and the distance (most of a shape's
+        // points face away from its neighbour).
+        // (Compared in `from`'s frame, where its points are: no rotation for the ones skipped.)
+        let reach = into.shape.bounding_radius() + margin;
         for q in fixed[..count].iter().chain(&facing[..facing_count]) {
+            if (q - toward).norm_squared() > reach * reach {
+                continue;
+            }
             let world = from.body.pos + r_from * q;
             let (d, n_body) = into
                 .shape
