@@ -170,7 +170,9 @@ fn write_both(
     Ok(())
 }
 
-/// Writes `fig_x`, `fig_y` and `divergence` (PNG and SVG) for a run into `dir`.
+/// Writes `fig_x`, `fig_y` (the first object) and `divergence` (every object), and in a world of
+/// several objects `objects_x`, `objects_y` and `objects_z` (a panel per object), PNG and SVG,
+/// for a run into `dir`.
 ///
 /// # Errors
 /// The font is missing, or a file cannot be written.
@@ -247,21 +249,47 @@ pub fn figures(
         );
         write_both(dir, stem, &title, &panels, time_axis, (1000, 1300))?;
     }
+    // A world of several objects: every object's position as each site believes it, one panel
+    // per object, per axis.
+    let objects = r.sites.first().map_or(1, |s| s.objects());
+    if objects > 1 {
+        for (axis, stem, label) in [
+            (0usize, "objects_x", "x"),
+            (1, "objects_y", "y"),
+            (2, "objects_z", "z"),
+        ] {
+            let panels: Vec<Panel> = (0..objects)
+                .map(|o| Panel {
+                    title: format!(
+                        "{} {label} position as each site believes it",
+                        sc.object_name(o)
+                    ),
+                    y_label: "m",
+                    series: series(
+                        &|i, k| r.sites[i].object_pos(o)[k][axis],
+                        Some(&|k| reference.sites[0].object_pos(o)[k][axis]),
+                    ),
+                })
+                .collect();
+            let title = format!(
+                "scenario {}, method {method}: every object, {label}",
+                sc.name
+            );
+            let height = (260 * objects as u32).clamp(400, 4200);
+            write_both(dir, stem, &title, &panels, time_axis, (1000, height))?;
+        }
+    }
     let div: Vec<(f64, f64)> =
         r.t.iter()
             .enumerate()
-            .map(|(k, &t)| {
-                let mut d: f64 = 0.0;
-                for (i, a) in r.sites.iter().enumerate() {
-                    for b in &r.sites[i + 1..] {
-                        d = d.max((a.obj_pos[k] - b.obj_pos[k]).norm());
-                    }
-                }
-                (t, d * 1e3)
-            })
+            .map(|(k, &t)| (t, coop_model::metrics::divergence(r, k) * 1e3))
             .collect();
     let panels = [Panel {
-        title: "largest distance between any two sites' copies of the object".into(),
+        title: if objects > 1 {
+            "largest distance between any two sites' copies of any object".into()
+        } else {
+            "largest distance between any two sites' copies of the object".into()
+        },
         y_label: "mm",
         series: vec![Series {
             label: method.into(),
