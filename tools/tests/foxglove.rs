@@ -659,3 +659,63 @@ fn live_url(
         .unwrap_or_else(|_| panic!("{who} prints the live view's address"));
     (url, log)
 }
+
+/// A world of several objects in `sim run --out`'s `session.mcap`: read by the foreign reader,
+/// every site has a frame and an entity for every object (`object/<site>` for the first,
+/// `object/<name>/<site>` for each other), one frame per sample, each entity in a declared frame,
+/// in the object's real size.
+#[test]
+fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per_site() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/billiards.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    assert_eq!(scenario.objects.len(), 2);
+    let out = out_dir("sim-objects");
+    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
+        .arg("run")
+        .arg(&scenario_path)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("sim runs");
+    assert!(
+        run.status.success(),
+        "sim failed: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let v = foxglove_summary(&[out.join("session.mcap")]);
+    assert_eq!(v["errors"], serde_json::json!([]), "{}", v["errors"]);
+    let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
+    let frames = v["frames"].as_object().expect("frames");
+    let entities = &v["entities"];
+    let target = &scenario.objects[1];
+    let (d, h) = (2.0 * target.radius_m, 2.0 * target.half_height_m);
+    for s in scenario.site.iter().map(|s| s.name.as_str()) {
+        for frame in [format!("object/{s}"), format!("object/target/{s}")] {
+            assert_eq!(
+                frames[&format!("world>{frame}")].as_u64(),
+                Some(samples),
+                "{frame} in {:?}",
+                frames.keys().collect::<Vec<_>>()
+            );
+            assert!(entities[&frame].is_object(), "entity {frame}");
+        }
+        assert_eq!(
+            entities[format!("object/target/{s}")]["cylinder_size"],
+            serde_json::json!([d, d, h])
+        );
+    }
+    let declared: Vec<&str> = frames
+        .keys()
+        .map(|k| k.split_once('>').expect("parent>child").1)
+        .collect();
+    for e in v["entity_frames"].as_array().expect("entity frames") {
+        let frame = e[1].as_str().expect("frame");
+        assert!(
+            frame == "world" || declared.contains(&frame),
+            "entity {e} in a frame no /tf declares"
+        );
+    }
+}

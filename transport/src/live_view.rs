@@ -681,6 +681,7 @@ mod tests {
                 object: Body::Sphere { radius: 0.04 },
                 tool_radius_m: 0.005,
                 planes: vec![([0.0, 0.0, 1.0], 0.0)],
+                others: Vec::new(),
             })
             .collect::<Vec<_>>();
         Shown {

@@ -1887,6 +1887,7 @@ mod tests {
             },
             tool_radius_m: 0.005,
             planes: vec![([0.0, 0.0, 1.0], 0.0)],
+            others: Vec::new(),
         };
         let meta = BTreeMap::from([("site".into(), "b".into())]);
         let mut w = Recorder::create_with_scene(&path, meta, bytes_bound(64 << 10, 0), scene)
@@ -2044,6 +2045,7 @@ mod tests {
             },
             tool_radius_m: 0.005,
             planes: Vec::new(),
+            others: Vec::new(),
         };
         let session = SessionMsg {
             t_ns: 1,

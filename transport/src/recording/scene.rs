@@ -10,9 +10,11 @@
 //! ([`ARROW_M_PER_N`]); and the environment's planes (in `world`, the same for every site).
 //!
 //! Entity ids are unique per site (`object/<site>`, `tool/<site>`, `force/<site>`), so the
-//! recordings of every site open together, and the live view shows every copy in one scene.
+//! recordings of every site open together, and the live view shows every copy in one scene. In a
+//! world of several objects the first keeps `object/<site>` and each other has its own frame and
+//! entity, `object/<name>/<site>`.
 
-use coop_model::scenario::{Scenario, ShapeName};
+use coop_model::scenario::{ObjectSpec, Scenario, ShapeName};
 use foxglove::messages::{
     log::Level, ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform, Log, Pose,
     Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3,
@@ -69,6 +71,50 @@ pub struct Scene {
     pub tool_radius_m: f64,
     /// The environment's planes: normal into free space, offset along it, m.
     pub planes: Vec<([f64; 3], f64)>,
+    /// The world's other objects (the second on), by name: frames `object/<name>/<site>`.
+    pub others: Vec<(String, Body)>,
+}
+
+impl Body {
+    /// The shape and size of `o`.
+    pub fn of(o: &ObjectSpec) -> Self {
+        match o.shape {
+            ShapeName::Sphere => Body::Sphere { radius: o.radius_m },
+            ShapeName::Cylinder => Body::Cylinder {
+                radius: o.radius_m,
+                half_height: o.half_height_m,
+            },
+            ShapeName::Box => Body::Box {
+                half: o.half_extents_m,
+            },
+        }
+    }
+
+    /// The primitive of this body in `entity`, centred on its frame, in colour `c`.
+    fn draw(&self, entity: &mut SceneEntity, c: Option<Color>) {
+        match *self {
+            Body::Sphere { radius } => entity.spheres.push(SpherePrimitive {
+                pose: pose([0.0; 3], IDENTITY),
+                size: Some(v3([2.0 * radius; 3])),
+                color: c,
+            }),
+            Body::Cylinder {
+                radius,
+                half_height,
+            } => entity.cylinders.push(CylinderPrimitive {
+                pose: pose([0.0; 3], IDENTITY),
+                size: Some(v3([2.0 * radius, 2.0 * radius, 2.0 * half_height])),
+                bottom_scale: 1.0,
+                top_scale: 1.0,
+                color: c,
+            }),
+            Body::Box { half } => entity.cubes.push(CubePrimitive {
+                pose: pose([0.0; 3], IDENTITY),
+                size: Some(v3([2.0 * half[0], 2.0 * half[1], 2.0 * half[2]])),
+                color: c,
+            }),
+        }
+    }
 }
 
 /// The force `f` (N) drawn as an arrow, or `None` where it is below [`ARROW_MIN_N`]: two
@@ -184,21 +230,10 @@ impl Scene {
     /// Site `index` of `scenario` (`None`: no such site), in its [`site_colour`].
     pub fn from_scenario(scenario: &Scenario, index: usize) -> Option<Self> {
         let site = scenario.site.get(index)?;
-        // (Stations run one object: the first.)
-        let o = &scenario.objects[0];
         Some(Self {
             site: site.name.clone(),
             colour: site_colour(index),
-            object: match o.shape {
-                ShapeName::Sphere => Body::Sphere { radius: o.radius_m },
-                ShapeName::Cylinder => Body::Cylinder {
-                    radius: o.radius_m,
-                    half_height: o.half_height_m,
-                },
-                ShapeName::Box => Body::Box {
-                    half: o.half_extents_m,
-                },
-            },
+            object: Body::of(&scenario.objects[0]),
             tool_radius_m: site.tool_radius_m,
             planes: scenario
                 .world
@@ -206,7 +241,56 @@ impl Scene {
                 .iter()
                 .map(|p| (p.normal, p.offset_m))
                 .collect(),
+            others: (1..scenario.objects.len())
+                .map(|k| {
+                    let name = scenario.object_name(k).to_owned();
+                    (name, Body::of(&scenario.objects[k]))
+                })
+                .collect(),
         })
+    }
+
+    /// `object/<name>/<site>`: this site's copy of the world's other object `name`.
+    pub fn other_frame(&self, name: &str) -> String {
+        format!("object/{name}/{}", self.site)
+    }
+
+    /// `world → object/<name>/<site>` for each other object at its pose (position, orientation
+    /// w, x, y, z) in `poses` (in [`Scene::others`]' order), at `unix_ns`.
+    pub fn other_transforms(
+        &self,
+        poses: &[([f64; 3], [f64; 4])],
+        unix_ns: u64,
+    ) -> Vec<FrameTransform> {
+        self.others
+            .iter()
+            .zip(poses)
+            .map(|((name, _), &(p, [w, x, y, z]))| FrameTransform {
+                timestamp: Some(timestamp(unix_ns)),
+                parent_frame_id: WORLD.into(),
+                child_frame_id: self.other_frame(name),
+                translation: Some(v3(p)),
+                rotation: Some(Quaternion { x, y, z, w }),
+            })
+            .collect()
+    }
+
+    /// The other objects' entities, each locked to its frame, in the site's colour.
+    pub fn other_entities(&self, unix_ns: u64) -> Vec<SceneEntity> {
+        self.others
+            .iter()
+            .map(|(name, body)| {
+                let mut e = SceneEntity {
+                    timestamp: Some(timestamp(unix_ns)),
+                    frame_id: self.other_frame(name),
+                    id: self.other_frame(name),
+                    frame_locked: true,
+                    ..SceneEntity::default()
+                };
+                body.draw(&mut e, Some(colour(self.colour)));
+                e
+            })
+            .collect()
     }
 
     /// `object/<site>`.
@@ -253,29 +337,7 @@ impl Scene {
             ..SceneEntity::default()
         };
         let mut object = entity(self.object_frame(), self.object_frame());
-        let c = Some(colour(self.colour));
-        match self.object {
-            Body::Sphere { radius } => object.spheres.push(SpherePrimitive {
-                pose: pose([0.0; 3], IDENTITY),
-                size: Some(v3([2.0 * radius; 3])),
-                color: c,
-            }),
-            Body::Cylinder {
-                radius,
-                half_height,
-            } => object.cylinders.push(CylinderPrimitive {
-                pose: pose([0.0; 3], IDENTITY),
-                size: Some(v3([2.0 * radius, 2.0 * radius, 2.0 * half_height])),
-                bottom_scale: 1.0,
-                top_scale: 1.0,
-                color: c,
-            }),
-            Body::Box { half } => object.cubes.push(CubePrimitive {
-                pose: pose([0.0; 3], IDENTITY),
-                size: Some(v3([2.0 * half[0], 2.0 * half[1], 2.0 * half[2]])),
-                color: c,
-            }),
-        }
+        self.object.draw(&mut object, Some(colour(self.colour)));
         let mut tool = entity(self.tool_frame(), self.tool_frame());
         let [r, g, b, _] = self.colour;
         tool.spheres.push(SpherePrimitive {

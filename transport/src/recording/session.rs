@@ -12,7 +12,7 @@
 //! | `/object`     | JSON, as in a station's recording | one per site and one for the reference (`site` tells them apart) |
 //! | `/tool`       | JSON, as in a station's recording | one per site                                 |
 //! | `/divergence` | JSON [`DivergenceMsg`]    | the largest distance between copies, each copy's from the reference |
-//! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference` |
+//! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference`; in a world of several objects also `world → object/<name>/<site>` for each other object |
 //! | `/scene`      | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`]: every site's entities and the reference copy ([`REFERENCE_COLOUR`]) |
 //! | `/log`        | `foxglove.Log`            | the session's start (scenario, method, sites)       |
 //!
@@ -81,6 +81,15 @@ fn sample_of(run: &RunResult, i: usize, k: usize, t_ns: u64) -> SampleMsg {
         f_object: s.f_on_object[k].into(),
         touching: s.touching[k],
     }
+}
+
+/// Site `i`'s other objects' poses (position, orientation w, x, y, z) at sample `k` of `run`.
+fn other_poses(run: &RunResult, i: usize, k: usize) -> Vec<([f64; 3], [f64; 4])> {
+    run.sites[i]
+        .others
+        .iter()
+        .map(|o| (o.pos[k].into(), o.rot[k]))
+        .collect()
 }
 
 fn object_part(site: &str, m: &SampleMsg) -> ObjectPart {
@@ -207,10 +216,13 @@ pub fn write(
         let reference_sample = reference
             .filter(|r| k < r.t.len())
             .map(|r| sample_of(r, 0, k, t_ns));
-        for (scene, m) in scenes.iter().zip(&samples) {
+        for (i, (scene, m)) in scenes.iter().zip(&samples).enumerate() {
             w.json(OBJECT, t_ns, &object_part(&scene.site, m))?;
             w.json(TOOL, t_ns, &tool_part(&scene.site, m))?;
             for f in &scene.transforms(m, wall) {
+                w.foxglove(TF, t_ns, f)?;
+            }
+            for f in &scene.other_transforms(&other_poses(run, i, k), wall) {
                 w.foxglove(TF, t_ns, f)?;
             }
         }
@@ -238,6 +250,7 @@ pub fn write(
             let mut entities = vec![first.environment(wall)];
             for (scene, m) in scenes.iter().zip(&samples) {
                 entities.extend(scene.entities(m, wall));
+                entities.extend(scene.other_entities(wall));
             }
             if let Some(m) = &reference_sample {
                 let [object, _tool, _force] = reference_scene.entities(m, wall);
