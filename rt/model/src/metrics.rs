@@ -506,8 +506,18 @@ fn phase_happened(
         .take_while(|&k| run.t[k] <= p.to_s + lag)
         .last()
         .unwrap_or(first);
+    // The object the phase names (the first by default); a phase that names one is about
+    // touching that object, one that names none about touching any.
+    let o = sc.phase_object(p);
+    let touches = |k: usize| {
+        if p.object.is_empty() {
+            s.touching[k]
+        } else {
+            s.touches(o, k)
+        }
+    };
     if p.contact.contains(me) {
-        if !window.iter().any(|&k| s.touching[k]) {
+        if !window.iter().any(|&k| touches(k)) {
             return false;
         }
         let peak = window
@@ -518,11 +528,9 @@ fn phase_happened(
             return false;
         }
     }
-    if p.no_contact.contains(me) && window.iter().any(|&k| s.touching[k]) {
+    if p.no_contact.contains(me) && window.iter().any(|&k| touches(k)) {
         return false;
     }
-    // The object the phase names (the first by default).
-    let o = sc.phase_object(p);
     let pos = s.object_pos(o);
     if (pos[last] - pos[first]).norm() < p.object_moves_m {
         return false;
@@ -632,5 +640,54 @@ mod tests {
         assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
         let (sc, run) = push_seen_at(1.5, Mode::Reference);
         assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
+    }
+
+    /// A phase that names an object is about touching that object: a user touching another one
+    /// does not make it, nor break its `no_contact`; a phase that names none takes any object.
+    #[test]
+    fn a_phase_naming_an_object_is_about_touching_that_object() {
+        let paper = Mode::Distributed(crate::scenario::MethodName::Paper);
+        let (mut sc, mut run) = push_seen_at(1.5, paper);
+        sc.objects = vec![
+            crate::scenario::ObjectSpec {
+                name: "a".into(),
+                ..Default::default()
+            },
+            crate::scenario::ObjectSpec {
+                name: "b".into(),
+                start_m: [0.2, 0.0, 0.0],
+                ..Default::default()
+            },
+        ];
+        // User 1 touches object b only; user 2 touches nothing.
+        let n = run.t.len();
+        run.sites[0].touched = vec![0b10; n];
+        run.sites[1].touched = vec![0; n];
+        for s in &mut run.sites {
+            s.others = vec![crate::sim::ObjectTrace {
+                pos: vec![Vec3::new(0.2, 0.0, 0.0); n],
+                vel: vec![Vec3::zeros(); n],
+                rot: vec![[1.0, 0.0, 0.0, 0.0]; n],
+            }];
+        }
+        let mut p = sc.phase[0].clone();
+        p.object_moves_m = 0.0;
+        assert!(phase_happened(&sc, &run, 0, &p), "any object: b is touched");
+        p.object = "b".into();
+        assert!(phase_happened(&sc, &run, 0, &p), "b is touched");
+        p.object = "a".into();
+        assert!(!phase_happened(&sc, &run, 0, &p), "a is not touched");
+        // User 2 must not touch: touching b breaks a phase about b, not one about a.
+        run.sites[1].touched = vec![0b10; n];
+        run.sites[1].touching = vec![true; n];
+        let mut q = p.clone();
+        q.contact.clear();
+        q.object = "a".into();
+        assert!(
+            phase_happened(&sc, &run, 1, &q),
+            "a is not touched by user 2"
+        );
+        q.object = "b".into();
+        assert!(!phase_happened(&sc, &run, 1, &q), "user 2 touches b");
     }
 }

@@ -341,8 +341,9 @@ pub struct PhaseSpec {
     pub object_moves_m: f64,
     /// Each site's copy must rise this far above its start height in the window, m (0 = no check).
     pub lifted_m: f64,
-    /// The object `object_moves_m`, `lifted_m` and `region_m` are about, by name (empty: the
-    /// first).
+    /// The object the phase is about, by name: `contact` and `no_contact` then mean touching
+    /// that object, and `object_moves_m`, `lifted_m` and `region_m` are about it (empty: contact
+    /// with any object, the rest about the first).
     pub object: String,
     /// Each site's copy of the object stays inside this box (lowest corner, highest corner, m)
     /// through the window: where it must rest (on another object, on a plane), or stay.

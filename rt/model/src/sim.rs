@@ -68,6 +68,9 @@ pub struct SiteTrace {
     pub f_on_object: Vec<Vec3>,
     /// Whether this site's user touches an object.
     pub touching: Vec<bool>,
+    /// Which objects this site's user touches, bit `k` for object `k` (empty: not known per
+    /// object, as in a station's recording of a one-object world: [`SiteTrace::touches`]).
+    pub touched: Vec<u16>,
     /// The world's other objects (the second on), as this site believes them.
     pub others: Vec<ObjectTrace>,
 }
@@ -78,6 +81,14 @@ impl SiteTrace {
         match k {
             0 => &self.obj_pos,
             _ => &self.others[k - 1].pos,
+        }
+    }
+
+    /// Whether this site's user touches object `k` at sample `i`.
+    pub fn touches(&self, k: usize, i: usize) -> bool {
+        match self.touched.get(i) {
+            Some(bits) => bits & (1 << k) != 0,
+            None => k == 0 && self.touching[i],
         }
     }
 
@@ -508,6 +519,8 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 tr.f_desired.push(s.last_f_desired);
                 tr.f_measured.push(s.last_f_measured);
                 tr.touching.push(s.own.iter().any(|c| c.touching));
+                let bits = (0..objects).fold(0u16, |b, k| b | (u16::from(s.own[k].touching) << k));
+                tr.touched.push(bits);
                 let own = |s: &Site| {
                     s.own[1..objects]
                         .iter()
