@@ -332,6 +332,14 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
 /// The scenario cannot be loaded.
 pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
     let sc = scenario_file::load(scenario)?;
+    if sc.objects.len() > 1 {
+        // Its step figures push one object and run naive and paper, which keep one.
+        anyhow::bail!(
+            "scenario {}: sim bench times a one-object scenario (and the crowd, crowd.toml beside it, as the world of several); this one has {} objects",
+            scenario.display(),
+            sc.objects.len()
+        );
+    }
     let world = sc.world();
     let (batches, per_batch) = if quick { (5, 2_000) } else { (21, 50_000) };
 

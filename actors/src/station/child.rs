@@ -9,7 +9,7 @@
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use coop_model::method::{Consistency, WorldCopy};
+use coop_model::method::{Consistency, ObjectCopy};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::servo::Servo;
 use coop_rt::device::safety::{clamp_contact, Guarded};
@@ -233,7 +233,13 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         );
     }
     let copy = match (join_after, resumed) {
-        (None, Some(state)) => WorldCopy::one(state),
+        (None, Some(state)) => {
+            // The scenario's world with the first object where it was (a station's rings carry
+            // one object's state).
+            let mut copy = sc.start_copy();
+            *copy.first_mut() = ObjectCopy::new(state);
+            copy
+        }
         _ => sc.start_copy(),
     };
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);

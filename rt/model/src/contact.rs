@@ -648,8 +648,8 @@ fn faces(
 }
 
 /// Most points an object–object contact weighs: every contact point of either shape, and the
-/// points of each facing the other ([`Shape::facing_points`]).
-const PAIR_POINTS: usize = 2 * (MAX_CONTACT_POINTS + 2);
+/// point of each facing the other ([`Shape::facing_point`]).
+const PAIR_POINTS: usize = 2 * (MAX_CONTACT_POINTS + 1);
 
 /// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
 /// `a`, the wrench on `b`, and whether they touch.
@@ -666,8 +666,8 @@ const PAIR_POINTS: usize = 2 * (MAX_CONTACT_POINTS + 2);
 ///
 /// Two boxes' touching points come from the separating-axis test instead: the other box's face
 /// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
-/// which no corner of either finds). A cylinder adds the points of its side and rim facing the
-/// other's centre ([`Shape::facing_points`]); a cylinder's side crossing a box's edge between its
+/// which no corner of either finds). A cylinder adds the point of its side facing the other's
+/// centre ([`Shape::facing_point`]); a cylinder's side crossing a box's edge between its
 /// ends, or another cylinder's side at an angle away from both centres, is still not found.
 pub fn pair_wrench(
     c: &ContactParams,
@@ -714,15 +714,14 @@ pub fn pair_wrench(
         let mut fixed = [Vec3::zeros(); MAX_CONTACT_POINTS];
         let (count, margin) = from.shape.contact_points(&mut fixed);
         let (r_from, inv_into) = (from.body.rot, into.body.rot.inverse());
-        let mut facing = [Vec3::zeros(); 2];
         let toward = r_from.inverse() * (into.body.pos - from.body.pos);
-        let facing_count = from.shape.facing_points(toward, &mut facing);
+        let facing = from.shape.facing_point(toward);
         // A point farther from `into`'s centre than its bounding sphere and the margin is not
         // inside it: the same answer without the rotation and the distance (most of a shape's
         // points face away from its neighbour).
         // (Compared in `from`'s frame, where its points are: no rotation for the ones skipped.)
         let reach = into.shape.bounding_radius() + margin;
-        for q in fixed[..count].iter().chain(&facing[..facing_count]) {
+        for q in fixed[..count].iter().chain(facing.as_ref()) {
             if (q - toward).norm_squared() > reach * reach {
                 continue;
             }

@@ -314,9 +314,10 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         .map(|(i, s)| {
             // Every object's error, the worst at each sample.
             let errs = (0..samples).map(|k| {
-                (0..s.objects())
-                    .map(|o| (s.object_pos(o)[k] - reference.sites[i].object_pos(o)[k]).norm())
-                    .fold(0.0, f64::max)
+                let err =
+                    |o: usize| (s.object_pos(o)[k] - reference.sites[i].object_pos(o)[k]).norm();
+                // (From the first object's: a NaN error stays NaN.)
+                (1..s.objects()).fold(err(0), |a, o| a.max(err(o)))
             });
             let adoptions: Vec<_> = run.adoptions.iter().filter(|a| a.site == i).collect();
             let e = run.energy[i];
@@ -336,7 +337,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                     .iter()
                     .map(|a| a.force_step_n)
                     .fold(0.0, f64::max),
-                energy_from_others_j: (e1 - e0) - e.own_j - e.env_j,
+                energy_from_others_j: (e1 - e0) - e.own_j - e.env_j - e.objects_j,
                 others_work_j: if run.mode == crate::sim::Mode::Reference {
                     0.0
                 } else {
@@ -470,6 +471,15 @@ fn energy_beyond_users(scenario: &Scenario, run: &RunResult) -> f64 {
     let e0 = (1..starts.len()).fold(e(0, starts[0].pos, starts[0].vel), |a, k| {
         a + e(k, starts[k].pos, starts[k].vel)
     });
+    // The traces hold no spin: an object started spinning may turn it into motion (a collision,
+    // friction), which is energy it was given at the start, not beyond the users' work.
+    let spin: f64 = starts
+        .iter()
+        .zip(world.bodies())
+        .map(|(s, b)| s.kinetic_energy(&b.mass) - 0.5 * b.mass.mass_kg * s.vel.norm_squared())
+        .filter(|&j| j > 0.0)
+        .sum();
+    let e0 = if spin > 0.0 { e0 + spin } else { e0 };
     run.sites
         .iter()
         .flat_map(|s| {

@@ -959,7 +959,7 @@ impl Scenario {
                     mass: &bodies[k].mass,
                 };
                 let mut memory = PairContactState::default();
-                // With a unit stiffness, the force is the overlap summed over the contact points.
+                // With a unit stiffness, the force is the deepest overlap (in m).
                 let (on_i, _, _) = pair_wrench(&probe, &mut memory, side(i), side(j));
                 let overlap = on_i.force.norm();
                 if overlap > 1e-3 || !overlap.is_finite() {
@@ -1025,13 +1025,18 @@ impl Scenario {
                 &o.angular_velocity_rad_per_s,
                 100.0,
             )?;
-            if o.fixed
-                && (o.velocity_m_per_s != [0.0; 3] || o.angular_velocity_rad_per_s != [0.0; 3])
-            {
+            if o.fixed && o.velocity_m_per_s != [0.0; 3] {
                 return Err(err(
                     at("velocity_m_per_s"),
                     o.velocity_m_per_s,
-                    "must be 0 (with angular_velocity_rad_per_s) for a fixture (fixed = true)",
+                    "must be 0 for a fixture (fixed = true)",
+                ));
+            }
+            if o.fixed && o.angular_velocity_rad_per_s != [0.0; 3] {
+                return Err(err(
+                    at("angular_velocity_rad_per_s"),
+                    o.angular_velocity_rad_per_s,
+                    "must be 0 for a fixture (fixed = true)",
                 ));
             }
         }

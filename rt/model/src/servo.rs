@@ -162,7 +162,16 @@ impl Servo {
             self.displayed = [DisplayedObject::default(); MAX_OBJECTS];
         }
         let d = &p.display;
-        let was_copy = self.displayed[..n].iter().all(DisplayedObject::is_copy);
+        // Whether the display is the copy: the one object's, or in a world of several those the
+        // tool touches (live or displayed; a correction of a puck across the table must not hold
+        // back the force of the one in hand).
+        let in_hand: [bool; MAX_OBJECTS] = std::array::from_fn(|k| {
+            n == 1 || self.contact[k].touching() || self.display_contact[k].touching()
+        });
+        let all_copy = |displayed: &[DisplayedObject; MAX_OBJECTS]| {
+            (0..n).all(|k| !in_hand[k] || displayed[k].is_copy())
+        };
+        let was_copy = all_copy(&self.displayed);
         let mut shown_contacts = [ContactForce::default(); MAX_OBJECTS];
         for k in 0..n {
             let (shown, _corrected) = self.displayed[k].update(
@@ -192,7 +201,7 @@ impl Servo {
                 )
             };
         }
-        let is_copy = self.displayed[..n].iter().all(DisplayedObject::is_copy);
+        let is_copy = all_copy(&self.displayed);
         // Eq. 6 with the tool rigidly at the handle (J_h = I): the hand feels the reaction.
         // (0 − F rather than −F: no contact displays +0, not −0, as before the display stages.)
         let (f_target, f_sim) = (

@@ -143,32 +143,29 @@ impl Shape {
         }
     }
 
-    /// The body-frame points of the shape that face a point `toward` (body frame) beyond the
+    /// The body-frame point of the shape that faces a point `toward` (body frame) beyond the
     /// fixed [`Shape::contact_points`]: for a cylinder whose side faces it (it lies farther from
-    /// the axis than along it), the point of its side facing it at its height (clamped to the
-    /// side) and the rim point facing it on the cap nearer it. Two upright cylinders side by side
-    /// touch along their sides, between the rim points sampled (which lie in the other's cap
-    /// planes, at depth 0): these find them, and a cylinder's rim crossing another's. None for
-    /// the other shapes (a sphere's centre, a box's corners and faces do).
-    pub fn facing_points(&self, toward: Vec3, out: &mut [Vec3; 2]) -> usize {
+    /// the axis than along it), the point of its side facing it at its height, clamped to the side
+    /// (a rim point when it lies beyond a cap). Two upright cylinders side by side touch along
+    /// their sides, between the rim points sampled (which lie in the other's cap planes, at depth
+    /// 0): this finds them, and a cylinder's rim crossing another's. None for the other shapes (a
+    /// sphere's centre, a box's corners and faces do).
+    pub fn facing_point(&self, toward: Vec3) -> Option<Vec3> {
         match *self {
             Shape::Cylinder {
                 radius,
                 half_height,
             } => {
                 let across = (toward.x * toward.x + toward.y * toward.y).sqrt();
-                if across <= toward.z.abs() {
-                    // Nearer the axis than the side (a cup on a tray): the caps' rims and centres
-                    // face it; one more rim point, at an azimuth the least sideways offset picks,
-                    // would tilt the contact's centre of pressure towards it.
-                    return 0;
-                }
-                let (x, y) = (radius * toward.x / across, radius * toward.y / across);
-                out[0] = Vec3::new(x, y, toward.z.clamp(-half_height, half_height));
-                out[1] = Vec3::new(x, y, half_height.copysign(toward.z));
-                2
+                // Nearer the axis than the side (a cup on a tray): the caps' rims and centres face
+                // it; one more rim point, at an azimuth the least sideways offset picks, would
+                // tilt the contact's centre of pressure towards it.
+                (across > toward.z.abs()).then(|| {
+                    let (x, y) = (radius * toward.x / across, radius * toward.y / across);
+                    Vec3::new(x, y, toward.z.clamp(-half_height, half_height))
+                })
             }
-            Shape::Sphere { .. } | Shape::Box { .. } => 0,
+            Shape::Sphere { .. } | Shape::Box { .. } => None,
         }
     }
 

@@ -125,12 +125,9 @@ pub fn push_out_of_environment(world: &World, shape: &Shape, s: &mut BodyState) 
     }
 }
 
-/// Most objects a world may have: every table of per-object and per-pair state is this long, so
-/// stepping a world allocates nothing.
+/// Most objects a world may have: a world's copy is sized for its objects when made, and the
+/// scratch tables of a step are this long, so stepping a world allocates nothing.
 pub const MAX_OBJECTS: usize = 16;
-
-/// Object pairs in a world of [`MAX_OBJECTS`].
-pub const MAX_PAIRS: usize = MAX_OBJECTS * (MAX_OBJECTS - 1) / 2;
 
 /// One object of a world: its shape, its mass, and whether it is a fixture (it does not move; it
 /// still touches the others).

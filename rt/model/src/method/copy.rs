@@ -172,6 +172,11 @@ impl WorldCopy {
     /// Becomes `other`, a copy of the same world. Allocates nothing.
     pub fn copy_from(&mut self, other: &WorldCopy) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        debug_assert_eq!(
+            self.objects.len(),
+            other.objects.len(),
+            "copies of one world"
+        );
         self.objects.copy_from_slice(&other.objects);
         self.pairs.copy_from_slice(&other.pairs);
         self.still.copy_from_slice(&other.still);

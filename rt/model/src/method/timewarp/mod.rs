@@ -34,7 +34,8 @@
 //! by number; the first site's history is the one kept, so sites that all disagree still converge
 //! on one. A state that puts the object deeper into the environment than all the users' forces
 //! together could ([`TimeWarp::set_max_spring_energy`]) is not adopted: the mismatches go on,
-//! counted.
+//! counted. A world of several objects is not resynchronised (a snapshot carries one object): its
+//! mismatches are counted and go on.
 //!
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
 //! touched the object though the copy had shown no contact when it first simulated them
@@ -625,8 +626,10 @@ impl Consistency for TimeWarp {
                 // Asked for while it differs from a site before this one (and no longer when the
                 // order changes: a restart moves a site back).
                 let earlier = (r.started_tick, from) < (self.started_tick, self.me);
-                self.want_state[from] = earlier && differs;
-                if earlier && differs {
+                // (A snapshot carries one object: a world of several is not resynchronised.)
+                let can = copy.len() == 1;
+                self.want_state[from] = earlier && differs && can;
+                if earlier && differs && can {
                     if let Some(a) = self.resync(world, copy, r) {
                         adoption = Some(adoption.map_or(a, |b| Adoption {
                             jump: a.jump + b.jump,
@@ -729,7 +732,7 @@ impl Before {
     fn work(copy: &WorldCopy) -> f64 {
         copy.objects()
             .iter()
-            .map(|c| c.energy.own_j + c.energy.remote_j + c.energy.env_j)
+            .map(|c| c.energy.own_j + c.energy.remote_j + c.energy.env_j + c.energy.objects_j)
             .sum()
     }
 
