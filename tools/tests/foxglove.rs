@@ -662,8 +662,8 @@ fn live_url(
 
 /// A world of several objects in `sim run --out`'s `session.mcap`: read by the foreign reader,
 /// every site has a frame and an entity for every object (`object/<site>` for the first,
-/// `object/<name>/<site>` for each other), one frame per sample, each entity in a declared frame,
-/// in the object's real size.
+/// `object/<name>/<site>` for each other), and so has the reference copy, one frame per sample,
+/// each entity in a declared frame, in the object's real size.
 #[test]
 fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per_site() {
     if python_with(&["mcap", "google.protobuf"]).is_none() {
@@ -692,7 +692,8 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
     let entities = &v["entities"];
     let target = &scenario.objects[1];
     let (d, h) = (2.0 * target.radius_m, 2.0 * target.half_height_m);
-    for s in scenario.site.iter().map(|s| s.name.as_str()) {
+    let sites = scenario.site.iter().map(|s| s.name.as_str());
+    for s in sites.chain(["reference"]) {
         for frame in [format!("object/{s}"), format!("object/target/{s}")] {
             assert_eq!(
                 frames[&format!("world>{frame}")].as_u64(),

@@ -12,7 +12,7 @@
 //! | `/object`     | JSON, as in a station's recording | one per site and one for the reference (`site` tells them apart) |
 //! | `/tool`       | JSON, as in a station's recording | one per site                                 |
 //! | `/divergence` | JSON [`DivergenceMsg`]    | the largest distance between copies, each copy's from the reference |
-//! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference`; in a world of several objects also `world → object/<name>/<site>` for each other object |
+//! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference`; in a world of several objects also `world → object/<name>/<site>` (and `object/<name>/reference`) for each other object |
 //! | `/scene`      | `foxglove.SceneUpdate`    | every [`SCENE_EVERY`]: every site's entities and the reference copy ([`REFERENCE_COLOUR`]) |
 //! | `/log`        | `foxglove.Log`            | the session's start (scenario, method, sites)       |
 //!
@@ -230,6 +230,11 @@ pub fn write(
             w.json(OBJECT, t_ns, &object_part(REFERENCE, m))?;
             let [object, _tool] = reference_scene.transforms(m, wall);
             w.foxglove(TF, t_ns, &object)?;
+            if let Some(r) = reference {
+                for f in &reference_scene.other_transforms(&other_poses(r, 0, k), wall) {
+                    w.foxglove(TF, t_ns, f)?;
+                }
+            }
         }
         let distance = |a: [f64; 3], b: [f64; 3]| {
             ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -255,6 +260,7 @@ pub fn write(
             if let Some(m) = &reference_sample {
                 let [object, _tool, _force] = reference_scene.entities(m, wall);
                 entities.push(object);
+                entities.extend(reference_scene.other_entities(wall));
             }
             w.foxglove(
                 SCENE,
