@@ -245,17 +245,6 @@ impl Site {
     }
 }
 
-/// The objects' mechanical energy, J (in the world's order: for one object, its own).
-fn mechanical_energy(world: &crate::world::World, copy: &WorldCopy) -> f64 {
-    let mut e = copy
-        .objects()
-        .iter()
-        .zip(world.bodies())
-        .map(|(o, b)| o.state.mechanical_energy(&b.mass, world.gravity));
-    let first = e.next().unwrap_or(0.0);
-    e.fold(first, |a, b| a + b)
-}
-
 fn period_ns(rate_hz: f64) -> u64 {
     ((1e9 / rate_hz).round() as u64).max(1)
 }
@@ -340,7 +329,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         ],
         ..RunResult::empty(mode)
     };
-    let e0 = mechanical_energy(&world, &start);
+    let e0 = start.mechanical_energy(&world);
     let mut next_progress = 0u64;
     let reference = mode == Mode::Reference;
 
@@ -550,7 +539,7 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
         );
         result
             .mech_energy
-            .push((e0, mechanical_energy(&world, copy)));
+            .push((e0, copy.mechanical_energy(&world)));
         result.rollback.push(s.method.stats().rollback().copied());
         result.force_steps.push(ForceSteps {
             display: *s.servo.display_stats(),

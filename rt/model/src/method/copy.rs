@@ -182,6 +182,18 @@ impl WorldCopy {
         self.still.copy_from_slice(&other.still);
     }
 
+    /// The objects' mechanical energy in `world`, J, summed in the world's order from the
+    /// first object's (for one object: its own, to the bit).
+    pub fn mechanical_energy(&self, world: &World) -> f64 {
+        let mut e = self
+            .objects
+            .iter()
+            .zip(world.bodies())
+            .map(|(o, b)| o.state.mechanical_energy(&b.mass, world.gravity));
+        let first = e.next().unwrap_or(0.0);
+        e.fold(first, |a, b| a + b)
+    }
+
     /// Whether every number is finite.
     pub fn is_finite(&self) -> bool {
         self.objects.iter().all(|o| o.state.is_finite())

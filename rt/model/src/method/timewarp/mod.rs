@@ -736,15 +736,6 @@ impl Before {
             .sum()
     }
 
-    /// The objects' mechanical energy, J.
-    fn energy(world: &World, copy: &WorldCopy) -> f64 {
-        copy.objects()
-            .iter()
-            .zip(world.bodies())
-            .map(|(c, b)| c.state.mechanical_energy(&b.mass, world.gravity))
-            .sum()
-    }
-
     pub(super) fn of(world: &World, copy: &WorldCopy) -> Self {
         let mut pos = [Vec3::zeros(); MAX_OBJECTS];
         for (p, c) in pos.iter_mut().zip(copy.objects()) {
@@ -752,7 +743,7 @@ impl Before {
         }
         Self {
             pos,
-            energy_j: Self::energy(world, copy),
+            energy_j: copy.mechanical_energy(world),
             work_j: Self::work(copy),
         }
     }
@@ -771,7 +762,7 @@ impl Before {
             );
         Adoption {
             jump,
-            energy_j: Self::energy(world, copy) - self.energy_j,
+            energy_j: copy.mechanical_energy(world) - self.energy_j,
             work_j: Self::work(copy) - self.work_j,
             age_s,
             clipped_j: 0.0,
