@@ -274,21 +274,21 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// `sim run --out` writes `session.mcap`: read by the same foreign reader as a station's
-/// recording, it holds every site's frames, entities and JSON channels and the reference copy as
-/// its own frame, entity and colour, with times increasing and frame ids that are all declared.
-#[test]
-fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_terms() {
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
-        return;
-    }
-    let scenario_path = root().join("scenarios/three-users.toml");
+/// `sim run scenarios/<file> <args> --out` into the test's directory `tag`: the scenario, and its
+/// `session.mcap` as the foreign reader summarises it (read without errors), and the directory.
+fn simulated_session(
+    tag: &str,
+    file: &str,
+    args: &[&str],
+) -> (coop_model::scenario::Scenario, Value, PathBuf) {
+    let scenario_path = root().join("scenarios").join(file);
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
-    let out = out_dir("sim");
+    let out = out_dir(tag);
     let run = Command::new(env!("CARGO_BIN_EXE_sim"))
         .arg("run")
         .arg(&scenario_path)
-        .args(["--method", "paper", "--out"])
+        .args(args)
+        .arg("--out")
         .arg(&out)
         .output()
         .expect("sim runs");
@@ -299,6 +299,18 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
     );
     let v = foxglove_summary(&[out.join("session.mcap")]);
     assert_eq!(v["errors"], serde_json::json!([]), "{}", v["errors"]);
+    (scenario, v, out)
+}
+
+/// `sim run --out` writes `session.mcap`: read by the same foreign reader as a station's
+/// recording, it holds every site's frames, entities and JSON channels and the reference copy as
+/// its own frame, entity and colour, with times increasing and frame ids that are all declared.
+#[test]
+fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_terms() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let (scenario, v, out) = simulated_session("sim", "three-users.toml", &["--method", "paper"]);
     let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
     let mut sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     // Every site's copy and tool and the reference copy, one frame each per sample, in `world`.
@@ -669,24 +681,8 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
     if python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let scenario_path = root().join("scenarios/billiards.toml");
-    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    let (scenario, v, out) = simulated_session("sim-objects", "billiards.toml", &[]);
     assert_eq!(scenario.objects.len(), 2);
-    let out = out_dir("sim-objects");
-    let run = Command::new(env!("CARGO_BIN_EXE_sim"))
-        .arg("run")
-        .arg(&scenario_path)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("sim runs");
-    assert!(
-        run.status.success(),
-        "sim failed: {}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let v = foxglove_summary(&[out.join("session.mcap")]);
-    assert_eq!(v["errors"], serde_json::json!([]), "{}", v["errors"]);
     let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
     let frames = v["frames"].as_object().expect("frames");
     let entities = &v["entities"];
@@ -719,4 +715,5 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
             "entity {e} in a frame no /tf declares"
         );
     }
+    let _ = std::fs::remove_dir_all(&out);
 }
