@@ -687,16 +687,21 @@ impl SiteReport {
     }
 
     /// Lays out `report` from `site` at `seq`; times in seconds become ns.
+    ///
+    /// A report names no object: a station keeps a world of one (its configuration refuses
+    /// more), and its reports are all about object 0.
     pub fn new(site: usize, seq: u64, report: &Report) -> Self {
         let ns = |s: f64| (s.max(0.0) * 1e9).round() as u64;
         match *report {
             Report::State {
+                object: _,
                 t_s,
                 state,
                 accel,
                 included,
             } => Self::state(KIND_STATE, site, seq, ns(t_s), &state, accel, included),
             Report::Force {
+                object: _,
                 t_s,
                 force,
                 given_j,
@@ -801,6 +806,7 @@ impl SiteReport {
                 Some((
                     site,
                     Report::State {
+                        object: 0,
                         t_s,
                         state,
                         accel: v3(self.accel),
@@ -817,6 +823,7 @@ impl SiteReport {
                     site,
                     Report::Coupled(CoupledReport {
                         tools: ToolReport::NONE,
+                        object: 0,
                         t_s,
                         state,
                         accel: v3(self.accel),
@@ -851,6 +858,7 @@ impl SiteReport {
                 Some((
                     site,
                     Report::Force {
+                        object: 0,
                         t_s,
                         force,
                         given_j,
@@ -876,6 +884,7 @@ mod tests {
             ..BodyState::at_rest(Vec3::new(1.0, 2.0, 3.0))
         };
         let r = Report::State {
+            object: 0,
             t_s: 3.0,
             state,
             accel: Vec3::new(0.0, 0.0, -3.27),
@@ -915,6 +924,7 @@ mod tests {
         for (since, last) in [(1.25, 1.5), (f64::INFINITY, f64::NEG_INFINITY)] {
             let c = Report::Coupled(CoupledReport {
                 tools: ToolReport::NONE,
+                object: 0,
                 t_s: 3.0,
                 state,
                 accel: Vec3::new(0.0, 0.0, -3.27),
@@ -938,6 +948,7 @@ mod tests {
             assert!(bad.report().is_none(), "a force field in a state");
         }
         let f = Report::Force {
+            object: 0,
             t_s: 1.0,
             force: ContactForce {
                 force: Vec3::x(),
@@ -1046,9 +1057,13 @@ mod tests {
         }
         // Repairs alternate with the newest window.
         let repair = (0..2)
-            .find_map(|_| match tw.report(&copy, &[none], 1.0) {
-                Report::Tools(r) if r.first_tick == 500 => Some(r),
-                _ => None,
+            .find_map(|_| {
+                let mut repair = None;
+                tw.report(&copy, &[none], 1.0, &mut |r| match r {
+                    Report::Tools(r) if r.first_tick == 500 => repair = Some(r),
+                    _ => {}
+                });
+                repair
             })
             .expect("a repair from tick 500");
         let end = repair.first_tick + repair.count as i64;

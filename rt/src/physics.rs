@@ -324,37 +324,52 @@ impl PhysicsLoop {
                 .next_report_ns
                 .max(now_ns.saturating_sub(self.report_period_ns))
                 + self.report_period_ns;
-            let report = self
-                .method
-                .report(&self.copy, std::slice::from_ref(&self.own), now_s);
-            let tools = match &report {
-                Report::Tools(r) => Some(r),
-                Report::Coupled(c) => Some(&c.tools),
-                _ => None,
-            };
-            if let Some(r) = tools {
-                // Tools go out as a track (its own ring and sequence), and only once the grid
-                // has begun (before, there is nothing of this site's to say).
-                if self.ticks.done > 0 {
-                    self.ticks.seq += 1;
-                    let t = ToolTrack::new(self.site, self.ticks.seq, now_ns, r);
-                    let pushed = self.tracks_out.as_mut().map(|p| p.push(t).is_ok());
-                    if pushed != Some(true) {
-                        self.tracks.drops += 1;
+            let (site, done) = (self.site, self.ticks.done);
+            let (ticks_seq, tracks_out, track_drops) = (
+                &mut self.ticks.seq,
+                &mut self.tracks_out,
+                &mut self.tracks.drops,
+            );
+            let (report_seq, reports, report_drops) = (
+                &mut self.report_seq,
+                &mut self.reports,
+                &mut self.report_drops,
+            );
+            let mut send = |report: Report| {
+                let tools = match &report {
+                    Report::Tools(r) => Some(r),
+                    Report::Coupled(c) if c.tools.count > 0 => Some(&c.tools),
+                    _ => None,
+                };
+                if let Some(r) = tools {
+                    // Tools go out as a track (its own ring and sequence), and only once the
+                    // grid has begun (before, there is nothing of this site's to say).
+                    if done > 0 {
+                        *ticks_seq += 1;
+                        let t = ToolTrack::new(site, *ticks_seq, now_ns, r);
+                        let pushed = tracks_out.as_mut().map(|p| p.push(t).is_ok());
+                        if pushed != Some(true) {
+                            *track_drops += 1;
+                        }
                     }
                 }
-            }
-            // `coupled` sends its state besides its track.
-            if !matches!(report, Report::Tools(_)) {
-                self.report_seq += 1;
-                if self
-                    .reports
-                    .push(SiteReport::new(self.site, self.report_seq, &report))
-                    .is_err()
-                {
-                    self.report_drops += 1;
+                // `coupled` sends its state besides its track.
+                if !matches!(report, Report::Tools(_)) {
+                    *report_seq += 1;
+                    if reports
+                        .push(SiteReport::new(site, *report_seq, &report))
+                        .is_err()
+                    {
+                        *report_drops += 1;
+                    }
                 }
-            }
+            };
+            self.method.report(
+                &self.copy,
+                std::slice::from_ref(&self.own),
+                now_s,
+                &mut send,
+            );
         }
     }
 

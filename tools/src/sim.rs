@@ -170,8 +170,6 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         } => {
             let mut sc = scenario_file::load(&scenario)?;
             if let Some(m) = method {
-                sc.check_method(m)
-                    .map_err(|e| anyhow::anyhow!("--method: {e}"))?;
                 sc.method = m;
             }
             if let Some(s) = seed {
@@ -191,7 +189,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             out,
         } => {
             let sc = scenario_file::load(&scenario)?;
-            let methods = kept(&sc, chosen(methods)?)?;
+            let methods = chosen(methods)?;
             let reference = run_mode(&sc, Mode::Reference);
             let mut all = vec![metrics::compute(&sc, &reference, &reference)];
             for method in methods {
@@ -221,7 +219,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             out,
         } => {
             let sc = scenario_file::load(&scenario)?;
-            let methods = kept(&sc, chosen(methods)?)?;
+            let methods = chosen(methods)?;
             crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
         }
         Command::Bench {
@@ -247,23 +245,6 @@ fn chosen(methods: Vec<MethodName>) -> anyhow::Result<Vec<MethodName>> {
         }
     }
     Ok(methods)
-}
-
-/// Of `methods`, those that can keep `sc`'s world ([`Scenario::check_method`]); the others are
-/// named on stderr. None left is an error.
-fn kept(sc: &Scenario, methods: Vec<MethodName>) -> anyhow::Result<Vec<MethodName>> {
-    let (ok, not): (Vec<_>, Vec<_>) = methods
-        .into_iter()
-        .partition(|&m| sc.check_method(m).is_ok());
-    for m in &not {
-        if let Err(e) = sc.check_method(*m) {
-            eprintln!("# skipped: {e}");
-        }
-    }
-    if ok.is_empty() {
-        anyhow::bail!("--methods: none of the methods given can keep this scenario's world");
-    }
-    Ok(ok)
 }
 
 /// One line per site of a method that rolls back.

@@ -651,47 +651,23 @@ fn faces(
 /// point of each facing the other ([`Shape::facing_point`]).
 const PAIR_POINTS: usize = 2 * (MAX_CONTACT_POINTS + 1);
 
-/// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
-/// `a`, the wrench on `b`, and whether they touch.
-///
-/// The environment's law (see [`environment_wrench`]) between two moving bodies. Each shape's
-/// contact points ([`Shape::contact_points`]) inside the other are the touching points, each with
-/// its depth and the other's outward normal there; the normal force is K times the *deepest*
-/// penetration along the depth-weighted mean normal, at the depth-weighted centre of pressure;
-/// damping is shared by the touching points, each resisting the two bodies' relative normal
-/// velocity there, and never pulls; friction is one stick spring between a point on each body, set
-/// where the contact began (the touching points' centre). Whatever acts on `b` is exactly the
-/// negative of what acts on `a`, at the same points: the pair's forces conserve momentum, linear
-/// and angular.
-///
-/// Two boxes' touching points come from the separating-axis test instead: the other box's face
-/// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
-/// which no corner of either finds). A cylinder adds the point of its side facing the other's
-/// centre ([`Shape::facing_point`]); a cylinder's side crossing a box's edge between its
-/// ends, or another cylinder's side at an angle away from both centres, is still not found.
-pub fn pair_wrench(
-    c: &ContactParams,
-    state: &mut PairContactState,
-    a: PairSide<'_>,
-    b: PairSide<'_>,
-) -> (Wrench, Wrench, bool) {
-    let none = (Wrench::default(), Wrench::default(), false);
+/// Where two objects touch (see [`pair_wrench`]): each touching point, the normal pushing `a`
+/// away from `b` there and the depth, into `points`; how many.
+fn pair_points(
+    a: &PairSide<'_>,
+    b: &PairSide<'_>,
+    points: &mut [(Vec3, Vec3, f64); PAIR_POINTS],
+) -> usize {
     let reach = a.shape.bounding_radius() + b.shape.bounding_radius();
     if (a.body.pos - b.body.pos).norm_squared() > reach * reach {
-        *state = PairContactState::default();
-        return none;
+        return 0;
     }
-    // (point, normal pushing `a` away from `b`, depth)
-    let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0f64); PAIR_POINTS];
     let mut n_touch = 0usize;
     // Two boxes: the separating-axis test, then the clipped face contact or the crossing of two
     // edges (which no corner or face centre of either finds: two bars crossed).
     if let (Shape::Box { half: ha }, Shape::Box { half: hb }) = (*a.shape, *b.shape) {
         match box_box_axes(a.body, ha, b.body, hb) {
-            BoxOverlap::Apart => {
-                *state = PairContactState::default();
-                return none;
-            }
+            BoxOverlap::Apart => return 0,
             BoxOverlap::Edges {
                 point,
                 normal,
@@ -738,9 +714,47 @@ pub fn pair_wrench(
         }
     };
     if !matches!((a.shape, b.shape), (Shape::Box { .. }, Shape::Box { .. })) {
-        gather(&a, &b, 1.0);
-        gather(&b, &a, -1.0);
+        gather(a, b, 1.0);
+        gather(b, a, -1.0);
     }
+    n_touch
+}
+
+/// How deep two objects overlap, m (0: apart): the depth of [`pair_wrench`]'s spring.
+pub fn pair_depth(a: &PairSide<'_>, b: &PairSide<'_>) -> f64 {
+    let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0f64); PAIR_POINTS];
+    let n = pair_points(a, b, &mut points);
+    points[..n].iter().fold(0.0, |d, p| d.max(p.2))
+}
+
+/// The contact between two objects `a` and `b`, updating the pair's friction memory: the wrench on
+/// `a`, the wrench on `b`, and whether they touch.
+///
+/// The environment's law (see [`environment_wrench`]) between two moving bodies. Each shape's
+/// contact points ([`Shape::contact_points`]) inside the other are the touching points, each with
+/// its depth and the other's outward normal there; the normal force is K times the *deepest*
+/// penetration along the depth-weighted mean normal, at the depth-weighted centre of pressure;
+/// damping is shared by the touching points, each resisting the two bodies' relative normal
+/// velocity there, and never pulls; friction is one stick spring between a point on each body, set
+/// where the contact began (the touching points' centre). Whatever acts on `b` is exactly the
+/// negative of what acts on `a`, at the same points: the pair's forces conserve momentum, linear
+/// and angular.
+///
+/// Two boxes' touching points come from the separating-axis test instead: the other box's face
+/// clipped to the face they overlap least across, or where two edges cross (two bars crossed,
+/// which no corner of either finds). A cylinder adds the point of its side facing the other's
+/// centre ([`Shape::facing_point`]); a cylinder's side crossing a box's edge between its
+/// ends, or another cylinder's side at an angle away from both centres, is still not found.
+pub fn pair_wrench(
+    c: &ContactParams,
+    state: &mut PairContactState,
+    a: PairSide<'_>,
+    b: PairSide<'_>,
+) -> (Wrench, Wrench, bool) {
+    let none = (Wrench::default(), Wrench::default(), false);
+    // (point, normal pushing `a` away from `b`, depth)
+    let mut points = [(Vec3::zeros(), Vec3::zeros(), 0.0f64); PAIR_POINTS];
+    let n_touch = pair_points(&a, &b, &mut points);
     if n_touch == 0 {
         *state = PairContactState::default();
         return none;

@@ -559,7 +559,6 @@ impl Scenario {
         }
         bounded("sample_rate_hz", self.sample_rate_hz, 1.0, 10_000.0, "Hz")?;
         self.validate_objects()?;
-        self.check_method(self.method)?;
         finite3(
             "world.gravity_m_per_s2",
             &self.world.gravity_m_per_s2,
@@ -1039,26 +1038,6 @@ impl Scenario {
                     "must be 0 for a fixture (fixed = true)",
                 ));
             }
-        }
-        Ok(())
-    }
-
-    /// Whether method `name` can keep this scenario's world: every method keeps one object;
-    /// only `timewarp` (which steps the whole world from every tool) keeps several so far.
-    ///
-    /// # Errors
-    /// A [`ScenarioError`] naming the objects and the method.
-    pub fn check_method(&self, name: MethodName) -> Result<(), ScenarioError> {
-        if self.objects.len() > 1 && name != MethodName::Timewarp {
-            return Err(err(
-                "method",
-                name.as_str(),
-                format!(
-                    "keeps a world of one object so far; this scenario has {} (timewarp keeps \
-                     several)",
-                    self.objects.len()
-                ),
-            ));
         }
         Ok(())
     }

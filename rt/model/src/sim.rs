@@ -476,15 +476,21 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
                 s.next_servo += s.period_servo;
             }
             if !reference && s.next_report == t {
-                let msg = s.method.report(&s.copy, &s.own[..objects], ns_to_s(t));
-                for to in (0..n).filter(|&to| to != i) {
-                    messages.0 += 1;
-                    let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
-                        messages.2 += 1;
-                        continue;
-                    };
-                    in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
-                }
+                // Each report takes its own chance on each link (a world's objects may travel in
+                // several).
+                let mut send = |msg: Report| {
+                    for to in (0..n).filter(|&to| to != i) {
+                        messages.0 += 1;
+                        let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t))
+                        else {
+                            messages.2 += 1;
+                            continue;
+                        };
+                        in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
+                    }
+                };
+                s.method
+                    .report(&s.copy, &s.own[..objects], ns_to_s(t), &mut send);
                 s.next_report += s.period_report;
             }
         }

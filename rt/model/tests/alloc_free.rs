@@ -107,6 +107,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
                 &mut b,
                 1,
                 &Report::Force {
+                    object: 0,
                     t_s: now,
                     force: own[0],
                     given_j: 0.01,
@@ -115,6 +116,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
             );
             included[1] = now;
             let msg = Report::State {
+                object: 0,
                 t_s: now,
                 state: b.first().state,
                 accel: Vec3::zeros(),
@@ -171,4 +173,73 @@ fn a_world_of_the_most_objects_steps_without_allocating() {
         copy.pairs().iter().any(|p| p.touching()),
         "the heap touches"
     );
+}
+
+/// The methods that keep a copy per object (`naive`, `paper`, `coupled`) step, report and take
+/// each other's reports on the largest world without allocating: two sites, every object touched
+/// by the own tool, every report of one handed to the other.
+#[test]
+fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocating() {
+    use coop_model::method::Coupled;
+    use coop_model::world::{cube_heap, MAX_OBJECTS};
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let (bodies, states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
+    let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, contact());
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let pair = |make: &dyn Fn(usize) -> Box<dyn Consistency>| [make(0), make(1)];
+    let mut methods = [
+        pair(&|_| Box::<Naive>::default()),
+        pair(&|i| Box::new(Paper::new(2, i).with_tool(0.005, 800.0))),
+        pair(&|i| Box::new(Coupled::new(i, 2, 1e-3, contact(), radii, 100))),
+    ];
+    let mut copies: Vec<[WorldCopy; 2]> = (0..methods.len())
+        .map(|_| [WorldCopy::new(&states), WorldCopy::new(&states)])
+        .collect();
+    // Each tool pressing on every object's centre a little, so every object is the own site's.
+    let mut own = [ContactForce::default(); MAX_OBJECTS];
+    let mut sent =
+        [[Report::Tools(coop_model::method::track::ToolReport::NONE); MAX_OBJECTS + 1]; 2];
+    let mut reports = 0usize;
+    let n = allocations(|| {
+        for k in 0..300 {
+            let now = k as f64 * 1e-3;
+            for (site_methods, site_copies) in methods.iter_mut().zip(copies.iter_mut()) {
+                let mut counts = [0usize; 2];
+                for i in 0..2 {
+                    let (m, copy) = (&mut site_methods[i], &mut site_copies[i]);
+                    for (u, o) in own.iter_mut().zip(copy.objects()) {
+                        *u = ContactForce {
+                            force: Vec3::new(0.01, 0.0, 0.0),
+                            point: o.state.pos,
+                            depth: 1e-3,
+                            touching: true,
+                            slipping: false,
+                        };
+                    }
+                    m.own_tool(copy.first().state.pos);
+                    m.physics_step(&world, copy, &own, 1e-3);
+                    m.report(copy, &own, now, &mut |r| {
+                        if counts[i] < sent[i].len() {
+                            sent[i][counts[i]] = r;
+                            counts[i] += 1;
+                        }
+                    });
+                }
+                for i in 0..2 {
+                    let other = 1 - i;
+                    for r in &sent[other][..counts[other]] {
+                        site_methods[i].receive(&world, &mut site_copies[i], other, r, now);
+                    }
+                }
+                reports += counts[0] + counts[1];
+            }
+        }
+    });
+    assert_eq!(n, 0, "the per-object methods allocated {n} times");
+    // Every object was reported by some method on some tick.
+    assert!(reports >= 300 * MAX_OBJECTS, "{reports} reports");
 }

@@ -14,8 +14,16 @@ pub trait Consistency: std::fmt::Debug + Send {
     fn name(&self) -> &'static str;
     /// Integrates `copy` by `dt` with the own user's (held) contact `own` with each object.
     fn physics_step(&mut self, world: &World, copy: &mut WorldCopy, own: &[ContactForce], dt: f64);
-    /// The report this site sends now.
-    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64) -> Report;
+    /// The reports this site sends now, each handed to `out`: one for the whole world
+    /// (`timewarp`), or one per object this site has something to say about (`naive`, `paper`,
+    /// `coupled`: see each), in the world's order. Allocates nothing.
+    fn report(
+        &self,
+        copy: &WorldCopy,
+        own: &[ContactForce],
+        now_s: f64,
+        out: &mut dyn FnMut(Report),
+    );
     /// Handles a report from site `from`; `Some` when the local copy jumped to a received state.
     fn receive(
         &mut self,

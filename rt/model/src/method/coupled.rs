@@ -43,7 +43,7 @@
 
 use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
-use crate::world::{World, MAX_SITES};
+use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
 use super::consistency::Consistency;
 use super::copy::{integrate, WorldCopy};
@@ -111,16 +111,20 @@ pub struct Coupled {
     own: Quantized,
     /// Per site: the position played at the last tick.
     played: [Quantized; MAX_SITES],
-    contacts: [ToolContactState; MAX_SITES],
-    /// Per site: when its user's current contact began, s (infinite: not touching).
-    touch_since: [f64; MAX_SITES],
-    /// Per site: when its user last touched, s (negative infinity: never).
-    last_touch: [f64; MAX_SITES],
-    leader: usize,
-    /// Per site: the time of its newest report taken.
-    newest_from: [f64; MAX_SITES],
-    last_pull_s: f64,
-    tank_j: f64,
+    /// Per object, per site: its tool's contact memory.
+    contacts: [[ToolContactState; MAX_SITES]; MAX_OBJECTS],
+    /// Per object, per site: when its user's current contact began, s (infinite: not touching).
+    touch_since: [[f64; MAX_SITES]; MAX_OBJECTS],
+    /// Per object, per site: when its user last touched, s (negative infinity: never).
+    last_touch: [[f64; MAX_SITES]; MAX_OBJECTS],
+    /// Per object: the site that leads it.
+    leader: [usize; MAX_OBJECTS],
+    /// Per object, per site: the time of its newest report taken.
+    newest_from: [[f64; MAX_SITES]; MAX_OBJECTS],
+    /// Per object: when it was last pulled, s.
+    last_pull_s: [f64; MAX_OBJECTS],
+    /// Per object: its tank, J.
+    tank_j: [f64; MAX_OBJECTS],
     /// Forces of the remote tools on the copy at the last tick (for traces), N.
     remote_force: Vec3,
 }
@@ -161,13 +165,13 @@ impl Coupled {
             own_hist: vec![[0; 3]; WINDOW_TICKS].into_boxed_slice(),
             own: [0; 3],
             played: [UNKNOWN; MAX_SITES],
-            contacts: [ToolContactState::default(); MAX_SITES],
-            touch_since: [f64::INFINITY; MAX_SITES],
-            last_touch: [f64::NEG_INFINITY; MAX_SITES],
-            leader: 0,
-            newest_from: [f64::NEG_INFINITY; MAX_SITES],
-            last_pull_s: 0.0,
-            tank_j: 0.0,
+            contacts: [[ToolContactState::default(); MAX_SITES]; MAX_OBJECTS],
+            touch_since: [[f64::INFINITY; MAX_SITES]; MAX_OBJECTS],
+            last_touch: [[f64::NEG_INFINITY; MAX_SITES]; MAX_OBJECTS],
+            leader: [0; MAX_OBJECTS],
+            newest_from: [[f64::NEG_INFINITY; MAX_SITES]; MAX_OBJECTS],
+            last_pull_s: [0.0; MAX_OBJECTS],
+            tank_j: [0.0; MAX_OBJECTS],
             remote_force: Vec3::zeros(),
         }
     }
@@ -289,28 +293,26 @@ impl Coupled {
         }
     }
 
-    /// The site that leads: the earliest current contact (ties: the lower index); when nobody
-    /// touches, the one whose user touched last (its copy holds the newest push), as far as known.
-    fn pick_leader(&mut self) {
+    /// The site that leads object `o`: the earliest current contact with it (ties: the lower
+    /// index); when nobody touches it, the one whose user touched it last (its copy holds the
+    /// newest push), as far as known.
+    fn pick_leader(&mut self, o: usize) {
+        let (since, last) = (&self.touch_since[o], &self.last_touch[o]);
         let mut best: Option<usize> = None;
         for k in 0..self.sites {
-            if self.touch_since[k].is_finite()
-                && best.is_none_or(|b| self.touch_since[k] < self.touch_since[b])
-            {
+            if since[k].is_finite() && best.is_none_or(|b| since[k] < since[b]) {
                 best = Some(k);
             }
         }
         if best.is_none() {
             for k in 0..self.sites {
-                if self.last_touch[k].is_finite()
-                    && best.is_none_or(|b| self.last_touch[k] > self.last_touch[b])
-                {
+                if last[k].is_finite() && best.is_none_or(|b| last[k] > last[b]) {
                     best = Some(k);
                 }
             }
         }
         if let Some(b) = best {
-            self.leader = b;
+            self.leader[o] = b;
         }
     }
 }
@@ -347,11 +349,12 @@ impl Consistency for Coupled {
         _dt: f64,
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let copy = world_copy.first();
         let t = self.now_tick;
-        let mut users = [ContactForce::default(); MAX_SITES];
-        let mut remote = Vec3::zeros();
-        for (j, user) in users.iter_mut().enumerate().take(self.sites) {
+        let sites = self.sites;
+        let n = world_copy.len();
+        // Every site's tool as played at this tick: position and velocity.
+        let mut tools = [(Vec3::zeros(), Vec3::zeros()); MAX_SITES];
+        for (j, tool) in tools.iter_mut().enumerate().take(sites) {
             let q = if j == self.me {
                 self.own
             } else {
@@ -382,50 +385,71 @@ impl Consistency for Coupled {
                 Vec3::zeros()
             };
             self.played[j] = q;
-            *user = tool_contact(
-                &self.contact,
-                &mut self.contacts[j],
-                &world.bodies[0].shape,
-                &copy.state,
-                &world.bodies[0].mass,
-                p,
-                v,
-                self.radii[j],
-            );
-            if j != self.me {
-                remote += user.force;
+            *tool = (p, v);
+        }
+        // Every tool on every object, `sites` to an object, in site order.
+        let mut users = [ContactForce::default(); MAX_SITES * MAX_OBJECTS];
+        let mut remote = Vec3::zeros();
+        let now_s = world_copy.first().time_s;
+        let mut before = [0.0; MAX_OBJECTS];
+        for (k, copy) in world_copy.objects().iter().enumerate() {
+            let body = &world.bodies()[k];
+            for j in 0..sites {
+                let (p, v) = tools[j];
+                let user = tool_contact(
+                    &self.contact,
+                    &mut self.contacts[k][j],
+                    &body.shape,
+                    &copy.state,
+                    &body.mass,
+                    p,
+                    v,
+                    self.radii[j],
+                );
+                if j != self.me {
+                    remote += user.force;
+                }
+                users[k * sites + j] = user;
             }
+            let own_touch = users[k * sites + self.me].touching;
+            let since = &mut self.touch_since[k][self.me];
+            match (own_touch, since.is_finite()) {
+                (true, false) => *since = now_s,
+                (false, true) => *since = f64::INFINITY,
+                _ => {}
+            }
+            if own_touch {
+                self.last_touch[k][self.me] = now_s;
+            }
+            self.pick_leader(k);
+            before[k] = copy.energy.users_positive_j;
         }
-        let now_s = copy.time_s;
-        let own_touch = users[self.me].touching;
-        match (own_touch, self.touch_since[self.me].is_finite()) {
-            (true, false) => self.touch_since[self.me] = now_s,
-            (false, true) => self.touch_since[self.me] = f64::INFINITY,
-            _ => {}
-        }
-        if own_touch {
-            self.last_touch[self.me] = now_s;
-        }
-        self.pick_leader();
-        let before = copy.energy.users_positive_j;
         // Summed in site order; every user acts on this copy.
-        let sites = self.sites;
         integrate(
             world,
             world_copy,
-            &users[..sites],
+            &users[..n * sites],
             sites,
             sites,
             self.dt,
             &mut [],
         );
-        self.tank_j += world_copy.first().energy.users_positive_j - before;
+        for (k, copy) in world_copy.objects().iter().enumerate() {
+            self.tank_j[k] += copy.energy.users_positive_j - before[k];
+        }
         self.remote_force = remote;
         self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize] = self.own;
         self.now_tick = t + 1;
     }
-    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64) -> Report {
-        let copy = copy.first();
+    /// The tool track, with one state per object this site leads or its user touches (in a world
+    /// of one object, that object always); the track alone when there is none.
+    fn report(
+        &self,
+        copy: &WorldCopy,
+        _own: &[ContactForce],
+        now_s: f64,
+        out: &mut dyn FnMut(Report),
+    ) {
         let end = self.now_tick;
         let first = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         let mut tools = ToolReport {
@@ -436,19 +460,33 @@ impl Consistency for Coupled {
         for (k, t) in (first..end).enumerate() {
             tools.positions[k] = self.own_hist[t.rem_euclid(WINDOW_TICKS as i64) as usize];
         }
-        Report::Coupled(CoupledReport {
-            tools,
-            t_s: now_s,
-            state: copy.state,
-            accel: copy.passive_accel,
-            touch_since_s: self.touch_since[self.me],
-            last_touch_s: self.last_touch[self.me],
-        })
+        let n = copy.len();
+        let mut sent = false;
+        for (k, o) in copy.objects().iter().enumerate() {
+            let touching = self.touch_since[k][self.me].is_finite();
+            if n > 1 && self.leader[k] != self.me && !touching {
+                continue;
+            }
+            // The track goes with the first state only.
+            out(Report::Coupled(CoupledReport {
+                tools: if sent { ToolReport::NONE } else { tools },
+                object: k,
+                t_s: now_s,
+                state: o.state,
+                accel: o.passive_accel,
+                touch_since_s: self.touch_since[k][self.me],
+                last_touch_s: self.last_touch[k][self.me],
+            }));
+            sent = true;
+        }
+        if !sent {
+            out(Report::Tools(tools));
+        }
     }
     fn receive(
         &mut self,
         world: &World,
-        copy: &mut WorldCopy,
+        world_copy: &mut WorldCopy,
         from: usize,
         msg: &Report,
         now_s: f64,
@@ -456,7 +494,6 @@ impl Consistency for Coupled {
         if from >= self.sites || from == self.me {
             return None;
         }
-        let copy = copy.first_mut();
         let r = match msg {
             // A station sends its tools as a track and its state apart (two rings, two keys).
             Report::Tools(tools) => {
@@ -467,38 +504,47 @@ impl Consistency for Coupled {
             _ => return None,
         };
         self.take_tools(from, &r.tools);
-        if r.t_s <= self.newest_from[from] {
+        let k = r.object;
+        // (A value: the copy's other objects are read as they are to bound it, then it is put back.)
+        let mut copy = *world_copy.objects().get(k)?;
+        let body = world.bodies().get(k)?;
+        if r.t_s <= self.newest_from[k][from] {
             return None; // an older state than one taken: its tools are kept, not its state
         }
-        self.newest_from[from] = r.t_s;
-        self.touch_since[from] = r.touch_since_s;
-        self.last_touch[from] = r.last_touch_s;
-        self.pick_leader();
-        if from != self.leader {
+        self.newest_from[k][from] = r.t_s;
+        self.touch_since[k][from] = r.touch_since_s;
+        self.last_touch[k][from] = r.last_touch_s;
+        self.pick_leader(k);
+        if from != self.leader[k] {
             return None;
         }
         // (Reckoned as `paper` adopts: with no more energy than the leader sent. The pull's budget
         // is the target's energy; a target flown on unslowed would have raised it.)
-        let mut target = dead_reckon_passive(world, &r.state, r.accel, now_s - r.t_s, 2);
+        let reckoned = dead_reckon_passive(world, k, &r.state, r.accel, now_s - r.t_s, 2);
+        let mut target = reckoned;
         // Along the normal of a plane the local copy rests on, its contact is local physics.
         for plane in world.planes() {
-            if crate::world::plane_depth(&world.bodies[0].shape, plane, &copy.state) > -1e-4 {
+            if crate::world::plane_depth(&body.shape, plane, &copy.state) > -1e-4 {
                 let n = plane.normal;
                 target.pos += n * (copy.state.pos - target.pos).dot(&n);
                 target.vel += n * (copy.state.vel - target.vel).dot(&n);
             }
         }
-        let since = (now_s - self.last_pull_s).max(0.0);
-        self.last_pull_s = now_s;
+        let since = (now_s - self.last_pull_s[k]).max(0.0);
+        self.last_pull_s[k] = now_s;
         let alpha = since / (since + PULL_TIME_S);
         let full = super::tank::blend(&copy.state, &target, alpha);
-        let stored = |s: &BodyState| super::tank::stored_energy(world, s);
+        let stored = |s: &BodyState| super::tank::stored_energy(world, k, s);
         // The leader's state is accounted for (its users gave it its energy, at its site): a pull
         // may bring the copy up to it, plus what this copy's tank holds.
-        let (e_copy, e_leader) = (stored(&copy.state), stored(&target));
-        let budget = self.tank_j + (e_leader - e_copy).max(0.0);
+        // The leader's energy is its state's as reckoned: the local height put under the leader's
+        // tilt presses a rim into the table, a spring the leader never had (a tray's pull took a
+        // 1.5 J budget from it and threw the tray).
+        let (e_copy, e_leader) = (stored(&copy.state), stored(&reckoned));
+        let tank = &mut self.tank_j[k];
+        let budget = *tank + (e_leader - e_copy).max(0.0);
         let (new, clipped_j) =
-            match super::tank::bound_gain(world, &copy.state, &full, budget, None) {
+            match super::tank::bound_gain(world, k, &copy.state, &full, budget, None) {
                 Some((s, c)) => (s, c),
                 None => (full, 0.0),
             };
@@ -507,8 +553,14 @@ impl Consistency for Coupled {
         let e_new = stored(&new);
         let beyond_leader = e_new - e_copy.max(e_leader);
         let taken = (e_copy - e_new).max(0.0);
-        self.tank_j = (self.tank_j - beyond_leader.max(0.0) + taken).max(0.0);
-        let e = |s: &BodyState| s.mechanical_energy(&world.bodies[0].mass, world.gravity);
+        *tank = (*tank - beyond_leader.max(0.0) + taken).max(0.0);
+        // Nor into another object here.
+        let (new, clipped_j) =
+            match super::tank::bound_pairs(world, world_copy, k, &copy.state, &new) {
+                Some((s, c)) => (s, clipped_j + c),
+                None => (new, clipped_j),
+            };
+        let e = |s: &BodyState| s.mechanical_energy(&body.mass, world.gravity);
         let adoption = Adoption {
             jump: copy.state.pos - new.pos,
             energy_j: e(&new) - e(&copy.state),
@@ -520,6 +572,8 @@ impl Consistency for Coupled {
         copy.env
             .shift(new.pos - copy.state.pos, new.rot * copy.state.rot.inverse());
         copy.state = new;
+        world_copy.objects_mut()[k] = copy;
+        world_copy.corrected(k);
         Some(adoption)
     }
 }
@@ -546,13 +600,14 @@ mod tests {
         let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.06, 0.0)));
         let r = Report::Coupled(CoupledReport {
             tools: ToolReport::NONE,
+            object: 0,
             t_s: 1.0,
             state: sent,
             accel: crate::world::supported_gravity(&w, &w.bodies[0].shape, &sent),
             touch_since_s: 0.9,
             last_touch_s: 0.9,
         });
-        let e = |s: &BodyState| crate::method::tank::stored_energy(&w, s);
+        let e = |s: &BodyState| crate::method::tank::stored_energy(&w, 0, s);
         let before = e(&copy.first().state);
         assert!(c.receive(&w, &mut copy, 1, &r, 1.5).is_some(), "pulled");
         let mut on_surface = sent;

@@ -1,8 +1,8 @@
 //! Method `naive`: Eq. 8 across the network.
 
-use crate::body::Vec3;
+use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
-use crate::world::{World, MAX_SITES};
+use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
 use super::consistency::{Consistency, LOST_FADE_S};
 use super::copy::{integrate, WorldCopy};
@@ -26,13 +26,17 @@ use super::report::{Adoption, Report};
 /// threw one 44 m up. Forces that take energy (resist the motion) always apply.
 #[derive(Debug, Clone)]
 pub struct Naive {
-    remote: [Option<(f64, ContactForce)>; MAX_SITES],
-    /// Per site: when it was lost (its force fades out over [`LOST_FADE_S`] from then).
+    /// Per object, per site: its newest force on that object, with its time.
+    remote: [[Option<(f64, ContactForce)>; MAX_SITES]; MAX_OBJECTS],
+    /// Per site: when it was lost (its forces fade out over [`LOST_FADE_S`] from then).
     lost_at: [Option<f64>; MAX_SITES],
-    /// Per site: the positive work its forces have done on this copy, J.
-    spent_j: [f64; MAX_SITES],
-    /// Per site: the most positive work its forces may do here, as its newest report allows, J.
-    allowed_j: [f64; MAX_SITES],
+    /// Per object, per site: the positive work its forces have done on this copy, J.
+    spent_j: [[f64; MAX_SITES]; MAX_OBJECTS],
+    /// Per object, per site: the most positive work its forces may do here, as its newest
+    /// report allows, J.
+    allowed_j: [[f64; MAX_SITES]; MAX_OBJECTS],
+    /// Per object: when the own user last touched it, s (negative infinity: never).
+    last_touch_s: [f64; MAX_OBJECTS],
 }
 
 /// How much more work a received force may have done here than its user gave there, J...
@@ -40,80 +44,142 @@ pub const NAIVE_SLACK_J: f64 = 1e-3;
 /// ...plus this fraction of what was given.
 pub const NAIVE_SLACK_FRACTION: f64 = 0.1;
 
+/// How long after its user let go of an object a site still reports its (zero) force on it, s:
+/// a lost report of the release is sent again, and an object nobody has touched costs nothing.
+pub const NAIVE_RELEASE_REPORTS_S: f64 = 0.5;
+
 impl Default for Naive {
     fn default() -> Self {
         Self {
-            remote: [None; MAX_SITES],
+            remote: [[None; MAX_SITES]; MAX_OBJECTS],
             lost_at: [None; MAX_SITES],
-            spent_j: [0.0; MAX_SITES],
-            allowed_j: [NAIVE_SLACK_J; MAX_SITES],
+            spent_j: [[0.0; MAX_SITES]; MAX_OBJECTS],
+            allowed_j: [[NAIVE_SLACK_J; MAX_SITES]; MAX_OBJECTS],
+            last_touch_s: [f64::NEG_INFINITY; MAX_OBJECTS],
         }
     }
 }
 
 impl Consistency for Naive {
     fn remote_force(&self) -> Vec3 {
-        self.remote.iter().flatten().map(|(_, f)| f.force).sum()
+        self.remote
+            .iter()
+            .flatten()
+            .flatten()
+            .map(|(_, f)| f.force)
+            .sum()
     }
     fn name(&self) -> &'static str {
         "naive"
     }
     fn physics_step(&mut self, world: &World, copy: &mut WorldCopy, own: &[ContactForce], dt: f64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let mut users = [ContactForce::default(); MAX_SITES + 1];
-        // Per received force: its site and its torque about the centre of mass at the step's start.
-        let mut sites = [(0usize, Vec3::zeros()); MAX_SITES + 1];
-        users[0] = own[0];
-        let mut n = 1;
-        let mass = &world.bodies[0].mass;
-        let before = copy.first().state;
-        let omega = before.omega(mass);
-        for (k, slot) in self.remote.iter_mut().enumerate() {
-            let Some((_, f)) = slot else { continue };
-            let mut f = *f;
-            if let Some(at) = self.lost_at[k] {
-                let left = 1.0 - (copy.first().time_s - at) / LOST_FADE_S;
-                if left <= 0.0 {
-                    *slot = None;
-                    self.lost_at[k] = None;
+        let n = copy.len().min(own.len());
+        // Per object: the own force, then the received ones in site order (as many slots per
+        // object as the object with the most; the rest zero, which adds nothing to any sum).
+        let mut users = [ContactForce::default(); MAX_SITES * MAX_OBJECTS];
+        // Per object and received force: its site and its torque about the centre of mass at
+        // the step's start.
+        let mut sites = [[(0usize, Vec3::zeros()); MAX_SITES]; MAX_OBJECTS];
+        let mut counts = [0usize; MAX_OBJECTS];
+        let mut before = [BodyState::at_rest(Vec3::zeros()); MAX_OBJECTS];
+        let now = copy.first().time_s;
+        for k in 0..n {
+            if own[k].touching {
+                self.last_touch_s[k] = now + dt;
+            }
+            let mass = &world.bodies[k].mass;
+            before[k] = copy.objects()[k].state;
+            let omega = before[k].omega(mass);
+            let mut count = 0;
+            for (j, slot) in self.remote[k].iter_mut().enumerate() {
+                let Some((_, f)) = slot else { continue };
+                let mut f = *f;
+                if let Some(at) = self.lost_at[j] {
+                    let left = 1.0 - (now - at) / LOST_FADE_S;
+                    if left <= 0.0 {
+                        *slot = None;
+                        continue;
+                    }
+                    f.force *= left.min(1.0);
+                }
+                // The no-gain bound (see the type's docs): a site's force that has done here
+                // what its user gave does no more positive work.
+                let torque = f.wrench(before[k].pos).torque;
+                let power = f.force.dot(&before[k].vel) + torque.dot(&omega);
+                if self.spent_j[k][j] > self.allowed_j[k][j] && power > 0.0 {
+                    copy.objects_mut()[k].energy.remote_denied_j += power * dt;
                     continue;
                 }
-                f.force *= left.min(1.0);
+                sites[k][count] = (j, torque);
+                count += 1;
+                users[k * MAX_SITES + count] = f;
             }
-            // The no-gain bound (see the type's docs): a site's force that has done here what
-            // its user gave does no more positive work.
-            let torque = f.wrench(before.pos).torque;
-            let power = f.force.dot(&before.vel) + torque.dot(&omega);
-            if self.spent_j[k] > self.allowed_j[k] && power > 0.0 {
-                copy.first_mut().energy.remote_denied_j += power * dt;
-                continue;
-            }
-            users[n] = f;
-            sites[n] = (k, torque);
-            n += 1;
+            users[k * MAX_SITES] = own[k];
+            counts[k] = count;
         }
-        integrate(world, copy, &users[..n], n, 1, dt, &mut []);
+        // A lost site whose forces have all faded is forgotten.
+        for (j, at) in self.lost_at.iter_mut().enumerate() {
+            if at.is_some() && self.remote.iter().all(|o| o[j].is_none()) {
+                *at = None;
+            }
+        }
+        let per_object = 1 + counts[..n].iter().copied().max().unwrap_or(0);
+        // Packed `per_object` to an object, as `integrate` takes them.
+        for k in 1..n {
+            for i in 0..per_object {
+                users[k * per_object + i] = users[k * MAX_SITES + i];
+            }
+        }
+        integrate(
+            world,
+            copy,
+            &users[..n * per_object],
+            per_object,
+            1,
+            dt,
+            &mut [],
+        );
         // What each received force did (the step's mean motion, as `integrate` counts work).
-        let after = copy.first().state;
-        let dx = after.pos - before.pos;
-        let omega_mid = (omega + after.omega(mass)) * 0.5;
-        for (f, &(k, torque)) in users[1..n].iter().zip(&sites[1..n]) {
-            let w = f.force.dot(&dx) + torque.dot(&omega_mid) * dt;
-            self.spent_j[k] += w.max(0.0);
+        for k in 0..n {
+            let mass = &world.bodies[k].mass;
+            let after = copy.objects()[k].state;
+            let dx = after.pos - before[k].pos;
+            let omega_mid = (before[k].omega(mass) + after.omega(mass)) * 0.5;
+            let received = &users[k * per_object + 1..k * per_object + 1 + counts[k]];
+            for (f, &(j, torque)) in received.iter().zip(&sites[k]) {
+                let w = f.force.dot(&dx) + torque.dot(&omega_mid) * dt;
+                self.spent_j[k][j] += w.max(0.0);
+            }
         }
     }
     fn peer_lost(&mut self, from: usize, now_s: f64) {
         if let Some(at) = self.lost_at.get_mut(from) {
-            if self.remote[from].is_some() {
+            if self.remote.iter().any(|o| o[from].is_some()) {
                 at.get_or_insert(now_s);
             }
         }
     }
-    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64) -> Report {
-        Report::Force {
-            t_s: now_s,
-            force: own[0],
-            given_j: copy.first().energy.own_positive_j,
+    /// One report per object the own user touches or let go of less than
+    /// [`NAIVE_RELEASE_REPORTS_S`] ago; in a world of one object, that object always.
+    fn report(
+        &self,
+        copy: &WorldCopy,
+        own: &[ContactForce],
+        now_s: f64,
+        out: &mut dyn FnMut(Report),
+    ) {
+        let n = copy.len().min(own.len());
+        for (k, (force, o)) in own.iter().zip(copy.objects()).enumerate() {
+            if n > 1 && now_s - self.last_touch_s[k] > NAIVE_RELEASE_REPORTS_S {
+                continue;
+            }
+            out(Report::Force {
+                object: k,
+                t_s: now_s,
+                force: *force,
+                given_j: o.energy.own_positive_j,
+            });
         }
     }
     fn receive(
@@ -124,22 +190,22 @@ impl Consistency for Naive {
         msg: &Report,
         _now: f64,
     ) -> Option<Adoption> {
-        if let (
-            Report::Force {
-                t_s,
-                force,
-                given_j,
-            },
-            Some(slot),
-        ) = (msg, self.remote.get_mut(from))
-        {
-            if slot.is_none_or(|(t, _)| *t_s > t) {
-                *slot = Some((*t_s, *force));
-                // Heard again; a NaN gives nothing.
-                self.lost_at[from] = None;
-                let given = if given_j.is_finite() { *given_j } else { 0.0 };
-                self.allowed_j[from] = given * (1.0 + NAIVE_SLACK_FRACTION) + NAIVE_SLACK_J;
-            }
+        let Report::Force {
+            object,
+            t_s,
+            force,
+            given_j,
+        } = msg
+        else {
+            return None;
+        };
+        let slot = self.remote.get_mut(*object)?.get_mut(from)?;
+        if slot.is_none_or(|(t, _)| *t_s > t) {
+            *slot = Some((*t_s, *force));
+            // Heard again; a NaN gives nothing.
+            self.lost_at[from] = None;
+            let given = if given_j.is_finite() { *given_j } else { 0.0 };
+            self.allowed_j[*object][from] = given * (1.0 + NAIVE_SLACK_FRACTION) + NAIVE_SLACK_J;
         }
         None
     }
@@ -164,6 +230,7 @@ mod tests {
             slipping: false,
         };
         let msg = Report::Force {
+            object: 0,
             t_s: 0.0,
             force: push,
             given_j: 0.0,
@@ -180,7 +247,7 @@ mod tests {
         }
         assert_eq!(naive.remote_force(), Vec3::zeros(), "gone after the fade");
         assert!(
-            naive.remote.iter().all(Option::is_none),
+            naive.remote.iter().flatten().all(Option::is_none),
             "the lost site's force is dropped"
         );
         // Heard again: its new force applies in full.
@@ -189,6 +256,7 @@ mod tests {
             &mut copy,
             1,
             &Report::Force {
+                object: 0,
                 t_s: 0.3,
                 force: push,
                 given_j: 0.0,
@@ -228,6 +296,7 @@ mod tests {
                 if k % every == 0 {
                     let now = copy.first().time_s;
                     let msg = Report::Force {
+                        object: 0,
                         t_s: now,
                         force: push(force),
                         given_j,

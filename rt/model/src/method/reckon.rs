@@ -13,11 +13,18 @@ use crate::world::{plane_depth, push_out_of_environment, World};
 use nalgebra::UnitQuaternion;
 
 /// Extrapolates `s` by `dt` seconds (see the module docs for the orders).
-pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8) -> BodyState {
+pub fn dead_reckon(
+    world: &World,
+    k: usize,
+    s: &BodyState,
+    accel: Vec3,
+    dt: f64,
+    order: u8,
+) -> BodyState {
     if order == 0 || dt <= 0.0 {
         return *s;
     }
-    let omega = s.omega(&world.bodies[0].mass);
+    let omega = s.omega(&world.bodies[k].mass);
     let mut out = BodyState {
         pos: s.pos + s.vel * dt,
         rot: UnitQuaternion::from_scaled_axis(omega * dt) * s.rot,
@@ -26,9 +33,9 @@ pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8
     if order >= 2 {
         out.pos += accel * (0.5 * dt * dt);
         out.vel += accel * dt;
-        slide_with_friction(world, s, accel, dt, &mut out);
+        slide_with_friction(world, k, s, accel, dt, &mut out);
     }
-    push_out_of_environment(world, &world.bodies[0].shape, &mut out);
+    push_out_of_environment(world, &world.bodies[k].shape, &mut out);
     out
 }
 
@@ -39,25 +46,33 @@ pub fn dead_reckon(world: &World, s: &BodyState, accel: Vec3, dt: f64, order: u8
 /// acceleration: unbounded, it flies on unslowed by gravity (0.44 m up after 0.5 s at 0.87 m/s).
 pub fn dead_reckon_passive(
     world: &World,
+    k: usize,
     s: &BodyState,
     accel: Vec3,
     dt: f64,
     order: u8,
 ) -> BodyState {
-    let new = dead_reckon(world, s, accel, dt, order);
+    let new = dead_reckon(world, k, s, accel, dt, order);
     let mut sent = *s;
-    push_out_of_environment(world, &world.bodies[0].shape, &mut sent);
-    super::tank::bound_gain(world, &sent, &new, DEAD_RECKONING_SLACK_J, None)
+    push_out_of_environment(world, &world.bodies[k].shape, &mut sent);
+    super::tank::bound_gain(world, k, &sent, &new, DEAD_RECKONING_SLACK_J, None)
         .map_or(new, |(bounded, _)| bounded)
 }
 
 /// Order 2 on a supporting plane: the tangential velocity decays under kinetic friction
 /// (μ_k times the supported part of gravity) and stops, rather than sliding on for ever.
-fn slide_with_friction(world: &World, s: &BodyState, accel: Vec3, dt: f64, out: &mut BodyState) {
+fn slide_with_friction(
+    world: &World,
+    k: usize,
+    s: &BodyState,
+    accel: Vec3,
+    dt: f64,
+    out: &mut BodyState,
+) {
     for plane in world.planes() {
         let n = plane.normal;
         let support = -(world.gravity.dot(&n));
-        if support <= 0.0 || plane_depth(&world.bodies[0].shape, plane, s) <= -1e-4 {
+        if support <= 0.0 || plane_depth(&world.bodies[k].shape, plane, s) <= -1e-4 {
             continue;
         }
         let v_t = s.vel - n * s.vel.dot(&n);
@@ -96,8 +111,8 @@ mod tests {
         };
         let dt = 0.3;
         let exact = s.pos + s.vel * dt + w.gravity * (0.5 * dt * dt);
-        assert!((dead_reckon(&w, &s, w.gravity, dt, 2).pos - exact).norm() < 1e-12);
-        assert!((dead_reckon(&w, &s, w.gravity, dt, 1).pos - exact).norm() > 0.1);
+        assert!((dead_reckon(&w, 0, &s, w.gravity, dt, 2).pos - exact).norm() < 1e-12);
+        assert!((dead_reckon(&w, 0, &s, w.gravity, dt, 1).pos - exact).norm() > 0.1);
     }
 
     /// A resting object (support cancels gravity) is not extrapolated through the floor.
@@ -108,7 +123,7 @@ mod tests {
             vel: Vec3::new(0.0, -0.5, 0.0),
             ..BodyState::at_rest(Vec3::new(0.0, -0.06, 0.0))
         };
-        let r = dead_reckon(&w, &s, w.gravity, 0.5, 2);
+        let r = dead_reckon(&w, 0, &s, w.gravity, 0.5, 2);
         assert!(r.pos.y >= -0.06 - 1e-12, "{}", r.pos.y);
         assert!(r.vel.y >= 0.0);
     }
@@ -120,7 +135,7 @@ mod tests {
         assert!(a.norm() < 1e-12, "a table carries all of gravity: {a:?}");
         let decel = w.env_contact.friction_kinetic * 9.81 / 3.0;
         let stop = 0.2 * 0.2 / (2.0 * decel);
-        let r = dead_reckon(&w, &s, a, 5.0, 2);
+        let r = dead_reckon(&w, 0, &s, a, 5.0, 2);
         assert!(
             (r.pos.x - stop).abs() < 1e-12 && r.vel.norm() < 1e-12,
             "{:?}",

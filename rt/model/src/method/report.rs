@@ -12,9 +12,11 @@ use super::track::{CoupledReport, ToolReport};
 // report's 3 KB are copied at the report rate instead of boxed.
 #[allow(clippy::large_enum_variant)]
 pub enum Report {
-    /// `paper`: a state, the time it holds at, up to when each site's user's impulses are included
+    /// `paper`: one object's state, the time it holds at, up to when each site's user's impulses are included
     /// in it, and the acceleration a receiver should extrapolate it with.
     State {
+        /// Which object of the world ([`crate::world::World::bodies`] order).
+        object: usize,
         /// Time of the state, s (sender's clock).
         t_s: f64,
         /// The state.
@@ -24,8 +26,10 @@ pub enum Report {
         /// Per site, the time up to which its user's impulses are included, s.
         included: [f64; MAX_SITES],
     },
-    /// `naive`: the sender's own contact force and where it acts.
+    /// `naive`: the sender's own contact force on one object and where it acts.
     Force {
+        /// Which object of the world it pushes.
+        object: usize,
         /// Time, s.
         t_s: f64,
         /// The contact.

@@ -103,6 +103,8 @@ impl ToolReport {
 pub struct CoupledReport {
     /// The tool positions, as `timewarp` sends them (no confirmed hash: `confirmed_hash` 0).
     pub tools: ToolReport,
+    /// Which object `state` is (its tools come with object 0's report only).
+    pub object: usize,
     /// Time of `state`, s (sender's clock).
     pub t_s: f64,
     /// The sender's copy.

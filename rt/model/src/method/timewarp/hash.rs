@@ -23,7 +23,7 @@ impl TimeWarp {
         let i = self.idx(snap.tick);
         // A kept slot is a simulated tick (the current one is not kept yet: hash_at checked).
         if self.slots[i].tick != snap.tick
-            || super::super::tank::spring_energy(world, &snap.state) > self.max_spring_j
+            || super::super::tank::spring_energy(world, 0, &snap.state) > self.max_spring_j
         {
             return None;
         }

@@ -438,29 +438,13 @@ impl TimeWarp {
     }
 }
 
-impl Consistency for TimeWarp {
-    fn name(&self) -> &'static str {
-        "timewarp"
-    }
-    fn own_tool(&mut self, tool_pos: Vec3) {
+impl TimeWarp {
+    /// The own tool's track and the confirmed frontier (see [`Consistency::report`]).
+    fn track_report(&self, copy: &WorldCopy) -> Report {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        self.play_own(tool_pos);
-    }
-    fn physics_step(
-        &mut self,
-        world: &World,
-        copy: &mut WorldCopy,
-        _own: &[ContactForce],
-        _dt: f64,
-    ) {
-        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        self.tick(world, copy);
-        self.advance_replay();
-        self.want_lag(world, copy);
-    }
-    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], _now_s: f64) -> Report {
-        let end = self.now_tick; // ticks up to end - 1 are simulated, with the own positions
-                                 // (Nothing before the tick this site's history starts at: it was not here.)
+        // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
+        // this site's history starts at: it was not here.)
+        let end = self.now_tick;
         let window = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         // A peer that lost more than a window of reports asked for the first tick it lacks: every
         // other report sends the window from there instead (while it is still kept), so the
@@ -523,6 +507,38 @@ impl Consistency for TimeWarp {
         }
         r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
         Report::Tools(r)
+    }
+}
+
+impl Consistency for TimeWarp {
+    fn name(&self) -> &'static str {
+        "timewarp"
+    }
+    fn own_tool(&mut self, tool_pos: Vec3) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.play_own(tool_pos);
+    }
+    fn physics_step(
+        &mut self,
+        world: &World,
+        copy: &mut WorldCopy,
+        _own: &[ContactForce],
+        _dt: f64,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.tick(world, copy);
+        self.advance_replay();
+        self.want_lag(world, copy);
+    }
+    /// One report for the whole world: the own tool's track and the confirmed world's hash.
+    fn report(
+        &self,
+        copy: &WorldCopy,
+        _own: &[ContactForce],
+        _now_s: f64,
+        out: &mut dyn FnMut(Report),
+    ) {
+        out(self.track_report(copy));
     }
     fn receive(
         &mut self,

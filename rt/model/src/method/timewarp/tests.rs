@@ -420,7 +420,7 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
                 if down(i, k) {
                     continue;
                 }
-                let r = tw.report(copy, &[ContactForce::default()], k as f64 * 1e-3);
+                let r = tw.track_report(copy);
                 if let Report::Tools(t) = &r {
                     assert!(
                         i == 0 || k < crash || t.first_tick >= join,
@@ -489,7 +489,7 @@ fn stations_started_apart_compare_their_confirmed_states() {
                 tw.own_tool(Vec3::new(if i == 0 { -0.2 } else { 0.2 }, 0.0, 0.01));
                 tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
                 if (k - begin[i]) % every[i] == 0 && k >= connect {
-                    let r = tw.report(copy, &[ContactForce::default()], 0.0);
+                    let r = tw.track_report(copy);
                     in_flight.push((k + 1, i, r));
                 }
             }
@@ -543,7 +543,7 @@ fn two_sites(
         if k % 20 == 0 {
             for i in 0..2 {
                 let (tw, copy) = &sites[i];
-                let r = tw.report(copy, &[ContactForce::default()], k as f64 * 1e-3);
+                let r = tw.track_report(copy);
                 if let Report::Tools(t) = &r {
                     seen(i, t, k, &sites);
                 }
@@ -682,7 +682,7 @@ fn a_state_deep_in_the_table_is_not_adopted() {
     );
     let [(a, ca), (b, cb)] = &mut sites;
     b.set_max_spring_energy(0.05);
-    let Report::Tools(mut r) = a.report(ca, &[ContactForce::default()], 0.5) else {
+    let Report::Tools(mut r) = a.track_report(ca) else {
         panic!("a track");
     };
     assert!(r.confirmed_tick > 400, "{}", r.confirmed_tick);
@@ -811,7 +811,7 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
                 assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
             }
             if k % 10 == 9 {
-                let r = tw.report(copy, &[ContactForce::default(); 4], t);
+                let r = tw.track_report(copy);
                 for to in (0..3).filter(|&to| to != i) {
                     in_flight.push((k + DELAY[i][to], i, to, r));
                 }
