@@ -14,7 +14,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use coop_model::body::{BodyState, Vec3};
-use coop_model::contact::{tool_contact, ContactForce, ContactParams, Plane, ToolContactState};
+use coop_model::contact::{
+    environment_wrench, pair_wrench, tool_contact, ContactForce, ContactParams, EnvContactState,
+    PairContactState, PairSide, Plane, ToolContactState,
+};
 use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
 use coop_model::method::{integrate, Consistency, Report, WorldCopy};
 use coop_model::metrics;
@@ -239,6 +242,22 @@ pub struct WorldStepCost {
     pub period_share: f64,
     /// The same with nothing asleep, ns.
     pub step_awake_ns: f64,
+    /// The step's contact geometry and laws alone, ours, nothing asleep: every tool with every
+    /// object, every object with the table, every pair of objects (points, depths, normals,
+    /// penalty, damping, friction memory), median, ns.
+    pub contacts_ns: f64,
+    /// The same pairs' contact *geometry* alone through `parry3d-f64` 0.25 (`query::contact`:
+    /// the deepest point and normal of each pair, no law, no friction; the least a parry-based
+    /// step would spend where our contact code is), median, ns.
+    pub parry_contacts_ns: f64,
+}
+
+/// Our shapes as parry's (the bench's scene is boxes; tools are balls).
+fn parry_cuboid(shape: &coop_model::shape::Shape) -> parry3d_f64::shape::Cuboid {
+    match *shape {
+        coop_model::shape::Shape::Box { half } => parry3d_f64::shape::Cuboid::new(half),
+        _ => unreachable!("the world-step scene is a heap of boxes"),
+    }
 }
 
 /// The world-step figures: `objects` boxes (4 cm, 0.1 kg) in a heap on a table, two layers, each
@@ -314,12 +333,123 @@ pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
                 )
             };
             let (step_ns, step_awake_ns) = (time(&sleeping), time(&awake));
+            // The contacts alone, ours and parry's, on the settled heap with the tools pressing.
+            let states: Vec<BodyState> = settled.objects().iter().map(|o| o.state).collect();
+            let ours = || {
+                median(
+                    (0..batches)
+                        .map(|_| {
+                            let mut tool_memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
+                            let mut env = [EnvContactState::default(); MAX_OBJECTS];
+                            let mut pairs =
+                                [PairContactState::default(); MAX_OBJECTS * MAX_OBJECTS];
+                            let t0 = Instant::now();
+                            for _ in 0..per_batch {
+                                for (t, (tip, _)) in tips.iter().enumerate() {
+                                    for (o, state) in states.iter().enumerate() {
+                                        black_box(tool_contact(
+                                            &law,
+                                            &mut tool_memory[t][o],
+                                            &bodies[o].shape,
+                                            state,
+                                            &bodies[o].mass,
+                                            black_box(*tip),
+                                            Vec3::zeros(),
+                                            0.005,
+                                        ));
+                                    }
+                                }
+                                for (o, state) in states.iter().enumerate() {
+                                    black_box(environment_wrench(
+                                        &law,
+                                        &mut env[o],
+                                        &table,
+                                        &bodies[o].shape,
+                                        state,
+                                        &bodies[o].mass,
+                                    ));
+                                }
+                                for i in 0..objects {
+                                    for j in i + 1..objects {
+                                        let side = |k: usize| PairSide {
+                                            shape: &bodies[k].shape,
+                                            body: &states[k],
+                                            mass: &bodies[k].mass,
+                                        };
+                                        black_box(pair_wrench(
+                                            &law,
+                                            &mut pairs[i * MAX_OBJECTS + j],
+                                            side(i),
+                                            side(j),
+                                        ));
+                                    }
+                                }
+                            }
+                            t0.elapsed().as_nanos() as f64 / per_batch as f64
+                        })
+                        .collect(),
+                )
+            };
+            let parry = || {
+                use parry3d_f64::math::Isometry;
+                use parry3d_f64::query::contact;
+                use parry3d_f64::shape::{Ball, HalfSpace};
+                let cuboids: Vec<_> = bodies[..objects]
+                    .iter()
+                    .map(|b| parry_cuboid(&b.shape))
+                    .collect();
+                let poses: Vec<Isometry<f64>> = states
+                    .iter()
+                    .map(|s| Isometry::from_parts(s.pos.into(), s.rot))
+                    .collect();
+                let ball = Ball::new(0.005);
+                let tip_poses: Vec<Isometry<f64>> = tips
+                    .iter()
+                    .map(|(tip, _)| Isometry::translation(tip.x, tip.y, tip.z))
+                    .collect();
+                let floor = HalfSpace::new(nalgebra::Vector3::z_axis());
+                let origin = Isometry::identity();
+                median(
+                    (0..batches)
+                        .map(|_| {
+                            let t0 = Instant::now();
+                            for _ in 0..per_batch {
+                                for tp in &tip_poses {
+                                    for (pose, c) in poses.iter().zip(&cuboids) {
+                                        black_box(contact(black_box(tp), &ball, pose, c, 0.0).ok());
+                                    }
+                                }
+                                for (pose, c) in poses.iter().zip(&cuboids) {
+                                    black_box(contact(&origin, &floor, pose, c, 0.0).ok());
+                                }
+                                for i in 0..objects {
+                                    for j in i + 1..objects {
+                                        black_box(
+                                            contact(
+                                                &poses[i],
+                                                &cuboids[i],
+                                                &poses[j],
+                                                &cuboids[j],
+                                                0.0,
+                                            )
+                                            .ok(),
+                                        );
+                                    }
+                                }
+                            }
+                            t0.elapsed().as_nanos() as f64 / per_batch as f64
+                        })
+                        .collect(),
+                )
+            };
             out.push(WorldStepCost {
                 objects,
                 tools,
                 step_ns,
                 period_share: step_ns / 1e6,
                 step_awake_ns,
+                contacts_ns: ours(),
+                parry_contacts_ns: parry(),
             });
         }
     }
@@ -467,12 +597,15 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         println!("# a world of several objects (cubes set down in a heap, tools pressing some): one physics step, every tool's contact with every object, then the objects stepped together (median); resting untouched objects sleep, and with nothing asleep");
         for w in &worlds {
             println!(
-                "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period; nothing asleep {:>8.0} ns",
+                "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period; nothing asleep {:>8.0} ns; its contacts {:>8.0} ns (ours: points, laws, friction) vs {:>8.0} ns (parry3d-f64 geometry alone, {:.2}x ours)",
                 w.objects,
                 w.tools,
                 w.step_ns,
                 w.period_share * 100.0,
-                w.step_awake_ns
+                w.step_awake_ns,
+                w.contacts_ns,
+                w.parry_contacts_ns,
+                w.parry_contacts_ns / w.contacts_ns
             );
         }
         println!("# timewarp run at a constant delay (busiest site): re-simulation as a share of one core; p99 rollback = (p99 depth + 1) ticks x cost per tick (goal: 8 users at 150 ms <= 1 ms)");
