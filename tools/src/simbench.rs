@@ -3,7 +3,9 @@
 //! shared and noisy); the speed is simulated seconds per wall-clock second over whole runs.
 //!
 //! Timewarp's rollback cost, for 2 users (the scenario) and 8 (the scenario's world and object with
-//! eight users around it, [`eight_users`]): one 500-tick rollback with every tool touching, timed
+//! eight users around it, [`eight_users`]) and the crowd: one 500-tick rollback with every tool
+//! touching, after one user's late report (the rollback a late report causes: it re-simulates the
+//! objects that user's tool reaches, and beside it the same with every object stepped), timed
 //! whole (median and p99) and per re-simulated tick; then, from a timewarp run at a constant 150 and
 //! 500 ms delay, the busiest site's re-simulated ticks per simulated second × that cost = the share
 //! of one core rollbacks take, and the p99 rollback (depth × cost per tick) against the 1 ms physics
@@ -85,8 +87,8 @@ pub fn eight_users(base: &Scenario) -> Scenario {
     sc
 }
 
-/// What one 500-tick rollback with `sc`'s every tool touching the object costs at site 0: each
-/// rollback's time, ns (one per batch).
+/// What one 500-tick rollback with `sc`'s every tool touching an object costs at site 0, after
+/// site 1's late report: each rollback's time, ns (one per batch).
 fn rollback_times_ns(sc: &Scenario, batches: usize) -> anyhow::Result<Vec<f64>> {
     let world = sc.world();
     let starts = sc.start_states();
@@ -157,6 +159,9 @@ struct RollbackCost {
     rollback_500_ticks_median_ns: f64,
     rollback_500_ticks_p99_ns: f64,
     per_resimulated_tick_ns: f64,
+    /// The same rollback stepping every object (`timewarp.islands = false`): what re-simulating
+    /// only the objects the late tool reaches buys.
+    per_resimulated_tick_whole_ns: f64,
 }
 
 /// Rollback load of a timewarp run at one delay.
@@ -193,6 +198,9 @@ fn rollback_figures(
         let deep = crate::sweep::scenario_at(many, 500.0, many.seed)?;
         let times = rollback_times_ns(&deep, batches)?;
         let per_tick = median(times.clone()) / ROLLBACK_TICKS as f64;
+        let mut whole = deep.clone();
+        whole.timewarp.islands = false;
+        let per_tick_whole = median(rollback_times_ns(&whole, batches)?) / ROLLBACK_TICKS as f64;
         costs.push(RollbackCost {
             scenario: many.name.clone(),
             users: many.site.len(),
@@ -200,6 +208,7 @@ fn rollback_figures(
             rollback_500_ticks_median_ns: median(times.clone()),
             rollback_500_ticks_p99_ns: quantile(times, 0.99),
             per_resimulated_tick_ns: per_tick,
+            per_resimulated_tick_whole_ns: per_tick_whole,
         });
         for delay_ms in [150.0, 500.0] {
             let mut at = crate::sweep::scenario_at(many, delay_ms, many.seed)?;
@@ -590,8 +599,8 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         );
         for c in &costs {
             println!(
-                "{:<20} {} users, {:>2} objects: one {ROLLBACK_TICKS}-tick rollback {:>9.0} / {:>9.0} ns, {:>6.0} ns per re-simulated tick",
-                c.scenario, c.users, c.objects, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns
+                "{:<20} {} users, {:>2} objects: one {ROLLBACK_TICKS}-tick rollback {:>9.0} / {:>9.0} ns, {:>6.0} ns per re-simulated tick (every object stepped: {:>6.0} ns)",
+                c.scenario, c.users, c.objects, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns, c.per_resimulated_tick_whole_ns
             );
         }
         println!("# a world of several objects (cubes set down in a heap, tools pressing some): one physics step, every tool's contact with every object, then the objects stepped together (median); resting untouched objects sleep, and with nothing asleep");

@@ -142,6 +142,10 @@ pub struct TimewarpSpec {
     /// ... at most this, ms, 0 to [`MAX_LOCAL_LAG_MS`] (default
     /// [`crate::method::timewarp::LOCAL_LAG_MAX_TICKS`] at 1 kHz).
     pub local_lag_max_ms: f64,
+    /// A rollback re-simulates only the objects a changed input reaches (true, the default), or
+    /// every object (false): the same bits either way, only the cost differs (see
+    /// `method/timewarp/islands.rs`; `sim bench` times both).
+    pub islands: bool,
 }
 
 impl Default for TimewarpSpec {
@@ -150,6 +154,7 @@ impl Default for TimewarpSpec {
             horizon_ms: 0.0,
             local_lag_share: crate::method::timewarp::LOCAL_LAG_SHARE,
             local_lag_max_ms: crate::method::timewarp::LOCAL_LAG_MAX_TICKS as f64,
+            islands: true,
         }
     }
 }
@@ -1171,6 +1176,7 @@ impl Scenario {
             self.timewarp.local_lag_share,
             (self.timewarp.local_lag_max_ms * 1e-3 / dt).round() as i64,
         );
+        tw.set_islands(self.timewarp.islands);
         // Every user pressing the object into one plane with all the device's force, and its
         // weight: per plane at most that force's depth, ½ F² / K each.
         let press = self

@@ -182,6 +182,31 @@ impl WorldCopy {
         }
     }
 
+    /// Takes from `other` (a copy of the same world) the objects in `objects` (their copies and
+    /// sleep counts) and the memory of the contacts `pairs(i, j)` says (`i < j`). Allocates
+    /// nothing.
+    pub fn copy_some_from(
+        &mut self,
+        other: &WorldCopy,
+        objects: &[bool; MAX_OBJECTS],
+        pairs: impl Fn(usize, usize) -> bool,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let n = self.objects.len().min(other.objects.len());
+        for k in (0..n).filter(|&k| objects[k]) {
+            self.objects[k] = other.objects[k];
+            self.still[k] = other.still[k];
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                if pairs(i, j) {
+                    let p = pair_index(i, j, n);
+                    self.pairs[p] = other.pairs[p];
+                }
+            }
+        }
+    }
+
     /// Every object's time, s (they advance together).
     pub fn set_time(&mut self, time_s: f64) {
         for o in self.objects.iter_mut() {
@@ -249,6 +274,32 @@ pub fn integrate(
     impulse: &mut [Wrench],
 ) {
     // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    let none = [false; MAX_OBJECTS];
+    integrate_some(
+        world,
+        copy,
+        (users, per_object, own_count),
+        dt,
+        impulse,
+        &none,
+    );
+}
+
+/// [`integrate`] of the objects not in `skip`: a skipped object is neither stepped nor evaluated
+/// (its copy, its sleep count and its contacts with the other skipped ones are left as they are,
+/// for the caller to set), and its contact with a stepped one is taken as apart. The caller
+/// guarantees that: no skipped object is within reach of a stepped one, nor touching it, so the
+/// stepped objects get the same bits as in a whole step (a rollback re-simulates only the
+/// objects a changed input can reach: see `timewarp`).
+pub fn integrate_some(
+    world: &World,
+    copy: &mut WorldCopy,
+    (users, per_object, own_count): (&[ContactForce], usize, usize),
+    dt: f64,
+    impulse: &mut [Wrench],
+    skip: &[bool; MAX_OBJECTS],
+) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
     let n = copy.len().min(world.bodies().len());
     let bodies = &world.bodies()[..n];
     let frozen = sleepers(world, bodies, copy, users, per_object);
@@ -263,20 +314,20 @@ pub fn integrate(
             world,
             bodies,
             copy,
-            &frozen,
+            (&frozen, skip),
             users,
             (per_object, own_count),
             seen,
             &mut touching,
         );
-        for k in (0..n).filter(|&k| !frozen[k]) {
+        for k in (0..n).filter(|&k| !frozen[k] && !skip[k]) {
             let [own, remote, env, objects] = seen[k];
             w[k] = own + remote + env;
             if n > 1 {
                 w[k] = w[k] + objects;
             }
         }
-        for k in (0..n).filter(|&k| !frozen[k]) {
+        for k in (0..n).filter(|&k| !frozen[k] && !skip[k]) {
             let o = &mut copy.objects[k];
             let m = &bodies[k].mass;
             if pass == 0 {
@@ -286,7 +337,7 @@ pub fn integrate(
             }
         }
     }
-    for k in 0..n {
+    for k in (0..n).filter(|&k| !skip[k]) {
         let b = &bodies[k];
         let o = &mut copy.objects[k];
         o.time_s += dt;
@@ -336,7 +387,7 @@ fn evaluate(
     world: &World,
     bodies: &[Body],
     copy: &mut WorldCopy,
-    frozen: &[bool; MAX_OBJECTS],
+    (frozen, skip): (&[bool; MAX_OBJECTS], &[bool; MAX_OBJECTS]),
     users: &[ContactForce],
     (per_object, own_count): (usize, usize),
     seen: &mut Seen,
@@ -344,7 +395,7 @@ fn evaluate(
 ) {
     // REAL-TIME: no allocation, no lock, no logging, no syscalls.
     let n = bodies.len();
-    for k in 0..n {
+    for k in (0..n).filter(|&k| !skip[k]) {
         let o = &mut copy.objects[k];
         let mut own = Wrench::default();
         let mut remote = Wrench::default();
@@ -376,12 +427,20 @@ fn evaluate(
     for i in 0..n {
         for j in i + 1..n {
             let memory = &mut copy.pairs[pair_index(i, j, n)];
+            if skip[i] && skip[j] {
+                continue; // neither stepped: the caller's
+            }
             if bodies[i].fixed && bodies[j].fixed {
                 *memory = PairContactState::default();
                 continue;
             }
             if frozen[i] && frozen[j] {
                 continue; // two sleepers (or a sleeper on a fixture): their contact as it was
+            }
+            if skip[i] || skip[j] {
+                // Out of reach of each other (the caller's guarantee): as `pair_wrench` has it.
+                *memory = PairContactState::default();
+                continue;
             }
             let side = |k: usize| PairSide {
                 shape: &bodies[k].shape,

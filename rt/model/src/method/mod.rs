@@ -38,7 +38,7 @@ pub mod track;
 
 pub use crate::world::MAX_SITES;
 pub use consistency::{Consistency, LOST_FADE_S};
-pub use copy::{integrate, EnergyAccount, ObjectCopy, WorldCopy};
+pub use copy::{integrate, integrate_some, EnergyAccount, ObjectCopy, WorldCopy};
 pub use coupled::Coupled;
 pub use naive::{Naive, NAIVE_SLACK_FRACTION, NAIVE_SLACK_J};
 pub use paper::Paper;

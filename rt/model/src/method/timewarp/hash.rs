@@ -36,7 +36,8 @@ impl TimeWarp {
         kept.env = snap.env;
         let n = self.tools_len();
         self.tools[i * n..i * n + MAX_SITES].copy_from_slice(&snap.contacts);
-        self.rollback(world, copy, snap.tick);
+        // (Its state changed, not only inputs: every object steps again.)
+        self.rollback(world, copy, snap.tick, true);
         self.stats.adopted_states += 1;
         Some(before.adoption(world, copy, (self.now_tick - snap.tick) as f64 * self.dt))
     }

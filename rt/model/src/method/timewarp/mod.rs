@@ -73,6 +73,7 @@
 //! same platform gives the same bits; see the crate docs on transcendental functions).
 
 mod hash;
+mod islands;
 mod lag;
 mod predict;
 mod replay;
@@ -90,7 +91,7 @@ use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState
 use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
 use super::consistency::Consistency;
-use super::copy::{integrate, WorldCopy};
+use super::copy::{integrate, integrate_some, WorldCopy};
 use super::report::{Adoption, Report};
 use super::stats::{RollbackStats, Stats};
 use super::track::{
@@ -182,6 +183,16 @@ pub struct TimeWarp {
     /// The tick this site's history starts at (0, or where a restarted physics joined the grid:
     /// [`Consistency::start_at_tick`]).
     origin_tick: i64,
+    /// A rollback's re-simulation in progress ([`islands`]).
+    resim: Option<islands::Resim>,
+    /// The copy and the tools' memory as a rollback found them: the old history's newest tick.
+    scratch: WorldCopy,
+    scratch_tools: Box<[ToolContactState]>,
+    /// Per slot, its world's sketch for the reach tests; and the scratch's.
+    sketches: Box<[islands::Sketch]>,
+    scratch_sketch: islands::Sketch,
+    /// Whether a re-simulation steps only what a changed input reaches ([`islands`]).
+    islands: bool,
 }
 
 impl TimeWarp {
@@ -241,6 +252,12 @@ impl TimeWarp {
             replay: None,
             replayed_until: 0,
             origin_tick: 0,
+            resim: None,
+            scratch: copy.clone(),
+            scratch_tools: vec![ToolContactState::default(); tools_len].into_boxed_slice(),
+            sketches: vec![islands::Sketch::EMPTY; len].into_boxed_slice(),
+            scratch_sketch: islands::Sketch::EMPTY,
+            islands: true,
         }
     }
 
@@ -315,15 +332,23 @@ impl TimeWarp {
         &self.tools[i * n..(i + 1) * n]
     }
 
-    /// Simulates tick `self.now_tick` on `copy` and keeps its record.
+    /// Simulates tick `self.now_tick` on `copy` and keeps its record (in a rollback, stepping
+    /// only the objects its changed inputs reach: [`islands`]).
     fn tick(&mut self, world: &World, copy: &mut WorldCopy) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let t = self.now_tick;
         let prev = self.slots[self.idx(t - 1)];
         let i = self.idx(t);
-        self.worlds[i].copy_from(copy);
-        let n = self.tools_len();
-        self.tools[i * n..(i + 1) * n].copy_from_slice(&self.contacts);
+        let old = self.slots[i];
+        // (In a re-simulation stepping the reached objects only, their record is written
+        // below, once they are known; the others' is the old history's.)
+        let islands = self.in_islands();
+        if !islands {
+            self.worlds[i].copy_from(copy);
+            let n = self.tools_len();
+            self.tools[i * n..(i + 1) * n].copy_from_slice(&self.contacts);
+            self.sketches[i].update(copy, &self.contacts, &[true; MAX_OBJECTS]);
+        }
         let mut slot = Slot {
             tick: t,
             inputs: [[0; 3]; MAX_SITES],
@@ -333,6 +358,8 @@ impl TimeWarp {
         };
         let objects = copy.len().min(world.bodies().len());
         let sites = self.sites;
+        let mut tips = [Vec3::zeros(); MAX_SITES];
+        let mut speeds = [Vec3::zeros(); MAX_SITES];
         for j in 0..sites {
             let (q, known) = if j == self.me {
                 (self.own_at(t), true)
@@ -353,30 +380,51 @@ impl TimeWarp {
             } else {
                 Vec3::zeros()
             };
+            tips[j] = p;
+            speeds[j] = v;
+        }
+        let reached = islands.then(|| self.reach_objects(world, copy, t, (&old, &slot), &tips));
+        let stepped = |k: usize| reached.is_none_or(|r| r[k]);
+        // (An object not stepped keeps whatever its entries held: nothing reads them.)
+        for j in 0..sites {
             for (k, body) in world.bodies()[..objects].iter().enumerate() {
-                self.users[k * sites + j] = tool_contact(
-                    &self.contact,
-                    &mut self.contacts[k * MAX_SITES + j],
-                    &body.shape,
-                    &copy.objects()[k].state,
-                    &body.mass,
-                    p,
-                    v,
-                    self.radii[j],
-                );
+                if stepped(k) {
+                    self.users[k * sites + j] = tool_contact(
+                        &self.contact,
+                        &mut self.contacts[k * MAX_SITES + j],
+                        &body.shape,
+                        &copy.objects()[k].state,
+                        &body.mass,
+                        tips[j],
+                        speeds[j],
+                        self.radii[j],
+                    );
+                }
             }
         }
-        slot.touched = (0..objects).any(|k| self.users[k * sites + self.me].touching);
+        slot.touched = (0..objects).any(|k| {
+            if stepped(k) {
+                self.users[k * sites + self.me].touching
+            } else {
+                self.touched_before(k, t)
+            }
+        });
         // A re-simulation keeps what the first simulation of the tick showed.
-        slot.felt = if self.slots[i].tick == t {
-            self.slots[i].felt
+        slot.felt = if old.tick == t {
+            old.felt
         } else {
             slot.touched
         };
         self.slots[i] = slot;
         // Summed in site order, the same at every site: all users count as "own" here.
         let users = &self.users[..objects * sites];
-        integrate(world, copy, users, sites, sites, self.dt, &mut []);
+        match reached {
+            None => integrate(world, copy, users, sites, sites, self.dt, &mut []),
+            Some(r) => {
+                let skip: [bool; MAX_OBJECTS] = std::array::from_fn(|k| k < objects && !r[k]);
+                integrate_some(world, copy, (users, sites, sites), self.dt, &mut [], &skip);
+            }
+        }
         self.now_tick = t + 1;
     }
 
@@ -390,7 +438,9 @@ impl TimeWarp {
     }
 
     /// Restores the copy to tick `from` and simulates again to where it was.
-    fn rollback(&mut self, world: &World, copy: &mut WorldCopy, from: i64) -> u64 {
+    /// `whole`: every object is re-simulated (the state at `from` changed, or a test forces it);
+    /// otherwise only what the changed inputs reach ([`islands`]).
+    fn rollback(&mut self, world: &World, copy: &mut WorldCopy, from: i64, whole: bool) -> u64 {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let to = self.now_tick;
         let oldest = self.oldest_kept();
@@ -400,6 +450,7 @@ impl TimeWarp {
         }
         let i = self.idx(from);
         let own_now = self.own;
+        self.begin_resim(copy, (from, to), whole);
         copy.copy_from(&self.worlds[i]);
         let n = self.tools_len();
         self.contacts
@@ -410,6 +461,7 @@ impl TimeWarp {
             self.own = self.slots[self.idx(self.now_tick)].inputs[self.me];
             self.tick(world, copy);
         }
+        self.end_resim(copy);
         self.own = own_now;
         let depth = (to - from) as u64;
         self.stats.rollbacks += 1;
@@ -624,7 +676,7 @@ impl Consistency for TimeWarp {
         let mut adoption = None;
         if let Some(from_tick) = self.dirty_from.take() {
             let before = Before::of(world, copy);
-            if self.rollback(world, copy, from_tick) > 0 {
+            if self.rollback(world, copy, from_tick, false) > 0 {
                 self.replay_missed_contact(from_tick);
                 adoption = Some(before.adoption(
                     world,
@@ -720,7 +772,7 @@ impl TimeWarp {
     pub fn synctest(&mut self, world: &World, copy: &mut WorldCopy, depth: i64) -> bool {
         let (before, contacts) = (copy.clone(), self.contacts.clone());
         let stats = self.stats;
-        self.rollback(world, copy, self.now_tick - depth);
+        self.rollback(world, copy, self.now_tick - depth, true);
         self.stats = stats; // a test's rollbacks are not the method's
         let same = |a: &WorldCopy, b: &WorldCopy| {
             a.pairs() == b.pairs()

@@ -771,52 +771,68 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
     const DELAY: [[i64; 3]; 3] = [[0, 20, 45], [30, 0, 290], [285, 60, 0]];
     let mut radii = [0.0; MAX_SITES];
     radii[..3].fill(0.005);
-    let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
-        .map(|i| {
-            (
-                TimeWarp::new(i, 3, 1e-3, sc.contact, radii, HISTORY, &start),
-                start.clone(),
-            )
-        })
-        .collect();
-    // Site 0 pushes the row's left end (0.1–0.5 s), site 1 its right end (0.6–1.0 s), site 2
-    // pokes the second puck from behind (0.3–0.7 s); all rest far away otherwise.
-    let tool = |i: usize, t: f64| -> Vec3 {
-        let ramp = |from: f64, to: f64| ((t - from) / (to - from)).clamp(0.0, 1.0);
-        match i {
-            0 => Vec3::new(-0.12 + 0.05 * ramp(0.1, 0.5), 0.0, 0.01),
-            1 => Vec3::new(0.15 - 0.04 * ramp(0.6, 1.0), 0.0, 0.01),
-            _ => Vec3::new(-0.02, -0.06 + 0.035 * ramp(0.3, 0.7), 0.01),
-        }
-    };
-    let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
+    // Run with rollbacks that re-simulate only what a changed input reaches, and with whole
+    // ones: every copy at every tick is the same bits.
     let end = 2000i64;
-    for k in 0..end {
-        let t = k as f64 * 1e-3;
-        let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
-        in_flight.retain(|m| m.0 > k);
-        for (_, from, to, r) in due {
-            let (tw, copy) = &mut sites[to];
-            tw.receive(&w, copy, from, &r, t);
-        }
-        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
-            tw.own_tool(tool(i, t));
-            tw.physics_step(&w, copy, &[ContactForce::default(); 4], 1e-3);
-            if i == 0 {
-                let depth = if k % 50 == 49 {
-                    (HISTORY as i64 - 1).min(k)
-                } else {
-                    1 + k % 40
-                };
-                assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
+    let run = |islands: bool| {
+        let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
+            .map(|i| {
+                let mut tw = TimeWarp::new(i, 3, 1e-3, sc.contact, radii, HISTORY, &start);
+                tw.set_islands(islands);
+                (tw, start.clone())
+            })
+            .collect();
+        let mut seen = Vec::new();
+        // Site 0 pushes the row's left end (0.1–0.5 s), site 1 its right end (0.6–1.0 s), site 2
+        // pokes the second puck from behind (0.3–0.7 s); all rest far away otherwise.
+        let tool = |i: usize, t: f64| -> Vec3 {
+            let ramp = |from: f64, to: f64| ((t - from) / (to - from)).clamp(0.0, 1.0);
+            match i {
+                0 => Vec3::new(-0.12 + 0.05 * ramp(0.1, 0.5), 0.0, 0.01),
+                1 => Vec3::new(0.15 - 0.04 * ramp(0.6, 1.0), 0.0, 0.01),
+                _ => Vec3::new(-0.02, -0.06 + 0.035 * ramp(0.3, 0.7), 0.01),
             }
-            if k % 10 == 9 {
-                let r = tw.track_report(copy);
-                for to in (0..3).filter(|&to| to != i) {
-                    in_flight.push((k + DELAY[i][to], i, to, r));
+        };
+        let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
+        for k in 0..end {
+            let t = k as f64 * 1e-3;
+            let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
+            in_flight.retain(|m| m.0 > k);
+            for (_, from, to, r) in due {
+                let (tw, copy) = &mut sites[to];
+                tw.receive(&w, copy, from, &r, t);
+            }
+            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+                tw.own_tool(tool(i, t));
+                tw.physics_step(&w, copy, &[ContactForce::default(); 4], 1e-3);
+                if i == 0 {
+                    let depth = if k % 50 == 49 {
+                        (HISTORY as i64 - 1).min(k)
+                    } else {
+                        1 + k % 40
+                    };
+                    assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
                 }
+                if k % 10 == 9 {
+                    let r = tw.track_report(copy);
+                    for to in (0..3).filter(|&to| to != i) {
+                        in_flight.push((k + DELAY[i][to], i, to, r));
+                    }
+                }
+                seen.push(copy.clone());
             }
         }
+        (sites, seen)
+    };
+    let (sites, seen) = run(true);
+    let (_, whole) = run(false);
+    for (k, (a, b)) in seen.iter().zip(&whole).enumerate() {
+        assert!(
+            a == b,
+            "tick {}, site {}: islands and whole rollbacks differ",
+            k / 3,
+            k % 3
+        );
     }
     let moved: f64 = (0..4)
         .map(|o| (sites[0].1.objects()[o].state.pos - states[o].pos).norm())
