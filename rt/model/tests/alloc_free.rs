@@ -243,3 +243,73 @@ fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocatin
     // Every object was reported by some method on some tick.
     assert!(reports >= 300 * MAX_OBJECTS, "{reports} reports");
 }
+
+/// `timewarp` on the largest world rolls back without allocating: two sites whose tools move
+/// through a heap of sixteen cubes, each one's track reaching the other 30 ticks late, so every
+/// report rolls the other back over the objects the late tool reaches.
+#[test]
+fn timewarp_rollbacks_on_the_most_objects_allocate_nothing() {
+    use coop_model::method::TimeWarp;
+    use coop_model::world::{cube_heap, MAX_OBJECTS};
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let (bodies, states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
+    let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, contact());
+    let start = WorldCopy::new(&states);
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..2)
+        .map(|i| {
+            (
+                TimeWarp::new(i, 2, 1e-3, contact(), radii, 200, &start),
+                start.clone(),
+            )
+        })
+        .collect();
+    // Reports in flight: (due tick, from, to, report), a fixed ring.
+    let mut flight = [(
+        i64::MAX,
+        0usize,
+        0usize,
+        Report::Tools(coop_model::method::track::ToolReport::NONE),
+    ); 16];
+    let none = [ContactForce::default(); MAX_OBJECTS];
+    let n = allocations(|| {
+        for k in 0..600i64 {
+            let now = k as f64 * 1e-3;
+            for f in flight.iter_mut().filter(|f| f.0 == k) {
+                let (tw, copy) = &mut sites[f.2];
+                tw.receive(&world, copy, f.1, &f.3, now);
+                f.0 = i64::MAX;
+            }
+            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+                // Each tool sweeps along one side of the heap and back.
+                let x = -0.06 + 0.12 * ((k as f64 / 300.0).sin().abs());
+                let y = if i == 0 { -0.025 } else { 0.025 };
+                tw.own_tool(Vec3::new(x, y, 0.02));
+                tw.physics_step(&world, copy, &none, 1e-3);
+                if k % 10 == 9 {
+                    tw.report(copy, &none, now, &mut |r| {
+                        if let Some(slot) = flight.iter_mut().find(|f| f.0 == i64::MAX) {
+                            *slot = (k + 30, i, 1 - i, r);
+                        }
+                    });
+                }
+            }
+        }
+    });
+    assert_eq!(
+        n, 0,
+        "timewarp on {MAX_OBJECTS} objects allocated {n} times"
+    );
+    let rolled: u64 = sites
+        .iter()
+        .map(|(tw, _)| tw.rollback_stats().rollbacks)
+        .sum();
+    assert!(
+        rolled > 10,
+        "the late tracks rolled the sites back: {rolled}"
+    );
+}
