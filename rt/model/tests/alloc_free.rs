@@ -175,12 +175,12 @@ fn a_world_of_the_most_objects_steps_without_allocating() {
     );
 }
 
-/// The methods that keep a copy per object (`naive`, `paper`, `coupled`) step, report and take
-/// each other's reports on the largest world without allocating: two sites, every object touched
-/// by the own tool, every report of one handed to the other.
-#[test]
-fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocating() {
-    use coop_model::method::Coupled;
+/// The largest world (sixteen cubes in a heap on a table) and two sites' tool radii.
+fn heap_for_two() -> (
+    World,
+    [BodyState; coop_model::world::MAX_OBJECTS],
+    [f64; MAX_SITES],
+) {
     use coop_model::world::{cube_heap, MAX_OBJECTS};
     let table = [Plane {
         normal: Vec3::z(),
@@ -190,6 +190,17 @@ fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocatin
     let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, contact());
     let mut radii = [0.0; MAX_SITES];
     radii[..2].fill(0.005);
+    (world, states, radii)
+}
+
+/// The methods that keep a copy per object (`naive`, `paper`, `coupled`) step, report and take
+/// each other's reports on the largest world without allocating: two sites, every object touched
+/// by the own tool, every report of one handed to the other.
+#[test]
+fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocating() {
+    use coop_model::method::Coupled;
+    use coop_model::world::MAX_OBJECTS;
+    let (world, states, radii) = heap_for_two();
     let pair = |make: &dyn Fn(usize) -> Box<dyn Consistency>| [make(0), make(1)];
     let mut methods = [
         pair(&|_| Box::<Naive>::default()),
@@ -250,16 +261,9 @@ fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocatin
 #[test]
 fn timewarp_rollbacks_on_the_most_objects_allocate_nothing() {
     use coop_model::method::TimeWarp;
-    use coop_model::world::{cube_heap, MAX_OBJECTS};
-    let table = [Plane {
-        normal: Vec3::z(),
-        offset: 0.0,
-    }];
-    let (bodies, states) = cube_heap(MAX_OBJECTS, 0.02, 0.1);
-    let world = World::new(&bodies, Vec3::new(0.0, 0.0, -9.81), &table, contact());
+    use coop_model::world::MAX_OBJECTS;
+    let (world, states, radii) = heap_for_two();
     let start = WorldCopy::new(&states);
-    let mut radii = [0.0; MAX_SITES];
-    radii[..2].fill(0.005);
     let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..2)
         .map(|i| {
             (

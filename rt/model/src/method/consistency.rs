@@ -17,13 +17,7 @@ pub trait Consistency: std::fmt::Debug + Send {
     /// The reports this site sends now, each handed to `out`: one for the whole world
     /// (`timewarp`), or one per object this site has something to say about (`naive`, `paper`,
     /// `coupled`: see each), in the world's order. Allocates nothing.
-    fn report(
-        &self,
-        copy: &WorldCopy,
-        own: &[ContactForce],
-        now_s: f64,
-        out: &mut dyn FnMut(Report),
-    );
+    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64, out: Sink<'_>);
     /// Handles a report from site `from`; `Some` when the local copy jumped to a received state.
     fn receive(
         &mut self,
@@ -72,6 +66,9 @@ pub trait Consistency: std::fmt::Debug + Send {
         copy.objects()[k].state
     }
 }
+
+/// Where a method hands its reports ([`Consistency::report`]): called once per report.
+pub type Sink<'a> = &'a mut dyn FnMut(Report);
 
 /// How long a lost site's influence takes to fade to nothing, s.
 pub const LOST_FADE_S: f64 = 0.1;

@@ -45,9 +45,9 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
 use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
-use super::consistency::Consistency;
+use super::consistency::{Consistency, Sink};
 use super::copy::{integrate, WorldCopy};
-use super::reckon::dead_reckon_passive;
+use super::reckon::{dead_reckon, passive_reckoned};
 use super::report::{Adoption, Report};
 use super::stats::Stats;
 use super::track::{
@@ -443,13 +443,7 @@ impl Consistency for Coupled {
     }
     /// The tool track, with one state per object this site leads or its user touches (in a world
     /// of one object, that object always); the track alone when there is none.
-    fn report(
-        &self,
-        copy: &WorldCopy,
-        _own: &[ContactForce],
-        now_s: f64,
-        out: &mut dyn FnMut(Report),
-    ) {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64, out: Sink<'_>) {
         let end = self.now_tick;
         let first = (end - WINDOW_TICKS as i64).max(self.origin_tick);
         let mut tools = ToolReport {
@@ -520,7 +514,8 @@ impl Consistency for Coupled {
         }
         // (Reckoned as `paper` adopts: with no more energy than the leader sent. The pull's budget
         // is the target's energy; a target flown on unslowed would have raised it.)
-        let reckoned = dead_reckon_passive(world, k, &r.state, r.accel, now_s - r.t_s, 2);
+        let reckoned = dead_reckon(world, k, &r.state, r.accel, now_s - r.t_s, 2);
+        let reckoned = passive_reckoned(world, k, &r.state, reckoned);
         let mut target = reckoned;
         // Along the normal of a plane the local copy rests on, its contact is local physics.
         for plane in world.planes() {

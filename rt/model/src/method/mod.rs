@@ -37,12 +37,12 @@ pub mod timewarp;
 pub mod track;
 
 pub use crate::world::MAX_SITES;
-pub use consistency::{Consistency, LOST_FADE_S};
+pub use consistency::{Consistency, Sink, LOST_FADE_S};
 pub use copy::{integrate, integrate_some, EnergyAccount, ObjectCopy, WorldCopy};
 pub use coupled::Coupled;
 pub use naive::{Naive, NAIVE_SLACK_FRACTION, NAIVE_SLACK_J};
 pub use paper::Paper;
-pub use reckon::{dead_reckon, dead_reckon_passive, DEAD_RECKONING_SLACK_J};
+pub use reckon::{dead_reckon, passive_reckoned, DEAD_RECKONING_SLACK_J};
 pub use report::{Adoption, Report};
 pub use stats::{RollbackStats, Stats};
 pub use timewarp::TimeWarp;

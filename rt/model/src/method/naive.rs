@@ -4,7 +4,7 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
-use super::consistency::{Consistency, LOST_FADE_S};
+use super::consistency::{Consistency, Sink, LOST_FADE_S};
 use super::copy::{integrate, WorldCopy};
 use super::report::{Adoption, Report};
 
@@ -162,13 +162,7 @@ impl Consistency for Naive {
     }
     /// One report per object the own user touches or let go of less than
     /// [`NAIVE_RELEASE_REPORTS_S`] ago; in a world of one object, that object always.
-    fn report(
-        &self,
-        copy: &WorldCopy,
-        own: &[ContactForce],
-        now_s: f64,
-        out: &mut dyn FnMut(Report),
-    ) {
+    fn report(&self, copy: &WorldCopy, own: &[ContactForce], now_s: f64, out: Sink<'_>) {
         let n = copy.len().min(own.len());
         for (k, (force, o)) in own.iter().zip(copy.objects()).enumerate() {
             if n > 1 && now_s - self.last_touch_s[k] > NAIVE_RELEASE_REPORTS_S {

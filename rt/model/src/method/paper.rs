@@ -5,9 +5,9 @@ use crate::contact::ContactForce;
 use crate::world::{pair_index, plane_depth, World, MAX_OBJECTS, MAX_SITES};
 use nalgebra::UnitQuaternion;
 
-use super::consistency::Consistency;
+use super::consistency::{Consistency, Sink};
 use super::copy::{integrate, WorldCopy};
-use super::reckon::dead_reckon_passive;
+use super::reckon::{dead_reckon, passive_reckoned};
 use super::report::{Adoption, Report};
 
 /// One own step's impulse on one object: (the object, end of the step, middle of the step, linear
@@ -176,13 +176,7 @@ impl Consistency for Paper {
         }
     }
     /// One report per object this site is the author of (see the type's docs).
-    fn report(
-        &self,
-        copy: &WorldCopy,
-        _own: &[ContactForce],
-        now_s: f64,
-        out: &mut dyn FnMut(Report),
-    ) {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64, out: Sink<'_>) {
         let n = copy.len();
         for (k, o) in copy.objects().iter().enumerate() {
             if n > 1 && Self::author(&o.included) != self.me {
@@ -234,7 +228,8 @@ impl Consistency for Paper {
         // Dead reckoning predicts a passive object: unbounded, on `three-users.toml` at 500 ms a
         // disk a user's tool had flicked up at 0.87 m/s was adopted 0.45 m up, 129 mJ beyond every
         // user's work.
-        let mut new = dead_reckon_passive(world, k, &state, accel, now_s - t_s, self.order);
+        let reckoned = dead_reckon(world, k, &state, accel, now_s - t_s, self.order);
+        let mut new = passive_reckoned(world, k, &state, reckoned);
         let given = new;
         // Replay our own impulses on this object the sender had not seen.
         let seen_until = included.get(self.me).copied().unwrap_or(f64::NEG_INFINITY);

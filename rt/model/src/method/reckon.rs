@@ -39,20 +39,14 @@ pub fn dead_reckon(
     out
 }
 
-/// [`dead_reckon`] of a passive object, as every method that adopts or follows a sent state must
-/// reckon it: the reckoned state holds no more energy than the state sent, as the reckoner puts it
-/// on the environment's surface, up to [`DEAD_RECKONING_SLACK_J`]. A state reported resting on a
-/// table but leaving it fast (a disk a tool flicked up) is reckoned with the support's zero
-/// acceleration: unbounded, it flies on unslowed by gravity (0.44 m up after 0.5 s at 0.87 m/s).
-pub fn dead_reckon_passive(
-    world: &World,
-    k: usize,
-    s: &BodyState,
-    accel: Vec3,
-    dt: f64,
-    order: u8,
-) -> BodyState {
-    let new = dead_reckon(world, k, s, accel, dt, order);
+/// `reckoned`, the state `s` sent of object `k` dead-reckoned ([`dead_reckon`]), as every method
+/// that adopts or follows a sent state must take it for a passive object: holding no more energy
+/// than the state sent, as the reckoner puts it on the environment's surface, up to
+/// [`DEAD_RECKONING_SLACK_J`]. A state reported resting on a table but leaving it fast (a disk a
+/// tool flicked up) is reckoned with the support's zero acceleration: unbounded, it flies on
+/// unslowed by gravity (0.44 m up after 0.5 s at 0.87 m/s).
+pub fn passive_reckoned(world: &World, k: usize, s: &BodyState, reckoned: BodyState) -> BodyState {
+    let new = reckoned;
     let mut sent = *s;
     push_out_of_environment(world, &world.bodies[k].shape, &mut sent);
     super::tank::bound_gain(world, k, &sent, &new, DEAD_RECKONING_SLACK_J, None)

@@ -90,7 +90,7 @@ use crate::body::{BodyState, Vec3};
 use crate::contact::{tool_contact, ContactForce, ContactParams, ToolContactState};
 use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
-use super::consistency::Consistency;
+use super::consistency::{Consistency, Sink};
 use super::copy::{integrate, integrate_some, WorldCopy};
 use super::report::{Adoption, Report};
 use super::stats::{RollbackStats, Stats};
@@ -583,13 +583,7 @@ impl Consistency for TimeWarp {
         self.want_lag(world, copy);
     }
     /// One report for the whole world: the own tool's track and the confirmed world's hash.
-    fn report(
-        &self,
-        copy: &WorldCopy,
-        _own: &[ContactForce],
-        _now_s: f64,
-        out: &mut dyn FnMut(Report),
-    ) {
+    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
         out(self.track_report(copy));
     }
     fn receive(
