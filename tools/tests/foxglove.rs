@@ -325,18 +325,7 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
     for (f, n) in frames {
         assert_eq!(n.as_u64(), Some(samples), "{f}");
     }
-    // Each entity sits in `world` or in a frame the file transforms.
-    let declared: Vec<&str> = frames
-        .keys()
-        .map(|k| k.split_once('>').expect("parent>child").1)
-        .collect();
-    for e in v["entity_frames"].as_array().expect("entity frames") {
-        let frame = e[1].as_str().expect("frame");
-        assert!(
-            frame == "world" || declared.contains(&frame),
-            "entity {e} in a frame no /tf declares"
-        );
-    }
+    entities_sit_in_declared_frames(&v);
     // The reference copy: its own entity, the object's real size, its own (grey) colour.
     let o = &scenario.objects[0];
     let (d, h) = (2.0 * o.radius_m, 2.0 * o.half_height_m);
@@ -704,6 +693,13 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
             serde_json::json!([d, d, h])
         );
     }
+    entities_sit_in_declared_frames(&v);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// Each entity of the reader's summary `v` sits in `world` or in a frame the file transforms.
+fn entities_sit_in_declared_frames(v: &serde_json::Value) {
+    let frames = v["frames"].as_object().expect("frames");
     let declared: Vec<&str> = frames
         .keys()
         .map(|k| k.split_once('>').expect("parent>child").1)
@@ -715,5 +711,4 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
             "entity {e} in a frame no /tf declares"
         );
     }
-    let _ = std::fs::remove_dir_all(&out);
 }

@@ -126,17 +126,23 @@ fn bound_spring(
     if e_new <= held {
         return None;
     }
+    let bounded = scale_back(local, new, |s| spring(s) <= held);
+    Some((bounded, e_new - spring(&bounded)))
+}
+
+/// The largest fraction of the way from `base` to `full` whose state `fits` (`base`, the fraction
+/// 0, is taken to fit): [`BISECTIONS`] halvings of plain arithmetic, the same bits everywhere.
+fn scale_back(base: &BodyState, full: &BodyState, fits: impl Fn(&BodyState) -> bool) -> BodyState {
     let (mut lo, mut hi) = (0.0f64, 1.0f64);
     for _ in 0..BISECTIONS {
         let mid = 0.5 * (lo + hi);
-        if spring(&blend(local, new, mid)) <= held {
+        if fits(&blend(base, full, mid)) {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    let bounded = blend(local, new, lo);
-    Some((bounded, e_new - spring(&bounded)))
+    blend(base, full, lo)
 }
 
 /// The states a `paper` adoption is made of.
@@ -283,16 +289,7 @@ pub fn bound_gain(
         return Some((*base, f64::INFINITY));
     }
     let e_full = energy(world, k, full, tool);
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    for _ in 0..BISECTIONS {
-        let mid = 0.5 * (lo + hi);
-        if fits(&blend(base, full, mid)) {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    let bounded = blend(base, full, lo);
+    let bounded = scale_back(base, full, fits);
     Some((bounded, e_full - energy(world, k, &bounded, tool)))
 }
 

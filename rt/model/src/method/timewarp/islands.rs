@@ -260,15 +260,15 @@ impl TimeWarp {
     }
 
     /// Whether the own tool touched object `k` at tick `t` of the old history (an object a
-    /// re-simulation did not step).
+    /// re-simulation did not step): its contact memory at the tick's end, as sketched.
     pub(super) fn touched_before(&self, k: usize, t: i64) -> bool {
         let Some(r) = self.resim else { return false };
-        let m = k * MAX_SITES + self.me;
-        if t + 1 < r.to {
-            self.tools_at(self.idx(t + 1))[m].touching()
+        let then = if t + 1 < r.to {
+            &self.sketches[self.idx(t + 1)]
         } else {
-            self.scratch_tools[m].touching()
-        }
+            &self.scratch_sketch
+        };
+        then.tools[k] & (1u8 << self.me) != 0
     }
 
     /// Re-simulates only the objects a changed input reaches (on: the default), or every object
