@@ -200,6 +200,9 @@ impl ToolSample {
             depth: self.depth,
             touching: self.touching != 0,
             slipping: false,
+            // Not carried: stations refuse a fingertip's rotational friction
+            // (`coop_actors::station::config`).
+            torque: Vec3::zeros(),
         })
     }
 }
@@ -854,6 +857,9 @@ impl SiteReport {
                     depth: self.depth,
                     touching: self.touching != 0,
                     slipping: false,
+                    // Not carried: stations refuse a fingertip's rotational friction
+                    // (`coop_actors::station::config`).
+                    torque: Vec3::zeros(),
                 };
                 Some((
                     site,
@@ -955,7 +961,7 @@ mod tests {
                 point: Vec3::y(),
                 depth: 1e-3,
                 touching: true,
-                slipping: false,
+                ..ContactForce::default()
             },
             given_j: 0.25,
         };

@@ -490,7 +490,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         point: start.pos - Vec3::new(sc.objects[0].radius_m, 0.0, 0.0),
         depth: 5e-4,
         touching: true,
-        slipping: false,
+        ..ContactForce::default()
     };
     let dt = 1e-3;
     let physics_ns = median(

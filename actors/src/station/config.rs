@@ -395,6 +395,16 @@ impl StationConfig {
                 scenario.name
             );
         }
+        let pad = scenario.contact.rotational_friction_radius_m;
+        if pad != 0.0 {
+            // The rings and the wire carry a tool contact's force and point, not a fingertip's
+            // torque (servo to physics, and `naive`'s reports), nor its rotational memory
+            // (`timewarp`'s adopted snapshot).
+            bail!(
+                "contact.rotational_friction_radius_m = {pad} (scenario {:?}): stations cannot carry a fingertip's rotational friction through their rings and wire yet; the simulator runs it (sim)",
+                scenario.name
+            );
+        }
         let name = self
             .station
             .clone()
@@ -808,6 +818,30 @@ mod tests {
             } else {
                 got.expect("other methods take it");
             }
+        }
+    }
+
+    /// A fingertip's rotational friction acts in the simulator; a station, whose rings and wire
+    /// carry a tool's force but not its torque, refuses it under every method.
+    #[test]
+    fn stations_refuse_a_fingertip_s_rotational_friction() {
+        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
+        sc.contact.rotational_friction_radius_m = 0.005;
+        sc.validate().expect("the simulator takes it");
+        for m in MethodName::ALL {
+            let c = StationConfig {
+                method: Some(m),
+                ..StationConfig::default()
+            };
+            let err = format!(
+                "{:#}",
+                c.resolve_with(None, sc.clone()).expect_err("refused")
+            );
+            assert!(
+                err.contains("contact.rotational_friction_radius_m = 0.005"),
+                "{}: {err}",
+                m.as_str()
+            );
         }
     }
 

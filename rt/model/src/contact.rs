@@ -37,7 +37,10 @@ pub struct ContactParams {
     /// about the contact normal, m. The patch sticks by a torsional spring of the tangential
     /// stiffness and damping times r², and slips at μ F_n r. 0 (the default): none, as the paper
     /// neglects it; an object that carries another off its centre needs it (else nothing holds it
-    /// from turning under the load).
+    /// from turning under the load). In the tool's law (`[contact]`) it is the fingertip's pad:
+    /// the tool does not turn, the object's turn about the normal is resisted, and the device
+    /// displays the force, not this torque (3-DOF); two fingertips without it hold an object as
+    /// on an axle through them.
     pub rotational_friction_radius_m: f64,
 }
 
@@ -69,12 +72,23 @@ pub struct ContactForce {
     pub touching: bool,
     /// Whether the friction slipped this evaluation.
     pub slipping: bool,
+    /// A torque on the object besides the force's moment, world, N·m: a fingertip's rotational
+    /// friction (a 3-DOF device displays the force, not this).
+    pub torque: Vec3,
 }
 
 impl ContactForce {
     /// Its generalized force on an object whose centre of mass is at `com` (Eq. 3).
     pub fn wrench(&self, com: Vec3) -> Wrench {
-        Wrench::at_point(self.force, self.point, com)
+        let w = Wrench::at_point(self.force, self.point, com);
+        // (Without a pad, the moment is left as it was to the bit: not even a zero's sign moves.)
+        if self.torque == Vec3::zeros() {
+            return w;
+        }
+        Wrench {
+            force: w.force,
+            torque: w.torque + self.torque,
+        }
     }
 }
 
@@ -174,10 +188,13 @@ fn twist(
     (slip, Some(v * cos_new + n.cross(&v) * sin_new))
 }
 
-/// Friction memory of one tool contact: the stick point on the object, in body coordinates.
+/// Friction memory of one tool contact: the stick point on the object, in body coordinates; with
+/// rotational friction, a reference direction in the world (the tool does not turn) and on the
+/// object.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ToolContactState {
     anchor_body: Option<Vec3>,
+    twist: Option<(Vec3, Vec3)>,
 }
 
 impl ToolContactState {
@@ -191,10 +208,11 @@ impl ToolContactState {
         self.anchor_body
     }
 
-    /// The memory whose stick point is `anchor` (from a snapshot).
+    /// The memory whose stick point is `anchor` (from a snapshot; no rotational friction memory).
     pub fn from_anchor(anchor: Option<Vec3>) -> Self {
         Self {
             anchor_body: anchor,
+            twist: None,
         }
     }
 }
@@ -216,14 +234,14 @@ pub fn tool_contact(
     // the rotation and the distance (in a world of many objects most tools are far from most).
     let reach = shape.bounding_radius() + tool_radius;
     if (tool_pos - body.pos).norm_squared() > reach * reach {
-        state.anchor_body = None;
+        *state = ToolContactState::default();
         return ContactForce::default();
     }
     let inv: UnitQuaternion<f64> = body.rot.inverse();
     let (dist, n_body) = shape.signed_distance(inv * (tool_pos - body.pos));
     let depth = tool_radius - dist;
     if depth <= 0.0 {
-        state.anchor_body = None;
+        *state = ToolContactState::default();
         return ContactForce::default();
     }
     let n_out = body.rot * n_body; // out of the object, towards the tool
@@ -243,12 +261,27 @@ pub fn tool_contact(
         anchor_w
     };
     state.anchor_body = Some(inv * (new_anchor - body.pos));
+    // A fingertip's pad resists turning about the normal as a patch does (the tool itself
+    // does not turn): without it two fingertips hold an object on the line between them as on
+    // an axle, and it swings about it.
+    let mut torque = Vec3::zeros();
+    if c.rotational_friction_radius_m > 0.0 {
+        let (world_ref, body_ref) = state.twist.unwrap_or_else(|| {
+            let t = across(push);
+            (t, inv * t)
+        });
+        let spin = -body.omega(mass).dot(&push);
+        let (t, slipped_ref) = twist(c, world_ref, body.rot * body_ref, spin, push, f_n);
+        state.twist = Some((slipped_ref.unwrap_or(world_ref), body_ref));
+        torque = push * t;
+    }
     ContactForce {
         force: push * f_n + f_t,
         point: surface,
         depth,
         touching: true,
         slipping: slipped,
+        torque,
     }
 }
 
@@ -903,6 +936,51 @@ pub(crate) mod tests {
             torque_after(&mut left).abs() > 1e-3,
             "left behind, it pulls back"
         );
+    }
+
+    /// Two fingertips squeezing a box from both ends hold it as on an axle through them: a box
+    /// spun about that line spins on between point grips, and is held between two pads (their
+    /// torsional springs take the spin and turn it back), each with at most its slip limit
+    /// (μ_s F_n r) and about that line only.
+    #[test]
+    fn fingertip_pads_stop_a_turn_about_the_line_between_them() {
+        let shape = Shape::Box {
+            half: Vec3::new(0.03, 0.05, 0.01),
+        };
+        let mass = MassProps {
+            mass_kg: 0.25,
+            inertia_body: shape.inertia(0.25),
+        };
+        let spin_after = |r: f64| {
+            let c = ContactParams {
+                rotational_friction_radius_m: r,
+                ..params()
+            };
+            let tips = [Vec3::new(-0.032, 0.0, 0.0), Vec3::new(0.032, 0.0, 0.0)];
+            let mut memory = [ToolContactState::default(); 2];
+            let mut s = BodyState::at_rest(Vec3::zeros());
+            s.ang_mom = s.rot * mass.inertia_body.component_mul(&Vec3::new(2.0, 0.0, 0.0));
+            let mut most = 0.0f64;
+            for _ in 0..1000 {
+                s = step(&s, &mass, Vec3::zeros(), 1e-3, |b| {
+                    let mut w = Wrench::default();
+                    for (tip, m) in tips.iter().zip(memory.iter_mut()) {
+                        let f = tool_contact(&c, m, &shape, b, &mass, *tip, Vec3::zeros(), 0.005);
+                        let n = f.force.dot(&(b.pos - *tip).normalize()).abs();
+                        most = most.max(f.torque.norm() / (c.friction_static * n * r).max(1e-30));
+                        assert!(f.torque.cross(&Vec3::x()).norm() <= 1e-9 + 0.05 * f.torque.norm());
+                        w = w + f.wrench(b.pos);
+                    }
+                    w
+                });
+            }
+            (s.rot.angle(), most)
+        };
+        let (point, _) = spin_after(0.0);
+        let (pad, most) = spin_after(0.005);
+        assert!(point > 1.5, "point grips: turned {point} rad");
+        assert!(pad < 0.3, "pads: turned {pad} rad");
+        assert!(most <= 1.0 + 1e-9, "torque {most} × its slip limit");
     }
 
     /// A firm, damped law with grippy friction: the model's tests' table.

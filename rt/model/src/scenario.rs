@@ -593,13 +593,6 @@ impl Scenario {
             )?;
         }
         validate_contact(&self.contact, "contact")?;
-        if self.contact.rotational_friction_radius_m != 0.0 {
-            return Err(err(
-                "contact.rotational_friction_radius_m",
-                self.contact.rotational_friction_radius_m,
-                "must be 0: a tool's tip touches an object at a point",
-            ));
-        }
         self.display.validate()?;
         validate_contact(&self.environment_contact, "environment_contact")?;
         if let Some(c) = &self.object_contact {

@@ -162,7 +162,7 @@ fn a_world_of_the_most_objects_steps_without_allocating() {
                     point: o.state.pos,
                     depth: 1e-3,
                     touching: true,
-                    slipping: false,
+                    ..ContactForce::default()
                 };
             }
             integrate(&world, &mut copy, &users, 1, 1, 1e-3, &mut []);
@@ -228,7 +228,7 @@ fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocatin
                             point: o.state.pos,
                             depth: 1e-3,
                             touching: true,
-                            slipping: false,
+                            ..ContactForce::default()
                         };
                     }
                     m.own_tool(copy.first().state.pos);

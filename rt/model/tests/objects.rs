@@ -58,7 +58,7 @@ fn through_centre(force: Vec3, s: &BodyState) -> ContactForce {
         point: s.pos,
         depth: 1e-3,
         touching: true,
-        slipping: false,
+        ..ContactForce::default()
     }
 }
 

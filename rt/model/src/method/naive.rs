@@ -221,7 +221,7 @@ mod tests {
             point: Vec3::new(0.0, 0.0, 1.0),
             depth: 1e-3,
             touching: true,
-            slipping: false,
+            ..ContactForce::default()
         };
         let msg = Report::Force {
             object: 0,
@@ -275,7 +275,7 @@ mod tests {
             point: Vec3::new(0.0, 1.0, 0.0),
             depth: 1e-3,
             touching: true,
-            slipping: false,
+            ..ContactForce::default()
         };
         // A free copy (1 m above the plane) pushed by a remote 1 N whose user has given
         // `given_j`, reported every `every` steps and arriving at once (`run`: every 10 ms).

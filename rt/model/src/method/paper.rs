@@ -376,7 +376,7 @@ mod tests {
             point: copy.first().state.pos,
             depth: 0.001,
             touching: true,
-            slipping: false,
+            ..ContactForce::default()
         };
         copy.set_time(0.99);
         m.physics_step(&w, &mut copy, &[push], 0.01);
