@@ -664,7 +664,8 @@ fn live_url(
 /// A world of several objects in `sim run --out`'s `session.mcap`: read by the foreign reader,
 /// every site has a frame and an entity for every object (`object/<site>` for the first,
 /// `object/<name>/<site>` for each other), and so has the reference copy, one frame per sample,
-/// each entity in a declared frame, in the object's real size.
+/// each entity in a declared frame, in the object's real size; and an `/object` message per
+/// object per sample, named.
 #[test]
 fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per_site() {
     if python_with(&["mcap", "google.protobuf"]).is_none() {
@@ -692,7 +693,17 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
             entities[format!("object/target/{s}")]["cylinder_size"],
             serde_json::json!([d, d, h])
         );
+        for o in &scenario.objects {
+            let key = format!("{s}/{}", o.name);
+            assert_eq!(
+                v["json"]["/object"][&key].as_u64(),
+                Some(samples),
+                "/object of {key} in {}",
+                v["json"]["/object"]
+            );
+        }
     }
+    assert!(v["json_schemas"]["/object"]["properties"]["object"].is_object());
     entities_sit_in_declared_frames(&v);
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -220,12 +220,16 @@ impl From<&TraceRecord> for SampleMsg {
 
 json_message! {
     /// `/object`: the sample's object part, named after its site (a viewer that opens several
-    /// sites' recordings, or a session file, tells them apart by it: `/object{site=="user1"}`).
+    /// sites' recordings, or a session file, tells them apart by it: `/object{site=="user1"}`),
+    /// and in a world of several objects after its object (`/object{object=="cup"}`; absent in a
+    /// world of one).
     #[derive(Serialize, Deserialize)]
     struct ObjectPart {
         t_ns: u64,
         #[serde(default)]
         site: String,
+        #[serde(default, skip_serializing_if = "String::is_empty")]
+        object: String,
         pos: [f64; 3],
         rot: [f64; 4],
         vel: [f64; 3],
@@ -1041,6 +1045,7 @@ impl Recorder {
             &ObjectPart {
                 t_ns: m.t_ns,
                 site: self.site.clone(),
+                object: String::new(),
                 pos: m.pos,
                 rot: m.rot,
                 vel: m.vel,
@@ -1486,6 +1491,7 @@ mod tests {
                 serde_json::to_value(ObjectPart {
                     t_ns: 0,
                     site: String::new(),
+                    object: "cup".into(),
                     pos: [0.0; 3],
                     rot: [0.0; 4],
                     vel: [0.0; 3],

@@ -9,7 +9,7 @@
 //!
 //! | topic         | schema                    | per sample of the scenario's grid                   |
 //! |---------------|---------------------------|-----------------------------------------------------|
-//! | `/object`     | JSON, as in a station's recording | one per site and one for the reference (`site` tells them apart) |
+//! | `/object`     | JSON, as in a station's recording | one per site and one for the reference (`site` tells them apart); in a world of several objects one per object of each (`object` names it) |
 //! | `/tool`       | JSON, as in a station's recording | one per site                                 |
 //! | `/divergence` | JSON [`DivergenceMsg`]    | the largest distance between copies, each copy's from the reference |
 //! | `/tf`         | `foxglove.FrameTransform` | `world → object/<site>`, `world → tool/<site>`, `world → object/reference`; in a world of several objects also `world → object/<name>/<site>` (and `object/<name>/reference`) for each other object |
@@ -92,15 +92,41 @@ fn other_poses(run: &RunResult, i: usize, k: usize) -> Vec<([f64; 3], [f64; 4])>
         .collect()
 }
 
-fn object_part(site: &str, m: &SampleMsg) -> ObjectPart {
+fn object_part(site: &str, object: &str, m: &SampleMsg) -> ObjectPart {
     ObjectPart {
         t_ns: m.t_ns,
         site: site.to_owned(),
+        object: object.to_owned(),
         pos: m.pos,
         rot: m.rot,
         vel: m.vel,
         adoptions: m.adoptions,
     }
+}
+
+/// The `/object` messages of site `i` of `run` at sample `k` after the first object's
+/// (`first`): one per other object, named (`names`: every object's, the first's first).
+fn other_object_parts(
+    run: &RunResult,
+    (i, k): (usize, usize),
+    site: &str,
+    names: &[String],
+    first: &SampleMsg,
+) -> Vec<ObjectPart> {
+    run.sites[i]
+        .others
+        .iter()
+        .zip(names.iter().skip(1))
+        .map(|(o, name)| ObjectPart {
+            t_ns: first.t_ns,
+            site: site.to_owned(),
+            object: name.clone(),
+            pos: o.pos[k].into(),
+            rot: o.rot[k],
+            vel: o.vel[k].into(),
+            adoptions: first.adoptions,
+        })
+        .collect()
 }
 
 fn tool_part(site: &str, m: &SampleMsg) -> ToolPart {
@@ -184,6 +210,13 @@ pub fn write(
         epoch_unix_ns,
     };
     let names: Vec<&str> = scenes.iter().map(|s| s.site.as_str()).collect();
+    // A world of one object names none (its `/object` is a station recording's).
+    let objects: Vec<String> = if sc.objects.len() > 1 {
+        sc.objects.iter().map(|o| o.name.clone()).collect()
+    } else {
+        Vec::new()
+    };
+    let first_object = objects.first().map_or("", String::as_str);
     let start = Scene {
         site: "session".into(),
         ..first.clone()
@@ -217,7 +250,10 @@ pub fn write(
             .filter(|r| k < r.t.len())
             .map(|r| sample_of(r, 0, k, t_ns));
         for (i, (scene, m)) in scenes.iter().zip(&samples).enumerate() {
-            w.json(OBJECT, t_ns, &object_part(&scene.site, m))?;
+            w.json(OBJECT, t_ns, &object_part(&scene.site, first_object, m))?;
+            for part in other_object_parts(run, (i, k), &scene.site, &objects, m) {
+                w.json(OBJECT, t_ns, &part)?;
+            }
             w.json(TOOL, t_ns, &tool_part(&scene.site, m))?;
             for f in &scene.transforms(m, wall) {
                 w.foxglove(TF, t_ns, f)?;
@@ -227,7 +263,12 @@ pub fn write(
             }
         }
         if let Some(m) = &reference_sample {
-            w.json(OBJECT, t_ns, &object_part(REFERENCE, m))?;
+            w.json(OBJECT, t_ns, &object_part(REFERENCE, first_object, m))?;
+            if let Some(r) = reference {
+                for part in other_object_parts(r, (0, k), REFERENCE, &objects, m) {
+                    w.json(OBJECT, t_ns, &part)?;
+                }
+            }
             let [object, _tool] = reference_scene.transforms(m, wall);
             w.foxglove(TF, t_ns, &object)?;
             if let Some(r) = reference {
