@@ -442,7 +442,30 @@ fn timewarp_lifts_and_carries_the_disk_in_3d_at_200_ms() {
     assert!(p.phases_passed < p.phases_total, "{p:?}");
 }
 
-/// The three-user task (issue 12): users 1 and 2 grasp the disk from the sides and user 3 from
+/// Two users carry the tray with the cup on it at a constant 300 ms (`scenarios/tray.toml`): held
+/// at mid-height by fingertip pads, it stays level and the cup on it, every phase at both sites;
+/// with point grips (no pad) the same grip lets the tray tip over about the line between them.
+#[test]
+fn timewarp_carries_the_tray_at_300_ms_on_fingertip_pads() {
+    let (_, m) = scenario_run("tray.toml", MethodName::Timewarp, 300.0, 3);
+    assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
+    assert_eq!(m.hash_mismatches, 0);
+    assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
+    let base = scenario_file::load(&repo().join("scenarios/tray.toml")).expect("tray.toml");
+    assert!(base.contact.rotational_friction_radius_m > 0.0);
+    let mut points = scenario_at(&base, 300.0, 3).expect("valid");
+    points.contact.rotational_friction_radius_m = 0.0;
+    let r = sim::run(
+        &points,
+        Mode::Distributed(MethodName::Timewarp),
+        &mut |_| {},
+    );
+    let reference = sim::run(&points, Mode::Reference, &mut |_| {});
+    let p = metrics::compute(&points, &r, &reference);
+    assert!(p.phases_passed < p.phases_total, "point grips: {p:?}");
+}
+
+/// The three-user task: users 1 and 2 grasp the disk from the sides and user 3 from
 /// the front, squeeze it and carry it together (`scenarios/three-grasp.toml`), and the 3-D ones, in
 /// which they lift it, carry it and set it down: from three sides 120° apart, the squeezes
 /// balancing (`scenarios/three-lift-balanced.toml`), and with user 3's squeeze held by the side
