@@ -427,7 +427,11 @@ impl ToolTrack {
             started_tick: r.started_tick,
             ..Self::default()
         };
-        if let Some(snap) = r.state.filter(|s| s.tick == r.confirmed_tick) {
+        // (A world of one: stations run one object so far.)
+        if let Some(snap) = r
+            .state
+            .filter(|s| s.tick == r.confirmed_tick && s.objects == 1)
+        {
             let (pos, rot, vel, ang_mom) = state_fields(&snap.state);
             out.has_state = 1;
             for (k, v) in pos
@@ -555,12 +559,13 @@ impl ToolTrack {
                 for (j, c) in contacts.iter_mut().enumerate() {
                     *c = ToolContactState::from_anchor(point(&self.state_tools, j, bit(8 + j))?);
                 }
-                Some(Some(Snapshot {
-                    tick: self.confirmed_tick as i64,
+                Some(Some(Snapshot::one(
+                    self.confirmed_tick as i64,
+                    self.confirmed_hash,
                     state,
-                    env: EnvContactState::from_anchors(env),
+                    EnvContactState::from_anchors(env),
                     contacts,
-                }))
+                )))
             }
             _ => None,
         }

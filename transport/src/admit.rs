@@ -838,17 +838,18 @@ mod tests {
         // where a state would be (faster than anything in the world can go).
         let with_state = |vel: f64| {
             let mut w = r;
-            w.state = Some(coop_model::method::track::Snapshot {
-                tick: 300_000,
-                state: coop_model::body::BodyState {
+            w.state = Some(coop_model::method::track::Snapshot::one(
+                300_000,
+                0,
+                coop_model::body::BodyState {
                     vel: coop_model::body::Vec3::new(vel, 0.0, 0.0),
                     ..coop_model::body::BodyState::at_rest(coop_model::body::Vec3::new(
                         0.0, 0.0, 0.01,
                     ))
                 },
-                env: Default::default(),
-                contacts: Default::default(),
-            });
+                Default::default(),
+                Default::default(),
+            ));
             w
         };
         let a = inb

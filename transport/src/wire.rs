@@ -401,12 +401,13 @@ mod tests {
         contacts[1] = coop_model::contact::ToolContactState::from_anchor(Some(
             coop_model::body::Vec3::new(0.04, 0.0, -0.0),
         ));
-        let snap = coop_model::method::track::Snapshot {
-            tick: 480,
-            state: body,
-            env: coop_model::contact::EnvContactState::from_anchors(anchors),
+        let snap = coop_model::method::track::Snapshot::one(
+            480,
+            coop_model::method::timewarp::hash_state(&body),
+            body,
+            coop_model::contact::EnvContactState::from_anchors(anchors),
             contacts,
-        };
+        );
         let with_state = ToolReport {
             need_state: 0b10,
             started_tick: 3,

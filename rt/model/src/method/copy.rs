@@ -182,6 +182,29 @@ impl WorldCopy {
         }
     }
 
+    /// Object `k` takes an adopted snapshot's parts: its state, its environment's friction
+    /// memory, its sleep count and its contacts' memory with each later object (`later[m]`: with
+    /// object `k + 1 + m`). Allocates nothing.
+    pub fn set_object(
+        &mut self,
+        k: usize,
+        (state, env): (BodyState, EnvContactState),
+        still: u32,
+        later: &[PairContactState],
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let n = self.objects.len();
+        if k >= n {
+            return;
+        }
+        self.objects[k].state = state;
+        self.objects[k].env = env;
+        self.still[k] = still;
+        for (j, p) in (k + 1..n).zip(later) {
+            self.pairs[pair_index(k, j, n)] = *p;
+        }
+    }
+
     /// Takes from `other` (a copy of the same world) the objects in `objects` (their copies and
     /// sleep counts) and the memory of the contacts `pairs(i, j)` says (`i < j`). Allocates
     /// nothing.

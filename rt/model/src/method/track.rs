@@ -2,8 +2,8 @@
 //! quantized so every site steps the same bits, and what goes with them.
 
 use crate::body::{BodyState, Vec3};
-use crate::contact::{EnvContactState, ToolContactState};
-use crate::world::MAX_SITES;
+use crate::contact::{EnvContactState, PairContactState, ToolContactState};
+use crate::world::{MAX_OBJECTS, MAX_SITES};
 
 /// The quantum of a tool position on the wire and in the physics, m (0.01 mm).
 pub const QUANTUM_M: f64 = 1e-5;
@@ -39,18 +39,53 @@ pub fn position(q: Quantized) -> Vec3 {
     )
 }
 
-/// A site's full state at the start of one of its confirmed ticks: what a site whose confirmed
-/// history diverged from it adopts (see the module docs).
+/// One object of a site's full state at the start of one of its confirmed ticks: what a site
+/// whose confirmed history diverged from it adopts (see the module docs). A world of several
+/// objects travels one object per report, all at the same tick, and is adopted once every object
+/// of it has arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Snapshot {
     /// The tick.
     pub tick: i64,
+    /// Which object this is, of how many.
+    pub object: usize,
+    /// See `object`.
+    pub objects: usize,
+    /// The hash of the whole world's state at `tick` (what every object of it together gives).
+    pub world_hash: u64,
     /// The object.
     pub state: BodyState,
     /// The environment's friction memory.
     pub env: EnvContactState,
     /// Every tool's friction memory.
     pub contacts: [ToolContactState; MAX_SITES],
+    /// Its contact memory with each later object (`object + 1 + k` at `k`).
+    pub pairs: [PairContactState; MAX_OBJECTS - 1],
+    /// The steps in a row it has been still (it sleeps after a number of them).
+    pub still: u32,
+}
+
+impl Snapshot {
+    /// The state of a world of one object (`world_hash` its state's hash: `hash_state`).
+    pub fn one(
+        tick: i64,
+        world_hash: u64,
+        state: BodyState,
+        env: EnvContactState,
+        contacts: [ToolContactState; MAX_SITES],
+    ) -> Self {
+        Self {
+            tick,
+            object: 0,
+            objects: 1,
+            world_hash,
+            state,
+            env,
+            contacts,
+            pairs: [PairContactState::default(); MAX_OBJECTS - 1],
+            still: 0,
+        }
+    }
 }
 
 // `ToolReport::need_state` has a bit per site.

@@ -1,45 +1,131 @@
 //! The confirmed state's hash every report carries, and adopting a confirmed state that differs.
 
 use super::*;
+use crate::contact::PairContactState;
+use crate::world::pair_index;
 
 impl TimeWarp {
-    /// Adopts the state `r` carries (its sender's at its confirmed frontier, which this site has
-    /// confirmed too) at that tick and re-simulates to now; `None` if it carries none, or one
-    /// that is not the state its hash names.
+    /// The snapshot a report carries while a site asks for this one's state, in a world of
+    /// `objects` with the confirmed frontier at `frontier`: a world of one whole at the
+    /// frontier; one of several one object per report, in turn, at a tick held until every
+    /// object went (and taken again at the frontier when it leaves the history). `None` where
+    /// the tick is not kept.
+    pub(super) fn snapshot_to_send(&self, objects: usize, frontier: i64) -> Option<Snapshot> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let kept = |t: i64| t >= self.oldest_kept() && self.slots[self.idx(t)].tick == t;
+        let (held, next) = self.state_sent.get();
+        let (t, k) = match held {
+            Some(t) if objects > 1 && kept(t) => (t, next % objects),
+            _ => (frontier, 0),
+        };
+        if !kept(t) {
+            self.state_sent.set((None, 0));
+            return None;
+        }
+        self.state_sent.set((Some(t), k + 1));
+        Some(self.snapshot_at(t, k))
+    }
+
+    /// Object `k` of the kept state at the start of tick `t`, as a snapshot.
+    fn snapshot_at(&self, t: i64, k: usize) -> Snapshot {
+        let i = self.idx(t);
+        let w = &self.worlds[i];
+        let n = w.len();
+        let mut contacts = [ToolContactState::default(); MAX_SITES];
+        contacts.copy_from_slice(&self.tools_at(i)[k * MAX_SITES..(k + 1) * MAX_SITES]);
+        let mut pairs = [PairContactState::default(); MAX_OBJECTS - 1];
+        for (p, j) in pairs.iter_mut().zip(k + 1..n) {
+            *p = w.pairs()[pair_index(k, j, n)];
+        }
+        let o = &w.objects()[k];
+        Snapshot {
+            tick: t,
+            object: k,
+            objects: n,
+            world_hash: hash_world(w),
+            state: o.state,
+            env: o.env,
+            contacts,
+            pairs,
+            still: w.still()[k],
+        }
+    }
+
+    /// Takes the object of the state `r` carries from site `from` (its confirmed state at a tick
+    /// this site has confirmed too); once every object of the world is in, all from that site at
+    /// that tick, and they hash to the world's hash, adopts them there and re-simulates to now.
+    /// `None` until then, or if what it carries is not that state.
     pub(super) fn resync(
         &mut self,
         world: &World,
         copy: &mut WorldCopy,
+        from: usize,
         r: &ToolReport,
     ) -> Option<Adoption> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        // (A snapshot carries one object: a world of several is not resynchronised.)
-        if copy.len() != 1 {
+        let snap = r.state?;
+        let n = copy.len();
+        if snap.objects != n || snap.object >= n {
             return None;
         }
-        let snap = r
-            .state
-            .filter(|s| s.tick == r.confirmed_tick && hash_state(&s.state) == r.confirmed_hash)?;
-        let i = self.idx(snap.tick);
-        // A kept slot is a simulated tick (the current one is not kept yet: hash_at checked).
-        if self.slots[i].tick != snap.tick
-            || super::super::tank::spring_energy(world, 0, &snap.state) > self.max_spring_j
+        // A world of one travels whole, at the sender's frontier, under its hash.
+        if n == 1 && (snap.tick != r.confirmed_tick || hash_state(&snap.state) != r.confirmed_hash)
         {
             return None;
         }
+        let same = self.incoming_from == from
+            && self.incoming[..n]
+                .iter()
+                .flatten()
+                .all(|s| s.tick == snap.tick && s.world_hash == snap.world_hash);
+        if !same {
+            self.incoming[..n].fill(None);
+            self.incoming_from = from;
+        }
+        self.incoming[snap.object] = Some(snap);
+        if self.incoming[..n].iter().any(Option::is_none) {
+            return None;
+        }
+        let (t, i) = (snap.tick, self.idx(snap.tick));
+        // A kept slot is a simulated tick (the current one is not kept yet); a tick not confirmed
+        // here yet waits for the next report (the sender sends its objects again).
+        if self.slots[i].tick != t || t < self.oldest_kept() {
+            self.incoming[..n].fill(None);
+            return None;
+        }
+        if t > self.confirmed_tick() {
+            return None;
+        }
+        let mut h = FNV_OFFSET;
+        for s in self.incoming[..n].iter().flatten() {
+            h = fnv(h, &s.state);
+        }
+        let deep = self.incoming[..n].iter().flatten().any(|s| {
+            super::super::tank::spring_energy(world, s.object, &s.state) > self.max_spring_j
+        });
+        if h != snap.world_hash || deep {
+            self.incoming[..n].fill(None);
+            return None;
+        }
         let before = Before::of(world, copy);
-        let e = |s: &BodyState| s.mechanical_energy(&world.bodies[0].mass, world.gravity);
-        let kept = self.worlds[i].first_mut();
-        // The jump is energy no force of the history accounts for.
-        kept.energy.adoption_j += e(&snap.state) - e(&kept.state);
-        kept.state = snap.state;
-        kept.env = snap.env;
-        let n = self.tools_len();
-        self.tools[i * n..i * n + MAX_SITES].copy_from_slice(&snap.contacts);
+        let len = self.tools_len();
+        for k in 0..n {
+            let Some(s) = self.incoming[k].take() else {
+                continue;
+            };
+            let body = &world.bodies[k];
+            let e = |b: &BodyState| b.mechanical_energy(&body.mass, world.gravity);
+            let kept = &mut self.worlds[i];
+            // The jump is energy no force of the history accounts for.
+            kept.objects_mut()[k].energy.adoption_j += e(&s.state) - e(&kept.objects()[k].state);
+            kept.set_object(k, (s.state, s.env), s.still, &s.pairs);
+            let m = i * len + k * MAX_SITES;
+            self.tools[m..m + MAX_SITES].copy_from_slice(&s.contacts);
+        }
         // (Its state changed, not only inputs: every object steps again.)
-        self.rollback(world, copy, snap.tick, true);
+        self.rollback(world, copy, t, true);
         self.stats.adopted_states += 1;
-        Some(before.adoption(world, copy, (self.now_tick - snap.tick) as f64 * self.dt))
+        Some(before.adoption(world, copy, (self.now_tick - t) as f64 * self.dt))
     }
 
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.

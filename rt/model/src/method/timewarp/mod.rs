@@ -27,15 +27,16 @@
 //! with no history before it), and then no
 //! rollback can repair them. A site whose confirmed state differs from that of a site *before* it
 //! asks that site for its state ([`ToolReport::need_state`]); that site sends its full confirmed
-//! state ([`Snapshot`]: body, momenta, every friction memory) with its reports while asked, and
-//! the asking site adopts it at that tick and re-simulates to now ([`RollbackStats::adopted_states`]):
+//! state ([`Snapshot`]: bodies, momenta, every friction memory, the objects' sleep) with its
+//! reports while asked (a world of several one object per report, all at one tick), and the
+//! asking site adopts it at that tick, once it has all of it, and re-simulates to now
+//! ([`RollbackStats::adopted_states`]):
 //! the paper's adoption of a received state, at the confirmed frontier. Sites are ordered by the
 //! tick their physics process started at ([`ToolReport::started_tick`]: the newest yields), then
 //! by number; the first site's history is the one kept, so sites that all disagree still converge
 //! on one. A state that puts the object deeper into the environment than all the users' forces
 //! together could ([`TimeWarp::set_max_spring_energy`]) is not adopted: the mismatches go on,
-//! counted. A world of several objects is not resynchronised (a snapshot carries one object): its
-//! mismatches are counted and go on.
+//! counted. (Stations carry a world of one object's state so far: their wire's snapshot.)
 //!
 //! What rolling back costs the user's feel is counted too: confirmed ticks in which the own tool
 //! touched the object though the copy had shown no contact when it first simulated them
@@ -153,6 +154,13 @@ pub struct TimeWarp {
     want_state: [bool; MAX_SITES],
     /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
+    /// While asked, in a world of several objects: the tick whose state goes out, one object per
+    /// report, and the next object to send.
+    state_sent: std::cell::Cell<(Option<i64>, usize)>,
+    /// A world's state being received, object by object (all from one site, at one tick).
+    incoming: Box<[Option<Snapshot>]>,
+    /// The site `incoming` comes from.
+    incoming_from: usize,
     /// The tick this site's physics process started at ([`ToolReport::started_tick`]).
     started_tick: u64,
     /// The most environment-spring energy an adopted state may hold, J.
@@ -236,6 +244,9 @@ impl TimeWarp {
             repaired_last: std::cell::Cell::new(false),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
+            state_sent: std::cell::Cell::new((None, 0)),
+            incoming: vec![None; MAX_OBJECTS].into_boxed_slice(),
+            incoming_from: 0,
             started_tick: 0,
             max_spring_j: f64::INFINITY,
             dirty_from: None,
@@ -535,20 +546,12 @@ impl TimeWarp {
         for (j, &want) in self.want_state.iter().enumerate() {
             r.need_state |= u8::from(want) << j;
         }
-        // (A snapshot carries one object: a world of several is not resynchronised.)
-        if self.state_asked.iter().any(|&a| a) && copy.len() == 1 {
-            let t = r.confirmed_tick;
-            let i = self.idx(t);
-            let s = &self.slots[i];
-            let mut contacts = [ToolContactState::default(); MAX_SITES];
-            contacts.copy_from_slice(&self.tools_at(i)[..MAX_SITES]);
-            r.state = (s.tick == t).then_some(Snapshot {
-                tick: t,
-                state: self.worlds[i].first().state,
-                env: self.worlds[i].first().env,
-                contacts,
-            });
-        }
+        r.state = if self.state_asked.iter().any(|&a| a) {
+            self.snapshot_to_send(copy.len(), r.confirmed_tick)
+        } else {
+            self.state_sent.set((None, 0));
+            None
+        };
         for j in (0..self.sites).filter(|&j| j != self.me) {
             if self.newest[j] > self.known_until[j] {
                 r.need[j] = self.known_until[j] + 1;
@@ -688,11 +691,9 @@ impl Consistency for TimeWarp {
                 // Asked for while it differs from a site before this one (and no longer when the
                 // order changes: a restart moves a site back).
                 let earlier = (r.started_tick, from) < (self.started_tick, self.me);
-                // (A snapshot carries one object: a world of several is not resynchronised.)
-                let can = copy.len() == 1;
-                self.want_state[from] = earlier && differs && can;
-                if earlier && differs && can {
-                    if let Some(a) = self.resync(world, copy, r) {
+                self.want_state[from] = earlier && differs;
+                if earlier && differs {
+                    if let Some(a) = self.resync(world, copy, from, r) {
                         adoption = Some(adoption.map_or(a, |b| Adoption {
                             jump: a.jump + b.jump,
                             energy_j: a.energy_j + b.energy_j,

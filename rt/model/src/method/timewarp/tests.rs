@@ -689,12 +689,13 @@ fn a_state_deep_in_the_table_is_not_adopted() {
     let offer = |r: &mut ToolReport, z: f64| {
         let state = BodyState::at_rest(Vec3::new(0.001, 0.0, z));
         r.confirmed_hash = hash_state(&state);
-        r.state = Some(Snapshot {
-            tick: r.confirmed_tick,
+        r.state = Some(Snapshot::one(
+            r.confirmed_tick,
+            r.confirmed_hash,
             state,
-            env: EnvContactState::default(),
-            contacts: [ToolContactState::default(); MAX_SITES],
-        });
+            EnvContactState::default(),
+            [ToolContactState::default(); MAX_SITES],
+        ));
     };
     // 5 cm into the table: ½ · 3000 N/m · (0.05 m)² ≈ 3.75 J of spring.
     offer(&mut r, 0.01 - 0.05);
@@ -864,4 +865,123 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
         .map(|(tw, _)| tw.rollback_stats().max_depth)
         .max();
     assert!(deepest >= Some(280), "rolled back to the edge: {deepest:?}");
+}
+
+/// A world of several objects resynchronises as a world of one does: site 1's tool pushes a row
+/// of pucks while its reports to site 0 are lost for longer than the history (a fallback), so
+/// the confirmed worlds differ; site 1 asks site 0 (the lower number) for its state, which comes
+/// one object per report at one tick, and adopts it once all of it is in. From then on the two
+/// agree to the bit, every object, its sleep and its contacts.
+#[test]
+fn a_world_of_several_objects_is_resynchronized_object_by_object() {
+    use crate::contact::Plane;
+    use crate::shape::Shape;
+    use crate::world::Body;
+    let (sc, _) = paper_world();
+    let puck = Body::solid(
+        Shape::Cylinder {
+            radius: 0.02,
+            half_height: 0.01,
+        },
+        0.1,
+    );
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let w = World::new(
+        &[puck; 3],
+        Vec3::new(0.0, 0.0, -3.27),
+        &table,
+        sc.environment_contact,
+    );
+    let states: Vec<BodyState> = (0..3)
+        .map(|k| BodyState::at_rest(Vec3::new(-0.04 + 0.0401 * k as f64, 0.0, 0.01)))
+        .collect();
+    let start = WorldCopy::new(&states);
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let mut sites = [0, 1].map(|i| {
+        (
+            TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start),
+            start.clone(),
+        )
+    });
+    // Site 1's tool pushes the row's right end from 0.9 s to 1.3 s and draws back; site 0's
+    // rests far away. Site 1 → site 0 is down for 1.2 s, twice the history.
+    let tool = |i: usize, k: i64| {
+        let s = k as f64 * 1e-3;
+        let x = match (i, s) {
+            (0, _) => -0.15,
+            (_, s) if s < 0.9 => 0.12,
+            (_, s) if s < 1.3 => 0.12 - 0.15 * (s - 0.9),
+            (_, s) => (0.06 + 0.15 * (s - 1.3)).min(0.12),
+        };
+        Vec3::new(x, 0.0, 0.01)
+    };
+    let lost = |from: usize, k: i64| from == 1 && (1000..2200).contains(&k);
+    let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+    let mut carried = [false; 3];
+    let mut mismatches_at = [0u64; 2];
+    for k in 0..5000i64 {
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+            }
+            tw.own_tool(tool(i, k));
+            tw.physics_step(&w, copy, &[ContactForce::default(); 3], 1e-3);
+        }
+        in_flight.retain(|m| m.0 > k);
+        if k == 4000 {
+            mismatches_at = [0, 1].map(|i| sites[i].0.rollback_stats().hash_mismatches);
+        }
+        if k % 20 == 0 {
+            for (i, (tw, copy)) in sites.iter().enumerate() {
+                let r = tw.track_report(copy);
+                if let Report::Tools(t) = &r {
+                    if let Some(s) = t.state {
+                        assert_eq!((i, s.objects), (0, 3), "only site 0 sends its state");
+                        carried[s.object] = true;
+                    }
+                }
+                if !lost(i, k) {
+                    in_flight.push((k + 50, i, r));
+                }
+            }
+        }
+    }
+    let [(a, ca), (b, cb)] = &sites;
+    let st = [a.rollback_stats(), b.rollback_stats()];
+    assert!(st[0].fallbacks > 0, "site 0 lost part of the push: {st:?}");
+    assert!(
+        st[0].hash_mismatches + st[1].hash_mismatches > 0,
+        "the divergence was seen: {st:?}"
+    );
+    assert_eq!(carried, [true; 3], "every object went");
+    assert!(st[1].adopted_states > 0, "{st:?}");
+    assert_eq!(st[0].adopted_states, 0, "{st:?}");
+    assert_eq!(
+        [st[0].hash_mismatches, st[1].hash_mismatches],
+        mismatches_at,
+        "no mismatch in the last second: {st:?}"
+    );
+    let t = a.confirmed_tick().min(b.confirmed_tick());
+    assert!(t > 4900, "both confirmed to the last report: {t}");
+    assert_eq!(a.hash_at(t), b.hash_at(t));
+    // (Their energy accounts differ: one adopted.)
+    assert!(
+        ca.pairs() == cb.pairs()
+            && ca.still() == cb.still()
+            && ca
+                .objects()
+                .iter()
+                .zip(cb.objects())
+                .all(|(x, y)| x.state == y.state && x.env == y.env),
+        "the copies are the same bits, every object"
+    );
+    // With site 0's state the row was never pushed.
+    let moved = (0..3)
+        .map(|o| (ca.objects()[o].state.pos - states[o].pos).norm())
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-3, "site 0's history kept: moved {moved} m");
 }
