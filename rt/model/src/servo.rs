@@ -128,7 +128,7 @@ impl Servo {
         let (tool_pos, tool_vel) = (inp.tool_pos, inp.tool_vel);
         let n = bodies.len().min(inp.objects.len()).clamp(1, MAX_OBJECTS);
         let synced: [bool; MAX_OBJECTS] =
-            std::array::from_fn(|k| self.display_contact[k] == self.contact[k]);
+            std::array::from_fn(|k| k < n && self.display_contact[k] == self.contact[k]);
         let mut contacts = [ContactForce::default(); MAX_OBJECTS];
         for k in 0..n {
             contacts[k] = tool_contact(
