@@ -208,6 +208,15 @@ impl ToolContactState {
         self.anchor_body
     }
 
+    /// Turns the pad's world reference by `turn`: when a copy takes another pose (turned by
+    /// `turn`), a pad's twist spring must not be stretched by the correction (the stick point,
+    /// on the body, moves with it already).
+    pub fn turn(&mut self, turn: UnitQuaternion<f64>) {
+        if let Some((world_ref, _)) = self.twist.as_mut() {
+            *world_ref = turn * *world_ref;
+        }
+    }
+
     /// The memory whose stick point is `anchor` (from a snapshot; no rotational friction memory).
     pub fn from_anchor(anchor: Option<Vec3>) -> Self {
         Self {

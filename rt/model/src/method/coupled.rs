@@ -564,8 +564,11 @@ impl Consistency for Coupled {
             clipped_j,
         };
         copy.energy.adoption_j += adoption.energy_j;
-        copy.env
-            .shift(new.pos - copy.state.pos, new.rot * copy.state.rot.inverse());
+        let turn = new.rot * copy.state.rot.inverse();
+        copy.env.shift(new.pos - copy.state.pos, turn);
+        for c in &mut self.contacts[k] {
+            c.turn(turn);
+        }
         copy.state = new;
         world_copy.objects_mut()[k] = copy;
         world_copy.corrected(k);

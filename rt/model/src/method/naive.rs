@@ -102,6 +102,7 @@ impl Consistency for Naive {
                         continue;
                     }
                     f.force *= left.min(1.0);
+                    f.torque *= left.min(1.0);
                 }
                 // The no-gain bound (see the type's docs): a site's force that has done here
                 // what its user gave does no more positive work.

@@ -5,29 +5,10 @@ use crate::contact::PairContactState;
 use crate::world::pair_index;
 
 impl TimeWarp {
-    /// The snapshot a report carries while a site asks for this one's state, in a world of
-    /// `objects` with the confirmed frontier at `frontier`: a world of one whole at the
-    /// frontier; one of several one object per report, in turn, at a tick held until every
-    /// object went (and taken again at the frontier when it leaves the history). `None` where
-    /// the tick is not kept.
-    pub(super) fn snapshot_to_send(&self, objects: usize, frontier: i64) -> Option<Snapshot> {
+    /// Object `k` of the kept state at the start of tick `t` (a simulated tick still kept), as
+    /// a snapshot.
+    pub(super) fn snapshot_at(&self, t: i64, k: usize) -> Snapshot {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let kept = |t: i64| t >= self.oldest_kept() && self.slots[self.idx(t)].tick == t;
-        let (held, next) = self.state_sent.get();
-        let (t, k) = match held {
-            Some(t) if objects > 1 && kept(t) => (t, next % objects),
-            _ => (frontier, 0),
-        };
-        if !kept(t) {
-            self.state_sent.set((None, 0));
-            return None;
-        }
-        self.state_sent.set((Some(t), k + 1));
-        Some(self.snapshot_at(t, k))
-    }
-
-    /// Object `k` of the kept state at the start of tick `t`, as a snapshot.
-    fn snapshot_at(&self, t: i64, k: usize) -> Snapshot {
         let i = self.idx(t);
         let w = &self.worlds[i];
         let n = w.len();
@@ -54,7 +35,10 @@ impl TimeWarp {
     /// Takes the object of the state `r` carries from site `from` (its confirmed state at a tick
     /// this site has confirmed too); once every object of the world is in, all from that site at
     /// that tick, and they hash to the world's hash, adopts them there and re-simulates to now.
-    /// `None` until then, or if what it carries is not that state.
+    /// `None` until then, or if what it carries is not that state. A world's first object begins
+    /// a new gathering, unless a site before the sender (in the sites' order) has one under way
+    /// whose tick is still kept: every earlier site that differs is asked, and the first one's
+    /// state is the one taken.
     pub(super) fn resync(
         &mut self,
         world: &World,
@@ -73,14 +57,24 @@ impl TimeWarp {
         {
             return None;
         }
-        let same = self.incoming_from == from
-            && self.incoming[..n]
-                .iter()
-                .flatten()
-                .all(|s| s.tick == snap.tick && s.world_hash == snap.world_hash);
-        if !same {
+        let kept = |t: i64| t >= self.oldest_kept() && self.slots[self.idx(t)].tick == t;
+        let under_way = self.incoming[..n]
+            .iter()
+            .flatten()
+            .next()
+            .copied()
+            .filter(|g| kept(g.tick));
+        let order = (r.started_tick, from);
+        if snap.object == 0 {
+            if under_way.is_some() && self.incoming_from < order {
+                return None;
+            }
             self.incoming[..n].fill(None);
-            self.incoming_from = from;
+            self.incoming_from = order;
+        } else if under_way.is_none_or(|g| {
+            self.incoming_from.1 != from || g.tick != snap.tick || g.world_hash != snap.world_hash
+        }) {
+            return None;
         }
         self.incoming[snap.object] = Some(snap);
         if self.incoming[..n].iter().any(Option::is_none) {

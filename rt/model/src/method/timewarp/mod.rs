@@ -154,13 +154,10 @@ pub struct TimeWarp {
     want_state: [bool; MAX_SITES],
     /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
-    /// While asked, in a world of several objects: the tick whose state goes out, one object per
-    /// report, and the next object to send.
-    state_sent: std::cell::Cell<(Option<i64>, usize)>,
     /// A world's state being received, object by object (all from one site, at one tick).
     incoming: Box<[Option<Snapshot>]>,
-    /// The site `incoming` comes from.
-    incoming_from: usize,
+    /// The site `incoming` comes from: its start tick and number (the sites' order).
+    incoming_from: (u64, usize),
     /// The tick this site's physics process started at ([`ToolReport::started_tick`]).
     started_tick: u64,
     /// The most environment-spring energy an adopted state may hold, J.
@@ -244,9 +241,8 @@ impl TimeWarp {
             repaired_last: std::cell::Cell::new(false),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
-            state_sent: std::cell::Cell::new((None, 0)),
             incoming: vec![None; MAX_OBJECTS].into_boxed_slice(),
-            incoming_from: 0,
+            incoming_from: (0, 0),
             started_tick: 0,
             max_spring_j: f64::INFINITY,
             dirty_from: None,
@@ -503,7 +499,7 @@ impl TimeWarp {
 
 impl TimeWarp {
     /// The own tool's track and the confirmed frontier (see [`Consistency::report`]).
-    fn track_report(&self, copy: &WorldCopy) -> Report {
+    fn track_report(&self) -> Report {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
         // this site's history starts at: it was not here.)
@@ -546,12 +542,10 @@ impl TimeWarp {
         for (j, &want) in self.want_state.iter().enumerate() {
             r.need_state |= u8::from(want) << j;
         }
-        r.state = if self.state_asked.iter().any(|&a| a) {
-            self.snapshot_to_send(copy.len(), r.confirmed_tick)
-        } else {
-            self.state_sent.set((None, 0));
-            None
-        };
+        // (Its first object: the others follow in reports of their own, `Consistency::report`.)
+        let t = r.confirmed_tick;
+        r.state = (self.state_asked.iter().any(|&a| a) && self.slots[self.idx(t)].tick == t)
+            .then(|| self.snapshot_at(t, 0));
         for j in (0..self.sites).filter(|&j| j != self.me) {
             if self.newest[j] > self.known_until[j] {
                 r.need[j] = self.known_until[j] + 1;
@@ -585,9 +579,28 @@ impl Consistency for TimeWarp {
         self.advance_replay();
         self.want_lag(world, copy);
     }
-    /// One report for the whole world: the own tool's track and the confirmed world's hash.
-    fn report(&self, copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
-        out(self.track_report(copy));
+    /// One report for the whole world: the own tool's track and the confirmed world's hash; while
+    /// a site asks for the confirmed state, of a world of several objects, one more report per
+    /// object after the first, at the same tick (no positions, no hash: the state alone), so the
+    /// whole state travels at once and arrives while its tick is still kept.
+    fn report(&self, _copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let first = self.track_report();
+        let rest = match &first {
+            Report::Tools(r) => r.state.map(|s| (*r, s)),
+            _ => None,
+        };
+        out(first);
+        if let Some((r, s)) = rest {
+            for k in 1..s.objects {
+                out(Report::Tools(ToolReport {
+                    count: 0,
+                    confirmed_hash: 0,
+                    state: Some(self.snapshot_at(s.tick, k)),
+                    ..r
+                }));
+            }
+        }
     }
     fn receive(
         &mut self,
@@ -692,18 +705,20 @@ impl Consistency for TimeWarp {
                 // order changes: a restart moves a site back).
                 let earlier = (r.started_tick, from) < (self.started_tick, self.me);
                 self.want_state[from] = earlier && differs;
-                if earlier && differs {
-                    if let Some(a) = self.resync(world, copy, from, r) {
-                        adoption = Some(adoption.map_or(a, |b| Adoption {
-                            jump: a.jump + b.jump,
-                            energy_j: a.energy_j + b.energy_j,
-                            work_j: a.work_j + b.work_j,
-                            age_s: a.age_s.max(b.age_s),
-                            clipped_j: 0.0,
-                        }));
-                        self.want_state[from] = false;
-                    }
-                }
+            }
+        }
+        // The state asked for (the first of its objects comes with a hash compared above, a world
+        // of several's others in reports of their own).
+        if self.want_state[from] && r.state.is_some() {
+            if let Some(a) = self.resync(world, copy, from, r) {
+                adoption = Some(adoption.map_or(a, |b| Adoption {
+                    jump: a.jump + b.jump,
+                    energy_j: a.energy_j + b.energy_j,
+                    work_j: a.work_j + b.work_j,
+                    age_s: a.age_s.max(b.age_s),
+                    clipped_j: 0.0,
+                }));
+                self.want_state[from] = false;
             }
         }
         self.tally();

@@ -416,11 +416,11 @@ fn a_site_joining_the_grid_late_starts_there_and_adopts() {
         }
         in_flight.retain(|m| m.0 > k);
         if k % 20 == 0 {
-            for (i, (tw, copy)) in sites.iter().enumerate() {
+            for (i, (tw, _)) in sites.iter().enumerate() {
                 if down(i, k) {
                     continue;
                 }
-                let r = tw.track_report(copy);
+                let r = tw.track_report();
                 if let Report::Tools(t) = &r {
                     assert!(
                         i == 0 || k < crash || t.first_tick >= join,
@@ -489,7 +489,7 @@ fn stations_started_apart_compare_their_confirmed_states() {
                 tw.own_tool(Vec3::new(if i == 0 { -0.2 } else { 0.2 }, 0.0, 0.01));
                 tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
                 if (k - begin[i]) % every[i] == 0 && k >= connect {
-                    let r = tw.track_report(copy);
+                    let r = tw.track_report();
                     in_flight.push((k + 1, i, r));
                 }
             }
@@ -542,8 +542,8 @@ fn two_sites(
         in_flight.retain(|m| m.0 > k);
         if k % 20 == 0 {
             for i in 0..2 {
-                let (tw, copy) = &sites[i];
-                let r = tw.track_report(copy);
+                let (tw, _) = &sites[i];
+                let r = tw.track_report();
                 if let Report::Tools(t) = &r {
                     seen(i, t, k, &sites);
                 }
@@ -680,9 +680,9 @@ fn a_state_deep_in_the_table_is_not_adopted() {
         |_, _| false,
         |_, _, _, _| {},
     );
-    let [(a, ca), (b, cb)] = &mut sites;
+    let [(a, _), (b, cb)] = &mut sites;
     b.set_max_spring_energy(0.05);
-    let Report::Tools(mut r) = a.track_report(ca) else {
+    let Report::Tools(mut r) = a.track_report() else {
         panic!("a track");
     };
     assert!(r.confirmed_tick > 400, "{}", r.confirmed_tick);
@@ -815,7 +815,7 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
                     assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
                 }
                 if k % 10 == 9 {
-                    let r = tw.track_report(copy);
+                    let r = tw.track_report();
                     for to in (0..3).filter(|&to| to != i) {
                         in_flight.push((k + DELAY[i][to], i, to, r));
                     }
@@ -870,8 +870,8 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
 /// A world of several objects resynchronises as a world of one does: site 1's tool pushes a row
 /// of pucks while its reports to site 0 are lost for longer than the history (a fallback), so
 /// the confirmed worlds differ; site 1 asks site 0 (the lower number) for its state, which comes
-/// one object per report at one tick, and adopts it once all of it is in. From then on the two
-/// agree to the bit, every object, its sleep and its contacts.
+/// one object per report, all sent at once at one tick, and adopts it once all of it is in.
+/// From then on the two agree to the bit, every object, its sleep and its contacts.
 #[test]
 fn a_world_of_several_objects_is_resynchronized_object_by_object() {
     use crate::contact::Plane;
@@ -937,15 +937,18 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
         }
         if k % 20 == 0 {
             for (i, (tw, copy)) in sites.iter().enumerate() {
-                let r = tw.track_report(copy);
-                if let Report::Tools(t) = &r {
-                    if let Some(s) = t.state {
-                        assert_eq!((i, s.objects), (0, 3), "only site 0 sends its state");
-                        carried[s.object] = true;
+                let mut out = Vec::new();
+                tw.report(copy, &[], k as f64 * 1e-3, &mut |r| out.push(r));
+                for r in out {
+                    if let Report::Tools(t) = &r {
+                        if let Some(s) = t.state {
+                            assert_eq!((i, s.objects), (0, 3), "only site 0 sends its state");
+                            carried[s.object] = true;
+                        }
                     }
-                }
-                if !lost(i, k) {
-                    in_flight.push((k + 50, i, r));
+                    if !lost(i, k) {
+                        in_flight.push((k + 50, i, r));
+                    }
                 }
             }
         }
