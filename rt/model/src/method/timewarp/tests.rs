@@ -988,3 +988,119 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
         .fold(0.0, f64::max);
     assert!(moved < 1e-3, "site 0's history kept: moved {moved} m");
 }
+
+/// Site 2 differs from both sites before it (site 1's push of the row never reached it: both
+/// links to it were down): it asks both, and their worlds reach it only together and
+/// interleaved, object by object (site 0's first, site 1's first, site 0's second, ...; a state
+/// that would arrive alone is lost). The gathering from site 0, the first in the sites' order, is
+/// not broken off by site 1's, and site 2 adopts it; then all three agree.
+#[test]
+fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
+    use crate::contact::Plane;
+    use crate::shape::Shape;
+    use crate::world::Body;
+    let (sc, _) = paper_world();
+    let puck = Body::solid(
+        Shape::Cylinder {
+            radius: 0.02,
+            half_height: 0.01,
+        },
+        0.1,
+    );
+    let table = [Plane {
+        normal: Vec3::z(),
+        offset: 0.0,
+    }];
+    let w = World::new(
+        &[puck; 3],
+        Vec3::new(0.0, 0.0, -3.27),
+        &table,
+        sc.environment_contact,
+    );
+    let states: Vec<BodyState> = (0..3)
+        .map(|k| BodyState::at_rest(Vec3::new(-0.04 + 0.0401 * k as f64, 0.0, 0.01)))
+        .collect();
+    let start = WorldCopy::new(&states);
+    let mut radii = [0.0; MAX_SITES];
+    radii[..3].fill(0.005);
+    let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
+        .map(|i| {
+            (
+                TimeWarp::new(i, 3, 1e-3, sc.contact, radii, 600, &start),
+                start.clone(),
+            )
+        })
+        .collect();
+    // Site 1 pushes the row's right end from 0.9 s to 1.3 s; sites 0 and 2 rest far away. Both
+    // links to site 2 are down for 1.2 s, twice the history (so both earlier sites hear it
+    // differ, and send, at the same reports).
+    let tool = |i: usize, k: i64| {
+        let s = k as f64 * 1e-3;
+        match (i, s) {
+            (0, _) => Vec3::new(-0.15, 0.0, 0.01),
+            (2, _) => Vec3::new(0.0, -0.15, 0.01),
+            (_, s) if s < 0.9 => Vec3::new(0.12, 0.0, 0.01),
+            (_, s) if s < 1.3 => Vec3::new(0.12 - 0.15 * (s - 0.9), 0.0, 0.01),
+            (_, s) => Vec3::new((0.06 + 0.15 * (s - 1.3)).min(0.12), 0.0, 0.01),
+        }
+    };
+    let lost = |_: usize, to: usize, k: i64| to == 2 && (1000..2200).contains(&k);
+    // (due tick, from, to, place in its sender's burst, report)
+    let mut in_flight: Vec<(i64, usize, usize, usize, Report)> = Vec::new();
+    let mut interleaved = 0;
+    for k in 0..5000i64 {
+        let t = k as f64 * 1e-3;
+        let mut due: Vec<_> = in_flight.iter().filter(|m| m.0 == k).cloned().collect();
+        in_flight.retain(|m| m.0 > k);
+        // Each burst's first report, then each one's second, and so on.
+        due.sort_by_key(|m| (m.3, m.1));
+        let states_from = |from: usize| {
+            due.iter()
+                .filter(|m| m.1 == from && m.2 == 2)
+                .filter(|m| matches!(&m.4, Report::Tools(r) if r.state.is_some()))
+                .count()
+        };
+        // A state that would reach site 2 alone is lost: only the two together arrive.
+        let both = states_from(0) > 1 && states_from(1) > 1;
+        interleaved += usize::from(both);
+        due.retain(|m| m.2 != 2 || both || !matches!(&m.4, Report::Tools(r) if r.state.is_some()));
+        for (_, from, to, _, r) in due {
+            let (tw, copy) = &mut sites[to];
+            tw.receive(&w, copy, from, &r, t);
+        }
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            tw.own_tool(tool(i, k));
+            tw.physics_step(&w, copy, &[ContactForce::default(); 3], 1e-3);
+        }
+        if k % 20 == 0 {
+            for (i, (tw, copy)) in sites.iter().enumerate() {
+                let mut out = Vec::new();
+                tw.report(copy, &[], t, &mut |r| out.push(r));
+                for (m, r) in out.into_iter().enumerate() {
+                    for to in (0..3).filter(|&to| to != i && !lost(i, to, k)) {
+                        in_flight.push((k + 50, i, to, m, r));
+                    }
+                }
+            }
+        }
+    }
+    let st: Vec<RollbackStats> = sites.iter().map(|(tw, _)| tw.rollback_stats()).collect();
+    assert!(st[2].fallbacks > 0, "site 2 lost part of the push: {st:?}");
+    assert!(
+        interleaved > 0,
+        "both earlier sites' worlds reached site 2 interleaved"
+    );
+    assert!(st[2].adopted_states > 0, "{st:?}");
+    assert_eq!(st[0].adopted_states + st[1].adopted_states, 0, "{st:?}");
+    let t = sites
+        .iter()
+        .map(|(tw, _)| tw.confirmed_tick())
+        .min()
+        .unwrap();
+    assert!(t > 4900, "all confirmed to the last report: {t}");
+    let hashes: Vec<_> = sites.iter().map(|(tw, _)| tw.hash_at(t)).collect();
+    assert!(
+        hashes.iter().all(|h| h.is_some() && *h == hashes[0]),
+        "{hashes:?}"
+    );
+}
