@@ -31,8 +31,20 @@ fn scenario_run(
     delay_ms: f64,
     seed: u64,
 ) -> (sim::RunResult, metrics::Metrics) {
+    scenario_run_with(file, method, delay_ms, seed, |_| {})
+}
+
+/// [`scenario_run`] with the scenario changed by `change` first.
+fn scenario_run_with(
+    file: &str,
+    method: MethodName,
+    delay_ms: f64,
+    seed: u64,
+    change: impl FnOnce(&mut Scenario),
+) -> (sim::RunResult, metrics::Metrics) {
     let base = scenario_file::load(&repo().join("scenarios").join(file)).expect(file);
-    let sc = scenario_at(&base, delay_ms, seed).expect("valid");
+    let mut sc = scenario_at(&base, delay_ms, seed).expect("valid");
+    change(&mut sc);
     let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
     let m = metrics::compute(&sc, &r, &reference);
@@ -451,17 +463,10 @@ fn timewarp_carries_the_tray_at_300_ms_on_fingertip_pads() {
     assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
     assert_eq!(m.hash_mismatches, 0);
     assert!(m.energy_beyond_users_j <= 0.0, "{m:?}");
-    let base = scenario_file::load(&repo().join("scenarios/tray.toml")).expect("tray.toml");
-    assert!(base.contact.rotational_friction_radius_m > 0.0);
-    let mut points = scenario_at(&base, 300.0, 3).expect("valid");
-    points.contact.rotational_friction_radius_m = 0.0;
-    let r = sim::run(
-        &points,
-        Mode::Distributed(MethodName::Timewarp),
-        &mut |_| {},
-    );
-    let reference = sim::run(&points, Mode::Reference, &mut |_| {});
-    let p = metrics::compute(&points, &r, &reference);
+    let (_, p) = scenario_run_with("tray.toml", MethodName::Timewarp, 300.0, 3, |sc| {
+        assert!(sc.contact.rotational_friction_radius_m > 0.0);
+        sc.contact.rotational_friction_radius_m = 0.0;
+    });
     assert!(p.phases_passed < p.phases_total, "point grips: {p:?}");
 }
 

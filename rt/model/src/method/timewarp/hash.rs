@@ -6,8 +6,8 @@ use crate::world::pair_index;
 
 impl TimeWarp {
     /// Object `k` of the kept state at the start of tick `t` (a simulated tick still kept), as
-    /// a snapshot.
-    pub(super) fn snapshot_at(&self, t: i64, k: usize) -> Snapshot {
+    /// a snapshot of the world whose hash there is `world_hash` ([`Self::hash_at`]).
+    pub(super) fn snapshot_at(&self, t: i64, k: usize, world_hash: u64) -> Snapshot {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let i = self.idx(t);
         let w = &self.worlds[i];
@@ -23,7 +23,7 @@ impl TimeWarp {
             tick: t,
             object: k,
             objects: n,
-            world_hash: hash_world(w),
+            world_hash,
             state: o.state,
             env: o.env,
             contacts,

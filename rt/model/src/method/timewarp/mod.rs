@@ -542,10 +542,11 @@ impl TimeWarp {
         for (j, &want) in self.want_state.iter().enumerate() {
             r.need_state |= u8::from(want) << j;
         }
+        r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
         // (Its first object: the others follow in reports of their own, `Consistency::report`.)
         let t = r.confirmed_tick;
         r.state = (self.state_asked.iter().any(|&a| a) && self.slots[self.idx(t)].tick == t)
-            .then(|| self.snapshot_at(t, 0));
+            .then(|| self.snapshot_at(t, 0, r.confirmed_hash));
         for j in (0..self.sites).filter(|&j| j != self.me) {
             if self.newest[j] > self.known_until[j] {
                 r.need[j] = self.known_until[j] + 1;
@@ -554,7 +555,6 @@ impl TimeWarp {
         for (k, t) in (first..first + r.count as i64).enumerate() {
             r.positions[k] = self.slots[self.idx(t)].inputs[self.me];
         }
-        r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
         Report::Tools(r)
     }
 }
@@ -596,7 +596,7 @@ impl Consistency for TimeWarp {
                 out(Report::Tools(ToolReport {
                     count: 0,
                     confirmed_hash: 0,
-                    state: Some(self.snapshot_at(s.tick, k)),
+                    state: Some(self.snapshot_at(s.tick, k, s.world_hash)),
                     ..r
                 }));
             }

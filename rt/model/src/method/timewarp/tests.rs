@@ -742,30 +742,7 @@ fn positions_quantize_to_the_hundredth_of_a_millimetre() {
 /// the window's edge.
 #[test]
 fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
-    use crate::contact::Plane;
-    use crate::shape::Shape;
-    use crate::world::Body;
-    let (sc, _) = paper_world();
-    let puck = Body::solid(
-        Shape::Cylinder {
-            radius: 0.02,
-            half_height: 0.01,
-        },
-        0.1,
-    );
-    let table = [Plane {
-        normal: Vec3::z(),
-        offset: 0.0,
-    }];
-    let w = World::new(
-        &[puck; 4],
-        Vec3::new(0.0, 0.0, -3.27),
-        &table,
-        sc.environment_contact,
-    );
-    let states: Vec<BodyState> = (0..4)
-        .map(|k| BodyState::at_rest(Vec3::new(-0.06 + 0.0401 * k as f64, 0.0, 0.01)))
-        .collect();
+    let (sc, w, states) = pucks_in_a_row(4, -0.06);
     let start = WorldCopy::new(&states);
     const HISTORY: usize = 300;
     // Site j's positions reach site i after DELAY[j][i] ticks: one pair at the history's edge.
@@ -867,13 +844,9 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
     assert!(deepest >= Some(280), "rolled back to the edge: {deepest:?}");
 }
 
-/// A world of several objects resynchronises as a world of one does: site 1's tool pushes a row
-/// of pucks while its reports to site 0 are lost for longer than the history (a fallback), so
-/// the confirmed worlds differ; site 1 asks site 0 (the lower number) for its state, which comes
-/// one object per report, all sent at once at one tick, and adopts it once all of it is in.
-/// From then on the two agree to the bit, every object, its sleep and its contacts.
-#[test]
-fn a_world_of_several_objects_is_resynchronized_object_by_object() {
+/// `n` pucks (radius 2 cm, 0.1 kg) in a row along x on [`paper_world`]'s table, 0.1 mm apart,
+/// the first at `first_x`: its scenario (the contact laws), the world and the pucks' start.
+fn pucks_in_a_row(n: usize, first_x: f64) -> (Scenario, World, Vec<BodyState>) {
     use crate::contact::Plane;
     use crate::shape::Shape;
     use crate::world::Body;
@@ -890,14 +863,38 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
         offset: 0.0,
     }];
     let w = World::new(
-        &[puck; 3],
+        &vec![puck; n],
         Vec3::new(0.0, 0.0, -3.27),
         &table,
         sc.environment_contact,
     );
-    let states: Vec<BodyState> = (0..3)
-        .map(|k| BodyState::at_rest(Vec3::new(-0.04 + 0.0401 * k as f64, 0.0, 0.01)))
+    let states = (0..n)
+        .map(|k| BodyState::at_rest(Vec3::new(first_x + 0.0401 * k as f64, 0.0, 0.01)))
         .collect();
+    (sc, w, states)
+}
+
+/// Site `i`'s tool at tick `k` over [`pucks_in_a_row`]`(3, -0.04)`: site 1's pushes the row's
+/// right end from 0.9 s to 1.3 s and draws back; the others rest far away.
+fn push_the_row(i: usize, k: i64) -> Vec3 {
+    let s = k as f64 * 1e-3;
+    match (i, s) {
+        (0, _) => Vec3::new(-0.15, 0.0, 0.01),
+        (1, s) if s < 0.9 => Vec3::new(0.12, 0.0, 0.01),
+        (1, s) if s < 1.3 => Vec3::new(0.12 - 0.15 * (s - 0.9), 0.0, 0.01),
+        (1, s) => Vec3::new((0.06 + 0.15 * (s - 1.3)).min(0.12), 0.0, 0.01),
+        _ => Vec3::new(0.0, -0.15, 0.01),
+    }
+}
+
+/// A world of several objects resynchronises as a world of one does: site 1's tool pushes a row
+/// of pucks while its reports to site 0 are lost for longer than the history (a fallback), so
+/// the confirmed worlds differ; site 1 asks site 0 (the lower number) for its state, which comes
+/// one object per report, all sent at once at one tick, and adopts it once all of it is in.
+/// From then on the two agree to the bit, every object, its sleep and its contacts.
+#[test]
+fn a_world_of_several_objects_is_resynchronized_object_by_object() {
+    let (sc, w, states) = pucks_in_a_row(3, -0.04);
     let start = WorldCopy::new(&states);
     let mut radii = [0.0; MAX_SITES];
     radii[..2].fill(0.005);
@@ -907,18 +904,8 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
             start.clone(),
         )
     });
-    // Site 1's tool pushes the row's right end from 0.9 s to 1.3 s and draws back; site 0's
-    // rests far away. Site 1 → site 0 is down for 1.2 s, twice the history.
-    let tool = |i: usize, k: i64| {
-        let s = k as f64 * 1e-3;
-        let x = match (i, s) {
-            (0, _) => -0.15,
-            (_, s) if s < 0.9 => 0.12,
-            (_, s) if s < 1.3 => 0.12 - 0.15 * (s - 0.9),
-            (_, s) => (0.06 + 0.15 * (s - 1.3)).min(0.12),
-        };
-        Vec3::new(x, 0.0, 0.01)
-    };
+    // Site 1 → site 0 is down for 1.2 s, twice the history, while site 1 pushes the row.
+    let tool = push_the_row;
     let lost = |from: usize, k: i64| from == 1 && (1000..2200).contains(&k);
     let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
     let mut carried = [false; 3];
@@ -996,30 +983,7 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
 /// not broken off by site 1's, and site 2 adopts it; then all three agree.
 #[test]
 fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
-    use crate::contact::Plane;
-    use crate::shape::Shape;
-    use crate::world::Body;
-    let (sc, _) = paper_world();
-    let puck = Body::solid(
-        Shape::Cylinder {
-            radius: 0.02,
-            half_height: 0.01,
-        },
-        0.1,
-    );
-    let table = [Plane {
-        normal: Vec3::z(),
-        offset: 0.0,
-    }];
-    let w = World::new(
-        &[puck; 3],
-        Vec3::new(0.0, 0.0, -3.27),
-        &table,
-        sc.environment_contact,
-    );
-    let states: Vec<BodyState> = (0..3)
-        .map(|k| BodyState::at_rest(Vec3::new(-0.04 + 0.0401 * k as f64, 0.0, 0.01)))
-        .collect();
+    let (sc, w, states) = pucks_in_a_row(3, -0.04);
     let start = WorldCopy::new(&states);
     let mut radii = [0.0; MAX_SITES];
     radii[..3].fill(0.005);
@@ -1031,19 +995,9 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
             )
         })
         .collect();
-    // Site 1 pushes the row's right end from 0.9 s to 1.3 s; sites 0 and 2 rest far away. Both
-    // links to site 2 are down for 1.2 s, twice the history (so both earlier sites hear it
-    // differ, and send, at the same reports).
-    let tool = |i: usize, k: i64| {
-        let s = k as f64 * 1e-3;
-        match (i, s) {
-            (0, _) => Vec3::new(-0.15, 0.0, 0.01),
-            (2, _) => Vec3::new(0.0, -0.15, 0.01),
-            (_, s) if s < 0.9 => Vec3::new(0.12, 0.0, 0.01),
-            (_, s) if s < 1.3 => Vec3::new(0.12 - 0.15 * (s - 0.9), 0.0, 0.01),
-            (_, s) => Vec3::new((0.06 + 0.15 * (s - 1.3)).min(0.12), 0.0, 0.01),
-        }
-    };
+    // Both links to site 2 are down for 1.2 s, twice the history, while site 1 pushes the row
+    // (so both earlier sites hear it differ, and send, at the same reports).
+    let tool = push_the_row;
     let lost = |_: usize, to: usize, k: i64| to == 2 && (1000..2200).contains(&k);
     // (due tick, from, to, place in its sender's burst, report)
     let mut in_flight: Vec<(i64, usize, usize, usize, Report)> = Vec::new();
