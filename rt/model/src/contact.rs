@@ -219,9 +219,20 @@ impl ToolContactState {
 
     /// The memory whose stick point is `anchor` (from a snapshot; no rotational friction memory).
     pub fn from_anchor(anchor: Option<Vec3>) -> Self {
+        Self::from_parts(anchor, None)
+    }
+
+    /// The pad's rotational friction memory: its reference direction in the world and on the
+    /// body (`None`: no pad, or not touching): what a snapshot carries besides the stick point.
+    pub fn twist(&self) -> Option<(Vec3, Vec3)> {
+        self.twist
+    }
+
+    /// The memory of a stick point and a pad's references (from a snapshot).
+    pub fn from_parts(anchor: Option<Vec3>, twist: Option<(Vec3, Vec3)>) -> Self {
         Self {
             anchor_body: anchor,
-            twist: None,
+            twist,
         }
     }
 }
@@ -334,10 +345,21 @@ impl EnvContactState {
 
     /// The memory with these stick points (from a snapshot; no rotational friction memory).
     pub fn from_anchors(anchors: [Option<Vec3>; MAX_PLANES]) -> Self {
-        Self {
-            anchors,
-            twist: [None; MAX_PLANES],
-        }
+        Self::from_parts(anchors, [None; MAX_PLANES])
+    }
+
+    /// The rotational friction memory, per plane: a reference direction in the world and on the
+    /// body (`None`: none kept): what a snapshot carries besides the stick points.
+    pub fn twists(&self) -> [Option<(Vec3, Vec3)>; MAX_PLANES] {
+        self.twist
+    }
+
+    /// The memory of these stick points and rotational references (from a snapshot).
+    pub fn from_parts(
+        anchors: [Option<Vec3>; MAX_PLANES],
+        twist: [Option<(Vec3, Vec3)>; MAX_PLANES],
+    ) -> Self {
+        Self { anchors, twist }
     }
 }
 

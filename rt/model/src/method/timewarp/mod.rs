@@ -594,7 +594,11 @@ impl Consistency for TimeWarp {
         if let Some((r, s)) = rest {
             for k in 1..s.objects {
                 out(Report::Tools(ToolReport {
+                    // No positions: the window is empty at the frontier (a frontier never lies
+                    // past a report's last tick).
+                    first_tick: s.tick,
                     count: 0,
+                    positions: [[0; 3]; WINDOW_TICKS],
                     confirmed_hash: 0,
                     state: Some(self.snapshot_at(s.tick, k, s.world_hash)),
                     ..r
