@@ -9,10 +9,13 @@
 #![allow(unsafe_code)] // the five `unsafe impl ShmPod` below, each with its SAFETY argument
 
 use coop_model::body::{BodyState, Vec3};
-use coop_model::contact::{ContactForce, EnvContactState, ToolContactState, MAX_PLANES};
+use coop_model::contact::{
+    ContactForce, EnvContactState, PairContactState, ToolContactState, MAX_PLANES,
+};
 use coop_model::method::track::CoupledReport;
 use coop_model::method::track::{Snapshot, ToolReport, WINDOW_TICKS};
 use coop_model::method::{Report, MAX_SITES};
+use coop_model::world::MAX_OBJECTS;
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use crate::shm::ShmPod;
@@ -155,8 +158,8 @@ fn finite(xs: &[f64]) -> bool {
 }
 
 pod_message! {
-    /// Servo → physics, every servo tick: the tool and its contact with the object.
-    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    /// Servo → physics, every servo tick: the tool and its contact with each object of the world.
+    #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ToolSample {
         /// When, ns on CLOCK_MONOTONIC.
         pub t_ns: u64,
@@ -166,44 +169,96 @@ pod_message! {
         pub tool_pos: [f64; 3],
         /// Tool velocity, m/s.
         pub tool_vel: [f64; 3],
-        /// Contact force on the object, N.
-        pub force: [f64; 3],
-        /// Where it acts, m.
-        pub point: [f64; 3],
-        /// Penetration, m.
-        pub depth: f64,
-        /// 1 when touching.
-        pub touching: u64,
         /// Desired force at the hand F_h, N.
         pub f_desired: [f64; 3],
         /// Measured force F_m, N.
         pub f_measured: [f64; 3],
         /// Commanded handle force after limits, N.
         pub f_command: [f64; 3],
+        /// How many objects the world has (the contacts past it are all 0).
+        pub objects: u64,
+        /// Bit `k`: the tool touches object `k`.
+        pub touching: u64,
+        /// Per object `k`, at `3k..3k+3`: the contact force on it, N.
+        pub force: [f64; 3 * MAX_OBJECTS],
+        /// Per object, where that force acts, m.
+        pub point: [f64; 3 * MAX_OBJECTS],
+        /// Per object, the penetration, m.
+        pub depth: [f64; MAX_OBJECTS],
+        /// Per object, a fingertip pad's torque on it besides the force's moment, N·m.
+        pub torque: [f64; 3 * MAX_OBJECTS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolSample>() == 200);
-// SAFETY: repr(C), only u64 and f64 fields (200 bytes, no padding); every bit pattern is valid.
+const _: () = assert!(core::mem::size_of::<ToolSample>() == 1432);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (1432 bytes, no padding); every bit
+// pattern is valid.
 unsafe impl ShmPod for ToolSample {
-    const TYPE_NAME: &'static str = "coop.ToolSample.v1";
+    const TYPE_NAME: &'static str = "coop.ToolSample.v2";
+}
+
+impl Default for ToolSample {
+    fn default() -> Self {
+        Self {
+            t_ns: 0,
+            seq: 0,
+            tool_pos: [0.0; 3],
+            tool_vel: [0.0; 3],
+            f_desired: [0.0; 3],
+            f_measured: [0.0; 3],
+            f_command: [0.0; 3],
+            objects: 0,
+            touching: 0,
+            force: [0.0; 3 * MAX_OBJECTS],
+            point: [0.0; 3 * MAX_OBJECTS],
+            depth: [0.0; MAX_OBJECTS],
+            torque: [0.0; 3 * MAX_OBJECTS],
+        }
+    }
 }
 
 impl ToolSample {
-    /// The contact it carries, or `None` if any number is not finite.
-    pub fn contact(&self) -> Option<ContactForce> {
-        finite(&self.force).then_some(())?;
-        finite(&self.point).then_some(())?;
-        self.depth.is_finite().then_some(())?;
-        Some(ContactForce {
-            force: v3(self.force),
-            point: v3(self.point),
-            depth: self.depth,
-            touching: self.touching != 0,
-            slipping: false,
-            // Not carried: stations refuse a fingertip's rotational friction
-            // (`coop_actors::station::config`).
-            torque: Vec3::zeros(),
-        })
+    /// Lays out the tool's contact with each of the world's objects (`contacts`, at most
+    /// [`MAX_OBJECTS`]); the rest of the sample is the caller's.
+    pub fn set_contacts(&mut self, contacts: &[ContactForce]) {
+        let n = contacts.len().min(MAX_OBJECTS);
+        self.objects = n as u64;
+        self.touching = 0;
+        for (k, c) in contacts[..n].iter().enumerate() {
+            self.touching |= u64::from(c.touching) << k;
+            self.force[3 * k..3 * k + 3].copy_from_slice(c.force.as_slice());
+            self.point[3 * k..3 * k + 3].copy_from_slice(c.point.as_slice());
+            self.depth[k] = c.depth;
+            self.torque[3 * k..3 * k + 3].copy_from_slice(c.torque.as_slice());
+        }
+    }
+
+    /// The contact with each object (the first [`ToolSample::objects`] filled), or `None` if the
+    /// count exceeds [`MAX_OBJECTS`], a touching bit names no object, or a number is not finite.
+    pub fn contacts(&self) -> Option<[ContactForce; MAX_OBJECTS]> {
+        let n = usize::try_from(self.objects)
+            .ok()
+            .filter(|&n| n <= MAX_OBJECTS)?;
+        (self.touching >> n == 0).then_some(())?;
+        (finite(&self.force) && finite(&self.point) && finite(&self.depth) && finite(&self.torque))
+            .then_some(())?;
+        let v = |w: &[f64], k: usize| Vec3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
+        let mut out = [ContactForce::default(); MAX_OBJECTS];
+        for (k, c) in out[..n].iter_mut().enumerate() {
+            *c = ContactForce {
+                force: v(&self.force, k),
+                point: v(&self.point, k),
+                depth: self.depth[k],
+                touching: self.touching & (1 << k) != 0,
+                slipping: false,
+                torque: v(&self.torque, k),
+            };
+        }
+        Some(out)
+    }
+
+    /// Whether the tool touches object `k`.
+    pub fn touches(&self, k: usize) -> bool {
+        k < 64 && self.touching & (1 << k) != 0
     }
 }
 
@@ -215,6 +270,9 @@ pod_message! {
         pub t_ns: u64,
         /// Physics step counter.
         pub seq: u64,
+        /// Which object of the world ([`coop_model::world::World::bodies`] order); physics sends
+        /// every object's each step, with the same `t_ns` and `seq`.
+        pub object: u64,
         /// Centre of mass, m.
         pub pos: [f64; 3],
         /// Orientation quaternion (w, x, y, z).
@@ -230,10 +288,10 @@ pod_message! {
         pub tool_t_ns: u64,
     }
 }
-const _: () = assert!(core::mem::size_of::<ObjectSample>() == 136);
-// SAFETY: repr(C), only u64 and f64 fields (136 bytes, no padding); every bit pattern is valid.
+const _: () = assert!(core::mem::size_of::<ObjectSample>() == 144);
+// SAFETY: repr(C), only u64 and f64 fields (144 bytes, no padding); every bit pattern is valid.
 unsafe impl ShmPod for ObjectSample {
-    const TYPE_NAME: &'static str = "coop.ObjectSample.v2";
+    const TYPE_NAME: &'static str = "coop.ObjectSample.v3";
 }
 
 fn state_fields(s: &BodyState) -> ([f64; 3], [f64; 4], [f64; 3], [f64; 3]) {
@@ -259,12 +317,20 @@ fn body_state(pos: [f64; 3], rot: [f64; 4], vel: [f64; 3], ang_mom: [f64; 3]) ->
 }
 
 impl ObjectSample {
-    /// From a state computed with the tool sample of time `tool_t_ns`.
-    pub fn new(t_ns: u64, seq: u64, s: &BodyState, adoptions: u64, tool_t_ns: u64) -> Self {
+    /// Object `object`'s state `s`, computed with the tool sample of time `tool_t_ns`.
+    pub fn new(
+        t_ns: u64,
+        seq: u64,
+        object: usize,
+        s: &BodyState,
+        adoptions: u64,
+        tool_t_ns: u64,
+    ) -> Self {
         let (pos, rot, vel, ang_mom) = state_fields(s);
         Self {
             t_ns,
             seq,
+            object: object as u64,
             pos,
             rot,
             vel,
@@ -276,6 +342,12 @@ impl ObjectSample {
     /// The state, or `None` if not finite or not a unit quaternion.
     pub fn state(&self) -> Option<BodyState> {
         body_state(self.pos, self.rot, self.vel, self.ang_mom)
+    }
+    /// Which object it is, or `None` past [`MAX_OBJECTS`].
+    pub fn object(&self) -> Option<usize> {
+        usize::try_from(self.object)
+            .ok()
+            .filter(|&k| k < MAX_OBJECTS)
     }
 }
 
@@ -292,6 +364,8 @@ pod_message! {
         pub seq: u64,
         /// Sender's site index.
         pub site: u64,
+        /// Which object of the world it is about ([`coop_model::world::World::bodies`] order).
+        pub object: u64,
         /// State: centre of mass, m.
         pub pos: [f64; 3],
         /// State: orientation (w, x, y, z).
@@ -313,13 +387,15 @@ pod_message! {
         pub depth: f64,
         /// Force: 1 when touching.
         pub touching: u64,
+        /// Force: a fingertip pad's torque besides the force's moment, N·m.
+        pub torque: [f64; 3],
     }
 }
-const _: () = assert!(core::mem::size_of::<SiteReport>() == 288);
-// SAFETY: repr(C), only u64 and f64 fields and arrays of them (288 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<SiteReport>() == 320);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (320 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for SiteReport {
-    const TYPE_NAME: &'static str = "coop.SiteReport.v1";
+    const TYPE_NAME: &'static str = "coop.SiteReport.v2";
 }
 
 // ---- tool tracks (timewarp / coupled: the tools on the wire, issue 12 item 1) ----
@@ -335,7 +411,7 @@ pod_message! {
     /// What a `timewarp` site reports besides (instead of) a state: its own tool's quantized
     /// positions at the last ticks of the session's tick grid, and its confirmed frontier with the
     /// hash of its state there (the model's [`ToolReport`] in a fixed layout). Physics → network
-    /// (own), network → physics (remote). 3 664 bytes, copied, never boxed.
+    /// (own), network → physics (remote). 5 816 bytes, copied, never boxed.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct ToolTrack {
         /// Sender's time of the report, ns (CLOCK_MONOTONIC of the sender).
@@ -374,16 +450,38 @@ pod_message! {
         pub state_env: [f64; 3 * MAX_PLANES],
         /// Per site, its tool's friction stick point on the object, body coordinates, m.
         pub state_tools: [f64; 3 * MAX_SITES],
+        /// Which object of the world the state is (a world's other objects come in tracks of
+        /// their own, with no positions, at the same tick).
+        pub state_object: u64,
+        /// How many objects the world has (0 when no state is carried).
+        pub state_objects: u64,
+        /// FNV-1a 64 of the whole world's state at `confirmed_tick`.
+        pub state_world_hash: u64,
+        /// The steps in a row the object has been still.
+        pub state_still: u64,
+        /// Bit `p` (`p` < 6): plane `p`'s rotational friction references are in
+        /// `state_env_twist`; bit 8 + `j`: site `j`'s pad's are in `state_tool_twist`; bit 16 +
+        /// `k`: the contact with object `state_object + 1 + k` has stick points in
+        /// `state_pair_anchors`; bit 32 + `k`: and rotational references in `state_pair_twist`.
+        pub state_memory: u64,
+        /// Per plane, its rotational friction reference in the world and on the body.
+        pub state_env_twist: [f64; 6 * MAX_PLANES],
+        /// Per site, its pad's reference in the world and on the body.
+        pub state_tool_twist: [f64; 6 * MAX_SITES],
+        /// Per later object, the stick points on this object and on it, body coordinates, m.
+        pub state_pair_anchors: [f64; 6 * (MAX_OBJECTS - 1)],
+        /// Per later object, the rotational references on this object and on it.
+        pub state_pair_twist: [f64; 6 * (MAX_OBJECTS - 1)],
         /// Positions in quanta, tick `first_tick + k` at coordinates `3k..3k+3`; coordinate `c`
         /// is the i32 in bits `32 (c % 2) ..` of word `c / 2` (little end first); unused ones 0.
         pub positions: [u64; TRACK_POSITION_WORDS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolTrack>() == 3664);
-// SAFETY: repr(C), only u64 and f64 fields and arrays of them (3664 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 5816);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (5816 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for ToolTrack {
-    const TYPE_NAME: &'static str = "coop.ToolTrack.v3";
+    const TYPE_NAME: &'static str = "coop.ToolTrack.v4";
 }
 
 impl Default for ToolTrack {
@@ -404,6 +502,15 @@ impl Default for ToolTrack {
             state_anchors: 0,
             state_env: [0.0; 3 * MAX_PLANES],
             state_tools: [0.0; 3 * MAX_SITES],
+            state_object: 0,
+            state_objects: 0,
+            state_world_hash: 0,
+            state_still: 0,
+            state_memory: 0,
+            state_env_twist: [0.0; 6 * MAX_PLANES],
+            state_tool_twist: [0.0; 6 * MAX_SITES],
+            state_pair_anchors: [0.0; 6 * (MAX_OBJECTS - 1)],
+            state_pair_twist: [0.0; 6 * (MAX_OBJECTS - 1)],
             positions: [0; TRACK_POSITION_WORDS],
         }
     }
@@ -427,39 +534,70 @@ impl ToolTrack {
             started_tick: r.started_tick,
             ..Self::default()
         };
-        // (A world of one: stations run one object so far.)
-        if let Some(snap) = r
-            .state
-            .filter(|s| s.tick == r.confirmed_tick && s.objects == 1)
-        {
-            let (pos, rot, vel, ang_mom) = state_fields(&snap.state);
-            out.has_state = 1;
-            for (k, v) in pos
-                .iter()
-                .chain(&rot)
-                .chain(&vel)
-                .chain(&ang_mom)
-                .enumerate()
-            {
-                out.state_body[k] = *v;
-            }
-            for (p, a) in snap.env.anchors().iter().enumerate() {
-                if let Some(a) = a {
-                    out.state_anchors |= 1 << p;
-                    out.state_env[3 * p..3 * p + 3].copy_from_slice(a.as_slice());
-                }
-            }
-            for (j, c) in snap.contacts.iter().enumerate() {
-                if let Some(a) = c.anchor() {
-                    out.state_anchors |= 1 << (8 + j);
-                    out.state_tools[3 * j..3 * j + 3].copy_from_slice(a.as_slice());
-                }
-            }
+        if let Some(snap) = r.state.filter(|s| s.tick == r.confirmed_tick) {
+            out.lay_out_state(&snap);
         }
         for (c, &v) in r.positions[..count].iter().flatten().enumerate() {
             out.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
         }
         out
+    }
+
+    /// Lays out a carried state: the object, every friction memory it has, its world.
+    fn lay_out_state(&mut self, snap: &Snapshot) {
+        let (pos, rot, vel, ang_mom) = state_fields(&snap.state);
+        self.has_state = 1;
+        self.state_object = snap.object as u64;
+        self.state_objects = snap.objects as u64;
+        self.state_world_hash = snap.world_hash;
+        self.state_still = u64::from(snap.still);
+        for (k, v) in pos
+            .iter()
+            .chain(&rot)
+            .chain(&vel)
+            .chain(&ang_mom)
+            .enumerate()
+        {
+            self.state_body[k] = *v;
+        }
+        let put =
+            |w: &mut [f64], k: usize, v: Vec3| w[3 * k..3 * k + 3].copy_from_slice(v.as_slice());
+        let put2 = |w: &mut [f64], k: usize, (a, b): (Vec3, Vec3)| {
+            w[6 * k..6 * k + 3].copy_from_slice(a.as_slice());
+            w[6 * k + 3..6 * k + 6].copy_from_slice(b.as_slice());
+        };
+        for (p, a) in snap.env.anchors().iter().enumerate() {
+            if let Some(a) = *a {
+                self.state_anchors |= 1 << p;
+                put(&mut self.state_env, p, a);
+            }
+        }
+        for (p, t) in snap.env.twists().iter().enumerate() {
+            if let Some(t) = *t {
+                self.state_memory |= 1 << p;
+                put2(&mut self.state_env_twist, p, t);
+            }
+        }
+        for (j, c) in snap.contacts.iter().enumerate() {
+            if let Some(a) = c.anchor() {
+                self.state_anchors |= 1 << (8 + j);
+                put(&mut self.state_tools, j, a);
+            }
+            if let Some(t) = c.twist() {
+                self.state_memory |= 1 << (8 + j);
+                put2(&mut self.state_tool_twist, j, t);
+            }
+        }
+        for (k, pair) in snap.pairs.iter().enumerate() {
+            if let Some(a) = pair.anchors() {
+                self.state_memory |= 1 << (16 + k);
+                put2(&mut self.state_pair_anchors, k, a);
+            }
+            if let Some(t) = pair.twist() {
+                self.state_memory |= 1 << (32 + k);
+                put2(&mut self.state_pair_twist, k, t);
+            }
+        }
     }
 
     /// Coordinate `c` (of `3 * count`).
@@ -518,19 +656,44 @@ impl ToolTrack {
     }
 
     /// The carried state: `Some(None)` for none (every `state_*` word 0), `Some(Some(_))` for a
-    /// valid one (finite, a unit quaternion up to rounding, kept to the bit), `None` for garbage.
+    /// valid one (finite, a unit quaternion up to rounding, an object of a world of at most
+    /// [`MAX_OBJECTS`], no memory named but of sites, planes and later objects that exist, kept
+    /// to the bit), `None` for garbage.
     fn snapshot(&self) -> Option<Option<Snapshot>> {
         let words = || {
             self.state_body
                 .iter()
                 .chain(&self.state_env)
                 .chain(&self.state_tools)
+                .chain(&self.state_env_twist)
+                .chain(&self.state_tool_twist)
+                .chain(&self.state_pair_anchors)
+                .chain(&self.state_pair_twist)
         };
         let valid_bits = ((1u64 << MAX_PLANES) - 1) | (((1u64 << MAX_SITES) - 1) << 8);
         match self.has_state {
-            0 => (self.state_anchors == 0 && words().all(|w| w.to_bits() == 0)).then_some(None),
+            0 => (self.state_anchors == 0
+                && self.state_memory == 0
+                && self.state_object == 0
+                && self.state_objects == 0
+                && self.state_world_hash == 0
+                && self.state_still == 0
+                && words().all(|w| w.to_bits() == 0))
+            .then_some(None),
             1 => {
-                if self.state_anchors & !valid_bits != 0 || !words().all(|w| w.is_finite()) {
+                let objects = usize::try_from(self.state_objects)
+                    .ok()
+                    .filter(|n| (1..=MAX_OBJECTS).contains(n))?;
+                let object = usize::try_from(self.state_object)
+                    .ok()
+                    .filter(|&k| k < objects)?;
+                let later = objects - 1 - object;
+                let pair_bits = ((1u64 << later) - 1) << 16 | ((1u64 << later) - 1) << 32;
+                let still = u32::try_from(self.state_still).ok()?;
+                if self.state_anchors & !valid_bits != 0
+                    || self.state_memory & !(valid_bits | pair_bits) != 0
+                    || !words().all(|w| w.is_finite())
+                {
                     return None;
                 }
                 let b = &self.state_body;
@@ -545,27 +708,50 @@ impl ToolTrack {
                     vel: Vec3::new(b[7], b[8], b[9]),
                     ang_mom: Vec3::new(b[10], b[11], b[12]),
                 };
-                let bit = |k: usize| self.state_anchors & (1 << k) != 0;
                 // A point of a clear bit is 0 (its bits: not even -0).
+                let v = |w: &[f64], i: usize| Vec3::new(w[i], w[i + 1], w[i + 2]);
                 let point = |w: &[f64], k: usize, set: bool| {
-                    let v = Vec3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
-                    (set || v.iter().all(|x| x.to_bits() == 0)).then_some(set.then_some(v))
+                    let p = v(w, 3 * k);
+                    (set || p.iter().all(|x| x.to_bits() == 0)).then_some(set.then_some(p))
                 };
+                let pair = |w: &[f64], k: usize, set: bool| {
+                    let (a, b) = (v(w, 6 * k), v(w, 6 * k + 3));
+                    (set || a.iter().chain(b.iter()).all(|x| x.to_bits() == 0))
+                        .then_some(set.then_some((a, b)))
+                };
+                let anchor = |k: usize| self.state_anchors & (1 << k) != 0;
+                let memory = |k: usize| self.state_memory & (1 << k) != 0;
                 let mut env = [None; MAX_PLANES];
-                for (p, a) in env.iter_mut().enumerate() {
-                    *a = point(&self.state_env, p, bit(p))?;
+                let mut env_twist = [None; MAX_PLANES];
+                for p in 0..MAX_PLANES {
+                    env[p] = point(&self.state_env, p, anchor(p))?;
+                    env_twist[p] = pair(&self.state_env_twist, p, memory(p))?;
                 }
                 let mut contacts = [ToolContactState::default(); MAX_SITES];
                 for (j, c) in contacts.iter_mut().enumerate() {
-                    *c = ToolContactState::from_anchor(point(&self.state_tools, j, bit(8 + j))?);
+                    *c = ToolContactState::from_parts(
+                        point(&self.state_tools, j, anchor(8 + j))?,
+                        pair(&self.state_tool_twist, j, memory(8 + j))?,
+                    );
                 }
-                Some(Some(Snapshot::one(
-                    self.confirmed_tick as i64,
-                    self.confirmed_hash,
+                let mut pairs = [PairContactState::default(); MAX_OBJECTS - 1];
+                for (k, c) in pairs.iter_mut().enumerate() {
+                    *c = PairContactState::from_parts(
+                        pair(&self.state_pair_anchors, k, memory(16 + k))?,
+                        pair(&self.state_pair_twist, k, memory(32 + k))?,
+                    );
+                }
+                Some(Some(Snapshot {
+                    tick: self.confirmed_tick as i64,
+                    object,
+                    objects,
+                    world_hash: self.state_world_hash,
                     state,
-                    EnvContactState::from_anchors(env),
+                    env: EnvContactState::from_parts(env, env_twist),
                     contacts,
-                )))
+                    pairs,
+                    still,
+                }))
             }
             _ => None,
         }
@@ -580,6 +766,7 @@ impl ToolTrack {
             .state_env
             .chunks(3)
             .chain(self.state_tools.chunks(3))
+            .chain(self.state_pair_anchors.chunks(3))
             .map(norm3)
             .fold(norm3(&self.state_body[..3]), f64::max);
         (
@@ -608,6 +795,9 @@ pod_message! {
         pub kind: u64,
         /// When, ns on CLOCK_MONOTONIC.
         pub t_ns: u64,
+        /// Which object of the world the object fields are (a sample of a world of several is one
+        /// record per object, the same tool fields in each; an adoption names the first).
+        pub object: u64,
         /// Object position as this site believes it, m.
         pub pos: [f64; 3],
         /// Object orientation (w, x, y, z).
@@ -622,7 +812,7 @@ pod_message! {
         pub f_measured: [f64; 3],
         /// Users' contact force acting on this copy (own, plus the others' in naive), N.
         pub f_object: [f64; 3],
-        /// 1 when the own user touches the object.
+        /// 1 when the own user touches this object.
         pub touching: u64,
         /// Adoptions so far.
         pub adoptions: u64,
@@ -634,10 +824,10 @@ pod_message! {
         pub age_s: f64,
     }
 }
-const _: () = assert!(core::mem::size_of::<TraceRecord>() == 232);
-// SAFETY: repr(C), only u64 and f64 fields (232 bytes, no padding); every bit pattern is valid.
+const _: () = assert!(core::mem::size_of::<TraceRecord>() == 240);
+// SAFETY: repr(C), only u64 and f64 fields (240 bytes, no padding); every bit pattern is valid.
 unsafe impl ShmPod for TraceRecord {
-    const TYPE_NAME: &'static str = "coop.TraceRecord.v1";
+    const TYPE_NAME: &'static str = "coop.TraceRecord.v2";
 }
 
 impl TraceRecord {
@@ -646,12 +836,21 @@ impl TraceRecord {
     /// An adoption.
     pub const ADOPTION: u64 = 2;
 
-    /// A record of `kind` at `t_ns` of `state`, with the newest tool sample `tool`.
-    pub fn new(kind: u64, t_ns: u64, s: &BodyState, tool: &ToolSample, f_object: Vec3) -> Self {
+    /// A record of `kind` at `t_ns` of object `object`'s state `s`, with the newest tool sample
+    /// `tool`.
+    pub fn new(
+        kind: u64,
+        t_ns: u64,
+        object: usize,
+        s: &BodyState,
+        tool: &ToolSample,
+        f_object: Vec3,
+    ) -> Self {
         let (pos, rot, vel, _) = state_fields(s);
         Self {
             kind,
             t_ns,
+            object: object as u64,
             pos,
             rot,
             vel,
@@ -659,7 +858,7 @@ impl TraceRecord {
             f_desired: tool.f_desired,
             f_measured: tool.f_measured,
             f_object: a3(f_object),
-            touching: tool.touching,
+            touching: u64::from(tool.touches(object)),
             ..Self::default()
         }
     }
@@ -695,21 +894,21 @@ impl SiteReport {
     }
 
     /// Lays out `report` from `site` at `seq`; times in seconds become ns.
-    ///
-    /// A report names no object: a station keeps a world of one (its configuration refuses
-    /// more), and its reports are all about object 0.
     pub fn new(site: usize, seq: u64, report: &Report) -> Self {
         let ns = |s: f64| (s.max(0.0) * 1e9).round() as u64;
         match *report {
             Report::State {
-                object: _,
+                object,
                 t_s,
                 state,
                 accel,
                 included,
-            } => Self::state(KIND_STATE, site, seq, ns(t_s), &state, accel, included),
+            } => Self {
+                object: object as u64,
+                ..Self::state(KIND_STATE, site, seq, ns(t_s), &state, accel, included)
+            },
             Report::Force {
-                object: _,
+                object,
                 t_s,
                 force,
                 given_j,
@@ -721,10 +920,12 @@ impl SiteReport {
                     t_ns: ns(t_s),
                     seq,
                     site: site as u64,
+                    object: object as u64,
                     force: a3(force.force),
                     point: a3(force.point),
                     depth: force.depth,
                     touching: u64::from(force.touching),
+                    torque: a3(force.torque),
                     included,
                     ..Self::default()
                 }
@@ -734,15 +935,18 @@ impl SiteReport {
                 let mut included = [0.0; MAX_SITES];
                 included[0] = time(c.touch_since_s);
                 included[1] = time(c.last_touch_s);
-                Self::state(
-                    KIND_COUPLED,
-                    site,
-                    seq,
-                    ns(c.t_s),
-                    &c.state,
-                    c.accel,
-                    included,
-                )
+                Self {
+                    object: c.object as u64,
+                    ..Self::state(
+                        KIND_COUPLED,
+                        site,
+                        seq,
+                        ns(c.t_s),
+                        &c.state,
+                        c.accel,
+                        included,
+                    )
+                }
             }
             // Tools go as a `ToolTrack` (their own ring and key): kind 0, which every receiver
             // refuses.
@@ -787,6 +991,7 @@ impl SiteReport {
         (finite(&self.accel)
             && zero(&self.force)
             && zero(&self.point)
+            && zero(&self.torque)
             && self.depth == 0.0
             && self.touching == 0)
             .then_some(state)
@@ -806,6 +1011,9 @@ impl SiteReport {
     ///   `physics.rejected`). It costs a few `is_finite` and one quaternion norm per report.
     pub fn report(&self) -> Option<(usize, Report)> {
         let site = usize::try_from(self.site).ok().filter(|&s| s < MAX_SITES)?;
+        let object = usize::try_from(self.object)
+            .ok()
+            .filter(|&k| k < MAX_OBJECTS)?;
         let t_s = self.t_ns as f64 * 1e-9;
         match self.kind {
             KIND_STATE => {
@@ -814,7 +1022,7 @@ impl SiteReport {
                 Some((
                     site,
                     Report::State {
-                        object: 0,
+                        object,
                         t_s,
                         state,
                         accel: v3(self.accel),
@@ -831,7 +1039,7 @@ impl SiteReport {
                     site,
                     Report::Coupled(CoupledReport {
                         tools: ToolReport::NONE,
-                        object: 0,
+                        object,
                         t_s,
                         state,
                         accel: v3(self.accel),
@@ -841,8 +1049,11 @@ impl SiteReport {
                 ))
             }
             KIND_FORCE => {
-                (finite(&self.force) && finite(&self.point) && self.depth.is_finite())
-                    .then_some(())?;
+                (finite(&self.force)
+                    && finite(&self.point)
+                    && finite(&self.torque)
+                    && self.depth.is_finite())
+                .then_some(())?;
                 // The state fields are not a force's: zero, as the sender lays them out; but
                 // `included[0]`, the work the sender's user has given its copy (finite, >= 0).
                 let given_j = self.included[0];
@@ -862,14 +1073,12 @@ impl SiteReport {
                     depth: self.depth,
                     touching: self.touching != 0,
                     slipping: false,
-                    // Not carried: stations refuse a fingertip's rotational friction
-                    // (`coop_actors::station::config`).
-                    torque: Vec3::zeros(),
+                    torque: v3(self.torque),
                 };
                 Some((
                     site,
                     Report::Force {
-                        object: 0,
+                        object,
                         t_s,
                         force,
                         given_j,
@@ -931,11 +1140,14 @@ mod tests {
         let mut bad = SiteReport::new(1, 7, &r);
         bad.kind = 9;
         assert!(bad.report().is_none(), "unknown kind");
+        let mut bad = SiteReport::new(1, 7, &r);
+        bad.object = MAX_OBJECTS as u64;
+        assert!(bad.report().is_none(), "an object past the largest world");
         // A `coupled` state: its user's contact times survive, "not touching" and "never" too.
         for (since, last) in [(1.25, 1.5), (f64::INFINITY, f64::NEG_INFINITY)] {
             let c = Report::Coupled(CoupledReport {
                 tools: ToolReport::NONE,
-                object: 0,
+                object: 3,
                 t_s: 3.0,
                 state,
                 accel: Vec3::new(0.0, 0.0, -3.27),
@@ -959,13 +1171,14 @@ mod tests {
             assert!(bad.report().is_none(), "a force field in a state");
         }
         let f = Report::Force {
-            object: 0,
+            object: 2,
             t_s: 1.0,
             force: ContactForce {
                 force: Vec3::x(),
                 point: Vec3::y(),
                 depth: 1e-3,
                 touching: true,
+                torque: Vec3::new(0.0, 0.0, 1e-4),
                 ..ContactForce::default()
             },
             given_j: 0.25,
@@ -988,29 +1201,37 @@ mod tests {
 
     #[test]
     fn words_follow_the_declared_layout_and_round_trip_bit_exactly() {
-        let mut s = ObjectSample::new(5, 6, &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)), 2, 4);
+        let mut s = ObjectSample::new(
+            5,
+            6,
+            3,
+            &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)),
+            2,
+            4,
+        );
         s.vel[1] = f64::NAN;
         let w = s.to_words();
-        assert_eq!(w.len(), 17);
+        assert_eq!(w.len(), 18);
         assert_eq!(
-            (w[0], w[1], w[15], w[16]),
-            (5, 6, 2, 4),
-            "t_ns, seq … adoptions, tool_t_ns"
+            (w[0], w[1], w[2], w[16], w[17]),
+            (5, 6, 3, 2, 4),
+            "t_ns, seq, object … adoptions, tool_t_ns"
         );
-        assert_eq!(w[4], 0.01f64.to_bits(), "pos[2]");
+        assert_eq!(w[5], 0.01f64.to_bits(), "pos[2]");
         let back = ObjectSample::from_words(&w);
         assert_eq!(back.to_words(), w, "bit exact, NaN included");
         assert_eq!(
             ObjectSample::LAYOUT.iter().map(|f| f.2).sum::<usize>(),
             ObjectSample::WORDS
         );
-        assert_eq!(ObjectSample::LAYOUT[2], ("pos", "f64", 3));
-        assert_eq!(SiteReport::LAYOUT[9], ("included", "f64", MAX_SITES));
-        assert_eq!(SiteReport::LAYOUT.len(), 14);
-        assert_eq!(SiteReport::WORDS, 36);
-        assert_eq!(TraceRecord::WORDS * 8, 232);
-        assert_eq!(ToolSample::WORDS * 8, 200);
-        assert!(layout_text(ObjectSample::LAYOUT).starts_with("t_ns u64 1\nseq u64 1\npos f64 3\n"));
+        assert_eq!(ObjectSample::LAYOUT[3], ("pos", "f64", 3));
+        assert_eq!(SiteReport::LAYOUT[10], ("included", "f64", MAX_SITES));
+        assert_eq!(SiteReport::LAYOUT.len(), 16);
+        assert_eq!(SiteReport::WORDS, 40);
+        assert_eq!(TraceRecord::WORDS * 8, 240);
+        assert_eq!(ToolSample::WORDS * 8, 1432);
+        assert!(layout_text(ObjectSample::LAYOUT)
+            .starts_with("t_ns u64 1\nseq u64 1\nobject u64 1\npos f64 3\n"));
         let mut r = SiteReport {
             kind: 1,
             site: 1,
@@ -1020,16 +1241,26 @@ mod tests {
         };
         r.included[7] = 3.0;
         assert_eq!(SiteReport::from_words(&r.to_words()), r);
-        assert_eq!(r.to_words()[4 + 3 + 4 + 3 + 3 + 3 + 7], 3.0f64.to_bits());
+        assert_eq!(r.to_words()[5 + 3 + 4 + 3 + 3 + 3 + 7], 3.0f64.to_bits());
     }
 
     #[test]
     fn object_samples_validate() {
-        let s = ObjectSample::new(5, 6, &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)), 2, 4);
+        let s = ObjectSample::new(
+            5,
+            6,
+            15,
+            &BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)),
+            2,
+            4,
+        );
         assert_eq!(s.state().map(|b| b.pos.z), Some(0.01));
+        assert_eq!(s.object(), Some(15));
         let mut bad = s;
         bad.pos[2] = f64::INFINITY;
         assert!(bad.state().is_none());
+        bad.object = 16;
+        assert_eq!(bad.object(), None, "past the largest world");
     }
 
     /// A repair (the window from the first tick a peer lacks, sent every other report while it
@@ -1152,6 +1383,147 @@ mod tests {
             bad(&|b| b.count = 2).is_none(),
             "a dropped position is unused, not zero"
         );
-        assert_eq!(ToolTrack::WORDS * 8, 3664);
+        assert_eq!(ToolTrack::WORDS * 8, 5816);
+    }
+
+    /// What `timewarp` sends while asked for its confirmed state in a world of several objects
+    /// (its track with the first object's state, and one report per other object) passes the
+    /// track's own validation whole: every report lays out and reads back as it was made.
+    #[test]
+    fn a_world_s_confirmed_state_passes_the_track_rules_report_by_report() {
+        use coop_model::method::track::quantize;
+        use coop_model::method::{Consistency, TimeWarp};
+        let mut sc = coop_model::scenario::Scenario::default();
+        let mut second = sc.objects[0].clone();
+        second.name = "second".into();
+        second.start_m[0] += 0.1;
+        sc.objects[0].name = "first".into();
+        sc.objects.push(second);
+        let world = sc.world();
+        let mut copy = sc.start_copy();
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut tw = TimeWarp::new(0, 2, 1e-3, sc.contact, radii, 600, &copy);
+        let none = [ContactForce::default(); 2];
+        let mut sent = Vec::new();
+        for k in 0..400i64 {
+            tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
+            if k % 50 == 49 {
+                // Site 1 knows everything up to now and asks site 0 for its confirmed state.
+                let mut r = ToolReport {
+                    first_tick: k - 49,
+                    count: 50,
+                    need_state: 1,
+                    started_tick: 5,
+                    ..ToolReport::NONE
+                };
+                r.positions[..50].fill(quantize(Vec3::new(0.2, 0.0, 0.01)));
+                tw.receive(&world, &mut copy, 1, &Report::Tools(r), k as f64 * 1e-3);
+            }
+            tw.physics_step(&world, &mut copy, &none, 1e-3);
+            if k > 300 {
+                tw.report(&copy, &none, k as f64 * 1e-3, &mut |r| sent.push(r));
+            }
+        }
+        let states: Vec<_> = sent
+            .iter()
+            .filter_map(|r| match r {
+                Report::Tools(t) => t.state,
+                _ => None,
+            })
+            .collect();
+        assert!(
+            states.iter().any(|s| s.object == 1) && states.iter().any(|s| s.object == 0),
+            "both objects' states sent: {states:?}"
+        );
+        for (n, r) in sent.into_iter().enumerate() {
+            let Report::Tools(t) = r else {
+                panic!("timewarp sends tracks only")
+            };
+            let laid = ToolTrack::new(0, n as u64 + 1, 1, &t);
+            assert_eq!(laid.report(), Some((0, Report::Tools(t))), "report {n}");
+        }
+    }
+
+    /// A confirmed state of one object of a world of several travels with every friction memory
+    /// it holds (the table's and the fingertips' stick points and rotational references, its
+    /// contacts with the later objects, its sleep count) to the bit; a memory named for an
+    /// object, plane or site the state cannot have is refused.
+    #[test]
+    fn a_world_s_object_travels_with_all_its_memory() {
+        let v = |x: f64| Vec3::new(x, -2.0 * x, 0.5 * x);
+        let mut env = [None; MAX_PLANES];
+        let mut env_twist = [None; MAX_PLANES];
+        env[0] = Some(v(0.01));
+        env_twist[0] = Some((v(0.6).normalize(), v(-0.3).normalize()));
+        env_twist[4] = Some((Vec3::x(), Vec3::y()));
+        let mut contacts = [ToolContactState::default(); MAX_SITES];
+        contacts[1] = ToolContactState::from_parts(Some(v(0.002)), Some((Vec3::z(), v(1.0))));
+        contacts[7] = ToolContactState::from_parts(Some(v(-0.003)), None);
+        let mut pairs = [PairContactState::default(); MAX_OBJECTS - 1];
+        pairs[0] =
+            PairContactState::from_parts(Some((v(0.004), v(-0.005))), Some((Vec3::x(), Vec3::z())));
+        let snap = Snapshot {
+            tick: 990,
+            object: 1,
+            objects: 3,
+            world_hash: 0x1234_5678_9abc_def0,
+            state: BodyState {
+                rot: UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1),
+                vel: v(0.7),
+                ang_mom: v(1e-4),
+                ..BodyState::at_rest(v(0.05))
+            },
+            env: EnvContactState::from_parts(env, env_twist),
+            contacts,
+            pairs,
+            still: 17,
+        };
+        let r = ToolReport {
+            first_tick: 1000,
+            count: 0,
+            confirmed_tick: 990,
+            state: Some(snap),
+            ..ToolReport::NONE
+        };
+        let t = ToolTrack::new(1, 5, 42, &r);
+        assert_eq!(t.report(), Some((1, Report::Tools(r))));
+        let bad = |f: &dyn Fn(&mut ToolTrack)| {
+            let mut b = t;
+            f(&mut b);
+            b.report()
+        };
+        assert!(
+            bad(&|b| b.state_object = 3).is_none(),
+            "an object past the world"
+        );
+        assert!(
+            bad(&|b| b.state_objects = 17).is_none(),
+            "a world past the largest"
+        );
+        assert!(bad(&|b| b.state_objects = 0).is_none(), "a world of none");
+        // Object 1 of 3 has one later object: pair 1 is not one.
+        assert!(
+            bad(&|b| b.state_memory |= 1 << 17).is_none(),
+            "a pair past the world"
+        );
+        assert!(
+            bad(&|b| b.state_memory |= 1 << 6).is_none(),
+            "a plane past the largest"
+        );
+        assert!(
+            bad(&|b| b.state_pair_anchors[6] = 1.0).is_none(),
+            "a point of a clear bit"
+        );
+        assert!(bad(&|b| b.state_tool_twist[0] = f64::NAN).is_none(), "NaN");
+        assert!(
+            bad(&|b| b.state_still = u64::MAX).is_none(),
+            "a sleep count"
+        );
+        let none = ToolTrack::new(1, 5, 42, &ToolReport::NONE);
+        assert!(none.report().is_some());
+        let mut b = none;
+        b.state_world_hash = 1;
+        assert!(b.report().is_none(), "no state but a world hash");
     }
 }

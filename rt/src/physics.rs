@@ -6,7 +6,7 @@
 
 use coop_model::contact::ContactForce;
 use coop_model::method::{Consistency, ObjectCopy, WorldCopy};
-use coop_model::world::World;
+use coop_model::world::{World, MAX_OBJECTS};
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::method::Report;
@@ -24,7 +24,10 @@ pub struct PhysicsLoop {
     copy: WorldCopy,
     /// The copy before the step or report being taken (restored if it made the copy non-finite).
     before: WorldCopy,
-    own: ContactForce,
+    /// The world's objects (fixed at start: the rings' capacities are sized for them).
+    n: usize,
+    /// The own user's contact on each object, from the newest tool sample.
+    own: [ContactForce; MAX_OBJECTS],
     own_t_ns: u64,
     tool: ToolSample,
     tools: Consumer<ToolSample>,
@@ -43,13 +46,14 @@ pub struct PhysicsLoop {
     seq: u64,
     report_seq: u64,
     adoptions: u64,
+    adoptions_by_object: [u64; MAX_OBJECTS],
     /// Reports refused as malformed (non-finite, unknown site, unknown kind).
     pub rejected: u64,
     /// Remote reports taken from the ring (valid or not).
     pub received: u64,
     /// Adoptions or steps that would have made the copy non-finite (the copy kept its state).
     pub nonfinite_kept: u64,
-    /// Object samples dropped because the ring to the servo was full.
+    /// Object samples dropped because the ring to the servo was full (one per object).
     pub object_drops: u64,
     /// Reports dropped because the ring to the network was full.
     pub report_drops: u64,
@@ -93,8 +97,8 @@ struct Ticks {
     /// Tool tracks sent.
     seq: u64,
     /// Join the grid where the session is at the first step (if that is at least this tick),
-    /// from this state (`None`: the copy given), not at tick 0.
-    join: Option<(u64, Option<BodyState>)>,
+    /// from these states of the world's objects (`None`: the copy given), not at tick 0.
+    join: Option<(u64, Option<[BodyState; MAX_OBJECTS]>)>,
     /// The tick it joined at (0: at the start).
     joined: u64,
 }
@@ -149,10 +153,11 @@ impl PhysicsLoop {
         Self {
             site,
             method,
+            n: copy.len().clamp(1, MAX_OBJECTS),
             world,
             before: copy.clone(),
             copy,
-            own: ContactForce::default(),
+            own: [ContactForce::default(); MAX_OBJECTS],
             own_t_ns: 0,
             tool: ToolSample::default(),
             tools: rings.tools,
@@ -172,6 +177,7 @@ impl PhysicsLoop {
             seq: 0,
             report_seq: timing.report_seq,
             adoptions: 0,
+            adoptions_by_object: [0; MAX_OBJECTS],
             rejected: 0,
             received: 0,
             nonfinite_kept: 0,
@@ -192,14 +198,15 @@ impl PhysicsLoop {
 
     /// For a method on the session's tick grid: if its first step on the grid falls in tick
     /// `after` or later (the session's time 0 may only be learnt then), this loop joins the grid
-    /// at that tick, from `state` (`None`: the copy it was given), not at tick 0: a restarted or
+    /// at that tick, from `states` (the world's objects in order; `None`: the copy it was
+    /// given), not at tick 0: a restarted or
     /// late physics process starts where the session is instead of re-simulating it from its
     /// start (at most [`MAX_CATCH_UP_TICKS`] extra ticks a period: a restart ten minutes in took
     /// 75 s to catch up, showing the user the session's past). Before the first step; nothing
     /// off the grid.
-    pub fn join_late(&mut self, after: u64, state: Option<BodyState>) {
+    pub fn join_late(&mut self, after: u64, states: Option<[BodyState; MAX_OBJECTS]>) {
         if self.ticks.on_grid && self.ticks.done == 0 {
-            self.ticks.join = Some((after, state));
+            self.ticks.join = Some((after, states));
         }
     }
 
@@ -230,8 +237,10 @@ impl PhysicsLoop {
                 // Joining late: the copy is the state at the start of the current tick.
                 self.ticks.done = due - 1;
                 self.ticks.joined = self.ticks.done;
-                if let Some(s) = state {
-                    *self.copy.first_mut() = ObjectCopy::new(s);
+                if let Some(states) = state {
+                    for (o, s) in self.copy.objects_mut().iter_mut().zip(states) {
+                        *o = ObjectCopy::new(s);
+                    }
                 }
                 self.method
                     .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
@@ -253,8 +262,8 @@ impl PhysicsLoop {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let now_s = now_ns as f64 * 1e-9;
         if let Ok(n) = self.tools.pop_newest() {
-            // A malformed sample leaves the last good contact in place.
-            if let Some(c) = n.value.contact() {
+            // A malformed sample leaves the last good contacts in place.
+            if let Some(c) = n.value.contacts() {
                 self.own = c;
                 self.own_t_ns = n.value.t_ns;
                 self.tool = n.value;
@@ -289,7 +298,7 @@ impl PhysicsLoop {
             self.method.physics_step(
                 &self.world,
                 &mut self.copy,
-                std::slice::from_ref(&self.own),
+                &self.own[..self.n],
                 self.period_ns as f64 * 1e-9,
             );
             if !sane(&self.world, &self.copy) {
@@ -300,24 +309,29 @@ impl PhysicsLoop {
         }
         self.copy.set_time(now_s);
         self.seq += 1;
-        if self
-            .objects
-            .push(ObjectSample::new(
-                now_ns,
-                self.seq,
-                // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                &self.method.shown(&self.copy, 0),
-                self.adoptions,
-                self.own_t_ns,
-            ))
-            .is_err()
-        {
-            self.object_drops += 1;
+        for k in 0..self.n {
+            if self
+                .objects
+                .push(ObjectSample::new(
+                    now_ns,
+                    self.seq,
+                    k,
+                    // What the user is shown: the copy, or a missed contact replayed (timewarp).
+                    &self.method.shown(&self.copy, k),
+                    self.adoptions,
+                    self.own_t_ns,
+                ))
+                .is_err()
+            {
+                self.object_drops += 1;
+            }
         }
         if now_ns >= self.next_trace_ns {
             self.next_trace_ns = next_on_grid(self.next_trace_ns, now_ns, self.trace_period_ns);
-            let rec = self.record(TraceRecord::SAMPLE, now_ns);
-            self.push_trace(rec);
+            for k in 0..self.n {
+                let rec = self.record(TraceRecord::SAMPLE, now_ns, k);
+                self.push_trace(rec);
+            }
         }
         if now_ns >= self.next_report_ns {
             self.next_report_ns = self
@@ -364,12 +378,8 @@ impl PhysicsLoop {
                     }
                 }
             };
-            self.method.report(
-                &self.copy,
-                std::slice::from_ref(&self.own),
-                now_s,
-                &mut send,
-            );
+            self.method
+                .report(&self.copy, &self.own[..self.n], now_s, &mut send);
         }
     }
 
@@ -403,7 +413,21 @@ impl PhysicsLoop {
         }
         if let Some(a) = adopted {
             self.adoptions += 1;
-            let mut rec = self.record(TraceRecord::ADOPTION, now_ns);
+            match *msg {
+                Report::State { object, .. } | Report::Force { object, .. } => {
+                    self.adoptions_by_object[object.min(MAX_OBJECTS - 1)] += 1;
+                }
+                Report::Coupled(ref c) => {
+                    self.adoptions_by_object[c.object.min(MAX_OBJECTS - 1)] += 1
+                }
+                // A confirmed world, adopted whole.
+                Report::Tools(_) => {
+                    for n in &mut self.adoptions_by_object[..self.n] {
+                        *n += 1;
+                    }
+                }
+            }
+            let mut rec = self.record(TraceRecord::ADOPTION, now_ns, 0);
             rec.from = from as u64;
             rec.jump_m = a.jump.norm();
             rec.age_s = a.age_s;
@@ -411,13 +435,21 @@ impl PhysicsLoop {
         }
     }
 
-    fn record(&self, kind: u64, now_ns: u64) -> TraceRecord {
+    fn record(&self, kind: u64, now_ns: u64, k: usize) -> TraceRecord {
+        // The others' force (naive) is on the first object's record: the method sums it over
+        // the world.
+        let remote = if k == 0 {
+            self.method.remote_force()
+        } else {
+            Vec3::zeros()
+        };
         let mut r = TraceRecord::new(
             kind,
             now_ns,
-            &self.copy.first().state,
+            k,
+            &self.copy.objects()[k].state,
             &self.tool,
-            self.own.force + self.method.remote_force(),
+            self.own[k].force + remote,
         );
         r.adoptions = self.adoptions;
         r
@@ -441,6 +473,11 @@ impl PhysicsLoop {
             .store(self.rejected, crate::sync::Ordering::Relaxed);
         p.adoptions
             .store(self.adoptions, crate::sync::Ordering::Relaxed);
+        p.objects
+            .store(self.n as u64, crate::sync::Ordering::Relaxed);
+        for (a, &v) in p.adoptions_by_object.iter().zip(&self.adoptions_by_object) {
+            a.store(v, crate::sync::Ordering::Relaxed);
+        }
         p.nonfinite_kept
             .store(self.nonfinite_kept, crate::sync::Ordering::Relaxed);
         p.drops.set(Ring::Object, self.object_drops);
@@ -479,16 +516,22 @@ impl PhysicsLoop {
     pub fn report_seq(&self) -> u64 {
         self.report_seq
     }
-    /// The copy's state now, as a sample (what a restarted physics resumes from: the copy, not
-    /// what the user is shown).
-    pub fn object_sample(&self, now_ns: u64) -> ObjectSample {
+    /// Object `k`'s state in the copy now, as a sample (what a restarted physics resumes from:
+    /// the copy, not what the user is shown).
+    pub fn object_sample(&self, now_ns: u64, k: usize) -> ObjectSample {
         ObjectSample::new(
             now_ns,
             self.seq,
-            &self.copy.first().state,
+            k,
+            &self.copy.objects()[k].state,
             self.adoptions,
             self.own_t_ns,
         )
+    }
+
+    /// The world's objects (fixed at start).
+    pub fn objects(&self) -> usize {
+        self.n
     }
 
     /// The copy this site believes.

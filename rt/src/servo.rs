@@ -8,7 +8,7 @@
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
 use coop_model::servo::{Servo, ServoInput};
-use coop_model::world::World;
+use coop_model::world::{World, MAX_OBJECTS};
 
 use crate::device::safety::{Guarded, Trip};
 use crate::device::{CartesianDevice, Placement};
@@ -25,8 +25,9 @@ pub struct ServoTick {
     pub f_command: Vec3,
     /// The force the device senses on the hand, world, N (zero without a sensor).
     pub f_measured: Vec3,
-    /// The tool's contact on the object (force on the object), for physics.
-    pub contact: ContactForce,
+    /// The tool's contact on each object (force on the object), for physics; past the world's
+    /// objects, none.
+    pub contacts: [ContactForce; MAX_OBJECTS],
     /// Tool position, world.
     pub tool_pos: Vec3,
     /// Tool velocity, world.
@@ -47,7 +48,13 @@ pub struct ServoLoop<D: CartesianDevice> {
     world: World,
     objects: Consumer<ObjectSample>,
     tools: Producer<ToolSample>,
-    latest: Option<(BodyState, u64, u64)>,
+    /// The world's objects (fixed at start).
+    n: usize,
+    /// The newest state of each object, and the time and adoption count of the newest sample.
+    states: [BodyState; MAX_OBJECTS],
+    latest: Option<(u64, u64)>,
+    /// The objects whose state has come since the start (all of them: the world is fresh).
+    have: u64,
     seq: u64,
     last_ns: u64,
     /// Tool samples dropped because physics did not keep up.
@@ -75,10 +82,13 @@ impl<D: CartesianDevice> ServoLoop<D> {
             device,
             placement,
             last_tool: (Vec3::new(1e3, 1e3, 1e3), Vec3::zeros(), Vec3::zeros()),
+            n: world.bodies().len().clamp(1, MAX_OBJECTS),
             world,
             objects,
             tools,
+            states: [BodyState::at_rest(Vec3::new(1e3, 1e3, 1e3)); MAX_OBJECTS],
             latest: None,
+            have: 0,
             seq: 0,
             last_ns: start_ns,
             dropped: 0,
@@ -109,23 +119,29 @@ impl<D: CartesianDevice> ServoLoop<D> {
     pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoTick {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let mut adopted = false;
-        if let Ok(n) = self.objects.pop_newest() {
+        // Every object's newest state (physics sends each of them every step).
+        while let Ok(n) = self.objects.pop() {
             // The round trip of the tool sample this state was computed with, once per tool sample.
-            if n.value.tool_t_ns > self.last_roundtrip_tool_ns && n.value.tool_t_ns <= now_ns {
-                self.last_roundtrip_tool_ns = n.value.tool_t_ns;
+            if n.tool_t_ns > self.last_roundtrip_tool_ns && n.tool_t_ns <= now_ns {
+                self.last_roundtrip_tool_ns = n.tool_t_ns;
                 if let Some(c) = control {
                     let count = c.servo.roundtrip_count.load(crate::sync::Ordering::Relaxed);
-                    c.servo
-                        .roundtrip
-                        .record(now_ns - n.value.tool_t_ns, count == 0);
+                    c.servo.roundtrip.record(now_ns - n.tool_t_ns, count == 0);
                     c.servo
                         .roundtrip_count
                         .store(count + 1, crate::sync::Ordering::Relaxed);
                 }
             }
-            if let Some(state) = n.value.state() {
-                adopted = self.latest.is_some_and(|(_, _, a)| a != n.value.adoptions);
-                self.latest = Some((state, n.value.t_ns, n.value.adoptions));
+            if let (Some(state), Some(k)) = (n.state(), n.object()) {
+                if k < self.n {
+                    adopted |= self.latest.is_some_and(|(_, a)| a != n.adoptions);
+                    self.states[k] = state;
+                    self.have |= 1 << k;
+                    // The world is as fresh as its stalest object.
+                    if self.have == (1 << self.n) - 1 && k == self.n - 1 {
+                        self.latest = Some((n.t_ns, n.adoptions));
+                    }
+                }
             }
         }
         if let Ok(s) = self.device.sample(now_ns) {
@@ -139,26 +155,19 @@ impl<D: CartesianDevice> ServoLoop<D> {
         let dt = (now_ns.saturating_sub(self.last_ns)).max(1) as f64 * 1e-9;
         self.last_ns = now_ns;
         // No state yet: the world is stale from the start (the display stays at zero).
-        let (object, t_ns) = self.latest.map_or(
-            (
-                BodyState::at_rest(coop_model::body::Vec3::new(1e3, 1e3, 1e3)),
-                0,
-            ),
-            |(s, t, _)| (s, t),
-        );
+        let t_ns = self.latest.map_or(0, |(t, _)| t);
         let out = self.servo.step(
             &ServoInput {
                 now_s: now_ns as f64 * 1e-9,
                 dt_s: dt,
                 tool_pos,
                 tool_vel,
-                objects: std::slice::from_ref(&object),
+                objects: &self.states[..self.n],
                 object_time_s: t_ns as f64 * 1e-9,
                 adopted,
                 stopping: control.is_some_and(|c| c.run_state() == RunState::Stopping),
             },
-            // (A station's world is one object: its rings carry one.)
-            &self.world.bodies()[..1],
+            &self.world.bodies()[..self.n],
         );
         let f_device = self.placement.force_to_device(out.f_desired);
         let f_command = self.device.display(now_ns, f_device, out.scale);
@@ -171,19 +180,17 @@ impl<D: CartesianDevice> ServoLoop<D> {
         };
         self.seq += 1;
         let a = |v: coop_model::body::Vec3| [v.x, v.y, v.z];
-        let sample = ToolSample {
+        let mut sample = ToolSample {
             t_ns: now_ns,
             seq: self.seq,
             tool_pos: a(out.tool_pos),
             tool_vel: a(out.tool_vel),
-            force: a(out.contacts[0].force),
-            point: a(out.contacts[0].point),
-            depth: out.contacts[0].depth,
-            touching: u64::from(out.contacts[0].touching),
             f_desired: a(out.f_desired),
             f_measured: a(f_measured),
             f_command: a(f_command),
+            ..ToolSample::default()
         };
+        sample.set_contacts(&out.contacts[..self.n]);
         if self.tools.push(sample).is_err() {
             self.dropped += 1;
             if let Some(c) = control {
@@ -225,7 +232,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
             f_desired: out.f_desired,
             f_command,
             f_measured,
-            contact: out.contacts[0],
+            contacts: out.contacts,
             tool_pos,
             tool_vel,
             scale: out.scale,

@@ -94,15 +94,27 @@ fn rig_with<D: CartesianDevice>(
         ..SiteSpec::default()
     });
     sc.validate().expect("valid scenario");
+    rig_in(tag, &sc, MethodName::Paper, make)
+}
+
+/// The rig of scenario `sc` under `method`, with the device `make` builds. Its rings have room
+/// for a world of `sc`'s objects (a message per object a step).
+fn rig_in<D: CartesianDevice>(
+    tag: &str,
+    sc: &Scenario,
+    method: MethodName,
+    make: impl FnOnce(&Scenario) -> D,
+) -> Rig<D> {
+    let per = sc.objects.len().next_power_of_two();
     let session = format!("lp{}{tag}", std::process::id());
     let name = |w: &str| SegmentName::new(&session, "a", w).expect("name");
     let tool = RingSegment::<ToolSample>::create(&name("tool"), 64).expect("tool ring");
-    let obj = RingSegment::<ObjectSample>::create(&name("obj"), 64).expect("object ring");
-    let rep = RingSegment::<SiteReport>::create(&name("rep"), 64).expect("report ring");
-    let rem = RingSegment::<SiteReport>::create(&name("rem"), 64).expect("remote ring");
-    let trc = RingSegment::<TraceRecord>::create(&name("trc"), 4096).expect("trace ring");
+    let obj = RingSegment::<ObjectSample>::create(&name("obj"), 64 * per).expect("object ring");
+    let rep = RingSegment::<SiteReport>::create(&name("rep"), 64 * per).expect("report ring");
+    let rem = RingSegment::<SiteReport>::create(&name("rem"), 64 * per).expect("remote ring");
+    let trc = RingSegment::<TraceRecord>::create(&name("trc"), 4096 * per).expect("trace ring");
     let world = sc.world();
-    let device = make(&sc);
+    let device = make(sc);
     let servo = ServoLoop::new(
         Servo::new(sc.servo_params(0)),
         Guarded::new(device, SafetyLimits::default(), 0),
@@ -114,7 +126,7 @@ fn rig_with<D: CartesianDevice>(
     );
     let physics = PhysicsLoop::new(
         0,
-        sc.method(0, MethodName::Paper),
+        sc.method(0, method),
         world,
         sc.start_copy(),
         PhysicsRings {
@@ -155,7 +167,7 @@ fn a_push_flows_through_the_rings_and_reports_go_out() {
     for k in 1..=1500u64 {
         r.physics.step(k * MS);
         let out = r.servo.step(k * MS, None);
-        touched |= out.contact.touching && out.f_desired.norm() > 0.1;
+        touched |= out.contacts[0].touching && out.f_desired.norm() > 0.1;
         while let Ok(rep) = r.reports.pop() {
             assert!(rep.report().is_some(), "every report decodes");
             reports += 1;
@@ -278,6 +290,127 @@ fn loop_steps_allocate_nothing() {
         }
     });
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
+}
+
+/// The largest world a station takes ([`coop_model::world::MAX_OBJECTS`] pucks in a 4 × 4 grid,
+/// touching their neighbours' gaps), one pushed by the tool into the others: under every method
+/// that steps it on a station, the servo's and physics' steps allocate nothing, every object's
+/// state reaches the servo, and the trace carries every object.
+#[test]
+fn loop_steps_in_the_largest_world_allocate_nothing() {
+    use coop_model::world::MAX_OBJECTS;
+    let mut sc = Scenario::default();
+    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+    sc.world.planes[0].offset_m = 0.0;
+    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    let puck = sc.objects[0].clone();
+    sc.objects = (0..MAX_OBJECTS)
+        .map(|k| coop_model::scenario::ObjectSpec {
+            name: format!("puck{k}"),
+            start_m: [
+                -0.04 + 0.085 * (k % 4) as f64,
+                -0.13 + 0.085 * (k / 4) as f64,
+                puck.half_height_m - 1e-4,
+            ],
+            ..puck.clone()
+        })
+        .collect();
+    sc.site.push(SiteSpec {
+        name: "a".into(),
+        device_base_m: [-0.3, -0.2, 0.0],
+        report_rate_hz: 100.0,
+        script: vec![
+            KeyframeSpec {
+                t_s: 0.0,
+                target_m: [-0.12, -0.13, 0.01],
+            },
+            KeyframeSpec {
+                t_s: 0.2,
+                target_m: [-0.12, -0.13, 0.01],
+            },
+            KeyframeSpec {
+                t_s: 0.9,
+                target_m: [0.02, -0.13, 0.01],
+            },
+        ],
+        ..SiteSpec::default()
+    });
+    sc.validate().expect("valid scenario");
+    for method in [
+        MethodName::Paper,
+        MethodName::Naive,
+        MethodName::Timewarp,
+        MethodName::Coupled,
+    ] {
+        let mut r = rig_in(&format!("big{}", method.as_str()), &sc, method, |sc| {
+            let script = sc.script(0);
+            SimScara::new(
+                Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+                sc.force_loop(0),
+                script,
+                0,
+            )
+        });
+        // On the grid from time 0 (methods that step on it).
+        r.physics.set_tick_origin(0);
+        let step = |r: &mut Rig, k: u64| {
+            r.physics.step(k * MS);
+            r.servo.step(k * MS, None);
+        };
+        for k in 1..=10u64 {
+            step(&mut r, k);
+        }
+        let mut records = Vec::with_capacity(4096 * MAX_OBJECTS);
+        let n = allocations_during(|| {
+            for k in 11..=1500u64 {
+                step(&mut r, k);
+                while r.reports.pop().is_ok() {}
+                while let Ok(t) = r.trace.pop() {
+                    if records.len() < records.capacity() {
+                        records.push(t);
+                    }
+                }
+            }
+        });
+        assert_eq!(
+            n,
+            0,
+            "{}: steps in a world of {MAX_OBJECTS} allocated {n} times",
+            method.as_str()
+        );
+        let objects: std::collections::BTreeSet<u64> = records.iter().map(|t| t.object).collect();
+        assert_eq!(
+            objects.len(),
+            MAX_OBJECTS,
+            "{}: the trace has every object",
+            method.as_str()
+        );
+        let touched: std::collections::BTreeSet<u64> = records
+            .iter()
+            .filter(|t| t.touching != 0)
+            .map(|t| t.object)
+            .collect();
+        assert!(
+            touched.contains(&0),
+            "{}: the tool pushed the first puck: {touched:?}",
+            method.as_str()
+        );
+        assert_eq!(
+            r.physics.object_drops,
+            0,
+            "{}: the object ring had room",
+            method.as_str()
+        );
+        // The servo's world is fresh only once every object's state has come.
+        r.physics.step(1501 * MS);
+        let last = r.servo.step(1501 * MS, None);
+        assert_eq!(
+            last.scale,
+            1.0,
+            "{}: the servo has every object",
+            method.as_str()
+        );
+    }
 }
 
 /// The servo step through the station's device type with each backend built in (the simulated

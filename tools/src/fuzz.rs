@@ -22,9 +22,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::bail;
 use clap::{Parser, ValueEnum};
-use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
-use coop_model::method::{Report, WorldCopy};
+use coop_model::method::Report;
 use coop_model::rng::Rng;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode};
@@ -190,13 +189,20 @@ const SPECIALS: [f64; 12] = [
     f64::MIN_POSITIVE,
 ];
 
-/// A genuine-looking state of site 1 at its clock time `t_ns`.
-fn genuine(rng: &mut Rng, seq: u64, t_ns: u64, force: bool) -> SiteReport {
+/// A world of two objects (two pucks on a table): the wire target's.
+fn world_of_two() -> Scenario {
+    coop_actors::scenario_file::parse(include_str!("../../scenarios/billiards.toml"))
+        .unwrap_or_default()
+}
+
+/// A genuine-looking state of site 1 about `object` at its clock time `t_ns`.
+fn genuine(rng: &mut Rng, seq: u64, t_ns: u64, force: bool, object: u64) -> SiteReport {
     let mut r = SiteReport {
         kind: if force { 2 } else { 1 },
         t_ns,
         seq,
         site: 1,
+        object,
         ..SiteReport::default()
     };
     if force {
@@ -261,13 +267,21 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// The oracle for an accepted state: is it what a world of `b` allows at `now_ns`?
-fn wire_oracle(b: &Bounds, r: &SiteReport, now_ns: u64) -> Result<(), String> {
+/// The oracle for an accepted state, received on a key naming `key_object`: is it what a world
+/// of `b` allows at `now_ns`?
+fn wire_oracle(b: &Bounds, r: &SiteReport, key_object: u64, now_ns: u64) -> Result<(), String> {
     let words_finite = r.to_words().iter().enumerate().all(|(i, &w)| {
-        // Every f64 field finite (the layout's u64 fields are kind, t_ns, seq, site, touching).
-        let is_u64 = matches!(i, 0..=3) || i == SiteReport::WORDS - 1;
+        // Every f64 field finite (the layout's u64 fields are kind, t_ns, seq, site, object,
+        // touching).
+        let is_u64 = matches!(i, 0..=4) || i == SiteReport::WORDS - 4;
         is_u64 || f64::from_bits(w).is_finite()
     });
+    if r.object != key_object || r.object >= b.object_count as u64 {
+        return Err(format!(
+            "object {} on a key of object {key_object}, in a world of {}: {r:?}",
+            r.object, b.object_count
+        ));
+    }
     if !words_finite {
         return Err(format!("a non-finite field: {r:?}"));
     }
@@ -278,7 +292,9 @@ fn wire_oracle(b: &Bounds, r: &SiteReport, now_ns: u64) -> Result<(), String> {
         ));
     }
     let state = r.kind == 1;
-    if state && (norm(r.pos) > b.extent_m || norm(r.vel) > b.speed_m_per_s) {
+    if state
+        && (norm(r.pos) > b.extent_m || norm(r.vel) > b.objects[r.object as usize].speed_m_per_s)
+    {
         return Err(format!("outside the world or too fast: {r:?}"));
     }
     if !state && norm(r.force) > b.force_n {
@@ -288,14 +304,15 @@ fn wire_oracle(b: &Bounds, r: &SiteReport, now_ns: u64) -> Result<(), String> {
 }
 
 fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
-    let sc = paper();
+    let sc = world_of_two();
     let bounds = Bounds::from_scenario(&sc, None);
     let world = sc.world();
     let sites = vec!["user1".to_owned(), "user2".to_owned()];
     let mut rng = Rng::new(a.seed);
     let mut inbound = Inbound::new(sites.clone(), bounds);
     let mut method = sc.method(0, MethodName::Paper);
-    let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(-0.05, 0.0, 0.01)));
+    let mut copy = sc.start_copy();
+    let none = [ContactForce::default(); 2];
     let mut now: u64 = 1_000_000_000_000;
     let mut seq = 0u64;
     let mut out = Outcome::default();
@@ -312,7 +329,13 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
         seq += 1;
         let t_theirs = now.saturating_add_signed(skew) - rng.next_u64() % 50_000_000;
         let force = rng.uniform() < 0.2;
-        let r = genuine(&mut rng, seq, t_theirs, force);
+        // Either object of the world; now and then one it does not have.
+        let object = match rng.next_u64() % 16 {
+            0 => 2,
+            1 => rng.next_u64() % 64,
+            k => k % 2,
+        };
+        let r = genuine(&mut rng, seq, t_theirs, force, object);
         let mut bytes = wire::encode(&r);
         if rng.uniform() < 0.9 {
             mutate_bytes(&mut rng, &mut bytes);
@@ -322,12 +345,18 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
             1 => "zz",
             _ => "user2",
         };
-        let Ok(admitted) = inbound.check(key, &bytes, now, &offsets) else {
+        // The key names the message's object, or now and then another.
+        let key_object = if rng.uniform() < 0.9 {
+            object
+        } else {
+            rng.next_u64() % 3
+        };
+        let Ok(admitted) = inbound.check(key, key_object, &bytes, now, &offsets) else {
             return;
         };
         out.accepted += 1;
         let rep = admitted.report;
-        if let Err(why) = wire_oracle(&bounds, &rep, now) {
+        if let Err(why) = wire_oracle(&bounds, &rep, key_object, now) {
             return implausible(out, || format!("input {i}: {why}"));
         }
         // Adopted and integrated by a paper copy, it must leave the copy finite and in the world.
@@ -344,10 +373,13 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
         copy.set_time(now_s);
         let before = copy.clone();
         method.receive(&world, &mut copy, from, &msg, now_s);
-        method.physics_step(&world, &mut copy, &[ContactForce::default()], 1e-3);
-        let s = copy.first().state;
-        if !s.is_finite() || s.pos.norm() > bounds.extent_m * 2.0 {
-            let after = s;
+        method.physics_step(&world, &mut copy, &none, 1e-3);
+        if let Some(after) = copy
+            .objects()
+            .iter()
+            .map(|o| o.state)
+            .find(|s| !s.is_finite() || s.pos.norm() > bounds.extent_m * 2.0)
+        {
             copy = before;
             implausible(out, || {
                 format!("input {i}: adopting {rep:?} left the copy at {after:?}")

@@ -33,8 +33,8 @@ use coop_model::body::Vec3;
 use coop_model::method::EnergyAccount;
 use coop_model::metrics::{self, Metrics};
 use coop_model::scenario::{MethodName, Scenario};
-use coop_model::sim::{AdoptionEvent, ForceSteps, Mode, RunResult, SiteTrace};
-use coop_transport::recording::{self, Recording};
+use coop_model::sim::{AdoptionEvent, ForceSteps, Mode, ObjectTrace, RunResult, SiteTrace};
+use coop_transport::recording::{self, Recording, SampleMsg};
 use coop_transport::{keys, network};
 use zenoh::Wait;
 
@@ -186,6 +186,84 @@ pub struct MethodOutcome {
     pub stations: serde_json::Value,
     /// The session's time 0 in the launcher's clock (CLOCK_MONOTONIC ns).
     pub launcher_epoch_ns: u64,
+    /// In a world of several objects, each object's figures (empty in a world of one).
+    pub objects: Vec<ObjectRow>,
+}
+
+/// One object's figures in a session: the simulator's and the stations'.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObjectRow {
+    /// The object's name.
+    pub name: String,
+    /// The simulator's run.
+    pub simulated: ObjectFigures,
+    /// The stations' run.
+    pub real: ObjectFigures,
+}
+
+/// How one object's copies agreed with each other and with the reference, mm.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObjectFigures {
+    /// Largest distance between two sites' copies of it, mm.
+    pub div_max_mm: f64,
+    /// RMS over the samples of that distance, mm.
+    pub div_rms_mm: f64,
+    /// That distance at the end, mm.
+    pub div_final_mm: f64,
+    /// Largest distance of any site's copy from the reference's, mm.
+    pub err_ref_max_mm: f64,
+}
+
+impl ObjectFigures {
+    /// Object `o`'s figures in `run` against `reference`.
+    pub fn of(run: &RunResult, reference: &RunResult, o: usize) -> Self {
+        let n = run.t.len();
+        let div: Vec<f64> = (0..n)
+            .map(|k| metrics::object_divergence(run, o, k))
+            .collect();
+        let rms = (div.iter().map(|d| d * d).sum::<f64>() / n.max(1) as f64).sqrt();
+        let err = run
+            .sites
+            .iter()
+            .flat_map(|s| {
+                let r = reference.sites[0].object_pos(o);
+                s.object_pos(o).iter().zip(r).map(|(a, b)| (a - b).norm())
+            })
+            .fold(0.0, f64::max);
+        Self {
+            div_max_mm: div.iter().copied().fold(0.0, f64::max) * 1e3,
+            div_rms_mm: rms * 1e3,
+            div_final_mm: div.last().copied().unwrap_or(0.0) * 1e3,
+            err_ref_max_mm: err * 1e3,
+        }
+    }
+}
+
+/// Prints the per-object lines under the table: per method and object, the simulator's figures
+/// and the stations' (`methods`: the run's JSON `methods`, each with its `objects`).
+///
+/// # Errors
+/// A method's `objects` is not a list of [`ObjectRow`].
+pub fn print_objects(methods: &serde_json::Value) -> anyhow::Result<()> {
+    for (m, r) in methods.as_object().into_iter().flatten() {
+        let rows: Vec<ObjectRow> = serde_json::from_value(r["objects"].clone())
+            .with_context(|| format!("the {m} run's per-object figures"))?;
+        for o in rows {
+            let f = |x: &ObjectFigures| {
+                format!(
+                    "div max {:.2} rms {:.2} final {:.2}, err ref max {:.2}",
+                    x.div_max_mm, x.div_rms_mm, x.div_final_mm, x.err_ref_max_mm
+                )
+            };
+            println!(
+                "# object {:<10} {m}-sim: {} | {m}-real: {} (mm)",
+                o.name,
+                f(&o.simulated),
+                f(&o.real)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The station configuration `session run` writes for one site: the defaults, with this session's
@@ -576,12 +654,25 @@ fn outcome(
             }),
         );
     }
+    // A world of several: each object's own figures (the table's are the worst object's).
+    let objects = if sc.objects.len() > 1 {
+        (0..sc.objects.len())
+            .map(|o| ObjectRow {
+                name: sc.object_name(o).to_owned(),
+                simulated: ObjectFigures::of(&sim_run, &reference_run, o),
+                real: ObjectFigures::of(&real_run, &reference_run, o),
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     Ok(MethodOutcome {
         reference,
         simulated,
         real,
         stations: serde_json::Value::Object(per_station),
         launcher_epoch_ns: 0,
+        objects,
     })
 }
 
@@ -615,13 +706,8 @@ pub fn run_from_recordings(
             bail!("the recording of site {} has no samples", sc.site[i].name);
         }
         let mut tr = SiteTrace::default();
-        let mut k = 0usize;
-        for &tk in &t {
-            let at = epoch_ns as f64 + tk * 1e9;
-            while k + 1 < r.samples.len() && (r.samples[k + 1].t_ns as f64) <= at {
-                k += 1;
-            }
-            let s = &r.samples[k];
+        let at = |tk: f64| epoch_ns as f64 + tk * 1e9;
+        for s in resample(&r.samples, &t, at) {
             tr.obj_pos.push(Vec3::from(s.pos));
             tr.obj_vel.push(Vec3::from(s.vel));
             tr.obj_rot.push(s.rot);
@@ -630,6 +716,39 @@ pub fn run_from_recordings(
             tr.f_measured.push(Vec3::from(s.f_measured));
             tr.f_on_object.push(Vec3::from(s.f_object));
             tr.touching.push(s.touching);
+        }
+        // A world of several: every other object (the recording names them in the world's
+        // order), and which of them the tool touches.
+        if sc.objects.len() > 1 {
+            if r.others.len() + 1 != sc.objects.len() {
+                bail!(
+                    "the recording of site {} has {} objects, scenario {:?} {}",
+                    sc.site[i].name,
+                    r.others.len() + 1,
+                    sc.name,
+                    sc.objects.len()
+                );
+            }
+            tr.touched = tr.touching.iter().map(|&t| u16::from(t)).collect();
+            for (k, o) in r.others.iter().enumerate() {
+                if o.samples.is_empty() {
+                    bail!(
+                        "the recording of site {} has no samples of object {}",
+                        sc.site[i].name,
+                        o.name
+                    );
+                }
+                let mut ob = ObjectTrace::default();
+                for (j, s) in resample(&o.samples, &t, at).enumerate() {
+                    ob.pos.push(Vec3::from(s.pos));
+                    ob.vel.push(Vec3::from(s.vel));
+                    ob.rot.push(s.rot);
+                    if s.touching {
+                        tr.touched[j] |= 1 << (k + 1);
+                    }
+                }
+                tr.others.push(ob);
+            }
         }
         sites.push(tr);
         for a in &r.adoptions {
@@ -662,6 +781,23 @@ pub fn run_from_recordings(
         messages,
         rollback: vec![None; recs.len()],
         force_steps: vec![ForceSteps::default(); recs.len()],
+    })
+}
+
+/// The sample of `samples` (in time order, not empty) in force at each time of `t` (`at` gives
+/// a time of `t` in the recording's clock, ns): the last one at or before it, else the first.
+fn resample<'a>(
+    samples: &'a [SampleMsg],
+    t: &'a [f64],
+    at: impl Fn(f64) -> f64 + 'a,
+) -> impl Iterator<Item = &'a SampleMsg> + 'a {
+    let mut k = 0usize;
+    t.iter().map(move |&tk| {
+        let at = at(tk);
+        while k + 1 < samples.len() && (samples[k + 1].t_ns as f64) <= at {
+            k += 1;
+        }
+        &samples[k]
     })
 }
 
@@ -713,7 +849,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
             "reference": o.reference,
             "methods": { m.as_str(): {
                 "simulated": o.simulated, "real": o.real, "stations": o.stations,
-                "launcher_epoch_ns": o.launcher_epoch_ns,
+                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects,
             } },
         });
         return Ok((sc, rows, v));
@@ -743,7 +879,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
             m.as_str().to_owned(),
             serde_json::json!({
                 "simulated": o.simulated, "real": o.real, "stations": o.stations,
-                "launcher_epoch_ns": o.launcher_epoch_ns,
+                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects,
             }),
         );
     }

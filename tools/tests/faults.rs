@@ -110,7 +110,7 @@ fn stations_whose_clocks_differ_by_1000_s_adopt_each_other_and_end_together() {
             Duration::from_millis(200),
         )
         .ok()?;
-        let s = ctl.resume()?;
+        let s = ctl.resume()?.samples[0];
         let t_s = s.t_ns.checked_sub(epoch_ns?)? as f64 * 1e-9;
         Some((t_s, s.pos, s.vel))
     };

@@ -723,3 +723,104 @@ fn entities_sit_in_declared_frames(v: &serde_json::Value) {
         );
     }
 }
+
+/// A world of several objects on real stations (`scenarios/stack.toml`, `timewarp`): a Foxglove
+/// WebSocket client gets every site's copy of every object live (a frame and an entity each), and
+/// the Python `mcap` reader finds in each site's recording a frame, an entity in its real size and
+/// `/object` messages per object.
+#[test]
+fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_recorded() {
+    let _turn = ONE_AT_A_TIME.lock();
+    if python_with(&["mcap", "google.protobuf", "websockets"]).is_none() {
+        return;
+    }
+    let scenario_path = root().join("scenarios/stack.toml");
+    let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
+    assert_eq!(scenario.objects.len(), 2);
+    let (first, second) = (scenario.object_name(0), scenario.object_name(1));
+    let out = out_dir("stack");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .arg("run")
+        .arg(&scenario_path)
+        .args(["--method", "timewarp", "--json", "--live", "127.0.0.1:0"])
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("session starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (url, log) = live_url(stderr, 30, "the launcher");
+    let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
+    let others: Vec<String> = sites
+        .iter()
+        .map(|s| format!("object/{second}/{s}"))
+        .collect();
+    let client = Command::new("python3")
+        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .args([url.as_str(), "60"])
+        .args(&sites)
+        .env("WANT_TF", others.join(","))
+        .output()
+        .expect("python3 runs");
+    let session = child.wait_with_output().expect("session ends");
+    let launcher_log = log.join().unwrap_or_default();
+    assert!(
+        client.status.success(),
+        "the client failed: {}",
+        String::from_utf8_lossy(&client.stderr)
+    );
+    assert!(session.status.success(), "session failed: {launcher_log}");
+    let v: Value = serde_json::from_slice(&client.stdout).expect("the client prints JSON");
+    assert_eq!(v["errors"], serde_json::json!([]), "{v}");
+    assert_eq!(v["complete"], true, "every object of every site live: {v}");
+    for f in &others {
+        let ids: Vec<&str> = v["scene_ids"]
+            .as_array()
+            .expect("scene ids")
+            .iter()
+            .filter_map(Value::as_str)
+            .collect();
+        assert!(ids.contains(&f.as_str()), "entity {f} live: {ids:?}");
+    }
+    // The recordings, read by the foreign reader.
+    let half = scenario.objects[1].half_extents_m;
+    for site in &sites {
+        let parts =
+            coop_transport::recording::read(&out.join("timewarp").join(format!("{site}.mcap")))
+                .expect("the recording reads")
+                .files;
+        let r = foxglove_summary(&parts);
+        assert_eq!(r["errors"], serde_json::json!([]), "{site}");
+        let frames = r["frames"].as_object().expect("frames");
+        for frame in [format!("object/{site}"), format!("object/{second}/{site}")] {
+            assert!(
+                frames[&format!("world>{frame}")].as_u64() > Some(1000),
+                "{site}: {frame} in {:?}",
+                frames.keys().collect::<Vec<_>>()
+            );
+            assert!(r["entities"][&frame].is_object(), "{site}: entity {frame}");
+        }
+        assert_eq!(
+            r["entities"][format!("object/{second}/{site}")]["cube_size"],
+            serde_json::json!([2.0 * half[0], 2.0 * half[1], 2.0 * half[2]]),
+            "{site}: the second object in its real size"
+        );
+        for o in [first, second] {
+            let key = format!("{site}/{o}");
+            assert!(
+                r["json"]["/object"][&key].as_u64() > Some(1000),
+                "/object of {key}: {}",
+                r["json"]["/object"]
+            );
+        }
+        entities_sit_in_declared_frames(&r);
+    }
+    // The launcher's result names each object.
+    let result: Value = serde_json::from_slice(&session.stdout).expect("the session's JSON");
+    let objects = &result["methods"]["timewarp"]["objects"];
+    assert_eq!(objects[0]["name"], first, "{result}");
+    assert_eq!(objects[1]["name"], second, "{result}");
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -672,7 +672,7 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
     // The embedded paper scenario: user1 pushes the disk from x = -5 cm at 1 s; it slides and comes
     // to rest before user1 comes back at 3 s.
     let (before, seq) = wait_until("the pushed disk at rest", LIMIT, || {
-        let s = ctl.resume()?;
+        let s = ctl.resume()?.samples[0];
         let t = s.t_ns.saturating_sub(epoch) as f64 * 1e-9;
         (t > 2.2 && s.pos[0] > 0.0).then(|| (s, ctl.physics.report_seq.load(Ordering::Relaxed)))
     });
@@ -681,6 +681,7 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
     let killed_at = coop_rt::timer::monotonic_ns();
     let after = wait_until("a state from the restarted physics", LIMIT, || {
         ctl.resume()
+            .map(|r| r.samples[0])
             .filter(|s| s.t_ns > killed_at && pid(&ctl, Child::Physics) != old)
     });
     assert!(

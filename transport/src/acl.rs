@@ -1,7 +1,7 @@
 //! Who may say what in a session: the zenoh access control (ACL) that follows from a scenario.
 //!
 //! Without it, anyone who reaches a session speaks for any site: a foreign client can put on
-//! `coop/<s>/obj/0/state/user2` or answer `clock/user2` queries, and the receive checks
+//! `coop/<s>/obj/<k>/state/user2` or answer `clock/user2` queries, and the receive checks
 //! (`admit`) cannot tell it from user2. Zenoh's ACL decides per message and per link, by the
 //! common name of the certificate the other side presented (mutual TLS), so the rules here name
 //! certificates: a site's certificate has the site's name as its common name (`session certs`
@@ -77,7 +77,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             "ingress",
             &["declare_subscriber"],
             &[
-                keys::all_states(s, 0),
+                keys::all_object_states(s),
                 keys::all_tools(s, 0),
                 keys::all_live(s),
                 keys::epoch(s),
@@ -87,7 +87,11 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             "watch-query",
             "ingress",
             &["query"],
-            &[keys::all_current(s, 0), keys::all_clocks(s), keys::epoch(s)],
+            &[
+                keys::all_object_current(s),
+                keys::all_clocks(s),
+                keys::epoch(s),
+            ],
         ),
         rule(
             "watch-presence",
@@ -137,7 +141,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             "ingress",
             &["put"],
             &[
-                keys::state(s, 0, site),
+                keys::states_of(s, site),
                 keys::tool(s, 0, site),
                 keys::live(s, site),
             ],
@@ -146,7 +150,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &own("answers"),
             "ingress",
             &["declare_queryable", "reply"],
-            &[keys::current(s, 0, site), keys::clock(s, site)],
+            &[keys::currents_of(s, site), keys::clock(s, site)],
         ));
         rules.push(rule(
             &own("presence"),
@@ -223,14 +227,14 @@ mod tests {
         assert_eq!(
             rule("site-user2-puts")["key_exprs"],
             json!([
-                "coop/s1/obj/0/state/user2",
+                "coop/s1/obj/*/state/user2",
                 "coop/s1/obj/0/tool/user2",
                 "coop/s1/live/user2"
             ])
         );
         assert_eq!(
             rule("site-user2-answers")["key_exprs"],
-            json!(["coop/s1/obj/0/current/user2", "coop/s1/clock/user2"])
+            json!(["coop/s1/obj/*/current/user2", "coop/s1/clock/user2"])
         );
         let policy = |id: &str| {
             acl["policies"]

@@ -12,6 +12,7 @@
 
 use coop_model::method::track::QUANTUM_M;
 use coop_model::scenario::Scenario;
+use coop_model::world::MAX_OBJECTS;
 use coop_model::MAX_SITES;
 use coop_rt::msg::{SiteReport, ToolTrack, KIND_COUPLED};
 use coop_rt::shm::control::Refused;
@@ -68,6 +69,16 @@ pub enum Refusal {
         /// How far ahead, ms.
         ahead_ms: f64,
     },
+    /// About another object than the one its key names.
+    #[error("state of site {site} is of object {object}, its key names object {key_object}")]
+    OtherObject {
+        /// The site.
+        site: usize,
+        /// The object it is about.
+        object: u64,
+        /// The object its key names.
+        key_object: u64,
+    },
     /// Finite but impossible in this world.
     #[error("state of site {site}: {what} is beyond what this world allows")]
     Implausible {
@@ -87,7 +98,8 @@ impl Refusal {
                 Refused::Length
             }
             Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
-            Refusal::Foreign { .. } => Refused::Foreign,
+            // Not what its key names: counted with the foreign ones.
+            Refusal::Foreign { .. } | Refusal::OtherObject { .. } => Refused::Foreign,
             Refusal::Stale { .. } => Refused::Stale,
             Refusal::NoOffset { .. } => Refused::NoOffset,
             Refusal::TooOld { .. } => Refused::TooOld,
@@ -97,15 +109,24 @@ impl Refusal {
     }
 }
 
-/// What is possible in one world, and how old a state may be: the receiver's plausibility bounds.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Bounds {
-    /// Largest distance from the origin the object (or a contact point) can be at, m.
-    pub extent_m: f64,
+/// What is possible for one object of the world.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ObjectBounds {
     /// Largest speed, m/s.
     pub speed_m_per_s: f64,
     /// Largest angular momentum, kg·m²/s.
     pub ang_mom: f64,
+}
+
+/// What is possible in one world, and how old a state may be: the receiver's plausibility bounds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bounds {
+    /// Largest distance from the origin an object (or a contact point) can be at, m.
+    pub extent_m: f64,
+    /// How many objects the world has: a state of any other is refused.
+    pub object_count: usize,
+    /// Per object (the world's order), its speed and angular momentum bounds.
+    pub objects: [ObjectBounds; MAX_OBJECTS],
     /// Largest dead-reckoning acceleration (gravity less support), m/s².
     pub accel_m_per_s2: f64,
     /// Largest contact force a site can report, N.
@@ -128,13 +149,17 @@ impl Bounds {
     /// the scenario expects (its link's maximum plus jitter) plus three of its slowest report
     /// periods plus 100 ms.
     pub fn from_scenario(sc: &Scenario, max_age_ms: Option<f64>) -> Self {
-        // (Stations run one object: the first.)
-        let o = &sc.objects[0];
-        let size = o
-            .radius_m
-            .max(o.half_height_m)
-            .max(o.half_extents_m.iter().copied().fold(0.0, f64::max));
-        let mut extent = norm(o.start_m) + size;
+        let size_of = |o: &coop_model::scenario::ObjectSpec| {
+            o.radius_m
+                .max(o.half_height_m)
+                .max(o.half_extents_m.iter().copied().fold(0.0, f64::max))
+        };
+        let size = sc.objects.iter().map(size_of).fold(0.0, f64::max);
+        let mut extent = sc
+            .objects
+            .iter()
+            .map(|o| norm(o.start_m) + size_of(o))
+            .fold(0.0, f64::max);
         for i in 0..sc.site.len() {
             let arm = sc.arm(i);
             extent = extent.max(norm(sc.site[i].device_base_m) + arm.link1_m + arm.link2_m);
@@ -145,18 +170,31 @@ impl Bounds {
         let extent_m = extent + 1.0;
         let force_n: f64 = sc.site.iter().map(|s| s.controller.max_force_n).sum();
         let g = norm(sc.world.gravity_m_per_s2);
-        // The fastest the users and gravity can make the object across the whole world, twice.
-        let accel = force_n / o.mass_kg + g;
-        let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
-        let mass = sc.world().bodies[0].mass;
-        let i_max = mass.inertia_body.max();
-        let r_min = [o.radius_m, o.half_height_m]
-            .into_iter()
-            .chain(o.half_extents_m)
-            .filter(|&r| r > 0.0)
-            .fold(f64::INFINITY, f64::min)
-            .max(1e-3);
-        let ang_mom = i_max * speed_m_per_s / r_min;
+        let world = sc.world();
+        let mut objects = [ObjectBounds::default(); MAX_OBJECTS];
+        for ((b, o), body) in objects.iter_mut().zip(&sc.objects).zip(world.bodies()) {
+            // The fastest the users and gravity can make the object across the whole world,
+            // twice; an object pushed by another is no faster than the users could make the
+            // lightest (its pusher's speed bounds it): the lightest's acceleration.
+            let lightest = sc
+                .objects
+                .iter()
+                .map(|o| o.mass_kg)
+                .fold(o.mass_kg, f64::min);
+            let accel = force_n / lightest + g;
+            let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
+            let i_max = body.mass.inertia_body.max();
+            let r_min = [o.radius_m, o.half_height_m]
+                .into_iter()
+                .chain(o.half_extents_m)
+                .filter(|&r| r > 0.0)
+                .fold(f64::INFINITY, f64::min)
+                .max(1e-3);
+            *b = ObjectBounds {
+                speed_m_per_s,
+                ang_mom: i_max * speed_m_per_s / r_min,
+            };
+        }
         let slowest_report_s = sc
             .site
             .iter()
@@ -166,8 +204,8 @@ impl Bounds {
         let max_age_ms = max_age_ms.unwrap_or(expected_ms + 3e3 * slowest_report_s + 100.0);
         Self {
             extent_m,
-            speed_m_per_s,
-            ang_mom,
+            object_count: sc.objects.len().min(MAX_OBJECTS),
+            objects,
             accel_m_per_s2: g * (1.0 + 1e-6) + 1e-9,
             force_n: 2.0 * force_n.max(1.0),
             max_age_ns: (max_age_ms * 1e6) as u64,
@@ -179,8 +217,11 @@ impl Bounds {
     pub fn unbounded() -> Self {
         Self {
             extent_m: f64::MAX,
-            speed_m_per_s: f64::MAX,
-            ang_mom: f64::MAX,
+            object_count: MAX_OBJECTS,
+            objects: [ObjectBounds {
+                speed_m_per_s: f64::MAX,
+                ang_mom: f64::MAX,
+            }; MAX_OBJECTS],
             accel_m_per_s2: f64::MAX,
             force_n: f64::MAX,
             max_age_ns: u64::MAX,
@@ -196,14 +237,17 @@ impl Bounds {
         r: &SiteReport,
         now_of: impl Fn(usize) -> Option<f64>,
     ) -> Option<&'static str> {
+        let Some(ob) = self.object(r.object) else {
+            return Some("object");
+        };
         if r.kind == 1 || r.kind == KIND_COUPLED {
             if norm(r.pos) > self.extent_m {
                 return Some("position");
             }
-            if norm(r.vel) > self.speed_m_per_s {
+            if norm(r.vel) > ob.speed_m_per_s {
                 return Some("velocity");
             }
-            if norm(r.ang_mom) > self.ang_mom {
+            if norm(r.ang_mom) > ob.ang_mom {
                 return Some("angular momentum");
             }
             if norm(r.accel) > self.accel_m_per_s2 {
@@ -229,6 +273,16 @@ impl Bounds {
             }
         }
         None
+    }
+}
+
+impl Bounds {
+    /// Object `k`'s bounds, or `None` if the world has no object `k`.
+    pub fn object(&self, k: u64) -> Option<&ObjectBounds> {
+        usize::try_from(k)
+            .ok()
+            .filter(|&k| k < self.object_count)
+            .and_then(|k| self.objects.get(k))
     }
 }
 
@@ -294,15 +348,16 @@ impl Inbound {
         &self.bounds
     }
 
-    /// Decodes `bytes` received on a key naming `key_site` at `now_ns` (our clock) and takes it
-    /// only if it passes every rule of this module; `offsets[j]` is site j's clock minus ours, ns,
-    /// where known.
+    /// Decodes `bytes` received on a key naming `key_site` and object `key_object` at `now_ns`
+    /// (our clock) and takes it only if it passes every rule of this module; `offsets[j]` is site
+    /// j's clock minus ours, ns, where known.
     ///
     /// # Errors
     /// [`Refusal`]; nothing changes then (but a resynchronisation's strike count).
     pub fn check(
         &mut self,
         key_site: &str,
+        key_object: u64,
         bytes: &[u8],
         now_ns: u64,
         offsets: &[Option<i64>],
@@ -312,6 +367,13 @@ impl Inbound {
             .index_of(key_site)
             .filter(|&i| i as u64 == r.site)
             .ok_or(Refusal::Foreign { site: r.site })?;
+        if r.object != key_object {
+            return Err(Refusal::OtherObject {
+                site,
+                object: r.object,
+                key_object,
+            });
+        }
         let offset_ns = offsets
             .get(site)
             .copied()
@@ -473,12 +535,26 @@ impl Inbound {
                     what: "tool position",
                 });
             }
-            // A confirmed state sent for a site to adopt: within the world, as a state must be.
+            // A confirmed state sent for a site to adopt: of an object of this world, within it,
+            // as a state must be (none carried: every word 0, object 0).
             let (extent, speed, ang_mom) = t.state_magnitudes();
+            let ob = match self.bounds.object(t.state_object) {
+                Some(ob)
+                    if t.has_state == 0 || t.state_objects == self.bounds.object_count as u64 =>
+                {
+                    ob
+                }
+                _ => {
+                    return Err(Refusal::Implausible {
+                        site,
+                        what: "state object",
+                    })
+                }
+            };
             for (what, v, max) in [
                 ("state position", extent, self.bounds.extent_m),
-                ("state velocity", speed, self.bounds.speed_m_per_s),
-                ("state angular momentum", ang_mom, self.bounds.ang_mom),
+                ("state velocity", speed, ob.speed_m_per_s),
+                ("state angular momentum", ang_mom, ob.ang_mom),
             ] {
                 if v > max {
                     return Err(Refusal::Implausible { site, what });
@@ -532,7 +608,7 @@ mod tests {
     fn a_receiver_refuses_foreign_sites_duplicates_and_reordering() {
         let mut rx = Inbound::new(vec!["a".into(), "b".into()], Bounds::unbounded());
         let clocks = same_clock(2);
-        let check = |rx: &mut Inbound, key: &str, bytes: &[u8]| rx.check(key, bytes, 5, &clocks);
+        let check = |rx: &mut Inbound, key: &str, bytes: &[u8]| rx.check(key, 0, bytes, 5, &clocks);
         let mut r = sample(); // site 1 = "b", seq 9
         assert_eq!(check(&mut rx, "b", &encode(&r)).map(|x| x.site), Ok(1));
         assert_eq!(
@@ -568,9 +644,24 @@ mod tests {
         );
         r.site = 1;
         assert_eq!(
-            check(&mut rx, "b", &[1, 2, 3]).map_err(|e| e.reason()),
+            check(&mut rx, "b", &[crate::wire::VERSION, 2, 3]).map_err(|e| e.reason()),
             Err(Refused::Length)
         );
+        // An object other than the key's, or one the world does not have.
+        r.object = 1;
+        assert_eq!(
+            check(&mut rx, "b", &encode(&r)).map_err(|e| e.reason()),
+            Err(Refused::Foreign),
+            "key names another object"
+        );
+        r.object = MAX_OBJECTS as u64;
+        assert_eq!(
+            rx.check("b", r.object, &encode(&r), 5, &clocks)
+                .map_err(|e| e.reason()),
+            Err(Refused::Contents),
+            "an object no world has"
+        );
+        r.object = 0;
         assert!(
             check(&mut rx, "b", &encode(&r)).is_ok(),
             "refusals changed nothing: 10 is still new"
@@ -586,8 +677,11 @@ mod tests {
     fn paper_bounds() -> Bounds {
         Bounds {
             extent_m: 2.0,
-            speed_m_per_s: 40.0,
-            ang_mom: 1.0,
+            object_count: 1,
+            objects: [ObjectBounds {
+                speed_m_per_s: 40.0,
+                ang_mom: 1.0,
+            }; MAX_OBJECTS],
             accel_m_per_s2: 3.27,
             force_n: 40.0,
             max_age_ns: 700_000_000,
@@ -604,12 +698,12 @@ mod tests {
         r.t_ns = 1000 * S + 10 * S; // their clock is 1000 s ahead of ours
         let now = 10 * S;
         assert_eq!(
-            rx.check("b", &encode(&r), now, &[Some(0), None]),
+            rx.check("b", 0, &encode(&r), now, &[Some(0), None]),
             Err(Refusal::NoOffset { site: 1 })
         );
         // Nothing moved: once the offset is known the same state is taken, at our time.
         let a = rx
-            .check("b", &encode(&r), now, &[Some(0), Some(1000 * S as i64)])
+            .check("b", 0, &encode(&r), now, &[Some(0), Some(1000 * S as i64)])
             .expect("taken");
         assert_eq!(a.report.t_ns, 10 * S);
     }
@@ -624,7 +718,9 @@ mod tests {
         r.included[1] = -1.0; // "never" stays
         r.t_ns = 1000 * S + 10 * S; // their clock is 1000 s ahead of ours
         let offsets = [Some(0), Some(1000 * S as i64)];
-        let a = rx.check("b", &encode(&r), 10 * S, &offsets).expect("taken");
+        let a = rx
+            .check("b", 0, &encode(&r), 10 * S, &offsets)
+            .expect("taken");
         assert_eq!(a.report.t_ns, 10 * S);
         assert!((a.report.included[0] - 8.0).abs() < 1e-9, "{:?}", a.report);
         assert_eq!(a.report.included[1], -1.0);
@@ -632,7 +728,7 @@ mod tests {
         r.seq += 1;
         r.included[0] = 1020.0;
         assert_eq!(
-            rx.check("b", &encode(&r), 10 * S, &offsets)
+            rx.check("b", 0, &encode(&r), 10 * S, &offsets)
                 .map_err(|e| e.reason()),
             Err(Refused::Implausible)
         );
@@ -653,7 +749,7 @@ mod tests {
             r.t_ns = t;
             r.seq += 1;
             assert_eq!(
-                rx.check("b", &encode(&r), now, &clocks)
+                rx.check("b", 0, &encode(&r), now, &clocks)
                     .map_err(|e| e.reason()),
                 Err(reason),
                 "t = {t}"
@@ -662,7 +758,7 @@ mod tests {
         // The newest seen did not move: a genuine state at now is taken.
         r.t_ns = now;
         r.seq = 10;
-        assert!(rx.check("b", &encode(&r), now, &clocks).is_ok());
+        assert!(rx.check("b", 0, &encode(&r), now, &clocks).is_ok());
     }
 
     #[test]
@@ -688,7 +784,7 @@ mod tests {
             r.seq = 100 + k as u64;
             bad(&mut r);
             assert_eq!(
-                rx.check("b", &encode(&r), now, &clocks),
+                rx.check("b", 0, &encode(&r), now, &clocks),
                 Err(Refusal::Implausible { site: 1, what }),
                 "{what}"
             );
@@ -696,7 +792,7 @@ mod tests {
         let mut r = base;
         r.seq = 50;
         assert!(
-            rx.check("b", &encode(&r), now, &clocks).is_ok(),
+            rx.check("b", 0, &encode(&r), now, &clocks).is_ok(),
             "refusals moved nothing"
         );
     }
@@ -708,12 +804,12 @@ mod tests {
         let mut now = 100 * S;
         let mut r = sample();
         r.t_ns = now;
-        assert!(rx.check("b", &encode(&r), now, &clocks).is_ok());
+        assert!(rx.check("b", 0, &encode(&r), now, &clocks).is_ok());
         let mut forged = r;
         forged.seq = u64::MAX;
         forged.t_ns = now + 1;
         assert!(
-            rx.check("b", &encode(&forged), now, &clocks).is_ok(),
+            rx.check("b", 0, &encode(&forged), now, &clocks).is_ok(),
             "plausible: taken once"
         );
         // The genuine sender goes on; replays of old states stay refused, but its newer states
@@ -723,11 +819,14 @@ mod tests {
             now += 10_000_000;
             r.seq += 1;
             r.t_ns = now;
-            taken.push(rx.check("b", &encode(&r), now, &clocks).map(|a| a.resync));
+            taken.push(
+                rx.check("b", 0, &encode(&r), now, &clocks)
+                    .map(|a| a.resync),
+            );
             let mut replay = r;
             replay.t_ns = now - 20_000_000 * k;
             assert_eq!(
-                rx.check("b", &encode(&replay), now, &clocks)
+                rx.check("b", 0, &encode(&replay), now, &clocks)
                     .map_err(|e| e.reason()),
                 Err(Refused::Stale)
             );
@@ -745,8 +844,56 @@ mod tests {
     fn bounds_of_the_paper_world_admit_its_states() {
         let b = Bounds::from_scenario(&Scenario::default(), None);
         assert!(b.extent_m > 1.0 && b.extent_m < 10.0, "{b:?}");
-        assert!(b.speed_m_per_s > 5.0 && b.speed_m_per_s < 1e3, "{b:?}");
+        let speed = b.objects[0].speed_m_per_s;
+        assert!(speed > 5.0 && speed < 1e3, "{b:?}");
         assert!(b.max_age_ns >= 100_000_000, "{b:?}");
+    }
+
+    /// In a world of several objects each has its own bounds (a light puck may spin faster than
+    /// a heavy box), and a state of an object the world does not have is refused.
+    #[test]
+    fn each_object_of_a_world_has_its_bounds() {
+        let mut sc = Scenario::default();
+        let mut heavy = sc.objects[0].clone();
+        heavy.name = "heavy".into();
+        heavy.mass_kg *= 10.0;
+        heavy.radius_m *= 3.0;
+        heavy.start_m[0] += 0.2;
+        sc.objects[0].name = "light".into();
+        sc.objects.push(heavy);
+        let b = Bounds::from_scenario(&sc, None);
+        assert_eq!(b.object_count, 2);
+        assert!(b.objects[1].ang_mom > b.objects[0].ang_mom, "{b:?}");
+        let mut rx = Inbound::new(vec!["a".into(), "b".into()], b);
+        let clocks = same_clock(2);
+        let mut r = sample();
+        r.t_ns = 1_000_000_000;
+        r.ang_mom = [
+            0.0,
+            0.0,
+            0.5 * (b.objects[0].ang_mom + b.objects[1].ang_mom),
+        ];
+        let now = r.t_ns;
+        r.object = 1;
+        assert!(
+            rx.check("b", 1, &encode(&r), now, &clocks).is_ok(),
+            "the heavy one"
+        );
+        r.seq += 1;
+        r.object = 0;
+        assert_eq!(
+            rx.check("b", 0, &encode(&r), now, &clocks)
+                .map_err(|e| e.reason()),
+            Err(Refused::Implausible),
+            "the light one cannot spin so"
+        );
+        r.object = 2;
+        assert_eq!(
+            rx.check("b", 2, &encode(&r), now, &clocks)
+                .map_err(|e| e.reason()),
+            Err(Refused::Implausible),
+            "a third object"
+        );
     }
 
     #[test]
@@ -864,7 +1011,7 @@ mod tests {
             seq: 1,
             ..sample()
         };
-        let a = inb.check("user2", &encode(&state), now, &clocks);
+        let a = inb.check("user2", 0, &encode(&state), now, &clocks);
         assert_eq!(
             a.map(|a| a.report.seq),
             Ok(1),

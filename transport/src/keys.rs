@@ -11,6 +11,38 @@ pub fn all_states(session: &str, obj: u32) -> String {
     format!("coop/{session}/obj/{obj}/state/*")
 }
 
+/// Every site's state of every object in `session`: `coop/<session>/obj/*/state/*`.
+pub fn all_object_states(session: &str) -> String {
+    format!("coop/{session}/obj/*/state/*")
+}
+
+/// Every site's current-state queryable of every object.
+pub fn all_object_current(session: &str) -> String {
+    format!("coop/{session}/obj/*/current/*")
+}
+
+/// Every object's state key of `site`: `coop/<session>/obj/*/state/<site>` (what its access
+/// control lets it put).
+pub fn states_of(session: &str, site: &str) -> String {
+    format!("coop/{session}/obj/*/state/{site}")
+}
+
+/// Every object's current-state queryable of `site`.
+pub fn currents_of(session: &str, site: &str) -> String {
+    format!("coop/{session}/obj/*/current/{site}")
+}
+
+/// The object a state, current or tool key names (`…/obj/<obj>/…`), if it names one.
+pub fn object_of(key: &str) -> Option<u64> {
+    let mut chunks = key.split('/');
+    chunks.find(|&c| c == "obj")?;
+    let k = chunks.next()?;
+    // Digits only: no sign, no leading `+`, no empty chunk.
+    (!k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| k.parse().ok())
+        .flatten()
+}
+
 /// The key a site's tool (its device's end effector) of object `obj`'s world goes on:
 /// `coop/<session>/obj/<obj>/tool/<site>`: the site's tool track (wire version 2, methods that
 /// exchange tools: `timewarp`); the access control lets only that site put it.
@@ -95,5 +127,17 @@ mod tests {
         assert_eq!(super::live("s1", "u"), "coop/s1/live/u");
         assert_eq!(super::all_live("s1"), "coop/s1/live/*");
         assert_eq!(super::site_of(&super::state("s", 0, "user2")), "user2");
+        assert_eq!(super::all_object_states("s1"), "coop/s1/obj/*/state/*");
+        assert_eq!(super::all_object_current("s1"), "coop/s1/obj/*/current/*");
+        assert_eq!(super::object_of(&super::state("s", 12, "u")), Some(12));
+        assert_eq!(super::object_of(&super::tool("s", 0, "u")), Some(0));
+        for bad in [
+            "coop/s/obj/+1/state/u",
+            "coop/s/obj//state/u",
+            "coop/s/obj/x/state/u",
+        ] {
+            assert_eq!(super::object_of(bad), None, "{bad}");
+        }
+        assert_eq!(super::object_of("coop/s/presence/u"), None);
     }
 }

@@ -39,7 +39,7 @@ use zenoh::Wait;
 use crate::keys;
 use crate::network::LIVE_EVERY_NS;
 use crate::recording::scene::{arrow, encode, timestamp};
-use crate::recording::{SampleMsg, Scene};
+use crate::recording::{LiveSample, SampleMsg, Scene};
 
 /// The WebSocket subprotocol spoken.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";
@@ -117,7 +117,7 @@ struct Shown {
     session: String,
     scenes: Vec<Scene>,
     /// Per site, the newest sample not yet shown.
-    newest: Vec<Option<SampleMsg>>,
+    newest: Vec<Option<LiveSample>>,
     /// Per site, its last sample shown (the scene keeps every site seen so far).
     shown: Vec<Option<SampleMsg>>,
     /// Log lines to send.
@@ -143,11 +143,13 @@ impl Shown {
         let mut arrows = Vec::new();
         let mut new_site = false;
         for i in 0..self.scenes.len() {
-            let Some(m) = self.newest[i].take() else {
+            let Some(live) = self.newest[i].take() else {
                 continue;
             };
             let scene = &self.scenes[i];
+            let m = live.sample;
             frames.extend(scene.transforms(&m, now));
+            frames.extend(scene.other_transforms(&live.other_poses(), now));
             match &self.shown[i] {
                 None => new_site = true,
                 Some(before) if arrow(before.f_object) != arrow(m.f_object) => {
@@ -169,6 +171,7 @@ impl Shown {
             for (scene, m) in self.scenes.iter().zip(&self.shown) {
                 if let Some(m) = m {
                     entities.extend(scene.entities(m, now));
+                    entities.extend(scene.other_entities(now));
                 }
             }
             Some((update(entities), true))
@@ -193,7 +196,7 @@ impl Shown {
     }
 
     /// Site `i`'s newest sample (the first says the site is live).
-    fn offer(&mut self, i: usize, m: SampleMsg) {
+    fn offer(&mut self, i: usize, m: LiveSample) {
         if i >= self.scenes.len() {
             return;
         }
@@ -330,7 +333,7 @@ impl LiveView {
 
     /// Site `i`'s (of the scenes shown) newest sample: shown at the next turn unless a newer one
     /// comes first. Takes a short lock and copies; never waits for a viewer.
-    pub fn offer(&self, i: usize, m: SampleMsg) {
+    pub fn offer(&self, i: usize, m: LiveSample) {
         lock(&self.shown).offer(i, m);
     }
 
@@ -373,7 +376,7 @@ impl LiveView {
             .declare_subscriber(keys::all_live(session))
             .callback(move |sample| {
                 let site = keys::site_of(sample.key_expr().as_str());
-                let Ok(m) = serde_json::from_slice::<SampleMsg>(&sample.payload().to_bytes())
+                let Ok(m) = serde_json::from_slice::<LiveSample>(&sample.payload().to_bytes())
                 else {
                     return;
                 };
@@ -682,6 +685,7 @@ mod tests {
                 tool_radius_m: 0.005,
                 planes: vec![([0.0, 0.0, 1.0], 0.0)],
                 others: Vec::new(),
+                first_name: String::new(),
             })
             .collect::<Vec<_>>();
         Shown {
@@ -693,11 +697,14 @@ mod tests {
         }
     }
 
-    fn sample(f_object: [f64; 3]) -> SampleMsg {
-        SampleMsg {
-            rot: [1.0, 0.0, 0.0, 0.0],
-            f_object,
-            ..SampleMsg::default()
+    fn sample(f_object: [f64; 3]) -> LiveSample {
+        LiveSample {
+            sample: SampleMsg {
+                rot: [1.0, 0.0, 0.0, 0.0],
+                f_object,
+                ..SampleMsg::default()
+            },
+            others: Vec::new(),
         }
     }
 

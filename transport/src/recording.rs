@@ -218,6 +218,49 @@ impl From<&TraceRecord> for SampleMsg {
     }
 }
 
+/// One object's pose, m and (w, x, y, z).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct ObjectPose {
+    /// Centre of mass, m.
+    pub pos: [f64; 3],
+    /// Orientation (w, x, y, z).
+    pub rot: [f64; 4],
+}
+
+/// What a station puts for live viewers (`coop/<session>/live/<site>`, `docs/wire.md`): a
+/// sample, and in a world of several objects the others' poses in the world's order (absent in a
+/// world of one: the message is then a [`SampleMsg`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct LiveSample {
+    /// The sample (its object the world's first).
+    #[serde(flatten)]
+    pub sample: SampleMsg,
+    /// The world's other objects.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub others: Vec<ObjectPose>,
+}
+
+impl LiveSample {
+    /// The first object's record and the others' of the same time (the world's order).
+    pub fn from_trace(first: &TraceRecord, others: &[TraceRecord]) -> Self {
+        Self {
+            sample: SampleMsg::from(first),
+            others: others
+                .iter()
+                .map(|t| ObjectPose {
+                    pos: t.pos,
+                    rot: t.rot,
+                })
+                .collect(),
+        }
+    }
+
+    /// The others' poses as [`Scene::other_transforms`] takes them.
+    pub fn other_poses(&self) -> Vec<([f64; 3], [f64; 4])> {
+        self.others.iter().map(|p| (p.pos, p.rot)).collect()
+    }
+}
+
 json_message! {
     /// `/object`: the sample's object part, named after its site (a viewer that opens several
     /// sites' recordings, or a session file, tells them apart by it: `/object{site=="user1"}`),
@@ -234,7 +277,22 @@ json_message! {
         rot: [f64; 4],
         vel: [f64; 3],
         adoptions: u64,
+        /// In a station's recording of a world of several: whether its user's tool touches this
+        /// object (absent in a world of one: `/tool` says it).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        touching: Option<bool>,
     }
+}
+
+/// One object of a world of several (the second on), as a recording holds it: its name and its
+/// samples (pose, velocity, whether the site's tool touches it).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ObjectSamples {
+    /// The object's name.
+    pub name: String,
+    /// Its samples: `t_ns`, `pos`, `rot`, `vel`, `adoptions`, `touching` filled, the tool's
+    /// fields left at 0.
+    pub samples: Vec<SampleMsg>,
 }
 
 json_message! {
@@ -587,6 +645,9 @@ struct Part {
     messages: u64,
 }
 
+/// The metadata key naming a world's objects in order, comma-separated (a world of several only).
+pub const OBJECTS_KEY: &str = "objects";
+
 /// Writes a recording, in parts as its [`Rotation`] says.
 pub struct Recorder {
     part: Part,
@@ -867,6 +928,11 @@ impl Recorder {
             }
         }
         metadata.insert("started_unix_ns".into(), started);
+        if let Some(sc) = scene.as_ref().filter(|s| !s.others.is_empty()) {
+            // The world's objects in order: `/object` names them, and a reader orders them by it.
+            let names: Vec<String> = (0..=sc.others.len()).map(|k| sc.object_name(k)).collect();
+            metadata.insert(OBJECTS_KEY.into(), names.join(","));
+        }
         let site = scene
             .as_ref()
             .map(|s| s.site.clone())
@@ -1028,9 +1094,56 @@ impl Recorder {
     pub fn trace(&mut self, t: &TraceRecord) -> Result<(), RecordingError> {
         if t.kind == TraceRecord::ADOPTION {
             self.adoption(&AdoptionMsg::from(t))
-        } else {
+        } else if t.object == 0 {
             self.sample(&SampleMsg::from(t))
+        } else {
+            self.other_object(t)
         }
+    }
+    /// The name `/object` gives object `k` (the scene's; without one, its index past the first).
+    fn object_name(&self, k: usize) -> String {
+        match &self.scene {
+            Some(s) => s.object_name(k),
+            None if k == 0 => String::new(),
+            None => k.to_string(),
+        }
+    }
+    /// Whether the world has several objects (`/object` names them and says which the tool
+    /// touches).
+    fn several(&self) -> bool {
+        self.scene.as_ref().is_some_and(|s| !s.others.is_empty())
+    }
+    /// `/object` of the world's object `t.object` (1 or later), in the same part as the first's;
+    /// with a scene, its `/tf` frame (its entity goes with the first's `/scene`).
+    ///
+    /// # Errors
+    /// Writing failed.
+    fn other_object(&mut self, t: &TraceRecord) -> Result<(), RecordingError> {
+        let k = usize::try_from(t.object).unwrap_or(usize::MAX);
+        self.rotate_if_full()?;
+        self.put(
+            1,
+            t.t_ns,
+            &ObjectPart {
+                t_ns: t.t_ns,
+                site: self.site.clone(),
+                object: self.object_name(k),
+                pos: t.pos,
+                rot: t.rot,
+                vel: t.vel,
+                adoptions: t.adoptions,
+                touching: Some(t.touching != 0),
+            },
+        )?;
+        let wall = self.wall_ns(t.t_ns);
+        if let Some(f) = self
+            .scene
+            .as_ref()
+            .and_then(|s| s.other_transform(k, t.pos, t.rot, wall))
+        {
+            self.put_foxglove(0, t.t_ns, &f)?;
+        }
+        Ok(())
     }
     /// `/object` and `/tool`, in the same part; with a scene, the sample's `/tf` frames and, every
     /// [`SCENE_EVERY`] (and first in each part), its `/scene`.
@@ -1045,11 +1158,12 @@ impl Recorder {
             &ObjectPart {
                 t_ns: m.t_ns,
                 site: self.site.clone(),
-                object: String::new(),
+                object: self.object_name(0),
                 pos: m.pos,
                 rot: m.rot,
                 vel: m.vel,
                 adoptions: m.adoptions,
+                touching: self.several().then_some(m.touching),
             },
         )?;
         self.put(
@@ -1184,8 +1298,11 @@ impl Recorder {
 pub struct Recording {
     /// The session message, if the session started.
     pub session: Option<SessionMsg>,
-    /// Samples (object and tool joined by time).
+    /// Samples (object and tool joined by time): in a world of several objects, the first
+    /// object's.
     pub samples: Vec<SampleMsg>,
+    /// In a world of several objects, the others', in the world's order.
+    pub others: Vec<ObjectSamples>,
     /// Adoptions.
     pub adoptions: Vec<AdoptionMsg>,
     /// Remote states handed to physics.
@@ -1268,6 +1385,12 @@ pub fn read(first: &Path) -> Result<Recording, RecordingError> {
         let p = parse(&path, &bytes)?;
         r.session = r.session.or(p.session);
         r.samples.extend(p.samples);
+        for o in p.others {
+            match r.others.iter_mut().find(|x| x.name == o.name) {
+                Some(x) => x.samples.extend(o.samples),
+                None => r.others.push(o),
+            }
+        }
         r.adoptions.extend(p.adoptions);
         r.remote.extend(p.remote);
         r.published.extend(p.published);
@@ -1364,6 +1487,49 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Recording, RecordingError> {
         }
     }
     r.truncated |= mcap::read::footer(bytes).is_err();
+    // The first object's part comes first at every sample (a world of one names none): the
+    // others are the ones named otherwise, in the order they first appear (the world's).
+    // (The recording's metadata names them in order; without it, the first seen is the first.)
+    let names: Vec<String> = metadata_of(bytes)
+        .get(OBJECTS_KEY)
+        .map(|n| n.split(',').map(str::to_owned).collect())
+        .unwrap_or_default();
+    let first_name = match names.first() {
+        Some(n) => n.clone(),
+        None => objects
+            .first()
+            .map(|o| o.object.clone())
+            .unwrap_or_default(),
+    };
+    for n in names.iter().skip(1) {
+        r.others.push(ObjectSamples {
+            name: n.clone(),
+            samples: Vec::new(),
+        });
+    }
+    let (objects, others): (Vec<ObjectPart>, Vec<ObjectPart>) =
+        objects.into_iter().partition(|o| o.object == first_name);
+    for o in others {
+        let at = match r.others.iter().position(|x| x.name == o.object) {
+            Some(at) => at,
+            None => {
+                r.others.push(ObjectSamples {
+                    name: o.object.clone(),
+                    samples: Vec::new(),
+                });
+                r.others.len() - 1
+            }
+        };
+        r.others[at].samples.push(SampleMsg {
+            t_ns: o.t_ns,
+            pos: o.pos,
+            rot: o.rot,
+            vel: o.vel,
+            adoptions: o.adoptions,
+            touching: o.touching.unwrap_or(false),
+            ..SampleMsg::default()
+        });
+    }
     // Object and tool parts of one sample are written back to back with the same time.
     let mut tools = tools.into_iter().peekable();
     for o in objects {
@@ -1412,6 +1578,7 @@ mod tests {
         let mut t = TraceRecord {
             kind: TraceRecord::SAMPLE,
             t_ns: 42,
+            object: 0,
             pos: [0.1, 0.2, 0.3],
             rot: [1.0, 0.0, 0.0, 0.0],
             vel: [1.5, 0.0, -2.0],
@@ -1496,6 +1663,7 @@ mod tests {
                     rot: [0.0; 4],
                     vel: [0.0; 3],
                     adoptions: 0,
+                    touching: Some(true),
                 }),
             ),
             (
@@ -1894,6 +2062,7 @@ mod tests {
             tool_radius_m: 0.005,
             planes: vec![([0.0, 0.0, 1.0], 0.0)],
             others: Vec::new(),
+            first_name: String::new(),
         };
         let meta = BTreeMap::from([("site".into(), "b".into())]);
         let mut w = Recorder::create_with_scene(&path, meta, bytes_bound(64 << 10, 0), scene)
@@ -2052,6 +2221,7 @@ mod tests {
             tool_radius_m: 0.005,
             planes: Vec::new(),
             others: Vec::new(),
+            first_name: String::new(),
         };
         let session = SessionMsg {
             t_ns: 1,

@@ -1,7 +1,7 @@
 //! The wire format between stations: one encode and one decode per message (`docs/wire.md` is the
 //! specification a foreign client can be written from).
 //!
-//! A site report is `version: u8 = 1`, then [`SiteReport::to_words`] (its fields in declaration
+//! A site report is `version: u8 = 5`, then [`SiteReport::to_words`] (its fields in declaration
 //! order, as `pod_message!` declares them) as little-endian u64/f64, nothing else: exactly
 //! [`ENCODED_LEN`] bytes. There is no second field list here: the layout is the struct's, and
 //! [`PINNED`] ties it to [`VERSION`] and to the table in `docs/wire.md` (a unit test fails when the
@@ -11,34 +11,38 @@
 //! kind does not use). What only a receiver can check (the site, the time, plausibility, the
 //! sequence) is [`crate::admit`]'s. Any failure is a typed error and changes nothing.
 //!
-//! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64.
+//! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64
+//! (unchanged since version 1: [`U64_VERSION`]).
 //!
-//! A tool track (methods that exchange the tools: `timewarp`) is `version: u8 = 4` then
+//! A tool track (methods that exchange the tools: `timewarp`, `coupled`) is `version: u8 = 5` then
 //! [`ToolTrack::to_words`], exactly [`TRACK_ENCODED_LEN`] bytes, on its own key (`tool/<site>`).
 //! Version 2 added this message and changed nothing else; version 3 added the track's `need` (a
 //! receiver asking for positions lost in a gap); version 4 the confirmed state a site whose
-//! confirmed history diverged asks for and adopts. A state is still version 1, byte for
-//! byte, so a version-1 reader still reads states (and refuses a track by its version byte,
-//! should it subscribe to its key). [`TRACK_PINNED`] ties the track's layout to the doc as
+//! confirmed history diverged asks for and adopts; version 5 the worlds of several objects (a
+//! state names its object, on its object's key; a track's carried state names its object, its
+//! world, and every friction memory it holds). States and tracks both carry byte 5 and are told
+//! apart by their key and length. [`TRACK_PINNED`] ties the track's layout to the doc as
 //! [`PINNED`] does the state's.
 
 use coop_rt::msg::{SiteReport, ToolTrack};
 
 /// Current wire version.
-pub const VERSION: u8 = 1;
+pub const VERSION: u8 = 5;
+/// The version byte of a u64 message (session time 0, clock reading): unchanged since version 1.
+pub const U64_VERSION: u8 = 1;
 /// The site report layout [`VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(SiteReport::LAYOUT)`). Changing [`SiteReport`] changes the hash, and
 /// the test `the_layout_is_pinned_to_the_version_and_the_doc` fails until [`VERSION`] is bumped,
 /// `docs/wire.md` describes the new layout, and this is re-pinned (the test prints the new value).
-pub const PINNED: (u8, u64) = (1, 0xfbfded3318dbe2b7);
+pub const PINNED: (u8, u64) = (5, 0x1cda41364d9098d7);
 /// Bytes of an encoded report.
 pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
-/// The version byte a tool track carries (2 added tracks, 3 added their `need`). States are still
-/// [`VERSION`].
-pub const TRACK_VERSION: u8 = 4;
+/// The version byte a tool track carries (2 added tracks, 3 added their `need`, 4 their carried
+/// state, 5 a world's objects): [`VERSION`].
+pub const TRACK_VERSION: u8 = VERSION;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (4, 0xcc8d2d2e31536b04);
+pub const TRACK_PINNED: (u8, u64) = (5, 0xfdf8d1b08f56854c);
 /// Bytes of an encoded tool track.
 pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
 
@@ -71,7 +75,7 @@ pub enum DecodeError {
 /// Encodes a u64 message (session time 0, clock reading).
 pub fn encode_u64(v: u64) -> [u8; 9] {
     let mut out = [0u8; 9];
-    out[0] = VERSION;
+    out[0] = U64_VERSION;
     out[1..].copy_from_slice(&v.to_le_bytes());
     out
 }
@@ -82,12 +86,12 @@ pub fn encode_u64(v: u64) -> [u8; 9] {
 /// Wrong version or length.
 pub fn decode_u64(bytes: &[u8]) -> Result<u64, DecodeError> {
     match bytes {
-        [VERSION, rest @ ..] if rest.len() == 8 => {
+        [U64_VERSION, rest @ ..] if rest.len() == 8 => {
             let mut w = [0u8; 8];
             w.copy_from_slice(rest);
             Ok(u64::from_le_bytes(w))
         }
-        [VERSION, ..] => Err(DecodeError::Length { found: bytes.len() }),
+        [U64_VERSION, ..] => Err(DecodeError::Length { found: bytes.len() }),
         [v, ..] => Err(DecodeError::Version { found: *v }),
         [] => Err(DecodeError::Length { found: 0 }),
     }
@@ -252,6 +256,7 @@ mod tests {
             t_ns: 5,
             seq: 9,
             site: 1,
+            object: 1,
             rot: [1.0, 0.0, 0.0, 0.0],
             ..SiteReport::default()
         };
@@ -265,18 +270,20 @@ mod tests {
         let r = sample();
         let bytes = encode(&r);
         assert_eq!(bytes.len(), ENCODED_LEN);
-        assert_eq!(ENCODED_LEN, 289, "docs/wire.md says 289 bytes");
-        // Where docs/wire.md puts them: kind in word 0, pos[0] in word 4, included[1] in word 21.
+        assert_eq!(ENCODED_LEN, 321, "docs/wire.md says 321 bytes");
+        // Where docs/wire.md puts them: kind in word 0, object in word 4, pos[0] in word 5,
+        // included[1] in word 22.
         let word = |i: usize| &bytes[1 + 8 * i..9 + 8 * i];
-        assert_eq!(bytes[0], 1);
+        assert_eq!(bytes[0], 5);
         assert_eq!(word(0), 1u64.to_le_bytes());
         assert_eq!(word(2), 9u64.to_le_bytes());
-        assert_eq!(word(4), 0.1f64.to_le_bytes());
-        assert_eq!(word(21), 4.5f64.to_le_bytes());
+        assert_eq!(word(4), 1u64.to_le_bytes());
+        assert_eq!(word(5), 0.1f64.to_le_bytes());
+        assert_eq!(word(22), 4.5f64.to_le_bytes());
         assert_eq!(decode(&bytes), Ok(r));
-        let mut v2 = bytes.clone();
-        v2[0] = 2;
-        assert_eq!(decode(&v2), Err(DecodeError::Version { found: 2 }));
+        let mut v1 = bytes.clone();
+        v1[0] = 1;
+        assert_eq!(decode(&v1), Err(DecodeError::Version { found: 1 }));
         assert_eq!(
             decode(&bytes[..100]),
             Err(DecodeError::Length { found: 100 })
@@ -354,7 +361,7 @@ mod tests {
     }
 
     #[test]
-    fn tracks_round_trip_and_every_corruption_is_refused_while_states_stay_version_1() {
+    fn tracks_round_trip_and_every_corruption_is_refused() {
         use coop_model::method::track::{ToolReport, WINDOW_TICKS};
         let mut r = ToolReport {
             first_tick: 500,
@@ -372,16 +379,16 @@ mod tests {
         let t = ToolTrack::new(1, 3, 99, &r);
         let bytes = encode_track(&t);
         assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
-        assert_eq!(TRACK_ENCODED_LEN, 3665, "docs/wire.md says 3665 bytes");
-        assert_eq!(bytes[0], 4);
+        assert_eq!(TRACK_ENCODED_LEN, 5817, "docs/wire.md says 5817 bytes");
+        assert_eq!(bytes[0], 5);
         // Where docs/wire.md puts them: site in word 2, `need` of site 0 (1 + the tick) in word 7,
         // none (0) for site 1 in word 8, no state (word 17), the first x in the low half of
-        // word 74.
+        // word 343.
         assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
         assert_eq!(&bytes[1 + 56..1 + 64], 471u64.to_le_bytes());
         assert_eq!(&bytes[1 + 64..1 + 72], 0u64.to_le_bytes());
         assert_eq!(&bytes[1 + 136..1 + 144], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 592..1 + 596], (-4500i32).to_le_bytes());
+        assert_eq!(&bytes[1 + 2744..1 + 2748], (-4500i32).to_le_bytes());
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
@@ -446,17 +453,21 @@ mod tests {
             decode_track(&encode_track(&stray)),
             Err(DecodeError::Invalid)
         );
-        // A version-3 track (no state) is refused by its version.
-        let mut v3 = bytes.clone();
-        v3[0] = 3;
-        assert_eq!(decode_track(&v3), Err(DecodeError::Version { found: 3 }));
-        // A version-1 reader refuses a track by its version; a track reader refuses a state.
-        assert_eq!(decode(&bytes), Err(DecodeError::Version { found: 4 }));
+        // A version-4 track (one object's state) is refused by its version.
+        let mut v4 = bytes.clone();
+        v4[0] = 4;
+        assert_eq!(decode_track(&v4), Err(DecodeError::Version { found: 4 }));
+        // A state reader refuses a track by its length, a track reader a state.
+        assert_eq!(
+            decode(&bytes),
+            Err(DecodeError::Length {
+                found: TRACK_ENCODED_LEN
+            })
+        );
         assert_eq!(
             decode_track(&encode(&sample())),
-            Err(DecodeError::Version { found: 1 })
+            Err(DecodeError::TrackLength { found: ENCODED_LEN })
         );
-        assert_eq!(encode(&sample())[0], 1, "states are still version 1");
         assert_eq!(
             decode_track(&bytes[..100]),
             Err(DecodeError::TrackLength { found: 100 })

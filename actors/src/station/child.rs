@@ -220,7 +220,11 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     // scenario's start (the servo kept displaying that state; a jump back would be felt). On the
     // grid (timewarp, coupled) only if it joins late; started with the session, it steps from
     // tick 0 like every other site.
-    let resumed = ctl.resume().and_then(|s| s.state());
+    // (Of this scenario's world: a block another world's physics wrote is not resumed from.)
+    let resumed = ctl
+        .resume()
+        .filter(|r| r.objects == sc.objects.len())
+        .map(|r| r.states());
     if resumed.is_some() {
         eprintln!(
             "station physics {}: resuming from the last published state{}",
@@ -233,11 +237,12 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         );
     }
     let copy = match (join_after, resumed) {
-        (None, Some(state)) => {
-            // The scenario's world with the first object where it was (a station's rings carry
-            // one object's state).
+        (None, Some(states)) => {
+            // The scenario's world with every object where it was.
             let mut copy = sc.start_copy();
-            *copy.first_mut() = ObjectCopy::new(state);
+            for (o, s) in copy.objects_mut().iter_mut().zip(states) {
+                *o = ObjectCopy::new(s);
+            }
             copy
         }
         _ => sc.start_copy(),
@@ -271,7 +276,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
                 ctl.physics
                     .report_seq
                     .store(last_report_seq, Ordering::Relaxed);
-                ctl.store_resume(&physics.object_sample(now));
+                ctl.store_resume(physics.objects(), |k| physics.object_sample(now, k));
             }
             matches!(ctl.run_state(), RunState::Starting | RunState::Running)
         },

@@ -259,6 +259,24 @@ pub(crate) fn readable(field: &str, p: &Path) -> anyhow::Result<()> {
 }
 
 impl StationConfig {
+    /// The rings' slots for a world of `objects` objects: the rings that carry a message per
+    /// object a step (object states, reports, remote reports, trace records) have the configured
+    /// slots per object (rounded up to a power of two), so that a world of several holds as many
+    /// steps as a world of one; the others as configured. Fixed at start: nothing grows later.
+    pub fn rings_for(&self, objects: usize) -> RingSlots {
+        let n = objects
+            .clamp(1, coop_model::world::MAX_OBJECTS)
+            .next_power_of_two();
+        let r = &self.rings;
+        RingSlots {
+            object_slots: r.object_slots * n,
+            report_slots: r.report_slots * n,
+            remote_slots: r.remote_slots * n,
+            trace_slots: r.trace_slots * n,
+            ..r.clone()
+        }
+    }
+
     /// The recording's bounds, as the recorder takes them.
     pub fn record_rotation(&self) -> Rotation {
         Rotation {
@@ -376,34 +394,6 @@ impl StationConfig {
                     scenario.method.as_str()
                 );
             }
-        }
-        if scenario.objects.len() > 1 {
-            // The rings, the wire and the recordings carry one object's state so far.
-            bail!(
-                "object = {} objects (scenario {:?}): stations run a world of one object so far; the simulator runs several (sim)",
-                scenario.objects.len(),
-                scenario.name
-            );
-        }
-        let twist = scenario.environment_contact.rotational_friction_radius_m;
-        if scenario.method == MethodName::Timewarp && twist != 0.0 {
-            // A confirmed state a site adopts travels as the ring's and the wire's snapshot,
-            // which carries the friction stick points but not the rotational friction's memory:
-            // the adopting site would go on from another state than the one it adopted.
-            bail!(
-                "environment_contact.rotational_friction_radius_m = {twist} (scenario {:?}): method timewarp on stations cannot carry rotational friction's memory in the states sites adopt; the simulator runs it (sim), stations run it with another method",
-                scenario.name
-            );
-        }
-        let pad = scenario.contact.rotational_friction_radius_m;
-        if pad != 0.0 {
-            // The rings and the wire carry a tool contact's force and point, not a fingertip's
-            // torque (servo to physics, and `naive`'s reports), nor its rotational memory
-            // (`timewarp`'s adopted snapshot).
-            bail!(
-                "contact.rotational_friction_radius_m = {pad} (scenario {:?}): stations cannot carry a fingertip's rotational friction through their rings and wire yet; the simulator runs it (sim)",
-                scenario.name
-            );
         }
         let name = self
             .station
@@ -796,52 +786,37 @@ mod tests {
         }
     }
 
-    /// A timewarp station refuses a table with rotational friction (its adopted states could not
-    /// carry that friction's memory); other methods take it.
+    /// Stations run a world of several objects, with rotational friction on the table, between
+    /// the objects and at the fingertips, under every method: their rings and wire carry every
+    /// object's state, every contact's torque, and every friction memory a snapshot holds.
     #[test]
-    fn timewarp_stations_refuse_rotational_friction_they_cannot_carry() {
-        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
-        sc.environment_contact.rotational_friction_radius_m = 0.01;
-        for m in MethodName::ALL {
-            let c = StationConfig {
-                method: Some(m),
-                ..StationConfig::default()
-            };
-            let got = c.resolve_with(None, sc.clone());
-            if m == MethodName::Timewarp {
-                let err = format!("{:#}", got.expect_err("refused"));
-                assert!(
-                    err.contains("environment_contact.rotational_friction_radius_m = 0.01")
-                        && err.contains("method timewarp on stations"),
-                    "{err}"
-                );
-            } else {
-                got.expect("other methods take it");
+    fn stations_take_a_world_of_several_objects_with_every_friction() {
+        for (file, text) in [
+            ("stack.toml", include_str!("../../../scenarios/stack.toml")),
+            ("tray.toml", include_str!("../../../scenarios/tray.toml")),
+            (
+                "billiards.toml",
+                include_str!("../../../scenarios/billiards.toml"),
+            ),
+        ] {
+            let sc = scenario_file::parse(text).expect(file);
+            assert!(sc.objects.len() > 1, "{file}");
+            for m in MethodName::ALL {
+                let c = StationConfig {
+                    method: Some(m),
+                    ..StationConfig::default()
+                };
+                let r = c
+                    .resolve_with(None, sc.clone())
+                    .unwrap_or_else(|e| panic!("{file} under {}: {e:#}", m.as_str()));
+                // The rings that carry a message per object grow with the world.
+                let n = sc.objects.len().next_power_of_two();
+                let d = coop_rt::shm::station::RingSlots::default();
+                let slots = r.config.rings_for(sc.objects.len());
+                assert_eq!(slots.object_slots, d.object_slots * n, "{file}");
+                assert_eq!(slots.trace_slots, d.trace_slots * n, "{file}");
+                assert_eq!(slots.tool_slots, d.tool_slots, "{file}");
             }
-        }
-    }
-
-    /// A fingertip's rotational friction acts in the simulator; a station, whose rings and wire
-    /// carry a tool's force but not its torque, refuses it under every method.
-    #[test]
-    fn stations_refuse_a_fingertip_s_rotational_friction() {
-        let mut sc = scenario_file::parse(DEFAULT_SCENARIO).expect("paper");
-        sc.contact.rotational_friction_radius_m = 0.005;
-        sc.validate().expect("the simulator takes it");
-        for m in MethodName::ALL {
-            let c = StationConfig {
-                method: Some(m),
-                ..StationConfig::default()
-            };
-            let err = format!(
-                "{:#}",
-                c.resolve_with(None, sc.clone()).expect_err("refused")
-            );
-            assert!(
-                err.contains("contact.rotational_friction_radius_m = 0.005"),
-                "{}: {err}",
-                m.as_str()
-            );
         }
     }
 

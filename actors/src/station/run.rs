@@ -96,7 +96,7 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
     })?;
     let names = Names::of(session, &cfg.name)?;
     let segs = Arc::new(
-        StationSegments::create(&names, &cfg.config.rings)
+        StationSegments::create(&names, &cfg.config.rings_for(cfg.scenario.objects.len()))
             .context("creating the station's segments")?,
     );
     segs.control.set_run_state(RunState::Starting);

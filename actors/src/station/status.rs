@@ -227,8 +227,21 @@ pub struct PhysicsStatus {
     pub adoptions: u64,
     /// Adoptions or steps that would have made the copy non-finite (it kept its state).
     pub nonfinite_kept: u64,
+    /// In a world of several objects, per object (empty in a world of one).
+    pub objects: Vec<ObjectStatus>,
     /// Rollback and tool-track figures, if the method exchanges tools (it stepped on the grid).
     pub rollback: Option<RollbackStatus>,
+}
+
+/// One object of a world of several, as the station sees it.
+#[derive(Debug, Clone, Serialize, PartialEq, Eq)]
+pub struct ObjectStatus {
+    /// Its name (its index until [`StationStatus::name_objects`] names it).
+    pub name: String,
+    /// States of it adopted (a confirmed world adopted whole counts for each object).
+    pub adoptions: u64,
+    /// Received states of it refused as implausible, or as another object than their key names.
+    pub refused: u64,
 }
 
 // ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
@@ -583,6 +596,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
             remote_rejected: ctl.physics.rejected.load(Ordering::Relaxed),
             adoptions: ctl.physics.adoptions.load(Ordering::Relaxed),
             nonfinite_kept: ctl.physics.nonfinite_kept.load(Ordering::Relaxed),
+            objects: ObjectStatus::of(&ctl),
             rollback: RollbackStatus::of(&ctl),
         },
         servo: ServoStatus {
@@ -605,6 +619,35 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
         },
         running: run_state == RunState::Running,
     })
+}
+
+impl ObjectStatus {
+    /// Per object of a world of several (physics says how many), by index.
+    fn of(ctl: &ControlBlock) -> Vec<Self> {
+        let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
+        let n = usize::try_from(load(&ctl.physics.objects))
+            .unwrap_or(0)
+            .min(coop_model::world::MAX_OBJECTS);
+        if n < 2 {
+            return Vec::new();
+        }
+        (0..n)
+            .map(|k| Self {
+                name: k.to_string(),
+                adoptions: load(&ctl.physics.adoptions_by_object[k]),
+                refused: load(&ctl.network.refused_by_object[k]),
+            })
+            .collect()
+    }
+}
+
+impl StationStatus {
+    /// Names the world's objects (the scenario's `[[object]]` names, in order).
+    pub fn name_objects(&mut self, names: &[String]) {
+        for (o, n) in self.physics.objects.iter_mut().zip(names) {
+            o.name.clone_from(n);
+        }
+    }
 }
 
 impl NetworkStatus {
@@ -806,6 +849,15 @@ impl fmt::Display for StationStatus {
             self.physics.adoptions,
             self.physics.nonfinite_kept
         )?;
+        if !self.physics.objects.is_empty() {
+            let each: Vec<String> = self
+                .physics
+                .objects
+                .iter()
+                .map(|o| format!("{} adopted {} refused {}", o.name, o.adoptions, o.refused))
+                .collect();
+            writeln!(f, "objects: {}", each.join("; "))?;
+        }
         if let Some(r) = &self.physics.rollback {
             writeln!(f, "{r}")?;
         }

@@ -10,6 +10,8 @@ use crate::msg::ObjectSample;
 use crate::shm::ShmShared;
 use crate::stats::{LoopStats, SharedHistogram};
 use crate::sync::{AtomicU64, Ordering};
+use coop_model::body::BodyState;
+use coop_model::world::MAX_OBJECTS;
 
 pub use coop_model::MAX_SITES;
 
@@ -388,12 +390,16 @@ pub struct PhysicsShared {
     pub rejected: AtomicU64,
     /// States adopted.
     pub adoptions: AtomicU64,
+    /// The world's objects (physics writes it at start).
+    pub objects: AtomicU64,
+    /// States adopted, by object (a world's adopted at once counts for each of its objects).
+    pub adoptions_by_object: [AtomicU64; MAX_OBJECTS],
     /// Adoptions or steps that would have made the copy non-finite: the copy kept its state.
     pub nonfinite_kept: AtomicU64,
     /// The newest state, for a restarted physics to resume from (a seqlock: see
     /// [`ControlBlock::store_resume`]).
     pub resume_seq: AtomicU64,
-    /// The words of that state: an [`ObjectSample`].
+    /// The words of that state: the count of objects, then an [`ObjectSample`] per object.
     pub resume: [AtomicU64; RESUME_WORDS],
     /// The last report sequence number, so a restarted physics continues the sequence (a receiver
     /// ignores sequence numbers it has seen).
@@ -473,6 +479,9 @@ pub struct NetworkShared {
     pub received: AtomicU64,
     /// Messages refused, by reason.
     pub refused: Counters<Refused>,
+    /// States refused as implausible or as another object than their key's, by the object their
+    /// key names (a world of several: which object's states are refused).
+    pub refused_by_object: [AtomicU64; MAX_OBJECTS],
     /// 1 when it emulates delay, jitter and loss on receive.
     pub emulated: AtomicU64,
     /// Messages the emulation dropped.
@@ -531,8 +540,8 @@ pub struct ControlBlock {
     pub network: NetworkShared,
 }
 
-/// Words of the resume state.
-pub const RESUME_WORDS: usize = ObjectSample::WORDS;
+/// Words of the resume state: a count, then every object's sample.
+pub const RESUME_WORDS: usize = 1 + MAX_OBJECTS * ObjectSample::WORDS;
 /// Words of the locator text (512 bytes).
 pub const LOCATOR_WORDS: usize = 64;
 
@@ -540,7 +549,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v17";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v18";
 }
 
 impl ControlBlock {
@@ -584,16 +593,23 @@ impl ControlBlock {
         Some(self.epoch_ns.load(Ordering::Acquire)).filter(|&e| e != 0)
     }
 
-    /// Physics (the one writer) stores its newest state for a successor to resume from. A seqlock
-    /// of relaxed atomic words (the sample's `to_words`): odd sequence while writing, even when
-    /// done.
-    pub fn store_resume(&self, s: &ObjectSample) {
+    /// Physics (the one writer) stores its newest state of the world's `objects` objects
+    /// (`sample(k)` of each) for a successor to resume from. A seqlock of relaxed atomic words
+    /// (the count, then the samples' `to_words`): odd sequence while writing, even when done.
+    pub fn store_resume(&self, objects: usize, sample: impl Fn(usize) -> ObjectSample) {
+        // REAL-TIME: relaxed and release stores only.
+        let objects = objects.min(MAX_OBJECTS);
         let seq = self.physics.resume_seq.load(Ordering::Relaxed);
         self.physics.resume_seq.store(seq | 1, Ordering::Relaxed);
         // SYNC: the odd sequence is visible before any word changes.
         core::sync::atomic::fence(Ordering::Release);
-        for (w, v) in self.physics.resume.iter().zip(s.to_words()) {
-            w.store(v, Ordering::Relaxed);
+        self.physics.resume[0].store(objects as u64, Ordering::Relaxed);
+        for k in 0..objects {
+            let at = 1 + k * ObjectSample::WORDS;
+            let words = &self.physics.resume[at..at + ObjectSample::WORDS];
+            for (w, v) in words.iter().zip(sample(k).to_words()) {
+                w.store(v, Ordering::Relaxed);
+            }
         }
         // SYNC: Release publishes the words with the even sequence; pairs with `resume`'s Acquire.
         self.physics
@@ -601,8 +617,9 @@ impl ControlBlock {
             .store((seq | 1).wrapping_add(1), Ordering::Release);
     }
 
-    /// The newest state physics stored, if any and if it reads back whole and valid.
-    pub fn resume(&self) -> Option<ObjectSample> {
+    /// The newest state physics stored, if any and if it reads back whole and valid (every
+    /// object's, each naming itself).
+    pub fn resume(&self) -> Option<Resume> {
         for _ in 0..100 {
             let before = self.physics.resume_seq.load(Ordering::Acquire);
             if before == 0 {
@@ -615,8 +632,7 @@ impl ControlBlock {
             // SYNC: the word loads complete before the sequence is read again.
             core::sync::atomic::fence(Ordering::Acquire);
             if before & 1 == 0 && self.physics.resume_seq.load(Ordering::Relaxed) == before {
-                let s = ObjectSample::from_words(&words);
-                return s.state().map(|_| s);
+                return Resume::from_words(&words);
             }
             std::thread::yield_now();
         }
@@ -648,5 +664,48 @@ impl ControlBlock {
         }
         bytes.truncate(len);
         String::from_utf8_lossy(&bytes).into_owned()
+    }
+}
+
+/// The world a physics process stored for its successor (see [`ControlBlock::resume`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Resume {
+    /// How many objects (1 ..= [`MAX_OBJECTS`]).
+    pub objects: usize,
+    /// Each object's sample, in the world's order (past `objects`, defaults).
+    pub samples: [ObjectSample; MAX_OBJECTS],
+}
+
+impl Resume {
+    /// From the seqlock's words: `None` unless the count is 1 ..= [`MAX_OBJECTS`], each sample
+    /// names its own index and holds a valid state.
+    fn from_words(words: &[u64; RESUME_WORDS]) -> Option<Self> {
+        let objects = usize::try_from(words[0])
+            .ok()
+            .filter(|n| (1..=MAX_OBJECTS).contains(n))?;
+        let mut samples = [ObjectSample::default(); MAX_OBJECTS];
+        for (k, s) in samples[..objects].iter_mut().enumerate() {
+            let at = 1 + k * ObjectSample::WORDS;
+            let w: &[u64; ObjectSample::WORDS] =
+                words[at..at + ObjectSample::WORDS].try_into().ok()?;
+            *s = ObjectSample::from_words(w);
+            (s.object() == Some(k) && s.state().is_some()).then_some(())?;
+        }
+        Some(Self { objects, samples })
+    }
+
+    /// The first object's sample.
+    pub fn first(&self) -> &ObjectSample {
+        &self.samples[0]
+    }
+
+    /// Every object's state, in the world's order (past `objects`, at rest at the origin).
+    pub fn states(&self) -> [BodyState; MAX_OBJECTS] {
+        std::array::from_fn(|k| {
+            self.samples[k]
+                .state()
+                .filter(|_| k < self.objects)
+                .unwrap_or_else(|| BodyState::at_rest(coop_model::body::Vec3::zeros()))
+        })
     }
 }

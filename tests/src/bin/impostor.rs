@@ -81,7 +81,7 @@ fn main() -> std::process::ExitCode {
         .liveliness()
         .declare_token(keys::presence(session, forge))
         .wait();
-    let garbage = [1u8, 2, 3, 4, 5];
+    let garbage = [wire::VERSION, 2, 3, 4, 5];
     let (theirs, mine) = (keys::state(session, 0, forge), keys::state(session, 0, me));
     for _ in 0..200 {
         let forged = forgery::forged_state(index, coop_rt::timer::monotonic_ns(), pos);

@@ -1,5 +1,5 @@
 //! The station's live view: the newest sample of this site's copy and tool, put on
-//! `coop/<session>/live/<site>` at most every [`LIVE_EVERY`] (JSON [`SampleMsg`], `docs/wire.md`),
+//! `coop/<session>/live/<site>` at most every [`LIVE_EVERY`] (JSON [`LiveSample`], `docs/wire.md`),
 //! for a viewer anywhere in the session (`session run --live` serves it to Foxglove).
 //!
 //! Off the real-time path: the samples are the ones this process already drains from physics'
@@ -14,7 +14,7 @@ use zenoh::{Session, Wait};
 
 use super::NetworkError;
 use crate::keys;
-use crate::recording::SampleMsg;
+use crate::recording::LiveSample;
 
 /// The shortest time between two live samples (about 60 Hz: a viewer's frame rate), ns.
 pub const LIVE_EVERY_NS: u64 = 16_666_667;
@@ -22,7 +22,7 @@ pub const LIVE_EVERY_NS: u64 = 16_666_667;
 /// The live publisher and the newest sample not yet put.
 pub(super) struct Live {
     publisher: Publisher<'static>,
-    pending: Option<TraceRecord>,
+    pending: Option<(TraceRecord, Vec<TraceRecord>)>,
     last_put_ns: Option<u64>,
 }
 
@@ -48,7 +48,7 @@ impl Live {
 
     /// Keeps `newest` (the newest sample drained this turn, if any) and puts the newest kept one
     /// when [`LIVE_EVERY_NS`] has passed since the last put.
-    pub(super) fn offer(&mut self, newest: Option<TraceRecord>, now: u64) {
+    pub(super) fn offer(&mut self, newest: Option<(TraceRecord, Vec<TraceRecord>)>, now: u64) {
         if newest.is_some() {
             self.pending = newest;
         }
@@ -58,11 +58,11 @@ impl Live {
         {
             return;
         }
-        let Some(t) = self.pending.take() else {
+        let Some((t, others)) = self.pending.take() else {
             return;
         };
         self.last_put_ns = Some(now);
-        let bytes = serde_json::to_vec(&SampleMsg::from(&t)).unwrap_or_default();
+        let bytes = serde_json::to_vec(&LiveSample::from_trace(&t, &others)).unwrap_or_default();
         // A failed put loses one frame of a viewer's picture, nothing else.
         let _ = self.publisher.put(bytes).wait();
     }

@@ -39,7 +39,7 @@ use zenoh::{Session, Wait};
 
 use crate::admit::Bounds;
 use crate::live_view::LiveView;
-use crate::recording::{Rotation, SampleMsg, Scene, SessionMsg, StatusMsg};
+use crate::recording::{LiveSample, Rotation, Scene, SessionMsg, StatusMsg};
 use foxglove::messages::log::Level;
 
 pub mod clock;
@@ -199,7 +199,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         .emulated
         .store(u64::from(a.emulation.is_some()), Ordering::Relaxed);
     let session = open(&ctx, a.endpoints)?;
-    let mut publish = Publish::declare(&session, ctx.session_name, &site)?;
+    let mut publish = Publish::declare(&session, ctx.session_name, &site, a.bounds.object_count)?;
     let mut rx = Receiver::new(
         ctx.sites,
         ctx.me,
@@ -365,7 +365,7 @@ impl Loop {
         presence: &mut Presence,
         clocks: &clock::Sampler<'_>,
     ) -> u64 {
-        if let Some(m) = publish.newest(&mut self.reports) {
+        for m in publish.newest(&mut self.reports) {
             self.recording.write(|w| w.published(&m));
         }
         if let Some((p, ring)) = &mut self.tracks {
@@ -404,8 +404,8 @@ impl Loop {
             }
         }
         let newest = self.recording.drain_trace(&mut self.trace);
-        if let (Some(v), Some(t)) = (&self.view, &newest) {
-            v.offer(0, SampleMsg::from(t));
+        if let (Some(v), Some((t, others))) = (&self.view, &newest) {
+            v.offer(0, LiveSample::from_trace(t, others));
         }
         self.live.offer(newest, now);
         for (level, text) in self.events.look(ctx.ctl) {

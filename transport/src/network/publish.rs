@@ -1,5 +1,5 @@
-//! Publishing this site's reports: only the newest one each time (states replace each other, a
-//! backlog is stale), none older than [`STALE_REPORT_NS`], express at real-time priority and dropped
+//! Publishing this site's reports: only the newest one of each object each time (states replace
+//! each other, a backlog is stale), none older than [`STALE_REPORT_NS`], express at real-time priority and dropped
 //! rather than queued under congestion; the last one published answers late joiners' queries for
 //! the current state. The loop wakes just after physics' next report is expected ([`next_wake`]).
 
@@ -68,11 +68,12 @@ fn realtime_publisher(
         .map_err(NetworkError::declare(what))
 }
 
-/// This site's state key: the publisher, and the queryable answering with the last state put.
+/// This site's state keys, one per object of the world: the publishers, and the queryables
+/// answering with the last state put of each.
 pub(super) struct Publish {
-    publisher: Publisher<'static>,
-    last: Arc<Mutex<Option<Vec<u8>>>>,
-    current: Option<Queryable<()>>,
+    publishers: Vec<Publisher<'static>>,
+    last: Arc<Mutex<Vec<Option<Vec<u8>>>>>,
+    current: Vec<Queryable<()>>,
     /// Reports published.
     pub(super) published: u64,
     /// Reports not published: replaced by a newer one, or stale.
@@ -80,70 +81,96 @@ pub(super) struct Publish {
 }
 
 impl Publish {
-    /// Declares `site`'s publisher.
+    /// Declares `site`'s publishers of a world of `objects` objects: one per object, on its own
+    /// key (a viewer may follow one object; a receiver checks that a state is the object its
+    /// key names).
     pub(super) fn declare(
         session: &Session,
         session_name: &str,
         site: &str,
+        objects: usize,
     ) -> Result<Self, NetworkError> {
-        let publisher =
-            realtime_publisher(session, keys::state(session_name, 0, site), "publisher")?;
+        let publishers = (0..objects.max(1))
+            .map(|k| {
+                realtime_publisher(
+                    session,
+                    keys::state(session_name, k as u32, site),
+                    "publisher",
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
-            publisher,
-            last: Arc::default(),
-            current: None,
+            last: Arc::new(Mutex::new(vec![None; publishers.len()])),
+            publishers,
+            current: Vec::new(),
             published: 0,
             stale_skipped: 0,
         })
     }
 
-    /// Answers queries for `site`'s current state from now on.
+    /// Answers queries for `site`'s current state of each object from now on.
     pub(super) fn serve_current(
         &mut self,
         session: &Session,
         session_name: &str,
         site: &str,
     ) -> Result<(), NetworkError> {
-        let lr = self.last.clone();
-        let current_key = keys::current(session_name, 0, site);
-        let reply_key = current_key.clone();
-        let q = session
-            .declare_queryable(current_key)
-            .callback(move |q| {
-                // Replies carry this site's own key (the query's may be a wildcard).
-                if let Some(bytes) = lock(&lr).clone() {
-                    let _ = q.reply(reply_key.as_str(), bytes).wait();
-                }
-            })
-            .wait()
-            .map_err(NetworkError::declare("current-state queryable"))?;
-        self.current = Some(q);
+        for k in 0..self.publishers.len() {
+            let lr = self.last.clone();
+            let current_key = keys::current(session_name, k as u32, site);
+            let reply_key = current_key.clone();
+            let q = session
+                .declare_queryable(current_key)
+                .callback(move |q| {
+                    // Replies carry this site's own key (the query's may be a wildcard).
+                    if let Some(bytes) = lock(&lr)[k].clone() {
+                        let _ = q.reply(reply_key.as_str(), bytes).wait();
+                    }
+                })
+                .wait()
+                .map_err(NetworkError::declare("current-state queryable"))?;
+            self.current.push(q);
+        }
         Ok(())
     }
 
-    /// Publishes the newest report in `reports`, if there is a fresh one; what was put, for the
+    /// Publishes the newest fresh report of each object in `reports`; what was put, for the
     /// recording.
-    pub(super) fn newest(&mut self, reports: &mut Consumer<SiteReport>) -> Option<PublishedMsg> {
-        // Only the newest report: states replace each other, and a backlog (physics ran before
-        // this process was up, or while it restarted) is stale by definition.
-        let newest = reports.pop_newest().ok()?;
-        self.stale_skipped += newest.skipped;
-        // A ring that filled up before this process was up holds old states only.
-        if monotonic_ns().saturating_sub(newest.value.t_ns) > STALE_REPORT_NS {
-            self.stale_skipped += 1;
-            return None;
-        }
-        let r = newest.value;
-        let bytes = wire::encode(&r);
-        let put = self.publisher.put(bytes.clone()).wait().is_ok().then(|| {
-            self.published += 1;
-            PublishedMsg {
-                t_ns: monotonic_ns(),
-                seq: r.seq,
-                state_ns: r.t_ns,
+    pub(super) fn newest(&mut self, reports: &mut Consumer<SiteReport>) -> Vec<PublishedMsg> {
+        // Only the newest report of each object: states replace each other, and a backlog
+        // (physics ran before this process was up, or while it restarted) is stale by
+        // definition.
+        let mut newest: Vec<Option<SiteReport>> = vec![None; self.publishers.len()];
+        while let Ok(r) = reports.pop() {
+            match newest.get_mut(r.object as usize) {
+                Some(slot) => {
+                    if slot.replace(r).is_some() {
+                        self.stale_skipped += 1;
+                    }
+                }
+                // Not an object of this world (physics never writes one): not published.
+                None => self.stale_skipped += 1,
             }
-        });
-        *lock(&self.last) = Some(bytes);
+        }
+        let mut put = Vec::new();
+        for (k, r) in newest.into_iter().enumerate() {
+            let Some(r) = r else { continue };
+            // A ring that filled up before this process was up holds old states only.
+            if monotonic_ns().saturating_sub(r.t_ns) > STALE_REPORT_NS {
+                self.stale_skipped += 1;
+                continue;
+            }
+            let bytes = wire::encode(&r);
+            if self.publishers[k].put(bytes.clone()).wait().is_ok() {
+                self.published += 1;
+                put.push(PublishedMsg {
+                    t_ns: monotonic_ns(),
+                    seq: r.seq,
+                    state_ns: r.t_ns,
+                });
+            }
+            lock(&self.last)[k] = Some(bytes);
+        }
         put
     }
 }
@@ -178,23 +205,27 @@ impl TrackPublish {
         })
     }
 
-    /// Publishes the newest track in `tracks`, if there is a fresh one.
+    /// Publishes the newest fresh track in `tracks`, with the world's other objects' states
+    /// that physics sent after it (the same report: a confirmed state travels whole).
     pub(super) fn newest(&mut self, tracks: &mut Consumer<ToolTrack>) {
-        let Ok(newest) = tracks.pop_newest() else {
-            return;
-        };
-        self.stale_skipped += newest.skipped;
-        if monotonic_ns().saturating_sub(newest.value.t_ns) > STALE_REPORT_NS {
-            self.stale_skipped += 1;
-            return;
+        let mut burst: Vec<ToolTrack> = Vec::new();
+        while let Ok(t) = tracks.pop() {
+            // A track of the world's first object (or none) starts a report; the others' states
+            // follow it in tracks with no positions.
+            if t.has_state == 0 || t.state_object == 0 {
+                self.stale_skipped += burst.len() as u64;
+                burst.clear();
+            }
+            burst.push(t);
         }
-        if self
-            .publisher
-            .put(wire::encode_track(&newest.value))
-            .wait()
-            .is_ok()
-        {
-            self.published += 1;
+        for t in burst {
+            if monotonic_ns().saturating_sub(t.t_ns) > STALE_REPORT_NS {
+                self.stale_skipped += 1;
+                continue;
+            }
+            if self.publisher.put(wire::encode_track(&t)).wait().is_ok() {
+                self.published += 1;
+            }
         }
     }
 }

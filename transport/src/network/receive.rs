@@ -9,6 +9,7 @@
 use std::sync::Mutex;
 use std::time::Duration;
 
+use coop_model::world::MAX_OBJECTS;
 use coop_rt::msg::{SiteReport, ToolTrack};
 use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, REFUSED_REASONS};
 use coop_rt::shm::Producer;
@@ -63,7 +64,8 @@ pub(super) struct Receiver<'a> {
     pub(super) log: Vec<RemoteMsg>,
     /// Sites lost and heard again since the loop last took them, for the recording.
     pub(super) peer_log: Vec<PeerMsg>,
-    /// Per site: its newest message that arrived before its clock offset was known.
+    /// Per site and object (`site * MAX_OBJECTS + object`): its newest state that arrived before
+    /// its clock offset was known.
     waiting: Vec<Option<Waiting>>,
     held: u64,
     /// Tool tracks (methods that exchange tools), if this station takes them.
@@ -76,8 +78,9 @@ pub(super) struct Receiver<'a> {
 pub(super) struct TrackIn {
     ring: Producer<ToolTrack>,
     emulator: Option<Emulator<ToolTrack>>,
-    /// Per site: its newest track that arrived before its clock offset was known.
-    waiting: Vec<Option<Vec<u8>>>,
+    /// Per site: its newest tracks that arrived before its clock offset was known (a burst may
+    /// carry a world's objects, one a track: up to [`MAX_OBJECTS`] kept).
+    waiting: Vec<Vec<Vec<u8>>>,
     /// Tracks handed to physics.
     pub(super) received: u64,
 }
@@ -121,7 +124,7 @@ impl<'a> Receiver<'a> {
             resyncs: 0,
             log: Vec::new(),
             peer_log: Vec::new(),
-            waiting: (0..sites.len()).map(|_| None).collect(),
+            waiting: (0..sites.len() * MAX_OBJECTS).map(|_| None).collect(),
             held: 0,
             tracks: None,
         }
@@ -132,7 +135,7 @@ impl<'a> Receiver<'a> {
         self.tracks = Some(TrackIn {
             ring,
             emulator: emulation.map(|e| Emulator::new(e, self.sites.len(), self.me)),
-            waiting: vec![None; self.sites.len()],
+            waiting: vec![Vec::new(); self.sites.len()],
             received: 0,
         });
     }
@@ -151,8 +154,12 @@ impl<'a> Receiver<'a> {
         {
             Ok(a) => a,
             Err(Refusal::NoOffset { site }) => {
-                // As a state: the newest is held until its sender's time can be read.
-                tr.waiting[site] = Some(bytes.to_vec());
+                // As a state: the newest are held until its sender's time can be read.
+                let w = &mut tr.waiting[site];
+                if w.len() == MAX_OBJECTS {
+                    w.remove(0);
+                }
+                w.push(bytes.to_vec());
                 return;
             }
             Err(e) => return self.refuse(key, &e),
@@ -160,7 +167,7 @@ impl<'a> Receiver<'a> {
         if a.site == self.me {
             return;
         }
-        tr.waiting[a.site] = None;
+        tr.waiting[a.site].clear();
         let release = match &mut tr.emulator {
             Some(emu) => match emu.arrival(a.site, a.track.t_ns, epoch) {
                 Some(at) => at,
@@ -190,8 +197,8 @@ impl<'a> Receiver<'a> {
         };
         let mut retry: Vec<(usize, Vec<u8>)> = Vec::new();
         for (j, known) in offsets.iter().enumerate() {
-            if let (Some(_), Some(b)) = (known, tr.waiting.get_mut(j).and_then(Option::take)) {
-                retry.push((j, b));
+            if let (Some(_), Some(w)) = (known, tr.waiting.get_mut(j)) {
+                retry.extend(w.drain(..).map(|b| (j, b)));
             }
         }
         let mut due = Vec::new();
@@ -229,8 +236,10 @@ impl<'a> Receiver<'a> {
         let offsets = self.offsets();
         for (j, known) in offsets.iter().enumerate() {
             if known.is_some() {
-                if let Some(w) = self.waiting[j].take() {
-                    self.on_bytes(&w.key, &w.bytes, w.zenoh_ts, w.join);
+                for k in 0..MAX_OBJECTS {
+                    if let Some(w) = self.waiting[j * MAX_OBJECTS + k].take() {
+                        self.on_bytes(&w.key, &w.bytes, w.zenoh_ts, w.join);
+                    }
                 }
             }
         }
@@ -264,6 +273,15 @@ impl<'a> Receiver<'a> {
         }
         self.refused[slot] += 1;
         self.control.network.refused.set(reason, self.refused[slot]);
+        // Which object's states are refused (a world of several), by the object the key names.
+        if key.contains("/state/")
+            && matches!(e, Refusal::Implausible { .. } | Refusal::OtherObject { .. })
+        {
+            let by = &self.control.network.refused_by_object;
+            if let Some(c) = keys::object_of(key).and_then(|k| by.get(k as usize)) {
+                c.fetch_add(1, Ordering::Relaxed);
+            }
+        }
     }
 
     /// A state of `site` was taken at `now`: a lost site is heard again.
@@ -330,7 +348,9 @@ impl<'a> Receiver<'a> {
         if self.lost & (1 << j) == 0 {
             self.last_heard[j] = None;
         }
-        self.waiting[j] = None;
+        for w in &mut self.waiting[j * MAX_OBJECTS..(j + 1) * MAX_OBJECTS] {
+            *w = None;
+        }
         self.control.network.clock_rtt_ns[j].store(0, Ordering::Relaxed);
     }
 
@@ -344,7 +364,14 @@ impl<'a> Receiver<'a> {
     ) {
         let now = monotonic_ns();
         let offsets = self.offsets();
-        let a = match self.inbound.check(keys::site_of(key), bytes, now, &offsets) {
+        // (A key naming no object of the largest world: refused as not the object it names.)
+        let key_object = keys::object_of(key)
+            .filter(|&k| k < MAX_OBJECTS as u64)
+            .unwrap_or(u64::MAX);
+        let a = match self
+            .inbound
+            .check(keys::site_of(key), key_object, bytes, now, &offsets)
+        {
             Ok(a) => a,
             Err(Refusal::NoOffset { site }) => {
                 // Its time cannot be read yet: held (the newest of the site) until it can.
@@ -353,7 +380,7 @@ impl<'a> Receiver<'a> {
                     .network
                     .held_for_offset
                     .store(self.held, Ordering::Relaxed);
-                self.waiting[site] = Some(Waiting {
+                self.waiting[site * MAX_OBJECTS + key_object as usize] = Some(Waiting {
                     key: key.to_owned(),
                     bytes: bytes.to_vec(),
                     zenoh_ts,
@@ -368,7 +395,7 @@ impl<'a> Receiver<'a> {
             return; // our own, echoed back
         }
         // A state held for its sender's clock offset is superseded by this newer one.
-        self.waiting[from] = None;
+        self.waiting[from * MAX_OBJECTS + key_object as usize] = None;
         if a.resync {
             self.resyncs += 1;
             self.control
@@ -466,7 +493,7 @@ pub(super) fn join_from_current(
     clocks: &Sampler<'_>,
 ) {
     let Ok(replies) = session
-        .get(keys::all_current(session_name, 0))
+        .get(keys::all_object_current(session_name))
         .allowed_destination(Locality::Remote)
         .timeout(Duration::from_secs(1))
         .wait()
@@ -493,7 +520,7 @@ pub(super) type States = Subscriber<FifoChannelHandler<Sample>>;
 /// Subscribes to the other sites' live states.
 pub(super) fn subscribe(session: &Session, session_name: &str) -> Result<States, NetworkError> {
     session
-        .declare_subscriber(keys::all_states(session_name, 0))
+        .declare_subscriber(keys::all_object_states(session_name))
         .allowed_origin(Locality::Remote)
         .with(zenoh::handlers::FifoChannel::new(1024))
         .wait()

@@ -65,13 +65,22 @@ impl Recording {
         }
     }
 
-    /// Moves physics' trace records into the recording; returns the newest sample among them.
-    pub(super) fn drain_trace(&mut self, trace: &mut Consumer<TraceRecord>) -> Option<TraceRecord> {
-        let mut newest = None;
+    /// Moves physics' trace records into the recording; returns the newest sample among them,
+    /// with the world's other objects' records of the same time (the first object's comes first).
+    pub(super) fn drain_trace(
+        &mut self,
+        trace: &mut Consumer<TraceRecord>,
+    ) -> Option<(TraceRecord, Vec<TraceRecord>)> {
+        let mut newest: Option<(TraceRecord, Vec<TraceRecord>)> = None;
         while let Ok(t) = trace.pop() {
             self.write(|w| w.trace(&t));
-            if t.kind == TraceRecord::SAMPLE {
-                newest = Some(t);
+            if t.kind != TraceRecord::SAMPLE {
+                continue;
+            }
+            match &mut newest {
+                Some((first, others)) if t.object != 0 && t.t_ns == first.t_ns => others.push(t),
+                _ if t.object == 0 => newest = Some((t, Vec::new())),
+                _ => {}
             }
         }
         newest

@@ -73,6 +73,9 @@ pub struct Scene {
     pub planes: Vec<([f64; 3], f64)>,
     /// The world's other objects (the second on), by name: frames `object/<name>/<site>`.
     pub others: Vec<(String, Body)>,
+    /// The first object's name in a world of several (empty in a world of one, whose `/object`
+    /// names none).
+    pub first_name: String,
 }
 
 impl Body {
@@ -247,6 +250,42 @@ impl Scene {
                     (name, Body::of(&scenario.objects[k]))
                 })
                 .collect(),
+            first_name: if scenario.objects.len() > 1 {
+                scenario.object_name(0).to_owned()
+            } else {
+                String::new()
+            },
+        })
+    }
+
+    /// Object `k`'s name as `/object` gives it (the first's empty in a world of one; past the
+    /// world's objects, its index).
+    pub fn object_name(&self, k: usize) -> String {
+        match k {
+            0 => self.first_name.clone(),
+            _ => self
+                .others
+                .get(k - 1)
+                .map_or_else(|| k.to_string(), |(n, _)| n.clone()),
+        }
+    }
+
+    /// `world → object/<name>/<site>` for the world's object `k` (1 or later) at `pos`, `rot`
+    /// (w, x, y, z), at `unix_ns`; `None` past the world's objects.
+    pub fn other_transform(
+        &self,
+        k: usize,
+        pos: [f64; 3],
+        [w, x, y, z]: [f64; 4],
+        unix_ns: u64,
+    ) -> Option<FrameTransform> {
+        let (name, _) = self.others.get(k.checked_sub(1)?)?;
+        Some(FrameTransform {
+            timestamp: Some(timestamp(unix_ns)),
+            parent_frame_id: WORLD.into(),
+            child_frame_id: self.other_frame(name),
+            translation: Some(v3(pos)),
+            rotation: Some(Quaternion { x, y, z, w }),
         })
     }
 
@@ -395,10 +434,12 @@ impl Scene {
         e
     }
 
-    /// The whole scene for sample `s`: the environment and the site's entities.
+    /// The whole scene for sample `s`: the environment and the site's entities (its copy of
+    /// every object, its tool and force).
     pub fn update(&self, s: &SampleMsg, unix_ns: u64) -> SceneUpdate {
         let mut entities = vec![self.environment(unix_ns)];
         entities.extend(self.entities(s, unix_ns));
+        entities.extend(self.other_entities(unix_ns));
         SceneUpdate {
             deletions: Vec::new(),
             entities,

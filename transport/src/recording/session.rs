@@ -101,6 +101,7 @@ fn object_part(site: &str, object: &str, m: &SampleMsg) -> ObjectPart {
         rot: m.rot,
         vel: m.vel,
         adoptions: m.adoptions,
+        touching: None,
     }
 }
 
@@ -125,6 +126,7 @@ fn other_object_parts(
             rot: o.rot[k],
             vel: o.vel[k].into(),
             adoptions: first.adoptions,
+            touching: None,
         })
         .collect()
 }
