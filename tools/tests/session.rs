@@ -227,10 +227,14 @@ fn four_stations_run_to_the_end_and_report_their_overruns() {
             during["servo"], during["physics"]
         );
     }
+    // The copies end together. (Not "after contacts": whether every user's tool has let go of the
+    // disk by the end is the paper method's outcome under real timing; one run on a loaded
+    // machine ended with the disk against user 1's tool, the contacts never over and the figure
+    // undefined, while the four copies ended 0.7 mm apart.)
     let real = &v["methods"]["paper"]["real"];
     assert!(
-        f(&real["divergence_after_contact_m"]) < 0.005,
-        "four copies together after contacts: {real}"
+        f(&real["divergence_final_m"]) < 0.005,
+        "four copies together at the end: {real}"
     );
     let _ = std::fs::remove_dir_all(&out);
 }
@@ -342,7 +346,8 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         put(&k1, long);
         s.length += 2;
         put(&k1, nan.clone());
-        let mut junk = vec![1u8; 289];
+        // The current version and length: refused for its contents.
+        let mut junk = vec![coop_transport::wire::VERSION; coop_transport::wire::ENCODED_LEN];
         for (i, b) in junk.iter_mut().enumerate().skip(1) {
             *b = (i as u64).wrapping_mul(0x9e37_79b9).wrapping_add(round) as u8;
         }
