@@ -279,9 +279,14 @@ fn station_config(
     connect: &[String],
     record: &Path,
     a: &RunArgs,
+    physics_cpu: Option<usize>,
 ) -> anyhow::Result<String> {
     let defaults = StationConfig::default();
     let emulate = a.emulate;
+    let physics = coop_actors::station::config::LoopSpec {
+        cpu: physics_cpu,
+        ..defaults.physics.clone()
+    };
     let c = StationConfig {
         session: session.to_owned(),
         station: Some(site.to_owned()),
@@ -296,6 +301,7 @@ fn station_config(
             ..network::NetworkConfig::default()
         },
         record_max_file_s: a.record_max_file_s.unwrap_or(defaults.record_max_file_s),
+        physics,
         ..defaults
     };
     Ok(format!(
@@ -343,8 +349,13 @@ pub fn run_method(
     let ports: Vec<String> = (0..=n)
         .map(|_| network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0))
         .collect();
+    // Every station on this one machine: their physics processes (and with them their network
+    // processes and supervisors) take the CPUs in turn, rather than all the first one while the
+    // last holds only the servos (which preempt them there: a higher priority, and short).
+    let cpus = coop_rt::sched::allowed_cpus();
     let mut stations: Vec<Station> = Vec::new();
     for (i, s) in sc.site.iter().enumerate() {
+        let physics_cpu = (!cpus.is_empty()).then(|| cpus[i % cpus.len()]);
         let others: Vec<String> = (0..=n)
             .filter(|&j| j != i)
             .map(|j| ports[j].clone())
@@ -355,7 +366,15 @@ pub fn run_method(
         std::fs::write(
             &config,
             station_config(
-                &sc_path, session, &s.name, method, &ports[i], &others, &record, a,
+                &sc_path,
+                session,
+                &s.name,
+                method,
+                &ports[i],
+                &others,
+                &record,
+                a,
+                physics_cpu,
             )?,
         )
         .with_context(|| format!("writing {}", config.display()))?;
@@ -748,6 +767,10 @@ pub fn run_from_recordings(
                     }
                 }
                 tr.others.push(ob);
+            }
+            // Whether the user touches an object: any of them, as the simulator has it.
+            for (t, &bits) in tr.touching.iter_mut().zip(&tr.touched) {
+                *t = bits != 0;
             }
         }
         sites.push(tr);
