@@ -168,7 +168,7 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
     // The real session's session file opens with the shipped layout too.
     let session_file = foxglove_summary(&[out.join("paper").join("session.mcap")]);
     assert_eq!(session_file["errors"], serde_json::json!([]));
-    assert!(check_layout(&session_file) > 0);
+    assert!(check_layout("foxglove-layout.json", &session_file) > 0);
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -465,8 +465,8 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
 }
 
 /// The shipped layout (`docs/foxglove-layout.json`).
-fn layout() -> Value {
-    let path = root().join("docs/foxglove-layout.json");
+fn layout(file: &str) -> Value {
+    let path = root().join("docs").join(file);
     serde_json::from_str(&std::fs::read_to_string(&path).expect("the layout")).expect("JSON")
 }
 
@@ -496,7 +496,10 @@ fn check_path(value: &str, v: &Value) -> Result<(), String> {
     if !root_schema.is_object() {
         return Err(format!("{value}: no JSON channel {topic} in the file"));
     }
-    if let Some(r) = rest.strip_prefix('{') {
+    // Filters, one after the other (`{site=="user1"}{object=="top"}`): the reader counts messages
+    // by site, and by `site/object` where a message names its object.
+    let mut wanted_key = Vec::new();
+    while let Some(r) = rest.strip_prefix('{') {
         let (filter, after) = r
             .split_once('}')
             .ok_or_else(|| format!("{value}: unclosed filter"))?;
@@ -506,13 +509,14 @@ fn check_path(value: &str, v: &Value) -> Result<(), String> {
         if !root_schema["properties"][field].is_object() {
             return Err(format!("{value}: {topic} has no field {field}"));
         }
-        let wanted = wanted.trim_matches('"');
-        if !v["json"][topic][wanted].is_u64() {
-            return Err(format!(
-                "{value}: no {topic} message with {field} {wanted:?}"
-            ));
-        }
+        wanted_key.push(wanted.trim_matches('"'));
         rest = after;
+    }
+    if !wanted_key.is_empty() {
+        let wanted = wanted_key.join("/");
+        if !v["json"][topic][&wanted].is_u64() {
+            return Err(format!("{value}: no {topic} message of {wanted:?}"));
+        }
     }
     let mut schema = root_schema;
     while !rest.is_empty() {
@@ -546,10 +550,11 @@ fn check_path(value: &str, v: &Value) -> Result<(), String> {
     Ok(())
 }
 
-/// Every panel of the shipped layout is placed and configured, and every topic and message path it
-/// refers to is in the file `v` summarises (a session file); returns the paths checked.
-fn check_layout(v: &Value) -> usize {
-    let l = layout();
+/// Every panel of the shipped layout `file` (in `docs/`) is placed and configured, and every topic
+/// and message path it refers to is in the file `v` summarises (a session file); returns the paths
+/// checked.
+fn check_layout(file: &str, v: &Value) -> usize {
+    let l = layout(file);
     let config = l["configById"].as_object().expect("configById");
     let mut ids = Vec::new();
     placed(&l["layout"], &mut ids);
@@ -567,7 +572,7 @@ fn check_layout(v: &Value) -> usize {
         .map(|id| id.split('!').next().unwrap_or(""))
         .collect();
     for t in ["3D", "Plot", "RosOut", "Tab"] {
-        assert!(types.contains(&t), "a {t} panel: {types:?}");
+        assert!(types.contains(&t), "{file}: a {t} panel: {types:?}");
     }
     let counts = &v["parts"][0]["counts"];
     let mut checked = 0;
@@ -590,7 +595,7 @@ fn check_layout(v: &Value) -> usize {
             }
         }
     }
-    assert!(errors.is_empty(), "{errors:#?}");
+    assert!(errors.is_empty(), "{file}: {errors:#?}");
     checked
 }
 
@@ -615,7 +620,10 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
         String::from_utf8_lossy(&run.stderr)
     );
     let v = foxglove_summary(&[out.join("session.mcap")]);
-    assert!(check_layout(&v) >= 20, "the plots' paths were checked");
+    assert!(
+        check_layout("foxglove-layout.json", &v) >= 20,
+        "the plots' paths were checked"
+    );
     // The check itself fails on a path the file does not have.
     assert!(check_path("/tool{site==\"user1\"}.f_desired[0]", &v).is_ok());
     for bad in [
@@ -629,6 +637,24 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
     ] {
         assert!(check_path(bad, &v).is_err(), "{bad} passed");
     }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+/// The layout for a world of several objects (`docs/foxglove-layout-world.json`, written for
+/// `scenarios/stack.toml`: each object's position as each site believes it) names only what a
+/// session file of that world has.
+#[test]
+fn the_world_layout_refers_only_to_what_a_stack_session_file_has() {
+    if python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    let (_, v, out) = simulated_session("layout-world", "stack.toml", &[]);
+    assert!(
+        check_layout("foxglove-layout-world.json", &v) >= 18,
+        "every object's series were checked"
+    );
+    assert!(check_path("/object{site==\"user1\"}{object==\"base\"}.pos[2]", &v).is_ok());
+    assert!(check_path("/object{site==\"user1\"}{object==\"cup\"}.pos[2]", &v).is_err());
     let _ = std::fs::remove_dir_all(&out);
 }
 
