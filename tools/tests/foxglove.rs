@@ -843,10 +843,18 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
         }
         entities_sit_in_declared_frames(&r);
     }
-    // The launcher's result names each object.
+    // The launcher's result names each object, in its figures and in each station's status.
     let result: Value = serde_json::from_slice(&session.stdout).expect("the session's JSON");
     let objects = &result["methods"]["timewarp"]["objects"];
     assert_eq!(objects[0]["name"], first, "{result}");
     assert_eq!(objects[1]["name"], second, "{result}");
+    for site in &sites {
+        let status = &result["methods"]["timewarp"]["stations"][site]["live"]["physics"]["objects"];
+        let names: Vec<&str> = status
+            .as_array()
+            .map(|a| a.iter().filter_map(|o| o["name"].as_str()).collect())
+            .unwrap_or_default();
+        assert_eq!(names, [first, second], "{site}'s status: {status}");
+    }
     let _ = std::fs::remove_dir_all(&out);
 }
