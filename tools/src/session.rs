@@ -188,6 +188,8 @@ pub struct MethodOutcome {
     pub launcher_epoch_ns: u64,
     /// In a world of several objects, each object's figures (empty in a world of one).
     pub objects: Vec<ObjectRow>,
+    /// Each station's traffic (payload kbit/s put and got, by kind).
+    pub wire: Vec<WireRow>,
 }
 
 /// One object's figures in a session: the simulator's and the stations'.
@@ -237,6 +239,85 @@ impl ObjectFigures {
             err_ref_max_mm: err * 1e3,
         }
     }
+}
+
+/// One station's traffic over its network process's life (payload as put and got, `station
+/// status`'s counts): per kind, and in all.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct WireRow {
+    /// The site.
+    pub site: String,
+    /// How long its network process ran, s.
+    pub duration_s: f64,
+    /// Payload put, kbit/s, all kinds.
+    pub sent_kbit_s: f64,
+    /// Payload received, kbit/s, all kinds.
+    pub received_kbit_s: f64,
+    /// Per kind (`states`, `tracks`, `clock`, `presence`, `live`): messages put per second,
+    /// payload put and received, kbit/s.
+    pub kinds: Vec<(String, f64, f64, f64)>,
+}
+
+impl WireRow {
+    /// From a station's recording: its final counts over its network process's life (the
+    /// recording's session message to its status), or `None` if it has not both.
+    pub fn of(site: &str, rec: &Recording) -> Option<Self> {
+        use coop_rt::shm::control::{CounterKey, WireKind};
+        let status = rec.status?;
+        let start = rec.session.as_ref()?.t_ns;
+        let dt = status.t_ns.saturating_sub(start) as f64 * 1e-9;
+        if dt <= 0.0 {
+            return None;
+        }
+        let t = status.traffic;
+        let kbit = |b: u64| b as f64 * 8e-3 / dt;
+        Some(Self {
+            site: site.to_owned(),
+            duration_s: dt,
+            sent_kbit_s: kbit(t.sent_bytes.iter().sum()),
+            received_kbit_s: kbit(t.received_bytes.iter().sum()),
+            kinds: WireKind::ALL
+                .iter()
+                .enumerate()
+                .map(|(k, kind)| {
+                    (
+                        kind.name().to_owned(),
+                        t.sent_msgs[k] as f64 / dt,
+                        kbit(t.sent_bytes[k]),
+                        kbit(t.received_bytes[k]),
+                    )
+                })
+                .collect(),
+        })
+    }
+}
+
+/// Prints each station's traffic (`methods`: the run's JSON `methods`, each with its `wire`).
+///
+/// # Errors
+/// A method's `wire` is not a list of [`WireRow`].
+pub fn print_wire(methods: &serde_json::Value) -> anyhow::Result<()> {
+    for (m, r) in methods.as_object().into_iter().flatten() {
+        let rows: Vec<WireRow> = serde_json::from_value(r["wire"].clone())
+            .with_context(|| format!("the {m} run's traffic"))?;
+        for w in rows {
+            let kinds: Vec<String> = w
+                .kinds
+                .iter()
+                .filter(|k| k.1 > 0.0 || k.3 > 0.0)
+                .map(|(kind, msgs, sent, got)| format!("{kind} {msgs:.0} msg/s {sent:.1}/{got:.1}"))
+                .collect();
+            println!(
+                "# wire: {m:<9} {:<6} sent {:.1} kbit/s, received {:.1} kbit/s over {:.1} s ({})",
+                w.site,
+                w.sent_kbit_s,
+                w.received_kbit_s,
+                w.duration_s,
+                kinds.join("; ")
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Prints the per-object lines under the table: per method and object, the simulator's figures
@@ -689,6 +770,11 @@ fn outcome(
     } else {
         Vec::new()
     };
+    let wire = sites
+        .iter()
+        .zip(recordings)
+        .filter_map(|((site, _), rec)| WireRow::of(site, rec))
+        .collect();
     Ok(MethodOutcome {
         reference,
         simulated,
@@ -696,6 +782,7 @@ fn outcome(
         stations: serde_json::Value::Object(per_station),
         launcher_epoch_ns: 0,
         objects,
+        wire,
     })
 }
 
@@ -729,6 +816,10 @@ pub fn run_from_recordings(
             bail!("the recording of site {} has no samples", sc.site[i].name);
         }
         let mut tr = SiteTrace::default();
+        if let Some(st) = r.status {
+            // What the station put: site reports and tool tracks (`WireKind` order).
+            tr.puts = [st.traffic.sent_msgs[0], st.traffic.sent_msgs[1]];
+        }
         let at = |tk: f64| epoch_ns as f64 + tk * 1e9;
         for s in resample(&r.samples, &t, at) {
             tr.obj_pos.push(Vec3::from(s.pos));
@@ -876,7 +967,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
             "reference": o.reference,
             "methods": { m.as_str(): {
                 "simulated": o.simulated, "real": o.real, "stations": o.stations,
-                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects,
+                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects, "wire": o.wire,
             } },
         });
         return Ok((sc, rows, v));
@@ -906,7 +997,7 @@ pub fn run(a: &RunArgs) -> anyhow::Result<(Scenario, Vec<Metrics>, serde_json::V
             m.as_str().to_owned(),
             serde_json::json!({
                 "simulated": o.simulated, "real": o.real, "stations": o.stations,
-                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects,
+                "launcher_epoch_ns": o.launcher_epoch_ns, "objects": o.objects, "wire": o.wire,
             }),
         );
     }

@@ -275,6 +275,14 @@ fn compare_json(sc: &Scenario, all: &[Metrics]) -> serde_json::Value {
     serde_json::json!({ "scenario": sc.name, "seed": sc.seed, "duration_s": sc.duration_s, "methods": all })
 }
 
+/// Payload kbit/s of `puts` (site reports, tool tracks, at the wire's encoded sizes) over
+/// `duration_s`.
+pub fn sent_kbit_s(puts: [u64; 2], duration_s: f64) -> f64 {
+    let bytes = puts[0] * coop_transport::wire::ENCODED_LEN as u64
+        + puts[1] * coop_transport::wire::TRACK_ENCODED_LEN as u64;
+    bytes as f64 * 8e-3 / duration_s.max(1e-9)
+}
+
 /// Prints the comparison table.
 pub fn print_table(sc: &Scenario, all: &[Metrics]) {
     println!(
@@ -285,7 +293,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         sc.site.len()
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}  phases",
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}{:>9}  phases",
         "method",
         "div max",
         "div rms",
@@ -297,11 +305,24 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
         "E others",
         "others did",
         "adoptions",
-        "bounded"
+        "bounded",
+        "sent"
     );
     println!(
-        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}",
-        "", "mm", "mm", "contact mm", "max mm", "rms mm", "N", "max N", "mJ", "mJ", "", ""
+        "{:<10}{:>10}{:>10}{:>12}{:>10}{:>11}{:>11}{:>11}{:>11}{:>11}{:>10}{:>8}{:>9}",
+        "",
+        "mm",
+        "mm",
+        "contact mm",
+        "max mm",
+        "rms mm",
+        "N",
+        "max N",
+        "mJ",
+        "mJ",
+        "",
+        "",
+        "kbit/s"
     );
     for m in all {
         // The worst site; NaN (not measured, e.g. on real stations) if any site's is.
@@ -330,7 +351,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             })
             .collect();
         println!(
-            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}{:>8}  {}",
+            "{:<10}{:>10.2}{:>10.2}{}{}{:>11.2}{:>11.3}{}{}{}{:>10}{:>8}{}  {}",
             m.method,
             m.divergence_max_m * 1e3,
             m.divergence_rms_m * 1e3,
@@ -343,12 +364,21 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             cell(worst(&|s| s.others_work_j) * 1e3, 11, 2),
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
             m.bounded_corrections,
+            match m
+                .sites
+                .iter()
+                .map(|s| sent_kbit_s(s.puts, sc.duration_s))
+                .fold(0.0, f64::max)
+            {
+                0.0 => format!("{:>9}", "-"),
+                k => format!("{k:>9.0}"),
+            },
             phases.join(", ")
         );
     }
     let radius = sc.objects[0].radius_m;
     println!(
-        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown); bounded = corrections the no-gain bound scaled back",
+        "# div = largest distance between sites' copies; 'after contact' from {} (contacts over, object at rest, + max delay + 2 report periods; '-': contacts never ended); co-div = div while two or more users touch ('-': never); object radius {:.0} mm\n# E others = energy a copy gained beyond its own user's and environment's work; others did = the other users' work at their own sites (worst site shown); bounded = corrections the no-gain bound scaled back; sent = payload a site puts (site reports and tool tracks at their encoded sizes, each put once: a peer-to-peer mesh sends it to every other site), worst site, over the scenario's duration",
         all.iter()
             .map(|m| format!("{:.2} s ({})", m.after_contact_from_s, m.method))
             .collect::<Vec<_>>()

@@ -83,11 +83,18 @@ pub struct Row {
     pub replays: u64,
     /// The largest local lag of any site's own tool, ms (`timewarp`).
     pub local_lag_max_ms: f64,
+    /// Payload the busiest site puts, kbit/s ([`crate::sim::sent_kbit_s`]).
+    pub sent_kbit_s: f64,
 }
 
 impl Row {
-    fn new(delay_ms: f64, seed: u64, m: &Metrics) -> Self {
+    fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64) -> Self {
         Self {
+            sent_kbit_s: m
+                .sites
+                .iter()
+                .map(|s| crate::sim::sent_kbit_s(s.puts, duration_s))
+                .fold(0.0, f64::max),
             method: m.method.clone(),
             delay_ms,
             seed,
@@ -234,7 +241,12 @@ pub fn sweep(
     Ok(par_map(&jobs, |(m, d, seed, sc)| {
         let r = sim::run(sc, Mode::Distributed(*m), &mut |_| {});
         let reference = &refs[(*seed - 1) as usize].1;
-        Row::new(*d, *seed, &metrics::compute(sc, &r, reference))
+        Row::new(
+            *d,
+            *seed,
+            &metrics::compute(sc, &r, reference),
+            sc.duration_s,
+        )
     }))
 }
 
@@ -260,7 +272,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}  missed phases",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}  missed phases",
         "method",
         "delay",
         "seed",
@@ -277,11 +289,12 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "rollback",
         "depth",
         "hash",
-        "unfelt/phant"
+        "unfelt/phant",
+        "sent"
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}",
+        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}",
         "",
         "ms",
         "",
@@ -298,12 +311,13 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
         "per s",
         "p99 ticks",
         "miss",
-        "ms"
+        "ms",
+        "kbit/s"
     );
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}{:>14}  {}",
+            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}{:>14}{:>9.0}  {}",
             r.method,
             r.delay_ms,
             r.seed,
@@ -321,6 +335,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             r.rollback_depth_p99_ticks,
             r.hash_mismatches,
             format!("{:.0}/{:.0}", r.unfelt_contact_ms, r.phantom_contact_ms),
+            r.sent_kbit_s,
             if r.phases_failed.is_empty() {
                 "-".to_string()
             } else {
@@ -330,7 +345,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; unfelt/phant = confirmed contact time a user was never shown live / contact time shown live that the confirmed history took back, all sites (timewarp); missed phases = site:phase",
+        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; unfelt/phant = confirmed contact time a user was never shown live / contact time shown live that the confirmed history took back, all sites (timewarp); sent = payload the busiest site puts (reports and tool tracks at their encoded sizes, each put once); missed phases = site:phase",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );

@@ -855,6 +855,32 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
             .map(|a| a.iter().filter_map(|o| o["name"].as_str()).collect())
             .unwrap_or_default();
         assert_eq!(names, [first, second], "{site}'s status: {status}");
+        // What it put and got, counted by kind over its network process's life: tool tracks
+        // only (timewarp sends no states), each at the wire's size.
+        let t = &result["methods"]["timewarp"]["stations"][site]["final"]["traffic"];
+        let n = |f: &str, k: usize| t[f][k].as_u64().unwrap_or(0);
+        let track = coop_transport::wire::TRACK_ENCODED_LEN as u64;
+        assert!(n("sent_msgs", 1) > 50, "{site} put its tracks: {t}");
+        assert_eq!(n("sent_bytes", 1), n("sent_msgs", 1) * track, "{site}: {t}");
+        assert!(n("received_msgs", 1) > 50, "{site} got the other's: {t}");
+        assert_eq!(
+            n("received_bytes", 1),
+            n("received_msgs", 1) * track,
+            "{site}: {t}"
+        );
+        assert_eq!(
+            (n("sent_msgs", 0), n("received_msgs", 0)),
+            (0, 0),
+            "{site}: no states: {t}"
+        );
+        assert!(
+            n("sent_msgs", 2) > 0 && n("received_bytes", 2) > 0,
+            "{site}: clock: {t}"
+        );
     }
+    let wire = result["methods"]["timewarp"]["wire"]
+        .as_array()
+        .expect("wire rows");
+    assert_eq!(wire.len(), sites.len(), "{result}");
     let _ = std::fs::remove_dir_all(&out);
 }

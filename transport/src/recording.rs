@@ -443,6 +443,48 @@ json_message! {
         /// Reports not published because a newer one was already waiting.
         #[serde(default)]
         pub stale_skipped: u64,
+        /// What the network process put on the wire and got from it, by kind, over its life.
+        #[serde(default)]
+        pub traffic: TrafficMsg,
+    }
+}
+
+json_message! {
+    /// The network process's traffic over its life, per `coop_rt::shm::control::WireKind` in
+    /// its order (states, tracks, clock, presence, live): payload bytes and messages put and got.
+    #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+    pub struct TrafficMsg {
+        /// Payload bytes put, by kind.
+        pub sent_bytes: [u64; WIRE_KINDS],
+        /// Messages put, by kind.
+        pub sent_msgs: [u64; WIRE_KINDS],
+        /// Payload bytes received, by kind.
+        pub received_bytes: [u64; WIRE_KINDS],
+        /// Messages received, by kind.
+        pub received_msgs: [u64; WIRE_KINDS],
+    }
+}
+
+/// How many kinds of traffic a [`TrafficMsg`] counts.
+pub const WIRE_KINDS: usize = 5;
+
+impl TrafficMsg {
+    /// The counts in `t` now.
+    pub fn of(t: &coop_rt::shm::control::Traffic) -> Self {
+        use coop_rt::shm::control::{CounterKey, WireKind};
+        let each = |c: &coop_rt::shm::control::Counters<WireKind>| {
+            let mut out = [0; WIRE_KINDS];
+            for (o, &k) in out.iter_mut().zip(WireKind::ALL) {
+                *o = c.get(k);
+            }
+            out
+        };
+        Self {
+            sent_bytes: each(&t.sent_bytes),
+            sent_msgs: each(&t.sent_msgs),
+            received_bytes: each(&t.received_bytes),
+            received_msgs: each(&t.received_msgs),
+        }
     }
 }
 

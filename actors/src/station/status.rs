@@ -186,6 +186,59 @@ pub struct NetworkStatus {
     pub latency_us: Option<Latency>,
     /// The session's time 0, ns (none until known).
     pub epoch_ns: Option<u64>,
+    /// What it put on the wire and got from it, by kind: totals, and rates over the status'
+    /// window.
+    pub traffic: Vec<TrafficStatus>,
+    /// That window, s.
+    pub traffic_window_s: f64,
+}
+
+/// One kind of the network process's traffic (payload, as put and got: a put goes to every
+/// subscribed peer, or once to a router).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct TrafficStatus {
+    /// `states`, `tracks`, `clock`, `presence` or `live`.
+    pub kind: &'static str,
+    /// Messages put, in all.
+    pub sent_msgs: u64,
+    /// Payload bytes put, in all.
+    pub sent_bytes: u64,
+    /// Messages received, in all.
+    pub received_msgs: u64,
+    /// Payload bytes received, in all.
+    pub received_bytes: u64,
+    /// Messages put per second, over the window.
+    pub sent_msgs_per_s: f64,
+    /// Payload put, kbit/s, over the window.
+    pub sent_kbit_s: f64,
+    /// Payload received, kbit/s, over the window.
+    pub received_kbit_s: f64,
+}
+
+impl TrafficStatus {
+    /// Each kind's totals now, and its rates since `before` (the totals `dt_s` seconds ago).
+    fn of(
+        now: &coop_transport::recording::TrafficMsg,
+        before: &coop_transport::recording::TrafficMsg,
+        dt_s: f64,
+    ) -> Vec<Self> {
+        use coop_rt::shm::control::{CounterKey, WireKind};
+        let rate = |a: u64, b: u64| a.saturating_sub(b) as f64 / dt_s.max(1e-9);
+        WireKind::ALL
+            .iter()
+            .enumerate()
+            .map(|(k, kind)| Self {
+                kind: kind.name(),
+                sent_msgs: now.sent_msgs[k],
+                sent_bytes: now.sent_bytes[k],
+                received_msgs: now.received_msgs[k],
+                received_bytes: now.received_bytes[k],
+                sent_msgs_per_s: rate(now.sent_msgs[k], before.sent_msgs[k]),
+                sent_kbit_s: rate(now.sent_bytes[k], before.sent_bytes[k]) * 8e-3,
+                received_kbit_s: rate(now.received_bytes[k], before.received_bytes[k]) * 8e-3,
+            })
+            .collect()
+    }
 }
 
 /// One site as the network process sees it.
@@ -535,6 +588,7 @@ pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
 pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<StationStatus> {
     let (names, ctl) = open(session, station)?;
     let snap = || (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
+    let traffic0 = coop_transport::recording::TrafficMsg::of(&ctl.network.traffic);
     let ((s0, p0), t0) = (snap(), Instant::now());
     std::thread::sleep(Duration::from_millis(200));
     let (s1, p1) = snap();
@@ -590,7 +644,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<St
                 .map(|&r| (r.name(), ctl.ring_drops(r)))
                 .collect(),
         },
-        network: NetworkStatus::of(&ctl, sites),
+        network: NetworkStatus::of(&ctl, sites, (&traffic0, dt)),
         physics: PhysicsStatus {
             remote_received: ctl.physics.received.load(Ordering::Relaxed),
             remote_rejected: ctl.physics.rejected.load(Ordering::Relaxed),
@@ -651,7 +705,11 @@ impl StationStatus {
 }
 
 impl NetworkStatus {
-    fn of(ctl: &ControlBlock, sites: &[String]) -> Self {
+    fn of(
+        ctl: &ControlBlock,
+        sites: &[String],
+        traffic_before: (&coop_transport::recording::TrafficMsg, f64),
+    ) -> Self {
         let n = &ctl.network;
         let load = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
         let present = load(&n.peers_present);
@@ -703,6 +761,12 @@ impl NetworkStatus {
             peers,
             latency_us,
             epoch_ns: ctl.epoch(),
+            traffic: TrafficStatus::of(
+                &coop_transport::recording::TrafficMsg::of(&n.traffic),
+                traffic_before.0,
+                traffic_before.1,
+            ),
+            traffic_window_s: traffic_before.1,
         }
     }
 }
@@ -814,6 +878,20 @@ impl fmt::Display for StationStatus {
             n.emulation,
             n.emulated_lost,
             n.join_states
+        )?;
+        let t = &n.traffic;
+        let kinds: Vec<String> = t
+            .iter()
+            .filter(|k| k.sent_msgs + k.received_msgs > 0)
+            .map(|k| format!("{} {:.1}/{:.1}", k.kind, k.sent_kbit_s, k.received_kbit_s))
+            .collect();
+        writeln!(
+            f,
+            "wire (payload kbit/s sent/received, last {:.1} s): {:.1}/{:.1} ({})",
+            n.traffic_window_s,
+            t.iter().map(|k| k.sent_kbit_s).sum::<f64>(),
+            t.iter().map(|k| k.received_kbit_s).sum::<f64>(),
+            kinds.join(", ")
         )?;
         writeln!(
             f,

@@ -77,6 +77,8 @@ pub struct SiteMetrics {
     pub force_tracking_rms_n: f64,
     /// Adoptions this site made.
     pub adoptions: usize,
+    /// Messages put: site reports and tool tracks ([`crate::sim::SiteTrace::puts`]).
+    pub puts: [u64; 2],
     /// Largest displayed-force change at an adoption, N.
     pub max_adoption_force_step_n: f64,
     /// Energy this copy gained beyond its own user's and its environment's work, J.
@@ -333,6 +335,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                     (0..samples).map(|k| (s.f_desired[k] - s.f_measured[k]).norm())
                 ),
                 adoptions: adoptions.len(),
+                puts: s.puts,
                 max_adoption_force_step_n: adoptions
                     .iter()
                     .map(|a| a.force_step_n)

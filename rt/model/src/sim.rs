@@ -73,6 +73,10 @@ pub struct SiteTrace {
     pub touched: Vec<u16>,
     /// The world's other objects (the second on), as this site believes them.
     pub others: Vec<ObjectTrace>,
+    /// The messages this site put, as a station puts them: site reports (states, forces) and
+    /// tool tracks (a `coupled` report with its tools is one of each). Their encoded sizes are
+    /// the wire's (`coop_transport::wire`).
+    pub puts: [u64; 2],
 }
 
 impl SiteTrace {
@@ -478,7 +482,16 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             if !reference && s.next_report == t {
                 // Each report takes its own chance on each link (a world's objects may travel in
                 // several).
+                let puts = &mut result.sites[i].puts;
                 let mut send = |msg: Report| {
+                    match &msg {
+                        Report::State { .. } | Report::Force { .. } => puts[0] += 1,
+                        Report::Tools(_) => puts[1] += 1,
+                        Report::Coupled(c) => {
+                            puts[0] += 1;
+                            puts[1] += u64::from(c.tools.count > 0);
+                        }
+                    }
                     for to in (0..n).filter(|&to| to != i) {
                         messages.0 += 1;
                         let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t))

@@ -94,6 +94,11 @@ impl<K: CounterKey> Counters<K> {
             Ordering::Relaxed,
         );
     }
+    /// Adds to the count for `k` from any thread (an atomic add: for counts several threads of
+    /// one process keep).
+    pub fn count(&self, k: K, by: u64) {
+        self.words[k.slot()].fetch_add(by, Ordering::Relaxed);
+    }
     /// Every key with its count, in slot order.
     pub fn all(&self) -> impl Iterator<Item = (K, u64)> + '_ {
         K::ALL.iter().map(|&k| (k, self.get(k)))
@@ -181,6 +186,73 @@ pub enum Refused {
     /// Finite but impossible for this world: outside its extent, faster or spinning faster than
     /// anything in it can make the object, or inclusion times that no site has reached.
     Implausible,
+}
+
+/// What the network process puts on the wire and gets from it, by kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WireKind {
+    /// Site reports (object states, forces): this site's puts, the others' it receives, and the
+    /// current states a late joiner asks for.
+    State,
+    /// Tool tracks (`timewarp`, `coupled`).
+    Track,
+    /// Clock exchanges: the queries and their answers (the session's time 0 too).
+    Clock,
+    /// Liveliness: this site's token, and the others' comings and goings (no payload).
+    Presence,
+    /// The live view's samples (put only).
+    Live,
+}
+
+impl CounterKey for WireKind {
+    const ALL: &'static [Self] = &[
+        WireKind::State,
+        WireKind::Track,
+        WireKind::Clock,
+        WireKind::Presence,
+        WireKind::Live,
+    ];
+    fn slot(self) -> usize {
+        self as usize
+    }
+    fn name(self) -> &'static str {
+        match self {
+            WireKind::State => "states",
+            WireKind::Track => "tracks",
+            WireKind::Clock => "clock",
+            WireKind::Presence => "presence",
+            WireKind::Live => "live",
+        }
+    }
+}
+
+/// The network process's traffic by [`WireKind`]: payload bytes and messages it put (each put
+/// once, however many peers zenoh sends it to) and got. Any of its threads counts
+/// ([`Counters::count`]).
+#[derive(Debug)]
+#[repr(C)]
+pub struct Traffic {
+    /// Payload bytes put.
+    pub sent_bytes: Counters<WireKind>,
+    /// Messages put (and queries made, tokens declared).
+    pub sent_msgs: Counters<WireKind>,
+    /// Payload bytes received.
+    pub received_bytes: Counters<WireKind>,
+    /// Messages received.
+    pub received_msgs: Counters<WireKind>,
+}
+
+impl Traffic {
+    /// One message of `kind`, `bytes` long, put.
+    pub fn sent(&self, kind: WireKind, bytes: usize) {
+        self.sent_msgs.count(kind, 1);
+        self.sent_bytes.count(kind, bytes as u64);
+    }
+    /// One message of `kind`, `bytes` long, received.
+    pub fn received(&self, kind: WireKind, bytes: usize) {
+        self.received_msgs.count(kind, 1);
+        self.received_bytes.count(kind, bytes as u64);
+    }
 }
 
 impl CounterKey for Refused {
@@ -482,6 +554,8 @@ pub struct NetworkShared {
     /// States refused as implausible or as another object than their key's, by the object their
     /// key names (a world of several: which object's states are refused).
     pub refused_by_object: [AtomicU64; MAX_OBJECTS],
+    /// What it put on the wire and got from it, by kind.
+    pub traffic: Traffic,
     /// 1 when it emulates delay, jitter and loss on receive.
     pub emulated: AtomicU64,
     /// Messages the emulation dropped.
@@ -549,7 +623,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v18";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v19";
 }
 
 impl ControlBlock {

@@ -336,6 +336,7 @@ fn main() -> std::process::ExitCode {
             } else {
                 coop_tools::sim::print_table(&sc, &rows);
                 coop_tools::session::print_objects(&v["methods"])?;
+                coop_tools::session::print_wire(&v["methods"])?;
                 if a.attach.is_some() {
                     for (m, r) in v["methods"].as_object().into_iter().flatten() {
                         let stations = r["stations"].as_object().into_iter().flatten();

@@ -5,7 +5,7 @@
 use std::sync::Mutex;
 use std::time::Duration;
 
-use coop_rt::shm::control::ControlBlock;
+use coop_rt::shm::control::{ControlBlock, Traffic, WireKind};
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
 use zenoh::query::Queryable;
@@ -48,27 +48,42 @@ pub fn clock_estimate(t0: u64, remote: u64, t2: u64) -> (u64, i64) {
     (rtt, (remote as i128 - mid) as i64)
 }
 
+/// The answers a clock queryable gave since they were last counted: (messages, bytes).
+#[derive(Debug, Default, Clone)]
+pub(super) struct Answers(std::sync::Arc<Mutex<(u64, u64)>>);
+
+impl Answers {
+    /// Counts the answers given since the last call into `traffic`.
+    pub(super) fn count(&self, traffic: &Traffic) {
+        let (msgs, bytes) = std::mem::take(&mut *lock(&self.0));
+        traffic.sent_msgs.count(WireKind::Clock, msgs);
+        traffic.sent_bytes.count(WireKind::Clock, bytes);
+    }
+}
+
 /// Answers queries for this site's clock (or, with `site` = [`crate::acl::LAUNCHER`], the
-/// launcher's).
+/// launcher's); the answers are counted in the [`Answers`] returned.
 pub(super) fn serve(
     session: &Session,
     session_name: &str,
     site: &str,
-) -> Result<Queryable<()>, NetworkError> {
+) -> Result<(Queryable<()>, Answers), NetworkError> {
     let clock_key = keys::clock(session_name, site);
     let reply_key = clock_key.clone();
-    session
+    let answers = Answers::default();
+    let counted = answers.clone();
+    let q = session
         .declare_queryable(clock_key)
         .callback(move |q| {
-            let _ = q
-                .reply(
-                    reply_key.as_str(),
-                    wire::encode_u64(monotonic_ns()).to_vec(),
-                )
-                .wait();
+            let bytes = wire::encode_u64(monotonic_ns());
+            if q.reply(reply_key.as_str(), bytes.to_vec()).wait().is_ok() {
+                let mut c = lock(&counted.0);
+                *c = (c.0 + 1, c.1 + bytes.len() as u64);
+            }
         })
         .wait()
-        .map_err(NetworkError::declare("clock queryable"))
+        .map_err(NetworkError::declare("clock queryable"))?;
+    Ok((q, answers))
 }
 
 /// How often the clock thread looks for a present peer whose offset is unknown or due.
@@ -183,14 +198,18 @@ impl<'a> Sampler<'a> {
 
     /// Queries a clock key; the first answer's time.
     fn ask(&self, key: &str) -> Option<u64> {
-        self.session
+        let traffic = &self.ctl.network.traffic;
+        traffic.sent(WireKind::Clock, 0);
+        let b = self
+            .session
             .get(key)
             .timeout(Duration::from_millis(200))
             .wait()
             .ok()
             .and_then(|replies| replies.recv().ok())
-            .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()))
-            .and_then(|b| wire::decode_u64(&b).ok())
+            .and_then(|r| r.result().ok().map(|s| s.payload().to_bytes().to_vec()))?;
+        traffic.received(WireKind::Clock, b.len());
+        wire::decode_u64(&b).ok()
     }
 
     /// The estimates made since the last call, for the recording.

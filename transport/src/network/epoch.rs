@@ -61,7 +61,8 @@ impl EpochAnnouncer {
             })
             .wait()
             .map_err(NetworkError::declare("epoch queryable"))?;
-        let clock = super::clock::serve(session, session_name, crate::acl::LAUNCHER)?;
+        let (clock, _launcher_answers) =
+            super::clock::serve(session, session_name, crate::acl::LAUNCHER)?;
         Ok(Self {
             session: session.clone(),
             key: keys::epoch(session_name),

@@ -8,6 +8,7 @@
 //! subscribes).
 
 use coop_rt::msg::TraceRecord;
+use coop_rt::shm::control::{Traffic, WireKind};
 use zenoh::pubsub::Publisher;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::{Session, Wait};
@@ -48,7 +49,12 @@ impl Live {
 
     /// Keeps `newest` (the newest sample drained this turn, if any) and puts the newest kept one
     /// when [`LIVE_EVERY_NS`] has passed since the last put.
-    pub(super) fn offer(&mut self, newest: Option<(TraceRecord, Vec<TraceRecord>)>, now: u64) {
+    pub(super) fn offer(
+        &mut self,
+        newest: Option<(TraceRecord, Vec<TraceRecord>)>,
+        now: u64,
+        traffic: &Traffic,
+    ) {
         if newest.is_some() {
             self.pending = newest;
         }
@@ -61,9 +67,21 @@ impl Live {
         let Some((t, others)) = self.pending.take() else {
             return;
         };
+        // Nobody watching: nothing to send (zenoh would send nothing either), nothing counted.
+        let watched = self
+            .publisher
+            .matching_status()
+            .wait()
+            .map_or(true, |m| m.matching());
+        if !watched {
+            return;
+        }
         self.last_put_ns = Some(now);
         let bytes = serde_json::to_vec(&LiveSample::from_trace(&t, &others)).unwrap_or_default();
         // A failed put loses one frame of a viewer's picture, nothing else.
-        let _ = self.publisher.put(bytes).wait();
+        let len = bytes.len();
+        if self.publisher.put(bytes).wait().is_ok() {
+            traffic.sent(WireKind::Live, len);
+        }
     }
 }

@@ -293,6 +293,10 @@ fn serve(
     let epoch = &epoch::EpochListener::declare(session, name, site)?;
     std::thread::scope(|scope| {
         let mut presence = Presence::declare(session, name, site)?;
+        ctx.ctl
+            .network
+            .traffic
+            .sent(coop_rt::shm::control::WireKind::Presence, 0);
         receive::join_from_current(session, name, receiver, clocks);
         let states = receive::subscribe(session, name)?;
         let tracks = match lp.tracks {
@@ -300,7 +304,7 @@ fn serve(
             None => None,
         };
         publish.serve_current(session, name, site)?;
-        let _clock = clock::serve(session, name, site)?;
+        let (_clock, clock_answers) = clock::serve(session, name, site)?;
         // Every declaration is made before the threads start: an error returns before anything
         // would wait for `stop`.
         scope.spawn(move || receive::deliver(&states, receiver, stop));
@@ -317,6 +321,7 @@ fn serve(
         let mut session_recorded = false;
         loop {
             let now = lp.turn(ctx, publish, receiver, &mut presence, clocks);
+            clock_answers.count(&ctx.ctl.network.traffic);
             epoch.poll(ctx.ctl, clocks.launcher_offset());
             if !session_recorded {
                 session_recorded = lp.record_session(ctx, now);
@@ -347,6 +352,7 @@ fn serve(
                 emulated_lost: rx.emulated_lost,
                 join_states: rx.join_states,
                 stale_skipped: publish.stale_skipped,
+                traffic: crate::recording::TrafficMsg::of(&ctx.ctl.network.traffic),
             }
         };
         lp.recording.finish(site, &status);
@@ -365,11 +371,13 @@ impl Loop {
         presence: &mut Presence,
         clocks: &clock::Sampler<'_>,
     ) -> u64 {
-        for m in publish.newest(&mut self.reports) {
+        let traffic = &ctx.ctl.network.traffic;
+        for m in publish.newest(&mut self.reports, traffic) {
             self.recording.write(|w| w.published(&m));
         }
+        publish.count_replies(traffic);
         if let Some((p, ring)) = &mut self.tracks {
-            p.newest(ring);
+            p.newest(ring, traffic);
         }
         let now = monotonic_ns();
         let (log, peers) = {
@@ -407,7 +415,7 @@ impl Loop {
         if let (Some(v), Some((t, others))) = (&self.view, &newest) {
             v.offer(0, LiveSample::from_trace(t, others));
         }
-        self.live.offer(newest, now);
+        self.live.offer(newest, now, &ctx.ctl.network.traffic);
         for (level, text) in self.events.look(ctx.ctl) {
             if let Some(v) = &self.view {
                 v.log(level, text.clone());

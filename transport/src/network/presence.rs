@@ -74,6 +74,9 @@ impl Presence {
     ) -> Vec<PresenceMsg> {
         let mut out = Vec::new();
         for (name, present, at) in std::mem::take(&mut *lock(&self.events)) {
+            ctl.network
+                .traffic
+                .received(coop_rt::shm::control::WireKind::Presence, 0);
             let Some(j) = sites.iter().position(|s| *s == name) else {
                 continue;
             };

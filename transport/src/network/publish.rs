@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use coop_rt::msg::{SiteReport, ToolTrack};
+use coop_rt::shm::control::{Traffic, WireKind};
 use coop_rt::shm::Consumer;
 use coop_rt::timer::monotonic_ns;
 use zenoh::pubsub::Publisher;
@@ -74,6 +75,8 @@ pub(super) struct Publish {
     publishers: Vec<Publisher<'static>>,
     last: Arc<Mutex<Vec<Option<Vec<u8>>>>>,
     current: Vec<Queryable<()>>,
+    /// Current states sent to late joiners since the loop last took them: (messages, bytes).
+    replies: Arc<Mutex<(u64, u64)>>,
     /// Reports published.
     pub(super) published: u64,
     /// Reports not published: replaced by a newer one, or stale.
@@ -103,6 +106,7 @@ impl Publish {
             last: Arc::new(Mutex::new(vec![None; publishers.len()])),
             publishers,
             current: Vec::new(),
+            replies: Arc::default(),
             published: 0,
             stale_skipped: 0,
         })
@@ -117,6 +121,7 @@ impl Publish {
     ) -> Result<(), NetworkError> {
         for k in 0..self.publishers.len() {
             let lr = self.last.clone();
+            let replies = self.replies.clone();
             let current_key = keys::current(session_name, k as u32, site);
             let reply_key = current_key.clone();
             let q = session
@@ -124,7 +129,11 @@ impl Publish {
                 .callback(move |q| {
                     // Replies carry this site's own key (the query's may be a wildcard).
                     if let Some(bytes) = lock(&lr)[k].clone() {
-                        let _ = q.reply(reply_key.as_str(), bytes).wait();
+                        let len = bytes.len() as u64;
+                        if q.reply(reply_key.as_str(), bytes).wait().is_ok() {
+                            let mut r = lock(&replies);
+                            *r = (r.0 + 1, r.1 + len);
+                        }
                     }
                 })
                 .wait()
@@ -134,9 +143,20 @@ impl Publish {
         Ok(())
     }
 
-    /// Publishes the newest fresh report of each object in `reports`; what was put, for the
-    /// recording.
-    pub(super) fn newest(&mut self, reports: &mut Consumer<SiteReport>) -> Vec<PublishedMsg> {
+    /// Counts the current states sent to late joiners since the last call into `traffic`.
+    pub(super) fn count_replies(&self, traffic: &Traffic) {
+        let (msgs, bytes) = std::mem::take(&mut *lock(&self.replies));
+        traffic.sent_msgs.count(WireKind::State, msgs);
+        traffic.sent_bytes.count(WireKind::State, bytes);
+    }
+
+    /// Publishes the newest fresh report of each object in `reports` (counted in `traffic`);
+    /// what was put, for the recording.
+    pub(super) fn newest(
+        &mut self,
+        reports: &mut Consumer<SiteReport>,
+        traffic: &Traffic,
+    ) -> Vec<PublishedMsg> {
         // Only the newest report of each object: states replace each other, and a backlog
         // (physics ran before this process was up, or while it restarted) is stale by
         // definition.
@@ -162,6 +182,7 @@ impl Publish {
             }
             let bytes = wire::encode(&r);
             if self.publishers[k].put(bytes.clone()).wait().is_ok() {
+                traffic.sent(WireKind::State, bytes.len());
                 self.published += 1;
                 put.push(PublishedMsg {
                     t_ns: monotonic_ns(),
@@ -206,8 +227,9 @@ impl TrackPublish {
     }
 
     /// Publishes the newest fresh track in `tracks`, with the world's other objects' states
-    /// that physics sent after it (the same report: a confirmed state travels whole).
-    pub(super) fn newest(&mut self, tracks: &mut Consumer<ToolTrack>) {
+    /// that physics sent after it (the same report: a confirmed state travels whole); counted in
+    /// `traffic`.
+    pub(super) fn newest(&mut self, tracks: &mut Consumer<ToolTrack>, traffic: &Traffic) {
         let mut burst: Vec<ToolTrack> = Vec::new();
         while let Ok(t) = tracks.pop() {
             // A track of the world's first object (or none) starts a report; the others' states
@@ -223,7 +245,10 @@ impl TrackPublish {
                 self.stale_skipped += 1;
                 continue;
             }
-            if self.publisher.put(wire::encode_track(&t)).wait().is_ok() {
+            let bytes = wire::encode_track(&t);
+            let len = bytes.len();
+            if self.publisher.put(bytes).wait().is_ok() {
+                traffic.sent(WireKind::Track, len);
                 self.published += 1;
             }
         }

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use coop_model::world::MAX_OBJECTS;
 use coop_rt::msg::{SiteReport, ToolTrack};
-use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, REFUSED_REASONS};
+use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, WireKind, REFUSED_REASONS};
 use coop_rt::shm::Producer;
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
@@ -505,11 +505,19 @@ pub(super) fn join_from_current(
             // The replying site's own key carries its name. Its time is read only with its
             // clock offset: measure it now rather than refuse the session's state.
             let key = s.key_expr().as_str().to_owned();
-            let site = lock(rx).inbound.index_of(keys::site_of(&key));
+            let payload = s.payload().to_bytes();
+            let site = {
+                let rx = lock(rx);
+                rx.control
+                    .network
+                    .traffic
+                    .received(WireKind::State, payload.len());
+                rx.inbound.index_of(keys::site_of(&key))
+            };
             if let Some(j) = site {
                 clocks.sample_if_unknown(j);
             }
-            lock(rx).on_bytes(&key, &s.payload().to_bytes(), None, true);
+            lock(rx).on_bytes(&key, &payload, None, true);
         }
     }
 }
@@ -544,7 +552,15 @@ pub(super) fn subscribe_tracks(
 pub(super) fn deliver_tracks(tracks: &States, rx: &Mutex<Receiver<'_>>, stop: &AtomicU64) {
     while stop.load(Ordering::Relaxed) == 0 {
         match tracks.recv_timeout(Duration::from_millis(50)) {
-            Ok(Some(s)) => lock(rx).on_track(s.key_expr().as_str(), &s.payload().to_bytes()),
+            Ok(Some(s)) => {
+                let payload = s.payload().to_bytes();
+                let mut rx = lock(rx);
+                rx.control
+                    .network
+                    .traffic
+                    .received(WireKind::Track, payload.len());
+                rx.on_track(s.key_expr().as_str(), &payload);
+            }
             Ok(None) => {}
             Err(_) => break,
         }
@@ -557,7 +573,13 @@ pub(super) fn deliver(states: &States, rx: &Mutex<Receiver<'_>>, stop: &AtomicU6
         match states.recv_timeout(Duration::from_millis(50)) {
             Ok(Some(s)) => {
                 let ts = s.timestamp().map(ToString::to_string);
-                lock(rx).on_bytes(s.key_expr().as_str(), &s.payload().to_bytes(), ts, false);
+                let payload = s.payload().to_bytes();
+                let mut rx = lock(rx);
+                rx.control
+                    .network
+                    .traffic
+                    .received(WireKind::State, payload.len());
+                rx.on_bytes(s.key_expr().as_str(), &payload, ts, false);
             }
             Ok(None) => {}
             Err(_) => break,
