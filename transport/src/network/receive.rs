@@ -586,3 +586,68 @@ pub(super) fn deliver(states: &States, rx: &Mutex<Receiver<'_>>, stop: &AtomicU6
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::admit::ObjectBounds;
+    use coop_rt::shm::{BlockSegment, RingSegment, SegmentName};
+
+    /// A world of two objects: each refused state is counted by the object its key names (what
+    /// `station status` shows per object), and a valid one of the second object reaches physics.
+    #[test]
+    fn refused_states_are_counted_by_the_object_their_key_names() {
+        let session = format!("ur{}", std::process::id());
+        let name = |w: &str| SegmentName::new(&session, "a", w).expect("valid name");
+        let ctl: BlockSegment<ControlBlock> = BlockSegment::create(&name("ctl")).expect("ctl");
+        let ring = RingSegment::<SiteReport>::create(&name("rem"), 16).expect("ring");
+        let mut to_physics = ring.consumer().expect("consumer");
+        // Site b's clock is ours (its offset known).
+        ctl.network.clock_rtt_ns[1].store(1, Ordering::Relaxed);
+        let mut bounds = Bounds::unbounded();
+        bounds.object_count = 2;
+        bounds.objects[1] = ObjectBounds {
+            speed_m_per_s: 1.0,
+            ang_mom: 1.0,
+        };
+        let sites = ["a".to_owned(), "b".to_owned()];
+        let mut rx = Receiver::new(
+            &sites,
+            0,
+            &ctl,
+            ring.producer().expect("producer"),
+            None,
+            bounds,
+            vec![u64::MAX; 2],
+        );
+        let state = |object: u64, seq: u64, speed: f64| {
+            let r = SiteReport {
+                kind: 1,
+                t_ns: monotonic_ns(),
+                seq,
+                site: 1,
+                object,
+                rot: [1.0, 0.0, 0.0, 0.0],
+                vel: [speed, 0.0, 0.0],
+                included: [-1.0; coop_model::MAX_SITES],
+                ..SiteReport::default()
+            };
+            crate::wire::encode(&r)
+        };
+        let key1 = keys::state("s", 1, "b");
+        rx.on_bytes(&key1, &state(1, 1, 5.0), None, false);
+        rx.on_bytes(&key1, &state(0, 2, 0.1), None, false);
+        let by = |k: usize| ctl.network.refused_by_object[k].load(Ordering::Relaxed);
+        assert_eq!(
+            (by(0), by(1)),
+            (0, 2),
+            "too fast, and another object's state on its key"
+        );
+        rx.on_bytes(&key1, &state(1, 3, 0.5), None, false);
+        let got = to_physics
+            .pop()
+            .expect("a valid state of the second object reached physics");
+        assert_eq!((got.object, got.seq), (1, 3));
+        assert_eq!((by(0), by(1)), (0, 2), "a taken state is not counted");
+    }
+}
