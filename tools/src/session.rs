@@ -603,13 +603,10 @@ pub fn run_method(
         // Just before the end: each station's live statistics (loops, network) for the report.
         if now + 300_000_000 >= end && statuses.is_empty() {
             let sites: Vec<String> = sc.site.iter().map(|s| s.name.clone()).collect();
-            let objects: Vec<String> = (0..sc.objects.len())
-                .map(|k| sc.object_name(k).to_owned())
-                .collect();
             for st in &stations {
                 let at_end = coop_actors::station::status::overruns(session, &st.site).ok();
                 if let Ok(mut s) = coop_actors::station::status::read(session, &st.site, &sites) {
-                    s.name_objects(&objects);
+                    s.name_objects(&sc);
                     let mut v = s.to_json();
                     // A late joiner's whole run is in the session.
                     let start = overruns_at_start.get(&st.site).copied().unwrap_or([0, 0]);

@@ -202,10 +202,7 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             let station = station.unwrap_or(r.name);
             let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
             let mut v = status::read(&session, &station, &sites)?;
-            let objects: Vec<String> = (0..r.scenario.objects.len())
-                .map(|k| r.scenario.object_name(k).to_owned())
-                .collect();
-            v.name_objects(&objects);
+            v.name_objects(&r.scenario);
             if json {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {

@@ -171,18 +171,18 @@ impl Bounds {
         let force_n: f64 = sc.site.iter().map(|s| s.controller.max_force_n).sum();
         let g = norm(sc.world.gravity_m_per_s2);
         let world = sc.world();
+        // The fastest the users and gravity can make an object across the whole world, twice;
+        // an object pushed by another is no faster than the users could make the lightest (its
+        // pusher's speed bounds it): the lightest's acceleration.
+        let lightest = sc
+            .objects
+            .iter()
+            .map(|o| o.mass_kg)
+            .fold(f64::INFINITY, f64::min);
+        let accel = force_n / lightest + g;
+        let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
         let mut objects = [ObjectBounds::default(); MAX_OBJECTS];
         for ((b, o), body) in objects.iter_mut().zip(&sc.objects).zip(world.bodies()) {
-            // The fastest the users and gravity can make the object across the whole world,
-            // twice; an object pushed by another is no faster than the users could make the
-            // lightest (its pusher's speed bounds it): the lightest's acceleration.
-            let lightest = sc
-                .objects
-                .iter()
-                .map(|o| o.mass_kg)
-                .fold(o.mass_kg, f64::min);
-            let accel = force_n / lightest + g;
-            let speed_m_per_s = 2.0 * (2.0 * accel * 2.0 * extent_m).sqrt();
             let i_max = body.mass.inertia_body.max();
             let r_min = [o.radius_m, o.half_height_m]
                 .into_iter()

@@ -696,10 +696,12 @@ impl ObjectStatus {
 }
 
 impl StationStatus {
-    /// Names the world's objects (the scenario's `[[object]]` names, in order).
-    pub fn name_objects(&mut self, names: &[String]) {
-        for (o, n) in self.physics.objects.iter_mut().zip(names) {
-            o.name.clone_from(n);
+    /// Names the world's objects after `scenario`'s (its `[[object]]` names, in order).
+    pub fn name_objects(&mut self, scenario: &coop_model::scenario::Scenario) {
+        for (k, o) in self.physics.objects.iter_mut().enumerate() {
+            if k < scenario.objects.len() {
+                scenario.object_name(k).clone_into(&mut o.name);
+            }
         }
     }
 }

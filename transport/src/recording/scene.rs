@@ -301,16 +301,10 @@ impl Scene {
         poses: &[([f64; 3], [f64; 4])],
         unix_ns: u64,
     ) -> Vec<FrameTransform> {
-        self.others
+        poses
             .iter()
-            .zip(poses)
-            .map(|((name, _), &(p, [w, x, y, z]))| FrameTransform {
-                timestamp: Some(timestamp(unix_ns)),
-                parent_frame_id: WORLD.into(),
-                child_frame_id: self.other_frame(name),
-                translation: Some(v3(p)),
-                rotation: Some(Quaternion { x, y, z, w }),
-            })
+            .enumerate()
+            .filter_map(|(k, &(p, q))| self.other_transform(k + 1, p, q, unix_ns))
             .collect()
     }
 
