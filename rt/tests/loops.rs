@@ -45,15 +45,39 @@ struct Rig<D: CartesianDevice = SimScara> {
 
 /// With `wall`, a wall at x = 4.5 cm stops the disk so the user can press it against the wall.
 fn rig(tag: &str, wall: bool) -> Rig {
-    rig_with(tag, wall, |sc| {
-        let script = sc.script(0);
-        SimScara::new(
-            Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
-            sc.force_loop(0),
-            script,
-            0,
-        )
-    })
+    rig_with(tag, wall, sim_arm)
+}
+
+/// The simulated arm of the scenario's site 0, playing its script.
+fn sim_arm(sc: &Scenario) -> SimScara {
+    let script = sc.script(0);
+    SimScara::new(
+        Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
+        sc.force_loop(0),
+        script,
+        0,
+    )
+}
+
+/// The default world on a table at z = 0 under g/3, with nothing of its own changed.
+fn on_a_table() -> Scenario {
+    let mut sc = Scenario::default();
+    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
+    sc.world.planes[0].offset_m = 0.0;
+    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    sc
+}
+
+/// Site `a` (100 Hz reports), whose tool rests at `from` until 0.2 s and moves to `to` by `by_s`.
+fn pusher(from: [f64; 3], to: [f64; 3], by_s: f64) -> SiteSpec {
+    let key = |t_s, target_m| KeyframeSpec { t_s, target_m };
+    SiteSpec {
+        name: "a".into(),
+        device_base_m: [-0.3, -0.2, 0.0],
+        report_rate_hz: 100.0,
+        script: vec![key(0.0, from), key(0.2, from), key(by_s, to)],
+        ..SiteSpec::default()
+    }
 }
 
 /// The rig with the device `make` builds for its scenario.
@@ -62,37 +86,16 @@ fn rig_with<D: CartesianDevice>(
     wall: bool,
     make: impl FnOnce(&Scenario) -> D,
 ) -> Rig<D> {
-    let mut sc = Scenario::default();
+    let mut sc = on_a_table();
     sc.objects[0].start_m = [0.0, 0.0, 0.0099];
-    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
-    sc.world.planes[0].offset_m = 0.0;
-    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
     if wall {
         sc.world.planes.push(coop_model::scenario::PlaneSpec {
             normal: [-1.0, 0.0, 0.0],
             offset_m: -0.045,
         });
     }
-    sc.site.push(SiteSpec {
-        name: "a".into(),
-        device_base_m: [-0.3, -0.2, 0.0],
-        report_rate_hz: 100.0,
-        script: vec![
-            KeyframeSpec {
-                t_s: 0.0,
-                target_m: [-0.12, 0.0, 0.01],
-            },
-            KeyframeSpec {
-                t_s: 0.2,
-                target_m: [-0.12, 0.0, 0.01],
-            },
-            KeyframeSpec {
-                t_s: 0.7,
-                target_m: [-0.035, 0.0, 0.01],
-            },
-        ],
-        ..SiteSpec::default()
-    });
+    sc.site
+        .push(pusher([-0.12, 0.0, 0.01], [-0.035, 0.0, 0.01], 0.7));
     sc.validate().expect("valid scenario");
     rig_in(tag, &sc, MethodName::Paper, make)
 }
@@ -299,10 +302,7 @@ fn loop_steps_allocate_nothing() {
 #[test]
 fn loop_steps_in_the_largest_world_allocate_nothing() {
     use coop_model::world::MAX_OBJECTS;
-    let mut sc = Scenario::default();
-    sc.world.planes[0].normal = [0.0, 0.0, 1.0];
-    sc.world.planes[0].offset_m = 0.0;
-    sc.world.gravity_m_per_s2 = [0.0, 0.0, -3.27];
+    let mut sc = on_a_table();
     let puck = sc.objects[0].clone();
     sc.objects = (0..MAX_OBJECTS)
         .map(|k| coop_model::scenario::ObjectSpec {
@@ -315,26 +315,8 @@ fn loop_steps_in_the_largest_world_allocate_nothing() {
             ..puck.clone()
         })
         .collect();
-    sc.site.push(SiteSpec {
-        name: "a".into(),
-        device_base_m: [-0.3, -0.2, 0.0],
-        report_rate_hz: 100.0,
-        script: vec![
-            KeyframeSpec {
-                t_s: 0.0,
-                target_m: [-0.12, -0.13, 0.01],
-            },
-            KeyframeSpec {
-                t_s: 0.2,
-                target_m: [-0.12, -0.13, 0.01],
-            },
-            KeyframeSpec {
-                t_s: 0.9,
-                target_m: [0.02, -0.13, 0.01],
-            },
-        ],
-        ..SiteSpec::default()
-    });
+    sc.site
+        .push(pusher([-0.12, -0.13, 0.01], [0.02, -0.13, 0.01], 0.9));
     sc.validate().expect("valid scenario");
     for method in [
         MethodName::Paper,
@@ -342,15 +324,7 @@ fn loop_steps_in_the_largest_world_allocate_nothing() {
         MethodName::Timewarp,
         MethodName::Coupled,
     ] {
-        let mut r = rig_in(&format!("big{}", method.as_str()), &sc, method, |sc| {
-            let script = sc.script(0);
-            SimScara::new(
-                Plant::at(sc.arm(0), sc.hand(0), script[0].target, 1.0),
-                sc.force_loop(0),
-                script,
-                0,
-            )
-        });
+        let mut r = rig_in(&format!("big{}", method.as_str()), &sc, method, sim_arm);
         // On the grid from time 0 (methods that step on it).
         r.physics.set_tick_origin(0);
         let step = |r: &mut Rig, k: u64| {

@@ -184,19 +184,7 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     let scenario_path = root().join("scenarios/three-users.toml");
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
     let out = out_dir("live");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
-        .arg("run")
-        .arg(&scenario_path)
-        .args(["--method", "paper", "--json", "--live", "127.0.0.1:0"])
-        .arg("--out")
-        .arg(&out)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("session starts");
-    let stderr = child.stderr.take().expect("stderr");
-    let (url, log) = live_url(stderr, 30, "the launcher");
+    let (child, url, log) = live_session(&scenario_path, "paper", &out);
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     // The client waits (up to 60 s) until it has seen every site; it connects before the stations
@@ -658,6 +646,29 @@ fn the_world_layout_refers_only_to_what_a_stack_session_file_has() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// `session run SCENARIO --method METHOD --json --live 127.0.0.1:0 --out OUT`, running: the
+/// launcher, its live view's address, and the thread gathering its log.
+fn live_session(
+    scenario: &std::path::Path,
+    method: &str,
+    out: &std::path::Path,
+) -> (std::process::Child, String, std::thread::JoinHandle<String>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .arg("run")
+        .arg(scenario)
+        .args(["--method", method, "--json", "--live", "127.0.0.1:0"])
+        .arg("--out")
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("session starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (url, log) = live_url(stderr, 30, "the launcher");
+    (child, url, log)
+}
+
 /// Follows a live-view server's stderr: the first `ws://` address it prints (within `limit_s`,
 /// else the test fails naming `who`), and a thread that gathers the whole log.
 fn live_url(
@@ -765,19 +776,7 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
     assert_eq!(scenario.objects.len(), 2);
     let (first, second) = (scenario.object_name(0), scenario.object_name(1));
     let out = out_dir("stack");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
-        .arg("run")
-        .arg(&scenario_path)
-        .args(["--method", "timewarp", "--json", "--live", "127.0.0.1:0"])
-        .arg("--out")
-        .arg(&out)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("session starts");
-    let stderr = child.stderr.take().expect("stderr");
-    let (url, log) = live_url(stderr, 30, "the launcher");
+    let (child, url, log) = live_session(&scenario_path, "timewarp", &out);
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     let others: Vec<String> = sites
         .iter()

@@ -466,6 +466,35 @@ fn through_router(
     )
 }
 
+/// `session run --attach` in namespace `ns` for `scenario`'s session `session` under `method`,
+/// through router r1 (192.0.2.1) with the certificates in `certs`, reading the stations'
+/// recordings from `records`; it waits `timeout_s` for them and writes to `out`.
+fn attach_launcher(
+    ns: &str,
+    (scenario, session, method): (&Path, &str, MethodName),
+    (certs, records): (&Path, &Path),
+    timeout_s: &str,
+    out: &Path,
+) -> Command {
+    let mut c = in_ns(ns, SESSION_BIN);
+    c.arg("run")
+        .arg(scenario)
+        .args([
+            "--attach",
+            "--session",
+            session,
+            "--method",
+            method.as_str(),
+        ])
+        .args(["--connect", "tls/192.0.2.1:7447", "--certs"])
+        .arg(certs)
+        .arg("--recordings")
+        .arg(records)
+        .args(["--start-timeout-s", timeout_s, "--out"])
+        .arg(out);
+    c
+}
+
 /// Starts a station in namespace `ns` with configuration `cfg` (120 s at most).
 fn start_station(ns: &str, cfg: &Path) -> Reaped {
     Reaped::spawn(
@@ -709,17 +738,13 @@ fn session_run_attach_drives_stations_started_by_hand_whose_clocks_differ() {
     let records = dir.join("records");
     std::fs::create_dir_all(&records).expect("records dir");
     let launcher = |out: &str, timeout_s: &str| {
-        let mut c = in_ns(&ns.names[0], SESSION_BIN);
-        c.arg("run")
-            .arg(&scenario)
-            .args(["--attach", "--session", &session, "--method", "paper"])
-            .args(["--connect", "tls/192.0.2.1:7447", "--certs"])
-            .arg(&certs)
-            .arg("--recordings")
-            .arg(&records)
-            .args(["--start-timeout-s", timeout_s, "--out"])
-            .arg(dir.join(out));
-        c
+        attach_launcher(
+            &ns.names[0],
+            (&scenario, &session, MethodName::Paper),
+            (&certs, &records),
+            timeout_s,
+            &dir.join(out),
+        )
     };
 
     // Nobody came: the launcher says who is missing, and leaves.
@@ -853,27 +878,15 @@ fn a_tray_carried_through_the_router_heals_after_a_partition_during_the_carry() 
         c.method = Some(MethodName::Timewarp);
         c.start = StartMode::Session;
     });
-    let station = |n: &str, cfg: &Path| {
-        Reaped::spawn(
-            in_ns(n, STATION)
-                .args(["run", "--duration-s", "120", "--config"])
-                .arg(cfg)
-                .stderr(Stdio::inherit()),
-        )
-    };
-    let mut sa = station(&ns.names[1], &a);
-    let mut sb = station(&ns.names[2], &b);
-    let mut launcher = in_ns(&ns.names[0], SESSION_BIN);
-    launcher
-        .arg("run")
-        .arg(&scenario)
-        .args(["--attach", "--session", &session, "--method", "timewarp"])
-        .args(["--connect", "tls/192.0.2.1:7447", "--certs"])
-        .arg(&certs)
-        .arg("--recordings")
-        .arg(&records)
-        .args(["--start-timeout-s", "60", "--out"])
-        .arg(dir.join("out"));
+    let mut sa = start_station(&ns.names[1], &a);
+    let mut sb = start_station(&ns.names[2], &b);
+    let mut launcher = attach_launcher(
+        &ns.names[0],
+        (&scenario, &session, MethodName::Timewarp),
+        (&certs, &records),
+        "60",
+        &dir.join("out"),
+    );
     let launched = std::thread::spawn(move || launcher.output().expect("launcher"));
 
     let sites = ["user1".to_owned(), "user2".to_owned()];
