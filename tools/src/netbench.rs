@@ -6,9 +6,10 @@
 //!   receive time minus send time on the one CLOCK_MONOTONIC of this machine (the clock-offset
 //!   correction is taken back out). The path: physics A → ring → network A (polls every
 //!   [`coop_transport::network::POLL`]) → zenoh → network B → ring into physics B.
-//! - **Bare zenoh**: this process publishes the same 289-byte payload (express, real-time
-//!   priority, drop on congestion), a child process (`session bench-pong`) echoes it; one way =
-//!   round trip / 2. Paced at 1 kHz like the states.
+//! - **Bare zenoh**: this process publishes the same payload, one encoded state
+//!   (`wire::ENCODED_LEN` bytes), express, at real-time priority, dropped on congestion; a child
+//!   process (`session bench-pong`) echoes it; one way = round trip / 2. Paced at 1 kHz like the
+//!   states.
 //!
 //! `session bench-router` ([`router`]) sets the same station path through one zenoh router next to
 //! peer to peer and to the bare ping-pong through that router.
@@ -350,7 +351,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         );
         return Ok(());
     }
-    println!("# state latency on loopback: a two-station session of scenarios/zero-delay.toml (14 s, 1 kHz reports) vs bare zenoh ping-pong (289 B, two processes)");
+    println!("# state latency on loopback: a two-station session of scenarios/zero-delay.toml (14 s, 1 kHz reports) vs bare zenoh ping-pong ({} B, two processes)", coop_transport::wire::ENCODED_LEN);
     println!(
         "{:<44}{:>10}{:>10}{:>10}{:>10}",
         "path", "p50 us", "p99 us", "max us", "samples"

@@ -9,7 +9,7 @@
 //!   the launcher driving them as `session run --attach` does (itself a client of the router).
 //!   Latency: as peer to peer, from the receivers' recordings (receive minus send time, one clock).
 //! - **Bare zenoh through the router**: this process and a child (`session bench-pong
-//!   --via-router`), both clients of the same router, ping-pong the same 289-byte payload with the
+//!   --via-router`), both clients of the same router, ping-pong the same payload (one encoded state) with the
 //!   stations' publisher settings (express, real-time priority, drop on congestion), at 1 kHz; one
 //!   way = round trip / 2, each way through the router once. No station, ring or protocol of ours.
 //!   For scale, the same ping-pong peer to peer after it.
