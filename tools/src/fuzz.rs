@@ -4,10 +4,13 @@
 //! judges what was *accepted* with an oracle of its own:
 //!
 //! - `wire`: the wire decoder and the receive checks ([`coop_transport::admit::Inbound::check`]),
-//!   fed mutated station states (words set to NaN, ±inf, 1e300, u64::MAX, flipped bits, truncated,
-//!   extended, wrong version, wrong key, skewed or unknown clocks). Every accepted state must be
-//!   finite, inside the world and the time window, and must keep a `paper` copy finite and inside
-//!   the world when it is adopted and integrated.
+//!   and [`coop_transport::admit::Inbound::check_track`], fed mutated station states and tool
+//!   tracks (words set to NaN, ±inf, 1e300, u64::MAX or 0 before encoding; bytes flipped,
+//!   inserted, removed, truncated, appended, a wrong version; wrong key, skewed or unknown
+//!   clocks). Every accepted state must be finite, inside the world and the time window, and must
+//!   keep a `paper` copy finite and inside the world when it is adopted and integrated; every
+//!   accepted track must hold at most a window of positions inside the world; and what was
+//!   accepted must be the one encoding of what was taken.
 //! - `scenario`: the scenario parser and validation, fed mutated `scenarios/paper.toml` text
 //!   (values replaced by hostile numbers, lines dropped or doubled, bytes flipped). Every accepted
 //!   scenario must build its world, and a sample of them is simulated briefly: the object must stay
@@ -23,12 +26,13 @@ use std::time::{Duration, Instant};
 use anyhow::bail;
 use clap::{Parser, ValueEnum};
 use coop_model::contact::ContactForce;
+use coop_model::method::track::{ToolReport, QUANTUM_M, WINDOW_TICKS};
 use coop_model::method::Report;
 use coop_model::rng::Rng;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode};
 use coop_model::MAX_SITES;
-use coop_rt::msg::SiteReport;
+use coop_rt::msg::{SiteReport, ToolTrack};
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_transport::admit::{Bounds, Inbound};
 use coop_transport::wire;
@@ -224,43 +228,80 @@ fn genuine(rng: &mut Rng, seq: u64, t_ns: u64, force: bool, object: u64) -> Site
     r
 }
 
-/// One to three hostile edits of an encoded message.
+/// One to three hostile values in a message's words, before it is encoded (what a hostile
+/// sender who speaks the encoding sends).
+fn mutate_words(rng: &mut Rng, words: &mut [u64]) {
+    for _ in 0..1 + rng.next_u64() % 3 {
+        let w = (rng.next_u64() as usize) % words.len();
+        words[w] = match rng.next_u64() % 5 {
+            0 | 1 => SPECIALS[(rng.next_u64() as usize) % SPECIALS.len()].to_bits(),
+            // Anything (u64::MAX among them).
+            2 if rng.uniform() < 0.3 => u64::MAX,
+            2 => rng.next_u64(),
+            // A finite but absurd float.
+            3 => (rng.range(-1.0, 1.0) * 10f64.powf(rng.range(0.0, 12.0))).to_bits(),
+            _ => 0,
+        };
+    }
+}
+
+/// One to three hostile edits of an encoded message's bytes.
 fn mutate_bytes(rng: &mut Rng, bytes: &mut Vec<u8>) {
     for _ in 0..1 + rng.next_u64() % 3 {
-        let words = (bytes.len().saturating_sub(1)) / 8;
-        match rng.next_u64() % 8 {
-            0 | 1 if words > 0 => {
-                // A float word set to a hostile value.
-                let w = (rng.next_u64() as usize) % words;
-                let v = SPECIALS[(rng.next_u64() as usize) % SPECIALS.len()];
-                bytes[1 + 8 * w..9 + 8 * w].copy_from_slice(&v.to_le_bytes());
-            }
-            2 if words > 0 => {
-                // A word set to anything (u64::MAX among them).
-                let w = (rng.next_u64() as usize) % words;
-                let v = if rng.uniform() < 0.3 {
-                    u64::MAX
-                } else {
-                    rng.next_u64()
-                };
-                bytes[1 + 8 * w..9 + 8 * w].copy_from_slice(&v.to_le_bytes());
-            }
-            3 if !bytes.is_empty() => {
-                let i = (rng.next_u64() as usize) % bytes.len();
+        let at = |rng: &mut Rng, n: usize| (rng.next_u64() as usize) % n.max(1);
+        match rng.next_u64() % 7 {
+            0 | 1 if !bytes.is_empty() => {
+                let i = at(rng, bytes.len());
                 bytes[i] ^= 1 << (rng.next_u64() % 8);
             }
-            4 => bytes.truncate((rng.next_u64() as usize) % (bytes.len() + 1)),
-            5 => bytes.extend((0..1 + rng.next_u64() % 16).map(|_| rng.next_u64() as u8)),
-            6 if !bytes.is_empty() => bytes[0] = rng.next_u64() as u8,
-            _ if words > 0 => {
-                // A finite but absurd float.
-                let w = (rng.next_u64() as usize) % words;
-                let v = rng.range(-1.0, 1.0) * 10f64.powf(rng.range(0.0, 12.0));
-                bytes[1 + 8 * w..9 + 8 * w].copy_from_slice(&v.to_le_bytes());
+            2 => bytes.truncate(at(rng, bytes.len() + 1)),
+            3 => bytes.extend((0..1 + rng.next_u64() % 16).map(|_| rng.next_u64() as u8)),
+            4 if !bytes.is_empty() => bytes[0] = rng.next_u64() as u8,
+            // A byte inserted or removed: every later field shifts.
+            5 => {
+                let i = at(rng, bytes.len() + 1);
+                bytes.insert(i, rng.next_u64() as u8);
+            }
+            6 if !bytes.is_empty() => {
+                let i = at(rng, bytes.len());
+                bytes.remove(i);
             }
             _ => {}
         }
     }
+}
+
+/// A genuine tool track of site 1: up to a window of a tool wandering over the table at up to
+/// 1 m/s, up to the physics tick of `t_ns` (1 kHz), now and then asking for a gap or carrying
+/// no positions.
+fn genuine_track(rng: &mut Rng, seq: u64, t_ns: u64) -> ToolTrack {
+    let end = (t_ns / 1_000_000) as i64;
+    let count = match rng.next_u64() % 8 {
+        0 => 0,
+        1 => WINDOW_TICKS,
+        _ => 1 + (rng.next_u64() as usize) % 40,
+    };
+    let mut r = ToolReport {
+        first_tick: end - count as i64,
+        count,
+        confirmed_tick: end - count as i64 - (rng.next_u64() % 100) as i64,
+        confirmed_hash: rng.next_u64(),
+        ..ToolReport::NONE
+    };
+    if rng.uniform() < 0.2 {
+        r.need[0] = r.first_tick - 300;
+    }
+    let mut p = [
+        rng.range(-20_000.0, 20_000.0) as i32,
+        rng.range(-20_000.0, 20_000.0) as i32,
+        1000,
+    ];
+    for q in &mut r.positions[..count] {
+        p[0] += rng.range(-100.0, 100.0) as i32;
+        p[1] += rng.range(-100.0, 100.0) as i32;
+        *q = p;
+    }
+    ToolTrack::new(1, seq, t_ns, &r)
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -303,6 +344,32 @@ fn wire_oracle(b: &Bounds, r: &SiteReport, key_object: u64, now_ns: u64) -> Resu
     Ok(())
 }
 
+/// The oracle for an accepted track: at most a window of positions, each inside the world
+/// (a tool beyond it is refused), and the bytes the one encoding of what was taken.
+fn track_oracle(b: &Bounds, t: &ToolTrack, bytes: &[u8]) -> Result<(), String> {
+    let Some((_, Report::Tools(r))) = t.report() else {
+        return Err(format!("accepted but not a track: {t:?}"));
+    };
+    if r.count > WINDOW_TICKS {
+        return Err(format!("{} positions", r.count));
+    }
+    let reach = b.extent_m / QUANTUM_M;
+    if let Some(p) = r.positions[..r.count]
+        .iter()
+        .find(|p| p.iter().any(|&c| f64::from(c).abs() > reach))
+    {
+        return Err(format!("a position outside the world: {p:?}"));
+    }
+    // (The admitted track's time is the receiver's clock's: the decoded one is the sender's.)
+    let decoded = wire::decode_track(bytes);
+    if decoded.map(|d| wire::encode_track(&d)).as_deref() != Ok(bytes) {
+        return Err(format!(
+            "accepted {bytes:?}, which is not the encoding of {decoded:?}"
+        ));
+    }
+    Ok(())
+}
+
 fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
     let sc = world_of_two();
     let bounds = Bounds::from_scenario(&sc, None);
@@ -335,16 +402,40 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
             1 => rng.next_u64() % 64,
             k => k % 2,
         };
-        let r = genuine(&mut rng, seq, t_theirs, force, object);
-        let mut bytes = wire::encode(&r);
-        if rng.uniform() < 0.9 {
-            mutate_bytes(&mut rng, &mut bytes);
-        }
         let key = match rng.next_u64() % 16 {
             0 => "user1",
             1 => "zz",
             _ => "user2",
         };
+        // A third of the inputs are tool tracks.
+        if rng.uniform() < 0.3 {
+            let t = genuine_track(&mut rng, seq, t_theirs);
+            let mut words = t.to_words();
+            if rng.uniform() < 0.5 {
+                mutate_words(&mut rng, &mut words);
+            }
+            let mut bytes = wire::encode_track(&ToolTrack::from_words(&words));
+            if rng.uniform() < 0.5 {
+                mutate_bytes(&mut rng, &mut bytes);
+            }
+            let Ok(admitted) = inbound.check_track(key, &bytes, now, &offsets) else {
+                return;
+            };
+            out.accepted += 1;
+            if let Err(why) = track_oracle(&bounds, &admitted.track, &bytes) {
+                implausible(out, || format!("input {i}: {why}"));
+            }
+            return;
+        }
+        let r = genuine(&mut rng, seq, t_theirs, force, object);
+        let mut words = r.to_words();
+        if rng.uniform() < 0.5 {
+            mutate_words(&mut rng, &mut words);
+        }
+        let mut bytes = wire::encode(&SiteReport::from_words(&words));
+        if rng.uniform() < 0.8 {
+            mutate_bytes(&mut rng, &mut bytes);
+        }
         // The key names the message's object, or now and then another.
         let key_object = if rng.uniform() < 0.9 {
             object
@@ -358,6 +449,14 @@ fn wire_target(a: &Args, progress: &AtomicU64) -> Outcome {
         let rep = admitted.report;
         if let Err(why) = wire_oracle(&bounds, &rep, key_object, now) {
             return implausible(out, || format!("input {i}: {why}"));
+        }
+        // One encoding per message: what was accepted is what it decodes to encoded again
+        // (the admitted report's time is the receiver's clock's).
+        let decoded = wire::decode(&bytes);
+        if decoded.map(|d| wire::encode(&d)).as_deref() != Ok(&bytes[..]) {
+            return implausible(out, || {
+                format!("input {i}: accepted {bytes:?}, which is not the encoding of {decoded:?}")
+            });
         }
         // Adopted and integrated by a paper copy, it must leave the copy finite and in the world.
         let Some((from, msg)) = rep.report() else {

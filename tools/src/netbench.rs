@@ -7,7 +7,7 @@
 //!   correction is taken back out). The path: physics A → ring → network A (polls every
 //!   [`coop_transport::network::POLL`]) → zenoh → network B → ring into physics B.
 //! - **Bare zenoh**: this process publishes the same payload, one encoded state
-//!   (`wire::ENCODED_LEN` bytes), express, at real-time priority, dropped on congestion; a child
+//!   (`bare_payload`: a moving object's, as big as a station's), express, at real-time priority, dropped on congestion; a child
 //!   process (`session bench-pong`) echoes it; one way = round trip / 2. Paced at 1 kHz like the
 //!   states.
 //!
@@ -253,11 +253,7 @@ pub(crate) fn bare_zenoh(samples: u64, router: Option<&str>) -> anyhow::Result<H
         "coop/bench/ping",
         "coop/bench/pong",
     )?;
-    let payload = coop_transport::wire::encode(&coop_rt::msg::SiteReport {
-        kind: 1,
-        rot: [1.0, 0.0, 0.0, 0.0],
-        ..Default::default()
-    });
+    let payload = bare_payload();
     let mut h = histogram();
     let start = Instant::now();
     let mut k = 0u64;
@@ -351,7 +347,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         );
         return Ok(());
     }
-    println!("# state latency on loopback: a two-station session of scenarios/zero-delay.toml (14 s, 1 kHz reports) vs bare zenoh ping-pong ({} B, two processes)", coop_transport::wire::ENCODED_LEN);
+    println!("# state latency on loopback: a two-station session of scenarios/zero-delay.toml (14 s, 1 kHz reports) vs bare zenoh ping-pong ({} B, two processes)", bare_payload().len());
     println!(
         "{:<44}{:>10}{:>10}{:>10}{:>10}",
         "path", "p50 us", "p99 us", "max us", "samples"
@@ -409,4 +405,23 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
         "# goal: no servo overruns at 1 kHz; the standalone row is what this machine does alone"
     );
     Ok(())
+}
+
+/// The bare zenoh payload: one encoded state of a moving object, every field a station's state
+/// has set (the compact encoding sends what is not zero: a state at rest would be smaller than
+/// the stations' own).
+fn bare_payload() -> Vec<u8> {
+    coop_transport::wire::encode(&coop_rt::msg::SiteReport {
+        kind: 1,
+        t_ns: 1_234_567_890_123,
+        seq: 1000,
+        site: 1,
+        pos: [0.012, -0.034, 0.01],
+        rot: [0.9, 0.1, -0.2, 0.3],
+        vel: [0.1, -0.2, 0.003],
+        ang_mom: [1e-5, -2e-5, 3e-5],
+        accel: [0.5, -0.1, 0.2],
+        included: [1.5, 1.49, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0],
+        ..Default::default()
+    })
 }

@@ -816,6 +816,7 @@ pub fn run_from_recordings(
         if let Some(st) = r.status {
             // What the station put: site reports and tool tracks (`WireKind` order).
             tr.puts = [st.traffic.sent_msgs[0], st.traffic.sent_msgs[1]];
+            tr.sent_bytes = st.traffic.sent_bytes[0] + st.traffic.sent_bytes[1];
         }
         let at = |tk: f64| epoch_ns as f64 + tk * 1e9;
         for s in resample(&r.samples, &t, at) {

@@ -145,11 +145,12 @@ pub fn run_mode(scenario: &Scenario, mode: Mode) -> RunResult {
     } else {
         None
     };
-    let r = sim::run(scenario, mode, &mut |f| {
+    let mut progress = |f: f64| {
         if let Some(b) = &bar {
             b.set_position((f * 1000.0) as u64);
         }
-    });
+    };
+    let r = sim::run_sized(scenario, mode, &mut progress, &wire_bytes);
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -275,12 +276,35 @@ fn compare_json(sc: &Scenario, all: &[Metrics]) -> serde_json::Value {
     serde_json::json!({ "scenario": sc.name, "seed": sc.seed, "duration_s": sc.duration_s, "methods": all })
 }
 
-/// Payload kbit/s of `puts` (site reports, tool tracks, at the wire's encoded sizes) over
-/// `duration_s`.
-pub fn sent_kbit_s(puts: [u64; 2], duration_s: f64) -> f64 {
-    let bytes = puts[0] * coop_transport::wire::ENCODED_LEN as u64
-        + puts[1] * coop_transport::wire::TRACK_ENCODED_LEN as u64;
+/// Payload kbit/s of `bytes` over `duration_s`.
+pub fn sent_kbit_s(bytes: u64, duration_s: f64) -> f64 {
     bytes as f64 * 8e-3 / duration_s.max(1e-9)
+}
+
+/// The bytes a station puts for `msg` ([`sim::Sizer`]): each message encoded as the wire
+/// encodes it, with the simulator's time as the sender's (a station's CLOCK_MONOTONIC is larger:
+/// its varint a byte or two longer).
+pub fn wire_bytes(site: usize, t_ns: u64, puts: [u64; 2], msg: &coop_model::method::Report) -> u64 {
+    use coop_model::method::Report;
+    use coop_rt::msg::{SiteReport, ToolTrack};
+    use coop_transport::wire;
+    let tools = match msg {
+        Report::Tools(r) => Some(r),
+        Report::Coupled(c) if c.tools.count > 0 => Some(&c.tools),
+        _ => None,
+    };
+    let track = tools.map_or(0, |r| {
+        wire::encode_track(&ToolTrack::new(site, puts[1] + 1, t_ns, r)).len()
+    });
+    let state = match msg {
+        Report::Tools(_) => 0,
+        _ => {
+            let mut r = SiteReport::new(site, puts[0] + 1, msg);
+            r.t_ns = t_ns;
+            wire::encode(&r).len()
+        }
+    };
+    (track + state) as u64
 }
 
 /// Prints the comparison table.
@@ -367,7 +391,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             match m
                 .sites
                 .iter()
-                .map(|s| sent_kbit_s(s.puts, sc.duration_s))
+                .map(|s| sent_kbit_s(s.sent_bytes, sc.duration_s))
                 .fold(0.0, f64::max)
             {
                 0.0 => format!("{:>9}", "-"),

@@ -93,7 +93,7 @@ impl Row {
             sent_kbit_s: m
                 .sites
                 .iter()
-                .map(|s| crate::sim::sent_kbit_s(s.puts, duration_s))
+                .map(|s| crate::sim::sent_kbit_s(s.sent_bytes, duration_s))
                 .fold(0.0, f64::max),
             method: m.method.clone(),
             delay_ms,
@@ -239,7 +239,12 @@ pub fn sweep(
         },
     );
     Ok(par_map(&jobs, |(m, d, seed, sc)| {
-        let r = sim::run(sc, Mode::Distributed(*m), &mut |_| {});
+        let r = sim::run_sized(
+            sc,
+            Mode::Distributed(*m),
+            &mut |_| {},
+            &crate::sim::wire_bytes,
+        );
         let reference = &refs[(*seed - 1) as usize].1;
         Row::new(
             *d,

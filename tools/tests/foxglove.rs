@@ -855,18 +855,19 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
             .unwrap_or_default();
         assert_eq!(names, [first, second], "{site}'s status: {status}");
         // What it put and got, counted by kind over its network process's life: tool tracks
-        // only (timewarp sends no states), each at the wire's size.
+        // only (timewarp sends no states), each within the wire's bounds for a track.
         let t = &result["methods"]["timewarp"]["stations"][site]["final"]["traffic"];
         let n = |f: &str, k: usize| t[f][k].as_u64().unwrap_or(0);
-        let track = coop_transport::wire::TRACK_ENCODED_LEN as u64;
+        let longest = coop_transport::wire::MAX_TRACK_ENCODED_LEN as u64;
         assert!(n("sent_msgs", 1) > 50, "{site} put its tracks: {t}");
-        assert_eq!(n("sent_bytes", 1), n("sent_msgs", 1) * track, "{site}: {t}");
         assert!(n("received_msgs", 1) > 50, "{site} got the other's: {t}");
-        assert_eq!(
-            n("received_bytes", 1),
-            n("received_msgs", 1) * track,
-            "{site}: {t}"
-        );
+        for (msgs, bytes) in [
+            ("sent_msgs", "sent_bytes"),
+            ("received_msgs", "received_bytes"),
+        ] {
+            let (m, b) = (n(msgs, 1), n(bytes, 1));
+            assert!(b > m * 20 && b <= m * longest, "{site}: {bytes}: {t}");
+        }
         assert_eq!(
             (n("sent_msgs", 0), n("received_msgs", 0)),
             (0, 0),

@@ -346,12 +346,17 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
         put(&k1, long);
         s.length += 2;
         put(&k1, nan.clone());
-        // The current version and length: refused for its contents.
-        let mut junk = vec![coop_transport::wire::VERSION; coop_transport::wire::ENCODED_LEN];
-        for (i, b) in junk.iter_mut().enumerate().skip(1) {
-            *b = (i as u64).wrapping_mul(0x9e37_79b9).wrapping_add(round) as u8;
+        // The current version and framing: refused for its contents (an unknown kind, and
+        // every other word junk).
+        let mut words = [0u64; coop_rt::msg::SiteReport::WORDS];
+        for (i, w) in words.iter_mut().enumerate() {
+            *w = (i as u64)
+                .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                .wrapping_add(round);
         }
-        put(&k1, junk);
+        let mut junk = coop_rt::msg::SiteReport::from_words(&words);
+        junk.kind = 99;
+        put(&k1, coop_transport::wire::encode(&junk));
         s.contents += 2;
         put(&k2, captured.clone()); // user1's state on user2's key
         s.foreign += 1;

@@ -94,9 +94,12 @@ impl Refusal {
     pub fn reason(&self) -> Refused {
         match self {
             Refusal::Decode(DecodeError::Version { .. }) => Refused::Version,
-            Refusal::Decode(DecodeError::Length { .. } | DecodeError::TrackLength { .. }) => {
-                Refused::Length
-            }
+            // Not a message of this wire's framing.
+            Refusal::Decode(
+                DecodeError::Truncated { .. }
+                | DecodeError::Trailing { .. }
+                | DecodeError::Varint { .. },
+            ) => Refused::Length,
             Refusal::Decode(DecodeError::Invalid) => Refused::Contents,
             // Not what its key names: counted with the foreign ones.
             Refusal::Foreign { .. } | Refusal::OtherObject { .. } => Refused::Foreign,
@@ -960,10 +963,15 @@ mod tests {
         far.positions[3] = [1_000_000_000, 0, 0];
         let e = inb.check_track("user2", &track(6, 300_010, &far), now, &clocks);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Implausible));
-        // Malformed: a count past the window.
-        let mut bytes = track(7, 300_010, &r);
-        bytes[1 + 32..1 + 40].copy_from_slice(&(WINDOW_TICKS as u64 + 1).to_le_bytes());
-        let e = inb.check_track("user2", &bytes, now, &clocks);
+        // Malformed: a count past the window (the header's fifth word, its varint after the
+        // bitmap, the time, the sequence number and the site).
+        let bytes = track(7, 300_010, &r);
+        let count_at = 1 + 3 + 5 + 1 + 1 + 3;
+        assert_eq!(bytes[count_at], 10, "the count of {bytes:?}");
+        let mut bad = bytes[..count_at].to_vec();
+        crate::wire::compact::put_varint(&mut bad, WINDOW_TICKS as u64 + 1);
+        bad.extend_from_slice(&bytes[count_at + 1..]);
+        let e = inb.check_track("user2", &bad, now, &clocks);
         assert_eq!(e.map_err(|e| e.reason()), Err(Refused::Contents));
         // Too old.
         let e = inb.check_track(

@@ -1,50 +1,72 @@
 //! The wire format between stations: one encode and one decode per message (`docs/wire.md` is the
 //! specification a foreign client can be written from).
 //!
-//! A site report is `version: u8 = 5`, then [`SiteReport::to_words`] (its fields in declaration
-//! order, as `pod_message!` declares them) as little-endian u64/f64, nothing else: exactly
-//! [`ENCODED_LEN`] bytes. There is no second field list here: the layout is the struct's, and
-//! [`PINNED`] ties it to [`VERSION`] and to the table in `docs/wire.md` (a unit test fails when the
-//! struct changes without a version bump and the doc). Decoding checks the version,
-//! the length (no truncation, no trailing bytes) and then everything [`SiteReport::report`] checks
-//! (finite numbers in every field, a unit quaternion, a known kind, and zero in the fields the
-//! kind does not use). What only a receiver can check (the site, the time, plausibility, the
-//! sequence) is [`crate::admit`]'s. Any failure is a typed error and changes nothing.
+//! A site report is `version: u8 = 6`, then [`SiteReport::to_words`] (its fields in declaration
+//! order, as `pod_message!` declares them) in the compact encoding: a bitmap of the nonzero
+//! words, then each of them, an integer as a LEB128 varint and a float as its 8 bytes
+//! ([`compact`]); at most [`MAX_ENCODED_LEN`] bytes. There is no second field list here: the
+//! layout is the struct's, and [`PINNED`] ties it to [`VERSION`] and to the table in
+//! `docs/wire.md` (a unit test fails when the struct changes without a version bump and the doc).
+//! Decoding checks the version, the framing (no truncation, no trailing bytes, minimal varints,
+//! one encoding per message) and then everything [`SiteReport::report`] checks (finite numbers
+//! in every field, a unit quaternion, a known kind, and zero in the fields the kind does not
+//! use). What only a receiver can check (the site, the time, plausibility, the sequence) is
+//! [`crate::admit`]'s. Any failure is a typed error and changes nothing.
 //!
 //! The session's time 0 and clock readings are `version: u8 = 1` then one little-endian u64
 //! (unchanged since version 1: [`U64_VERSION`]).
 //!
-//! A tool track (methods that exchange the tools: `timewarp`, `coupled`) is `version: u8 = 5` then
-//! [`ToolTrack::to_words`], exactly [`TRACK_ENCODED_LEN`] bytes, on its own key (`tool/<site>`).
-//! Version 2 added this message and changed nothing else; version 3 added the track's `need` (a
-//! receiver asking for positions lost in a gap); version 4 the confirmed state a site whose
-//! confirmed history diverged asks for and adopts; version 5 the worlds of several objects (a
-//! state names its object, on its object's key; a track's carried state names its object, its
-//! world, and every friction memory it holds). States and tracks both carry byte 5 and are told
-//! apart by their key and length. [`TRACK_PINNED`] ties the track's layout to the doc as
+//! A tool track (methods that exchange the tools: `timewarp`, `coupled`) is `version: u8 = 6`
+//! then [`ToolTrack::to_words`]' header, its carried state only when it has one, both compact,
+//! and its positions as zigzag varints of each tick's difference from the one before; on its
+//! own key (`tool/<site>`). Version 2 added this message and changed nothing else; version 3
+//! added the track's `need` (a receiver asking for positions lost in a gap); version 4 the
+//! confirmed state a site whose confirmed history diverged asks for and adopts; version 5 the
+//! worlds of several objects (a state names its object, on its object's key; a track's carried
+//! state names its object, its world, and every friction memory it holds); version 6 the compact
+//! encoding (a version 5 state was 321 bytes, a track 5 817; now about 190 and 90). States and
+//! tracks are told apart by their key. [`TRACK_PINNED`] ties the track's layout to the doc as
 //! [`PINNED`] does the state's.
 
-use coop_rt::msg::{SiteReport, ToolTrack};
+pub(crate) mod compact;
+
+use compact::{
+    field_word, max_words_len, put_varint, put_words, take_words, unzigzag, zigzag, Reader,
+};
+use coop_model::method::track::WINDOW_TICKS;
+use coop_rt::msg::{SiteReport, ToolTrack, TRACK_POSITION_WORDS};
 
 /// Current wire version.
-pub const VERSION: u8 = 5;
+pub const VERSION: u8 = 6;
 /// The version byte of a u64 message (session time 0, clock reading): unchanged since version 1.
 pub const U64_VERSION: u8 = 1;
 /// The site report layout [`VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(SiteReport::LAYOUT)`). Changing [`SiteReport`] changes the hash, and
 /// the test `the_layout_is_pinned_to_the_version_and_the_doc` fails until [`VERSION`] is bumped,
 /// `docs/wire.md` describes the new layout, and this is re-pinned (the test prints the new value).
-pub const PINNED: (u8, u64) = (5, 0x1cda41364d9098d7);
-/// Bytes of an encoded report.
-pub const ENCODED_LEN: usize = 1 + 8 * SiteReport::WORDS;
+pub const PINNED: (u8, u64) = (6, 0x1cda41364d9098d7);
+/// The most bytes an encoded report takes (every word nonzero, every integer 10 bytes).
+pub const MAX_ENCODED_LEN: usize = 1 + max_words_len(SiteReport::LAYOUT, 0, SiteReport::WORDS);
 /// The version byte a tool track carries (2 added tracks, 3 added their `need`, 4 their carried
-/// state, 5 a world's objects): [`VERSION`].
+/// state, 5 a world's objects, 6 the compact encoding): [`VERSION`].
 pub const TRACK_VERSION: u8 = VERSION;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (5, 0xfdf8d1b08f56854c);
-/// Bytes of an encoded tool track.
-pub const TRACK_ENCODED_LEN: usize = 1 + 8 * ToolTrack::WORDS;
+pub const TRACK_PINNED: (u8, u64) = (6, 0xfdf8d1b08f56854c);
+/// The most bytes an encoded tool track takes: every header and state word nonzero and every
+/// integer 10 bytes, and every coordinate 5 (a coordinate and a difference of two fit 33 bits).
+/// (A bound: `count` takes 2 bytes at most, as no more than 256 is accepted.)
+pub const MAX_TRACK_ENCODED_LEN: usize = 1
+    + max_words_len(ToolTrack::LAYOUT, 0, TRACK_STATE_AT)
+    + max_words_len(ToolTrack::LAYOUT, TRACK_STATE_AT, TRACK_POSITIONS_AT)
+    + 5 * 3 * WINDOW_TICKS;
+
+/// Where a track's words part: its header (through `has_state`), its carried state (from
+/// `state_body`), its positions.
+const TRACK_STATE_AT: usize = field_word(ToolTrack::LAYOUT, "state_body");
+const TRACK_POSITIONS_AT: usize = field_word(ToolTrack::LAYOUT, "positions");
+const _: () = assert!(TRACK_POSITIONS_AT + TRACK_POSITION_WORDS == ToolTrack::WORDS);
+const _: () = assert!(field_word(ToolTrack::LAYOUT, "has_state") + 1 == TRACK_STATE_AT);
 
 /// Why a message was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -55,17 +77,23 @@ pub enum DecodeError {
         /// Version byte found.
         found: u8,
     },
-    /// Too short, too long.
-    #[error("{found} bytes, expected exactly {ENCODED_LEN}")]
-    Length {
-        /// Length found.
-        found: usize,
+    /// It ends inside a field.
+    #[error("truncated: the message ends inside the field at byte {at}")]
+    Truncated {
+        /// Offset of the field.
+        at: usize,
     },
-    /// A tool track too short or too long.
-    #[error("{found} bytes, expected exactly {TRACK_ENCODED_LEN} for a tool track")]
-    TrackLength {
-        /// Length found.
-        found: usize,
+    /// Bytes after its end.
+    #[error("{extra} bytes after the message's end")]
+    Trailing {
+        /// How many.
+        extra: usize,
+    },
+    /// A varint longer than it has to be or past 64 bits.
+    #[error("the varint at byte {at} is not minimal or overflows 64 bits")]
+    Varint {
+        /// Its offset.
+        at: usize,
     },
     /// Well-formed but not a valid report (non-finite value, bad quaternion, unknown site or kind).
     #[error("invalid report contents")]
@@ -91,19 +119,31 @@ pub fn decode_u64(bytes: &[u8]) -> Result<u64, DecodeError> {
             w.copy_from_slice(rest);
             Ok(u64::from_le_bytes(w))
         }
-        [U64_VERSION, ..] => Err(DecodeError::Length { found: bytes.len() }),
+        [U64_VERSION, rest @ ..] if rest.len() > 8 => Err(DecodeError::Trailing {
+            extra: rest.len() - 8,
+        }),
+        [U64_VERSION, ..] => Err(DecodeError::Truncated { at: 1 }),
         [v, ..] => Err(DecodeError::Version { found: *v }),
-        [] => Err(DecodeError::Length { found: 0 }),
+        [] => Err(DecodeError::Truncated { at: 0 }),
     }
 }
 
-/// Encodes a report: the version, then [`SiteReport::to_words`] little-endian.
-pub fn encode(r: &SiteReport) -> Vec<u8> {
-    let mut out = Vec::with_capacity(ENCODED_LEN);
-    out.push(VERSION);
-    for w in r.to_words() {
-        out.extend_from_slice(&w.to_le_bytes());
+/// The version byte, and a reader of what follows.
+fn open(bytes: &[u8]) -> Result<Reader<'_>, DecodeError> {
+    let (&version, body) = bytes
+        .split_first()
+        .ok_or(DecodeError::Truncated { at: 0 })?;
+    if version != VERSION {
+        return Err(DecodeError::Version { found: version });
     }
+    Ok(Reader::new(body, 1))
+}
+
+/// Encodes a report: the version, then [`SiteReport::to_words`] in the compact encoding.
+pub fn encode(r: &SiteReport) -> Vec<u8> {
+    let mut out = Vec::with_capacity(MAX_ENCODED_LEN);
+    out.push(VERSION);
+    put_words(&mut out, SiteReport::LAYOUT, 0, &r.to_words());
     out
 }
 
@@ -112,34 +152,45 @@ pub fn encode(r: &SiteReport) -> Vec<u8> {
 /// its ring → model conversion, against whatever else might write the ring).
 ///
 /// # Errors
-/// [`DecodeError`]: wrong version, wrong length, or invalid contents.
+/// [`DecodeError`]: wrong version, truncated, trailing bytes, a bad varint, or invalid contents.
 pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
-    let (&version, body) = bytes
-        .split_first()
-        .ok_or(DecodeError::Length { found: 0 })?;
-    if version != VERSION {
-        return Err(DecodeError::Version { found: version });
-    }
-    if bytes.len() != ENCODED_LEN {
-        return Err(DecodeError::Length { found: bytes.len() });
-    }
+    let mut rd = open(bytes)?;
     let mut words = [0u64; SiteReport::WORDS];
-    for (w, c) in words.iter_mut().zip(body.chunks_exact(8)) {
-        let mut b = [0u8; 8];
-        b.copy_from_slice(c);
-        *w = u64::from_le_bytes(b);
-    }
+    take_words(&mut rd, SiteReport::LAYOUT, 0, &mut words)?;
+    rd.end()?;
     let r = SiteReport::from_words(&words);
     r.report().ok_or(DecodeError::Invalid)?;
     Ok(r)
 }
 
-/// Encodes a tool track: [`TRACK_VERSION`], then [`ToolTrack::to_words`] little-endian.
+/// Coordinate `c` of a track's packed positions.
+fn coordinate(t: &ToolTrack, c: usize) -> i32 {
+    (t.positions[c / 2] >> (32 * (c % 2))) as u32 as i32
+}
+
+/// Encodes a tool track: [`TRACK_VERSION`], its header words, its carried state's words when it
+/// has one (`has_state` not 0), each in the compact encoding, then its `count` positions: the
+/// first tick's coordinates as zigzag varints, every later tick's as the zigzag varint of its
+/// difference from the tick before.
 pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
-    let mut out = Vec::with_capacity(TRACK_ENCODED_LEN);
+    let words = t.to_words();
+    let count = (t.count as usize).min(WINDOW_TICKS);
+    let mut out = Vec::with_capacity(64 + 3 * count);
     out.push(TRACK_VERSION);
-    for w in t.to_words() {
-        out.extend_from_slice(&w.to_le_bytes());
+    put_words(&mut out, ToolTrack::LAYOUT, 0, &words[..TRACK_STATE_AT]);
+    if t.has_state != 0 {
+        put_words(
+            &mut out,
+            ToolTrack::LAYOUT,
+            TRACK_STATE_AT,
+            &words[TRACK_STATE_AT..TRACK_POSITIONS_AT],
+        );
+    }
+    let mut prev = [0i64; 3];
+    for c in 0..3 * count {
+        let v = i64::from(coordinate(t, c));
+        put_varint(&mut out, zigzag(v - prev[c % 3]));
+        prev[c % 3] = v;
     }
     out
 }
@@ -148,23 +199,35 @@ pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
 /// track, which physics applies again as its ring → model conversion).
 ///
 /// # Errors
-/// [`DecodeError`]: wrong version, wrong length ([`DecodeError::TrackLength`]), invalid contents.
+/// [`DecodeError`]: wrong version, truncated, trailing bytes, a bad varint, more than
+/// [`WINDOW_TICKS`] positions or one beyond an i32, or invalid contents.
 pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
-    let (&version, body) = bytes
-        .split_first()
-        .ok_or(DecodeError::TrackLength { found: 0 })?;
-    if version != TRACK_VERSION {
-        return Err(DecodeError::Version { found: version });
-    }
-    if bytes.len() != TRACK_ENCODED_LEN {
-        return Err(DecodeError::TrackLength { found: bytes.len() });
-    }
+    let mut rd = open(bytes)?;
     let mut words = [0u64; ToolTrack::WORDS];
-    for (w, c) in words.iter_mut().zip(body.chunks_exact(8)) {
-        let mut b = [0u8; 8];
-        b.copy_from_slice(c);
-        *w = u64::from_le_bytes(b);
+    take_words(&mut rd, ToolTrack::LAYOUT, 0, &mut words[..TRACK_STATE_AT])?;
+    let has_state = words[field_word(ToolTrack::LAYOUT, "has_state")];
+    if has_state != 0 {
+        take_words(
+            &mut rd,
+            ToolTrack::LAYOUT,
+            TRACK_STATE_AT,
+            &mut words[TRACK_STATE_AT..TRACK_POSITIONS_AT],
+        )?;
     }
+    let count = words[field_word(ToolTrack::LAYOUT, "count")];
+    if count > WINDOW_TICKS as u64 {
+        return Err(DecodeError::Invalid);
+    }
+    let mut prev = [0i64; 3];
+    for c in 0..3 * count as usize {
+        let v = prev[c % 3]
+            .checked_add(unzigzag(rd.varint()?))
+            .and_then(|v| i32::try_from(v).ok())
+            .ok_or(DecodeError::Invalid)?;
+        prev[c % 3] = i64::from(v);
+        words[TRACK_POSITIONS_AT + c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+    }
+    rd.end()?;
     let t = ToolTrack::from_words(&words);
     t.report().ok_or(DecodeError::Invalid)?;
     Ok(t)
@@ -173,6 +236,7 @@ pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use compact::{put_varint, zigzag};
     use coop_rt::msg::layout_text;
     use coop_rt::shm::pod::fnv1a64;
 
@@ -239,12 +303,12 @@ mod tests {
         );
         assert!(
             heading.contains(&format!("(version {VERSION})"))
-                && heading.contains(&format!("exactly {ENCODED_LEN} bytes")),
-            "docs/wire.md: the heading `{heading}` should name version {VERSION} and {ENCODED_LEN} bytes"
+                && heading.contains(&format!("at most {MAX_ENCODED_LEN} bytes")),
+            "docs/wire.md: the heading `{heading}` should name version {VERSION} and {MAX_ENCODED_LEN} bytes"
         );
         assert!(
             section.contains(&format!("Byte 0 is the version, `{VERSION}`"))
-                && section.contains(&format!("Then {} little-endian", SiteReport::WORDS)),
+                && section.contains(&format!("Then its {} words", SiteReport::WORDS)),
             "docs/wire.md: the site report text should say version `{VERSION}` and {} words",
             SiteReport::WORDS
         );
@@ -269,37 +333,39 @@ mod tests {
     fn round_trip_and_every_corruption_is_refused() {
         let r = sample();
         let bytes = encode(&r);
-        assert_eq!(bytes.len(), ENCODED_LEN);
-        assert_eq!(ENCODED_LEN, 321, "docs/wire.md says 321 bytes");
-        // Where docs/wire.md puts them: kind in word 0, object in word 4, pos[0] in word 5,
-        // included[1] in word 22.
-        let word = |i: usize| &bytes[1 + 8 * i..9 + 8 * i];
-        assert_eq!(bytes[0], 5);
-        assert_eq!(word(0), 1u64.to_le_bytes());
-        assert_eq!(word(2), 9u64.to_le_bytes());
-        assert_eq!(word(4), 1u64.to_le_bytes());
-        assert_eq!(word(5), 0.1f64.to_le_bytes());
-        assert_eq!(word(22), 4.5f64.to_le_bytes());
+        // The version; the bitmap (kind, t_ns, seq, site, object, pos[0..3], rot w, included[1]:
+        // words 0-7, 8, 22); kind 1, t_ns 5, seq 9, site 1, object 1 as varints; pos and rot's w
+        // and included[1] as 8 bytes each.
+        let mut want = vec![VERSION, 0xff, 0x01, 0x40, 0, 0, 1, 5, 9, 1, 1];
+        for v in [0.1f64, 0.2, 0.3, 1.0, 4.5] {
+            want.extend_from_slice(&v.to_le_bytes());
+        }
+        assert_eq!(bytes, want);
+        assert_eq!(bytes.len(), 51);
         assert_eq!(decode(&bytes), Ok(r));
         let mut v1 = bytes.clone();
         v1[0] = 1;
         assert_eq!(decode(&v1), Err(DecodeError::Version { found: 1 }));
-        assert_eq!(
-            decode(&bytes[..100]),
-            Err(DecodeError::Length { found: 100 })
-        );
+        assert_eq!(decode(&bytes[..20]), Err(DecodeError::Truncated { at: 19 }));
         let mut long = bytes.clone();
         long.push(0);
-        assert_eq!(
-            decode(&long),
-            Err(DecodeError::Length {
-                found: ENCODED_LEN + 1
-            })
-        );
-        assert_eq!(decode(&[]), Err(DecodeError::Length { found: 0 }));
+        assert_eq!(decode(&long), Err(DecodeError::Trailing { extra: 1 }));
+        assert_eq!(decode(&[]), Err(DecodeError::Truncated { at: 0 }));
+        // A zero marked nonzero (one encoding per message), and a varint not minimal.
+        let mut zero = bytes.clone();
+        zero[7] = 0;
+        assert_eq!(decode(&zero), Err(DecodeError::Invalid));
+        let mut overlong = bytes[..6].to_vec();
+        overlong.extend_from_slice(&[0x81, 0x00]);
+        overlong.extend_from_slice(&bytes[7..]);
+        assert_eq!(decode(&overlong), Err(DecodeError::Varint { at: 6 }));
         let mut nan = r;
         nan.vel[0] = f64::NAN;
         assert_eq!(decode(&encode(&nan)), Err(DecodeError::Invalid));
+        // Every word nonzero and every integer at its longest.
+        let mut full = SiteReport::from_words(&[u64::MAX; SiteReport::WORDS]);
+        full.kind = u64::MAX;
+        assert_eq!(encode(&full).len(), MAX_ENCODED_LEN);
         // Flipping any single byte never panics.
         for i in 0..bytes.len() {
             let mut b = bytes.clone();
@@ -315,7 +381,11 @@ mod tests {
             decode_u64(&[2, 0, 0, 0, 0, 0, 0, 0, 0]),
             Err(DecodeError::Version { found: 2 })
         );
-        assert_eq!(decode_u64(&[1, 0]), Err(DecodeError::Length { found: 2 }));
+        assert_eq!(decode_u64(&[1, 0]), Err(DecodeError::Truncated { at: 1 }));
+        assert_eq!(
+            decode_u64(&[1, 0, 0, 0, 0, 0, 0, 0, 0, 0]),
+            Err(DecodeError::Trailing { extra: 1 })
+        );
     }
 
     #[test]
@@ -355,8 +425,8 @@ mod tests {
         let heading = section.lines().next().unwrap_or_default();
         assert!(
             heading.contains(&format!("(version {TRACK_VERSION})"))
-                && heading.contains(&format!("exactly {TRACK_ENCODED_LEN} bytes")),
-            "docs/wire.md: `{heading}` should name version {TRACK_VERSION} and {TRACK_ENCODED_LEN} bytes"
+                && heading.contains(&format!("at most {MAX_TRACK_ENCODED_LEN} bytes")),
+            "docs/wire.md: `{heading}` should name version {TRACK_VERSION} and {MAX_TRACK_ENCODED_LEN} bytes"
         );
     }
 
@@ -378,17 +448,20 @@ mod tests {
         r.need[0] = 470;
         let t = ToolTrack::new(1, 3, 99, &r);
         let bytes = encode_track(&t);
-        assert_eq!(bytes.len(), TRACK_ENCODED_LEN);
-        assert_eq!(TRACK_ENCODED_LEN, 5817, "docs/wire.md says 5817 bytes");
-        assert_eq!(bytes[0], 5);
-        // Where docs/wire.md puts them: site in word 2, `need` of site 0 (1 + the tick) in word 7,
-        // none (0) for site 1 in word 8, no state (word 17), the first x in the low half of
-        // word 343.
-        assert_eq!(&bytes[1 + 16..1 + 24], 1u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 56..1 + 64], 471u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 64..1 + 72], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 136..1 + 144], 0u64.to_le_bytes());
-        assert_eq!(&bytes[1 + 2744..1 + 2748], (-4500i32).to_le_bytes());
+        // The version; the header's bitmap (t_ns, seq, site, first_tick, count, confirmed_tick,
+        // confirmed_hash: words 0-6; need[0]: word 7); those words as varints; then the
+        // positions: the first tick's zigzagged (-4500 → 8999: 0xa7 0x46; 3 → 6; 1000 → 2000:
+        // 0xd0 0x0f), and each later one's difference (x + 1 → 2, y and z 0).
+        let mut want = vec![TRACK_VERSION, 0xff, 0x00, 0x00, 99, 3, 1];
+        for v in [500u64, 20, 480, 77, 471] {
+            put_varint(&mut want, v);
+        }
+        want.extend_from_slice(&[0xa7, 0x46, 6, 0xd0, 0x0f]);
+        for _ in 1..20 {
+            want.extend_from_slice(&[2, 0, 0]);
+        }
+        assert_eq!(bytes, want);
+        assert_eq!(bytes.len(), 77);
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
@@ -424,9 +497,10 @@ mod tests {
         };
         let ts = ToolTrack::new(1, 4, 99, &with_state);
         let bs = encode_track(&ts);
-        assert_eq!(&bs[1 + 120..1 + 128], 2u64.to_le_bytes());
-        assert_eq!(&bs[1 + 128..1 + 136], 3u64.to_le_bytes());
-        assert_eq!(&bs[1 + 136..1 + 144], 1u64.to_le_bytes());
+        // `need_state`, `started_tick`, `has_state` (words 15-17) in the bitmap, and the state's
+        // words after the header's.
+        assert_eq!(bs[1..4], [0xff, 0x80, 0x03]);
+        assert!(bs.len() > bytes.len() + 13 * 8, "{}", bs.len());
         assert_eq!(
             decode_track(&bs)
                 .ok()
@@ -441,48 +515,48 @@ mod tests {
             decode_track(&encode_track(&stray)),
             Err(DecodeError::Invalid)
         );
+        // (Without a state, no state word is on the wire: a stray one is not sent.)
         let mut stray = t;
         stray.state_anchors = 1;
-        assert_eq!(
-            decode_track(&encode_track(&stray)),
-            Err(DecodeError::Invalid)
-        );
+        assert_eq!(decode_track(&encode_track(&stray)), Ok(t));
         let mut stray = ts;
         stray.state_body[3] = 2.0;
         assert_eq!(
             decode_track(&encode_track(&stray)),
             Err(DecodeError::Invalid)
         );
-        // A version-4 track (one object's state) is refused by its version.
-        let mut v4 = bytes.clone();
-        v4[0] = 4;
-        assert_eq!(decode_track(&v4), Err(DecodeError::Version { found: 4 }));
-        // A state reader refuses a track by its length, a track reader a state.
+        // A version-5 track (fixed words) is refused by its version.
+        let mut v5 = bytes.clone();
+        v5[0] = 5;
+        assert_eq!(decode_track(&v5), Err(DecodeError::Version { found: 5 }));
+        // A state reader refuses a track, a track reader a state.
+        assert!(decode(&bytes).is_err());
+        assert!(decode_track(&encode(&sample())).is_err());
         assert_eq!(
-            decode(&bytes),
-            Err(DecodeError::Length {
-                found: TRACK_ENCODED_LEN
-            })
-        );
-        assert_eq!(
-            decode_track(&encode(&sample())),
-            Err(DecodeError::TrackLength { found: ENCODED_LEN })
-        );
-        assert_eq!(
-            decode_track(&bytes[..100]),
-            Err(DecodeError::TrackLength { found: 100 })
+            decode_track(&bytes[..40]),
+            Err(DecodeError::Truncated { at: 40 })
         );
         let mut long = bytes.clone();
         long.push(0);
-        assert_eq!(
-            decode_track(&long),
-            Err(DecodeError::TrackLength {
-                found: TRACK_ENCODED_LEN + 1
-            })
-        );
+        assert_eq!(decode_track(&long), Err(DecodeError::Trailing { extra: 1 }));
         let mut bad = t;
         bad.count = WINDOW_TICKS as u64 + 1;
         assert_eq!(decode_track(&encode_track(&bad)), Err(DecodeError::Invalid));
+        // A coordinate past an i32 (the difference overflows it).
+        let mut far = bytes[..bytes.len() - 3].to_vec();
+        put_varint(&mut far, zigzag(i64::from(i32::MAX)));
+        far.extend_from_slice(&[0, 0]);
+        assert_eq!(decode_track(&far), Err(DecodeError::Invalid));
+        // The longest track: every header and state word nonzero and at its longest, 256
+        // positions jumping across the i32 range.
+        let mut longest = ToolTrack::from_words(&[u64::MAX; ToolTrack::WORDS]);
+        longest.count = WINDOW_TICKS as u64;
+        longest.positions = [0; TRACK_POSITION_WORDS];
+        for c in 0..3 * WINDOW_TICKS {
+            let v = if (c / 3) % 2 == 0 { i32::MIN } else { i32::MAX };
+            longest.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+        }
+        assert_eq!(encode_track(&longest).len() + 8, MAX_TRACK_ENCODED_LEN);
         // Flipping any single byte never panics.
         for i in 0..bytes.len() {
             let mut b = bytes.clone();

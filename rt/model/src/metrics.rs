@@ -79,6 +79,8 @@ pub struct SiteMetrics {
     pub adoptions: usize,
     /// Messages put: site reports and tool tracks ([`crate::sim::SiteTrace::puts`]).
     pub puts: [u64; 2],
+    /// Their bytes ([`crate::sim::SiteTrace::sent_bytes`]).
+    pub sent_bytes: u64,
     /// Largest displayed-force change at an adoption, N.
     pub max_adoption_force_step_n: f64,
     /// Energy this copy gained beyond its own user's and its environment's work, J.
@@ -336,6 +338,7 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
                 ),
                 adoptions: adoptions.len(),
                 puts: s.puts,
+                sent_bytes: s.sent_bytes,
                 max_adoption_force_step_n: adoptions
                     .iter()
                     .map(|a| a.force_step_n)

@@ -74,9 +74,11 @@ pub struct SiteTrace {
     /// The world's other objects (the second on), as this site believes them.
     pub others: Vec<ObjectTrace>,
     /// The messages this site put, as a station puts them: site reports (states, forces) and
-    /// tool tracks (a `coupled` report with its tools is one of each). Their encoded sizes are
-    /// the wire's (`coop_transport::wire`).
+    /// tool tracks (a `coupled` report with its tools is one of each).
     pub puts: [u64; 2],
+    /// Their bytes, as the [`Sizer`] the run was given counts them (0 with none: the wire's
+    /// encoding is `coop_transport::wire`'s, a crate above this one).
+    pub sent_bytes: u64,
 }
 
 impl SiteTrace {
@@ -270,6 +272,20 @@ pub fn site_method(scenario: &Scenario, mode: Mode, i: usize) -> Box<dyn Consist
 ///
 /// The scenario must be valid ([`Scenario::validate`]).
 pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> RunResult {
+    run_sized(scenario, mode, progress, &|_, _, _, _| 0)
+}
+
+/// The bytes a station would put for `msg` from `site` at `t_ns`, its puts so far being `puts`
+/// (site reports, tool tracks: the next sequence numbers are one more).
+pub type Sizer = dyn Fn(usize, u64, [u64; 2], &Report) -> u64;
+
+/// [`run`], counting each put's bytes with `size` ([`SiteTrace::sent_bytes`]).
+pub fn run_sized(
+    scenario: &Scenario,
+    mode: Mode,
+    progress: &mut dyn FnMut(f64),
+    size: &Sizer,
+) -> RunResult {
     let world = scenario.world();
     let start = scenario.start_copy();
     let objects = start.len();
@@ -482,8 +498,10 @@ pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> Ru
             if !reference && s.next_report == t {
                 // Each report takes its own chance on each link (a world's objects may travel in
                 // several).
-                let puts = &mut result.sites[i].puts;
+                let trace = &mut result.sites[i];
+                let (puts, bytes) = (&mut trace.puts, &mut trace.sent_bytes);
                 let mut send = |msg: Report| {
+                    *bytes += size(i, t, *puts, &msg);
                     match &msg {
                         Report::State { .. } | Report::Force { .. } => puts[0] += 1,
                         Report::Tools(_) => puts[1] += 1,
