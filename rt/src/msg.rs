@@ -434,6 +434,9 @@ pod_message! {
         /// Bit `j`: the sender's confirmed state differs from site `j`'s (`j` before the sender),
         /// and it asks `j` for its state (the `state_*` words); bits 8 and up are 0.
         pub need_state: u64,
+        /// Byte `j` (little end first): the share of site `j`'s tracks the sender found lost
+        /// lately, in 255ths.
+        pub loss: u64,
         /// The session tick at which the sender's physics process started (0: from the session's
         /// start); sites are ordered by it, then by index, and adopt the state of one before them.
         pub started_tick: u64,
@@ -477,11 +480,11 @@ pod_message! {
         pub positions: [u64; TRACK_POSITION_WORDS],
     }
 }
-const _: () = assert!(core::mem::size_of::<ToolTrack>() == 5816);
-// SAFETY: repr(C), only u64 and f64 fields and arrays of them (5816 bytes, no padding); every bit
+const _: () = assert!(core::mem::size_of::<ToolTrack>() == 5824);
+// SAFETY: repr(C), only u64 and f64 fields and arrays of them (5824 bytes, no padding); every bit
 // pattern is valid.
 unsafe impl ShmPod for ToolTrack {
-    const TYPE_NAME: &'static str = "coop.ToolTrack.v4";
+    const TYPE_NAME: &'static str = "coop.ToolTrack.v5";
 }
 
 impl Default for ToolTrack {
@@ -496,6 +499,7 @@ impl Default for ToolTrack {
             confirmed_hash: 0,
             need: [0; MAX_SITES],
             need_state: 0,
+            loss: 0,
             started_tick: 0,
             has_state: 0,
             state_body: [0.0; 13],
@@ -531,6 +535,7 @@ impl ToolTrack {
             confirmed_hash: r.confirmed_hash,
             need: r.need.map(|t| if t < 0 { 0 } else { t as u64 + 1 }),
             need_state: u64::from(r.need_state),
+            loss: u64::from_le_bytes(r.loss),
             started_tick: r.started_tick,
             ..Self::default()
         };
@@ -642,6 +647,8 @@ impl ToolTrack {
             confirmed_hash: self.confirmed_hash,
             need: self.need.map(|n| n as i64 - 1),
             need_state,
+            loss: self.loss.to_le_bytes(),
+            seq: self.seq,
             started_tick: self.started_tick,
             state,
         };
@@ -1315,7 +1322,9 @@ mod tests {
         );
         assert_ne!(repair.confirmed_hash, 0, "and its hash");
         let track = ToolTrack::new(0, 1, 1, &repair);
-        assert_eq!(track.report(), Some((0, Report::Tools(repair))));
+        // (A received track's report carries its sequence number.)
+        let numbered = ToolReport { seq: 1, ..repair };
+        assert_eq!(track.report(), Some((0, Report::Tools(numbered))));
     }
 
     #[test]
@@ -1332,7 +1341,9 @@ mod tests {
         r.positions[0] = [-4500, 0, 1000];
         r.positions[1] = [i32::MIN + 147_483_648, -1, 2_000_000_000];
         r.positions[2] = [7, -7, 0];
+        r.loss = [3, 0, 0, 0, 0, 0, 0, 255];
         let t = ToolTrack::new(1, 5, 42, &r);
+        assert_eq!(t.loss, 3 | 255 << 56, "site j's loss in byte j");
         assert_eq!(
             t.positions[0] as u32 as i32, -4500,
             "coordinate 0 in the low half"
@@ -1340,7 +1351,10 @@ mod tests {
         assert_eq!((t.positions[0] >> 32) as u32 as i32, 0);
         assert_eq!(t.positions[1] as u32 as i32, 1000);
         assert_eq!(t.max_abs_quantized(), 2_000_000_000);
-        assert_eq!(t.report(), Some((1, Report::Tools(r))));
+        assert_eq!(
+            t.report(),
+            Some((1, Report::Tools(ToolReport { seq: 5, ..r })))
+        );
         assert_eq!(ToolTrack::from_words(&t.to_words()), t);
         let full = ToolReport {
             count: WINDOW_TICKS,
@@ -1348,7 +1362,11 @@ mod tests {
             ..r
         };
         let t = ToolTrack::new(0, 1, 1, &full);
-        assert_eq!(t.report(), Some((0, Report::Tools(full))), "a full window");
+        assert_eq!(
+            t.report(),
+            Some((0, Report::Tools(ToolReport { seq: 1, ..full }))),
+            "a full window"
+        );
         let bad = |f: &dyn Fn(&mut ToolTrack)| {
             let mut b = ToolTrack::new(1, 5, 42, &r);
             f(&mut b);
@@ -1383,7 +1401,7 @@ mod tests {
             bad(&|b| b.count = 2).is_none(),
             "a dropped position is unused, not zero"
         );
-        assert_eq!(ToolTrack::WORDS * 8, 5816);
+        assert_eq!(ToolTrack::WORDS * 8, 5824);
     }
 
     /// What `timewarp` sends while asked for its confirmed state in a world of several objects
@@ -1441,6 +1459,10 @@ mod tests {
                 panic!("timewarp sends tracks only")
             };
             let laid = ToolTrack::new(0, n as u64 + 1, 1, &t);
+            let t = ToolReport {
+                seq: n as u64 + 1,
+                ..t
+            };
             assert_eq!(laid.report(), Some((0, Report::Tools(t))), "report {n}");
         }
     }
@@ -1487,7 +1509,10 @@ mod tests {
             ..ToolReport::NONE
         };
         let t = ToolTrack::new(1, 5, 42, &r);
-        assert_eq!(t.report(), Some((1, Report::Tools(r))));
+        assert_eq!(
+            t.report(),
+            Some((1, Report::Tools(ToolReport { seq: 5, ..r })))
+        );
         let bad = |f: &dyn Fn(&mut ToolTrack)| {
             let mut b = t;
             f(&mut b);

@@ -52,7 +52,7 @@ pub const MAX_ENCODED_LEN: usize = 1 + max_words_len(SiteReport::LAYOUT, 0, Site
 pub const TRACK_VERSION: u8 = VERSION;
 /// The tool track layout [`TRACK_VERSION`] stands for: (version, FNV-1a 64 of
 /// `coop_rt::msg::layout_text(ToolTrack::LAYOUT)`), pinned as [`PINNED`] is.
-pub const TRACK_PINNED: (u8, u64) = (6, 0xfdf8d1b08f56854c);
+pub const TRACK_PINNED: (u8, u64) = (6, 0xfcfdd4b3e41ef627);
 /// The most bytes an encoded tool track takes: every header and state word nonzero and every
 /// integer 10 bytes, and every coordinate 5 (a coordinate and a difference of two fit 33 bits).
 /// (A bound: `count` takes 2 bytes at most, as no more than 256 is accepted.)
@@ -465,7 +465,10 @@ mod tests {
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
-            Some(coop_model::method::Report::Tools(r))
+            Some(coop_model::method::Report::Tools(ToolReport {
+                seq: 3,
+                ..r
+            }))
         );
         // A confirmed state, asked for by site 1 (bit 1 of `need_state`, word 15) from a sender
         // restarted 3 times (word 16), goes to the bit: the adopting site hashes it to the
@@ -497,16 +500,19 @@ mod tests {
         };
         let ts = ToolTrack::new(1, 4, 99, &with_state);
         let bs = encode_track(&ts);
-        // `need_state`, `started_tick`, `has_state` (words 15-17) in the bitmap, and the state's
+        // `need_state`, `started_tick`, `has_state` (words 15, 17, 18) in the bitmap, and the state's
         // words after the header's.
-        assert_eq!(bs[1..4], [0xff, 0x80, 0x03]);
+        assert_eq!(bs[1..4], [0xff, 0x80, 0x06]);
         assert!(bs.len() > bytes.len() + 13 * 8, "{}", bs.len());
         assert_eq!(
             decode_track(&bs)
                 .ok()
                 .and_then(|t| t.report())
                 .map(|(_, r2)| r2),
-            Some(coop_model::method::Report::Tools(with_state))
+            Some(coop_model::method::Report::Tools(ToolReport {
+                seq: 4,
+                ..with_state
+            }))
         );
         // A state that is not one: a stick point without its bit, or a bit without a state.
         let mut stray = ts;

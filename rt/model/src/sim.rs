@@ -500,14 +500,19 @@ pub fn run_sized(
                 // several).
                 let trace = &mut result.sites[i];
                 let (puts, bytes) = (&mut trace.puts, &mut trace.sent_bytes);
-                let mut send = |msg: Report| {
+                let mut send = |mut msg: Report| {
                     *bytes += size(i, t, *puts, &msg);
-                    match &msg {
+                    // Numbered as a station's network numbers its tracks.
+                    match &mut msg {
                         Report::State { .. } | Report::Force { .. } => puts[0] += 1,
-                        Report::Tools(_) => puts[1] += 1,
+                        Report::Tools(r) => {
+                            puts[1] += 1;
+                            r.seq = puts[1];
+                        }
                         Report::Coupled(c) => {
                             puts[0] += 1;
                             puts[1] += u64::from(c.tools.count > 0);
+                            c.tools.seq = puts[1];
                         }
                     }
                     for to in (0..n).filter(|&to| to != i) {

@@ -116,6 +116,12 @@ pub struct ToolReport {
     pub started_tick: u64,
     /// The sender's state at `confirmed_tick`, sent while a site after it asks for it.
     pub state: Option<Snapshot>,
+    /// Per site `j`: the share of `j`'s reports the sender found lost lately, in 255ths (so `j`
+    /// sends its ticks again in as many reports as that loss needs).
+    pub loss: [u8; MAX_SITES],
+    /// The report's sequence number among its sender's, as the carrier numbers them (the wire's
+    /// track sequence, the simulator's count); 0: unknown. Not sent by the method: received.
+    pub seq: u64,
 }
 
 impl ToolReport {
@@ -130,6 +136,8 @@ impl ToolReport {
         need_state: 0,
         started_tick: 0,
         state: None,
+        loss: [0; MAX_SITES],
+        seq: 0,
     };
 }
 

@@ -6,9 +6,10 @@
 //! the tool's position at that tick, quantized to [`QUANTUM_M`] so every site uses the same bits: the
 //! own tool as measured, a remote one from its received trajectory, and beyond the last received
 //! tick a bounded prediction and then a hold. A site reports the own
-//! tool's positions of the last [`WINDOW_TICKS`] ticks (so a few lost reports lose nothing). When
-//! more is lost in a row, the receiver holds later positions but not the gap's: it asks for the
-//! gap ([`ToolReport::need`]) and the sender sends the window from there in every other report.
+//! tool's positions since its last report and those of the few reports before (so a lost report
+//! or two lose nothing; more while its receivers ask for gaps: [`MAX_REDUNDANCY`]). When more is
+//! lost in a row, the receiver holds later positions but not the gap's: it asks for the gap
+//! ([`ToolReport::need`]) and the sender sends [`WINDOW_TICKS`] from there in every other report.
 //!
 //! The copy's full state (body, momenta, environment friction memory, every tool's friction
 //! memory) is kept for every tick of the horizon. When a received position differs from what was
@@ -78,6 +79,7 @@ mod islands;
 mod lag;
 mod predict;
 mod replay;
+mod window;
 
 pub use hash::{hash_state, hash_world};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
@@ -85,6 +87,10 @@ pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_
 pub use predict::{EXTRAPOLATE_TICKS, REACH_TICKS, REACH_TIME_TICKS, REACH_VELOCITY_TICKS};
 pub use replay::{
     REPLAY_LEAD_TICKS, REPLAY_MIN_TICKS, REPLAY_REACH_M, REPLAY_SLOW_TICKS, REPLAY_SPEED,
+};
+use window::{LossMeter, Redundancy};
+pub use window::{
+    GAP_CHANCE, LOSS_FILTER_SHARE, MAX_REDUNDANCY, MIN_REDUNDANCY, REDUNDANCY_DECAY_REPORTS,
 };
 
 use crate::body::{BodyState, Vec3};
@@ -149,6 +155,12 @@ pub struct TimeWarp {
     given_up: [bool; MAX_SITES],
     /// Whether the last report repaired a gap (repairs alternate with the newest window).
     repaired_last: std::cell::Cell<bool>,
+    /// What the own tracks sent and how much of it they send again ([`Redundancy`]).
+    sent: std::cell::Cell<Redundancy>,
+    /// Per site: the share of its reports this site loses.
+    lost: [LossMeter; MAX_SITES],
+    /// Per site: the share of this site's reports it says it loses, in 255ths.
+    losing: [u8; MAX_SITES],
     /// Per site before this one: its confirmed state differed from ours at the last comparison,
     /// and we ask it for that state.
     want_state: [bool; MAX_SITES],
@@ -239,6 +251,9 @@ impl TimeWarp {
             asked: [-1; MAX_SITES],
             given_up: [false; MAX_SITES],
             repaired_last: std::cell::Cell::new(false),
+            sent: std::cell::Cell::new(Redundancy::START),
+            lost: [LossMeter::default(); MAX_SITES],
+            losing: [0; MAX_SITES],
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
             incoming: vec![None; MAX_OBJECTS].into_boxed_slice(),
@@ -504,10 +519,12 @@ impl TimeWarp {
         // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
         // this site's history starts at: it was not here.)
         let end = self.now_tick;
-        let window = (end - WINDOW_TICKS as i64).max(self.origin_tick);
-        // A peer that lost more than a window of reports asked for the first tick it lacks: every
-        // other report sends the window from there instead (while it is still kept), so the
-        // newest positions keep flowing and the peer's frontier can pass the gap.
+        // The newest ticks and the last few reports' again (`window`).
+        let mut sent = self.sent.get();
+        let window = sent.window_start(end, self.origin_tick);
+        // A peer that lost more reports in a row than that asked for the first tick it lacks:
+        // every other report sends the window from there instead (while it is still kept), so
+        // the newest positions keep flowing and the peer's frontier can pass the gap.
         let oldest = self.oldest_kept();
         let repair = (0..self.sites)
             .filter(|&j| j != self.me)
@@ -516,6 +533,10 @@ impl TimeWarp {
             .min()
             .filter(|_| !self.repaired_last.get());
         self.repaired_last.set(repair.is_some());
+        if repair.is_none() {
+            sent.sent(end);
+            self.sent.set(sent);
+        }
         let first = repair.unwrap_or(window);
         let count = (end - first).min(WINDOW_TICKS as i64);
         let mut r = ToolReport {
@@ -538,6 +559,8 @@ impl TimeWarp {
             need_state: 0,
             started_tick: self.started_tick,
             state: None,
+            loss: std::array::from_fn(|j| self.lost[j].share()),
+            seq: 0,
         };
         for (j, &want) in self.want_state.iter().enumerate() {
             r.need_state |= u8::from(want) << j;
@@ -620,7 +643,17 @@ impl Consistency for TimeWarp {
         if from >= self.sites || from == self.me {
             return None;
         }
-        self.asked[from] = r.need[self.me];
+        let need = r.need[self.me];
+        let mut sent = self.sent.get();
+        if need >= 0 && need != self.asked[from] {
+            sent.gap_asked();
+        }
+        self.asked[from] = need;
+        self.lost[from].arrived(r.seq);
+        self.losing[from] = r.loss[self.me];
+        let worst = (0..self.sites).map(|j| self.losing[j]).max().unwrap_or(0);
+        sent.set_loss(f64::from(worst) / 255.0);
+        self.sent.set(sent);
         self.state_asked[from] = r.need_state & (1 << self.me) != 0;
         let oldest = self.oldest_kept();
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
@@ -729,6 +762,10 @@ impl Consistency for TimeWarp {
         adoption
     }
     fn peer_lost(&mut self, from: usize, _now_s: f64) {
+        // Its reports skipped while it was silent are not a loss rate: measured afresh.
+        if let Some(m) = self.lost.get_mut(from) {
+            *m = LossMeter::default();
+        }
         // A silent site neither asks for our state nor sends its own: ask again once it is back.
         if let (Some(asked), Some(want)) = (
             self.state_asked.get_mut(from),

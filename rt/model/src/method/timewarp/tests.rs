@@ -543,8 +543,10 @@ fn two_sites(
         if k % 20 == 0 {
             for i in 0..2 {
                 let (tw, _) = &sites[i];
-                let r = tw.track_report();
-                if let Report::Tools(t) = &r {
+                let mut r = tw.track_report();
+                if let Report::Tools(t) = &mut r {
+                    // Numbered as the wire numbers tracks.
+                    t.seq = (k / 20 + 1) as u64;
                     seen(i, t, k, &sites);
                 }
                 if !lost(i, k) {
@@ -605,6 +607,82 @@ fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
         b.confirmed_tick(),
         "both confirmed to the last report"
     );
+}
+
+/// Tracks carry the ticks since the last report and the last reports' again, not a whole window:
+/// with 30 % of the reports lost at random, the gaps the redundancy does not cover are asked
+/// for and sent again, the redundancy grows with them, and the confirmed states still agree to
+/// the bit, as with no loss, while a track carries a few reports' ticks, not 256.
+#[test]
+fn at_thirty_percent_loss_short_tracks_lose_nothing() {
+    let mut rng = crate::rng::Rng::new(11);
+    let lost: Vec<bool> = (0..6000).map(|_| rng.uniform() < 0.3).collect();
+    let (mut counts, mut repairs, mut asked) = (Vec::new(), 0, 0);
+    let sites = two_sites(
+        1000,
+        [0, 0],
+        3000,
+        sweep_into_the_disk,
+        30,
+        |from, k| lost[2 * k as usize + from],
+        |i, t, _, _| {
+            asked += usize::from(t.need[1 - i] >= 0);
+            // (A repair sends from the gap on, up to 256 ticks: more than the redundancy's.)
+            if t.count > 20 * (MAX_REDUNDANCY + 1) {
+                repairs += 1;
+            }
+            counts.push(t.count);
+        },
+    );
+    let clean = two_sites(
+        1000,
+        [0, 0],
+        3000,
+        sweep_into_the_disk,
+        30,
+        |_, _| false,
+        |_, _, _, _| {},
+    );
+    let [(a, ca), (b, cb)] = &sites;
+    for (name, st) in [
+        ("site 0", a.rollback_stats()),
+        ("site 1", b.rollback_stats()),
+    ] {
+        assert!(st.hash_checks > 30, "{name} compared: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "{name}: {st:?}");
+        assert_eq!(st.fallbacks, 0, "{name}: {st:?}");
+    }
+    assert!(
+        asked > 0 && repairs > 0,
+        "gaps asked for {asked}, repaired {repairs}"
+    );
+    let grown = a.sent.get().reports().max(b.sent.get().reports());
+    assert!(
+        grown > MIN_REDUNDANCY,
+        "the redundancy grew with the gaps: {grown}"
+    );
+    // Every report is 20 ticks: a track carries as many reports' as the measured loss needs
+    // (at 0.3, 8: 160 ticks), not the window.
+    let reports = (0..2)
+        .map(|i| sites[i].0.sent.get().reports())
+        .collect::<Vec<_>>();
+    assert_eq!(reports, [MAX_REDUNDANCY; 2], "sized for the loss");
+    counts.sort_unstable();
+    let median = counts[counts.len() / 2];
+    assert!(
+        median <= 20 * (MAX_REDUNDANCY + 1),
+        "median track {median} ticks"
+    );
+    // The same confirmed history as without loss.
+    let t = a
+        .confirmed_tick()
+        .min(b.confirmed_tick())
+        .min(clean[0].0.confirmed_tick());
+    assert!(t > 2900, "{t}");
+    assert_eq!(a.hash_at(t), clean[0].0.hash_at(t));
+    assert_eq!(b.hash_at(t), clean[1].0.hash_at(t));
+    assert_eq!(ca.first().state, clean[0].1.first().state);
+    assert_eq!(cb.first().state, clean[1].1.first().state);
 }
 
 /// A link down for longer than the history: site 0 never learns part of site 1's sweep into
