@@ -272,8 +272,8 @@ fn mutate_bytes(rng: &mut Rng, bytes: &mut Vec<u8>) {
 }
 
 /// A genuine tool track of site 1: up to a window of a tool wandering over the table at up to
-/// 1 m/s, up to the physics tick of `t_ns` (1 kHz), now and then asking for a gap or carrying
-/// no positions.
+/// 1 m/s (or held most ticks, as through a deadband), up to the physics tick of `t_ns` (1 kHz),
+/// now and then asking for a gap or carrying no positions.
 fn genuine_track(rng: &mut Rng, seq: u64, t_ns: u64) -> ToolTrack {
     let end = (t_ns / 1_000_000) as i64;
     let count = match rng.next_u64() % 8 {
@@ -296,9 +296,13 @@ fn genuine_track(rng: &mut Rng, seq: u64, t_ns: u64) -> ToolTrack {
         rng.range(-20_000.0, 20_000.0) as i32,
         1000,
     ];
+    // Now and then a deadband's held positions (runs of one position).
+    let hold = if rng.uniform() < 0.5 { 0.0 } else { 0.9 };
     for q in &mut r.positions[..count] {
-        p[0] += rng.range(-100.0, 100.0) as i32;
-        p[1] += rng.range(-100.0, 100.0) as i32;
+        if rng.uniform() >= hold {
+            p[0] += rng.range(-100.0, 100.0) as i32;
+            p[1] += rng.range(-100.0, 100.0) as i32;
+        }
         *q = p;
     }
     ToolTrack::new(1, seq, t_ns, &r)

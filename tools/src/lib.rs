@@ -34,6 +34,7 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 
 pub mod certs;
 pub mod cli;
+pub mod deadband;
 pub mod devbench;
 pub mod fuzz;
 pub mod latency;

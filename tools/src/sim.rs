@@ -91,6 +91,19 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
+    /// `timewarp` with every tick's position sent vs through the scenario's perceptual deadband
+    /// (`[timewarp.deadband]`, turned on), at each constant delay: positions sent, kbit/s,
+    /// phases, hash mismatches, and the displayed force's difference in just-noticeable steps.
+    Deadband {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// One-way delays, ms, comma-separated (constant; the scenario's jitter, none at 0).
+        #[arg(long, value_delimiter = ',', value_parser = parse_delay, default_value = "0,100,200,300")]
+        delays_ms: Vec<f64>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmark: physics step, servo step (ns) and simulator speed on a scenario.
     Bench {
         /// Scenario for the speed figure.
@@ -223,6 +236,11 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             let methods = chosen(methods)?;
             crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
         }
+        Command::Deadband {
+            scenario,
+            delays_ms,
+            json,
+        } => crate::deadband::main(&scenario_file::load(&scenario)?, &delays_ms, json)?,
         Command::Bench {
             scenario,
             json,

@@ -511,3 +511,24 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
         assert_eq!(m.local_lag_max_ms, 0.0);
     }
 }
+
+/// `sim deadband` on the paper task at 100 ms: through the perceptual deadband the sites send
+/// fewer than a tenth of their ticks' positions and fewer bytes, every phase still passes, and
+/// the confirmed states agree; the force figures are shares and percentiles of something measured.
+#[test]
+fn the_deadband_sends_a_tenth_of_the_positions_and_the_task_still_passes() {
+    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let rows = coop_tools::deadband::rows(&base, &[100.0]).expect("runs");
+    let r = &rows[0];
+    assert!(r.sent_share > 0.0 && r.sent_share < 0.1, "{r:?}");
+    assert!(r.kbit_s[1] < r.kbit_s[0] && r.kbit_s[1] > 0.0, "{r:?}");
+    assert_eq!(r.phases[1], r.phases_total, "{r:?}");
+    assert_eq!(r.hash_mismatches, 0, "{r:?}");
+    for share in [r.within_jnd, r.baseline_within_jnd] {
+        assert!(share > 0.0 && share <= 1.0, "{r:?}");
+    }
+    assert!(
+        r.p99_jnd.is_finite() && r.baseline_p99_jnd.is_finite(),
+        "{r:?}"
+    );
+}

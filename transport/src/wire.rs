@@ -170,8 +170,10 @@ fn coordinate(t: &ToolTrack, c: usize) -> i32 {
 
 /// Encodes a tool track: [`TRACK_VERSION`], its header words, its carried state's words when it
 /// has one (`has_state` not 0), each in the compact encoding, then its `count` positions: the
-/// first tick's coordinates as zigzag varints, every later tick's as the zigzag varint of its
-/// difference from the tick before.
+/// first tick's coordinates, then every later tick that moved as its difference from the tick
+/// before, each coordinate a zigzag varint; x's shifted left by one, its low bit set when a
+/// varint follows the tick's three with how many ticks after it hold its position (a deadband's
+/// held positions, a tool at rest: one tick's bytes for a run).
 pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
     let words = t.to_words();
     let count = (t.count as usize).min(WINDOW_TICKS);
@@ -186,11 +188,20 @@ pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
             &words[TRACK_STATE_AT..TRACK_POSITIONS_AT],
         );
     }
-    let mut prev = [0i64; 3];
-    for c in 0..3 * count {
-        let v = i64::from(coordinate(t, c));
-        put_varint(&mut out, zigzag(v - prev[c % 3]));
-        prev[c % 3] = v;
+    let at = |k: usize| [0, 1, 2].map(|c| i64::from(coordinate(t, 3 * k + c)));
+    let (mut prev, mut k) = ([0i64; 3], 0);
+    while k < count {
+        let p = at(k);
+        let held = (k + 1..count).take_while(|&h| at(h) == p).count();
+        let d = [0, 1, 2].map(|c| zigzag(p[c] - prev[c]));
+        put_varint(&mut out, d[0] << 1 | u64::from(held > 0));
+        put_varint(&mut out, d[1]);
+        put_varint(&mut out, d[2]);
+        if held > 0 {
+            put_varint(&mut out, held as u64);
+        }
+        prev = p;
+        k += 1 + held;
     }
     out
 }
@@ -218,14 +229,34 @@ pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
     if count > WINDOW_TICKS as u64 {
         return Err(DecodeError::Invalid);
     }
-    let mut prev = [0i64; 3];
-    for c in 0..3 * count as usize {
-        let v = prev[c % 3]
-            .checked_add(unzigzag(rd.varint()?))
-            .and_then(|v| i32::try_from(v).ok())
-            .ok_or(DecodeError::Invalid)?;
-        prev[c % 3] = i64::from(v);
-        words[TRACK_POSITIONS_AT + c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+    let (count, mut k, mut prev) = (count as usize, 0usize, [0i64; 3]);
+    while k < count {
+        let x = rd.varint()?;
+        let d = [
+            unzigzag(x >> 1),
+            unzigzag(rd.varint()?),
+            unzigzag(rd.varint()?),
+        ];
+        let held = if x & 1 == 1 { rd.varint()? } else { 0 };
+        // One encoding: a tick after the first moved (else it is held), a run is not empty and
+        // ends by the count.
+        let run = usize::try_from(held).ok().filter(|&h| h < count - k);
+        if (k > 0 && d == [0; 3]) || (x & 1 == 1 && held == 0) || run.is_none() {
+            return Err(DecodeError::Invalid);
+        }
+        for (p, d) in prev.iter_mut().zip(d) {
+            *p = p
+                .checked_add(d)
+                .filter(|v| i32::try_from(*v).is_ok())
+                .ok_or(DecodeError::Invalid)?;
+        }
+        for tick in k..=k + run.unwrap_or(0) {
+            for (c, &v) in prev.iter().enumerate() {
+                let c = 3 * tick + c;
+                words[TRACK_POSITIONS_AT + c / 2] |= u64::from(v as i32 as u32) << (32 * (c % 2));
+            }
+        }
+        k += 1 + run.unwrap_or(0);
     }
     rd.end()?;
     let t = ToolTrack::from_words(&words);
@@ -450,18 +481,38 @@ mod tests {
         let bytes = encode_track(&t);
         // The version; the header's bitmap (t_ns, seq, site, first_tick, count, confirmed_tick,
         // confirmed_hash: words 0-6; need[0]: word 7); those words as varints; then the
-        // positions: the first tick's zigzagged (-4500 → 8999: 0xa7 0x46; 3 → 6; 1000 → 2000:
-        // 0xd0 0x0f), and each later one's difference (x + 1 → 2, y and z 0).
+        // positions: the first tick's zigzagged (-4500 → 8999, shifted: 17998, no run after it;
+        // 3 → 6; 1000 → 2000), and each later one's difference (x + 1 → 2, shifted: 4; y, z 0).
         let mut want = vec![TRACK_VERSION, 0xff, 0x00, 0x00, 99, 3, 1];
-        for v in [500u64, 20, 480, 77, 471] {
+        for v in [500u64, 20, 480, 77, 471, 17998, 6, 2000] {
             put_varint(&mut want, v);
         }
-        want.extend_from_slice(&[0xa7, 0x46, 6, 0xd0, 0x0f]);
         for _ in 1..20 {
-            want.extend_from_slice(&[2, 0, 0]);
+            want.extend_from_slice(&[4, 0, 0]);
         }
         assert_eq!(bytes, want);
-        assert_eq!(bytes.len(), 77);
+        assert_eq!(bytes.len(), 78);
+        // Held positions (a deadband's, a tool at rest) go as a run: the 5th to the 20th tick
+        // repeat the 4th (its x's low bit set, then 16).
+        let mut held = r;
+        for p in &mut held.positions[4..20] {
+            *p = [-4497, 3, 1000];
+        }
+        let th = ToolTrack::new(1, 3, 99, &held);
+        let hb = encode_track(&th);
+        assert_eq!(hb.len(), bytes.len() - 16 * 3 + 1);
+        assert_eq!(hb[hb.len() - 4..], [5, 0, 0, 16]);
+        assert_eq!(decode_track(&hb), Ok(th));
+        // One encoding: a run of 0, a run past the count, a tick that did not move.
+        for (tail, why) in [
+            (&[5u8, 0, 0, 0][..], "an empty run"),
+            (&[5, 0, 0, 17], "a run past the count"),
+            (&[4, 0, 0, 4, 0, 0, 0, 0, 0], "a tick that did not move"),
+        ] {
+            let mut b = hb[..hb.len() - 4].to_vec();
+            b.extend_from_slice(tail);
+            assert_eq!(decode_track(&b), Err(DecodeError::Invalid), "{why}");
+        }
         assert_eq!(decode_track(&bytes), Ok(t));
         assert_eq!(
             t.report().map(|(_, r2)| r2),
@@ -550,7 +601,7 @@ mod tests {
         assert_eq!(decode_track(&encode_track(&bad)), Err(DecodeError::Invalid));
         // A coordinate past an i32 (the difference overflows it).
         let mut far = bytes[..bytes.len() - 3].to_vec();
-        put_varint(&mut far, zigzag(i64::from(i32::MAX)));
+        put_varint(&mut far, zigzag(i64::from(i32::MAX)) << 1);
         far.extend_from_slice(&[0, 0]);
         assert_eq!(decode_track(&far), Err(DecodeError::Invalid));
         // The longest track: every header and state word nonzero and at its longest, 256

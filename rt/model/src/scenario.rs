@@ -146,6 +146,8 @@ pub struct TimewarpSpec {
     /// every object (false): the same bits either way, only the cost differs (see
     /// `method/timewarp/islands.rs`; `sim bench` times both).
     pub islands: bool,
+    /// A perceptual deadband on the own tool's positions (`[timewarp.deadband]`; off by default).
+    pub deadband: crate::method::timewarp::DeadbandSpec,
 }
 
 impl Default for TimewarpSpec {
@@ -155,6 +157,7 @@ impl Default for TimewarpSpec {
             local_lag_share: crate::method::timewarp::LOCAL_LAG_SHARE,
             local_lag_max_ms: crate::method::timewarp::LOCAL_LAG_MAX_TICKS as f64,
             islands: true,
+            deadband: crate::method::timewarp::DeadbandSpec::default(),
         }
     }
 }
@@ -829,6 +832,38 @@ impl Scenario {
                 format!("must be from 0 to {most} ms"),
             ));
         }
+        let d = &tw.deadband;
+        let rules: [(&str, f64, bool, &str); 4] = [
+            (
+                "timewarp.deadband.weber_fraction",
+                d.weber_fraction,
+                d.weber_fraction > 0.0 && d.weber_fraction <= 1.0,
+                "must be above 0 and at most 1 (a share of the contact force)",
+            ),
+            (
+                "timewarp.deadband.floor_n",
+                d.floor_n,
+                d.floor_n > 0.0 && d.floor_n <= 10.0,
+                "must be above 0 and at most 10 N",
+            ),
+            (
+                "timewarp.deadband.near_m",
+                d.near_m,
+                (0.0..=1.0).contains(&d.near_m),
+                "must be from 0 to 1 m",
+            ),
+            (
+                "timewarp.deadband.free_space_m",
+                d.free_space_m,
+                d.free_space_m > 0.0 && d.free_space_m <= 0.1,
+                "must be above 0 and at most 0.1 m",
+            ),
+        ];
+        for (field, value, ok, rule) in rules {
+            if !(value.is_finite() && ok) {
+                return Err(err(field, value, rule));
+            }
+        }
         Ok(())
     }
 
@@ -1170,6 +1205,9 @@ impl Scenario {
             (self.timewarp.local_lag_max_ms * 1e-3 / dt).round() as i64,
         );
         tw.set_islands(self.timewarp.islands);
+        if self.timewarp.deadband.enabled {
+            tw.set_deadband(self.timewarp.deadband);
+        }
         // Every user pressing the object into one plane with all the device's force, and its
         // weight: per plane at most that force's depth, ½ F² / K each.
         let press = self

@@ -257,7 +257,8 @@ fn every_method_on_the_most_objects_steps_reports_and_receives_without_allocatin
 
 /// `timewarp` on the largest world rolls back without allocating: two sites whose tools move
 /// through a heap of sixteen cubes, each one's track reaching the other 30 ticks late, so every
-/// report rolls the other back over the objects the late tool reaches.
+/// report rolls the other back over the objects the late tool reaches; one of them sends its
+/// tool through the perceptual deadband.
 #[test]
 fn timewarp_rollbacks_on_the_most_objects_allocate_nothing() {
     use coop_model::method::TimeWarp;
@@ -266,10 +267,15 @@ fn timewarp_rollbacks_on_the_most_objects_allocate_nothing() {
     let start = WorldCopy::new(&states);
     let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..2)
         .map(|i| {
-            (
-                TimeWarp::new(i, 2, 1e-3, contact(), radii, 200, &start),
-                start.clone(),
-            )
+            let mut tw = TimeWarp::new(i, 2, 1e-3, contact(), radii, 200, &start);
+            // Site 1 sends its tool through the perceptual deadband (its filter is on the path).
+            if i == 1 {
+                tw.set_deadband(coop_model::method::timewarp::DeadbandSpec {
+                    enabled: true,
+                    ..Default::default()
+                });
+            }
+            (tw, start.clone())
         })
         .collect();
     // Reports in flight: (due tick, from, to, report), a fixed ring.

@@ -76,4 +76,8 @@ pub struct RollbackStats {
     pub max_local_lag_ticks: u64,
     /// ... and the ticks simulated with a lag.
     pub lagged_ticks: u64,
+    /// With a perceptual deadband (`[timewarp.deadband]`): the own ticks stepped...
+    pub deadband_ticks: u64,
+    /// ... and the own positions sent (that left the band; the others were held).
+    pub deadband_samples: u64,
 }

@@ -74,6 +74,7 @@
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
 //! same platform gives the same bits; see the crate docs on transcendental functions).
 
+mod deadband;
 mod hash;
 mod islands;
 mod lag;
@@ -81,6 +82,7 @@ mod predict;
 mod replay;
 mod window;
 
+pub use deadband::DeadbandSpec;
 pub use hash::{hash_state, hash_world};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
 pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_LAG_TICKS};
@@ -210,6 +212,8 @@ pub struct TimeWarp {
     scratch_sketch: islands::Sketch,
     /// Whether a re-simulation steps only what a changed input reaches ([`islands`]).
     islands: bool,
+    /// The own positions' perceptual deadband, when on ([`deadband`]).
+    deadband: Option<deadband::Deadband>,
 }
 
 impl TimeWarp {
@@ -280,7 +284,19 @@ impl TimeWarp {
             sketches: vec![islands::Sketch::EMPTY; len].into_boxed_slice(),
             scratch_sketch: islands::Sketch::EMPTY,
             islands: true,
+            deadband: None,
         }
+    }
+
+    /// Sends (and steps with) the own tool's positions through a perceptual deadband
+    /// (`[timewarp.deadband]`, [`deadband`]).
+    pub fn set_deadband(&mut self, spec: DeadbandSpec) {
+        self.deadband = Some(deadband::Deadband::new(spec));
+    }
+
+    /// With a deadband: the own ticks stepped, and the positions sent (that left the band).
+    pub fn deadband_samples(&self) -> Option<(u64, u64)> {
+        self.deadband.map(|d| (d.ticks, d.samples))
     }
 
     /// This site's physics process started at session tick `tick` (a restart, a late station):
@@ -598,6 +614,19 @@ impl Consistency for TimeWarp {
         _dt: f64,
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if let Some(mut d) = self.deadband {
+            let objects = copy.len().min(world.bodies().len());
+            let own = (0..objects).map(|k| self.users[k * self.sites + self.me]);
+            let width = d.width_m(
+                (world, copy),
+                &self.contact,
+                position(self.own),
+                self.radii[self.me],
+                own,
+            );
+            self.own = d.filter(self.own, width);
+            self.deadband = Some(d);
+        }
         self.tick(world, copy);
         self.advance_replay();
         self.want_lag(world, copy);
@@ -780,7 +809,11 @@ impl Consistency for TimeWarp {
         }
     }
     fn stats(&self) -> Stats {
-        Stats::Rollback(self.stats)
+        let mut st = self.stats;
+        if let Some(d) = self.deadband {
+            (st.deadband_ticks, st.deadband_samples) = (d.ticks, d.samples);
+        }
+        Stats::Rollback(st)
     }
     fn grid_history_ticks(&self) -> Option<u64> {
         Some(self.history_ticks() as u64)

@@ -104,6 +104,91 @@ fn the_local_lag_is_configured_and_checked() {
     }
 }
 
+/// `[timewarp.deadband]` is off by default, turns the site's deadband on, and out of range is
+/// refused with the field and the rule.
+#[test]
+fn the_deadband_is_configured_and_checked() {
+    let mut sc = two_users();
+    sc.validate().expect("defaults");
+    let copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    assert!(sc.timewarp(0, &copy).deadband.is_none(), "off by default");
+    sc.timewarp.deadband.enabled = true;
+    sc.validate().expect("on");
+    assert!(sc.timewarp(0, &copy).deadband.is_some());
+    type Field = fn(&mut DeadbandSpec) -> &mut f64;
+    let fields: [(&str, Field, f64); 4] = [
+        ("weber_fraction", |d| &mut d.weber_fraction, 0.0),
+        ("floor_n", |d| &mut d.floor_n, -1.0),
+        ("near_m", |d| &mut d.near_m, f64::NAN),
+        ("free_space_m", |d| &mut d.free_space_m, 0.5),
+    ];
+    for (name, field, bad) in fields {
+        let mut bad_sc = sc.clone();
+        *field(&mut bad_sc.timewarp.deadband) = bad;
+        let e = bad_sc.validate().expect_err("refused");
+        assert_eq!(e.field, format!("timewarp.deadband.{name}"), "{e}");
+    }
+}
+
+/// Both sites send their tools through the deadband while site 1's sweeps into the disk: most
+/// ticks hold the last position sent, the tracks carry those held positions (runs), and every
+/// site steps the same inputs: the confirmed states agree to the bit.
+#[test]
+fn held_positions_are_every_site_s_inputs() {
+    let (sc, w) = paper_world();
+    let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+    let mut radii = [0.0; MAX_SITES];
+    radii[..2].fill(0.005);
+    let mut sites = [0, 1].map(|i| {
+        let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start);
+        tw.set_deadband(DeadbandSpec {
+            enabled: true,
+            ..DeadbandSpec::default()
+        });
+        (tw, start.clone())
+    });
+    let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+    let mut held_runs = 0;
+    for k in 0..3000i64 {
+        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+            for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
+                tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
+            }
+            tw.own_tool(sweep_into_the_disk(i, k));
+            tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
+        }
+        in_flight.retain(|m| m.0 > k);
+        if k % 20 == 0 {
+            for (i, (tw, _)) in sites.iter().enumerate() {
+                let mut r = tw.track_report();
+                if let Report::Tools(t) = &mut r {
+                    t.seq = (k / 20 + 1) as u64;
+                    held_runs += t.positions[..t.count]
+                        .windows(2)
+                        .filter(|p| p[0] == p[1])
+                        .count();
+                }
+                in_flight.push((k + 50, i, r));
+            }
+        }
+    }
+    let [(a, ca), (b, cb)] = &sites;
+    for (name, tw) in [("site 0", a), ("site 1", b)] {
+        let st = tw.rollback_stats();
+        assert!(st.hash_checks > 50, "{name}: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "{name}: {st:?}");
+        let (ticks, samples) = tw.deadband_samples().expect("on");
+        assert_eq!(ticks, 3000);
+        assert!(samples * 5 < ticks, "{name}: {samples} of {ticks} sent");
+    }
+    assert!(held_runs > 1000, "held positions travel: {held_runs}");
+    let moved = ca.first().state.pos.x;
+    assert!(moved < -1e-3, "the sweep pushed the disk: {moved}");
+    let t = a.confirmed_tick().min(b.confirmed_tick());
+    assert_eq!(a.hash_at(t), b.hash_at(t));
+    assert_eq!(ca.first().state, cb.first().state);
+}
+
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
 /// depth up to 50 ticks, on every tick) always arrives at the same bits.
 #[test]

@@ -1,0 +1,150 @@
+//! A perceptual deadband on the own tool's positions (opt-in: `[timewarp.deadband]`).
+//!
+//! The perceptual deadband coding of haptic streams (Hinterseer et al. 2008; IEEE 1918.1.1)
+//! sends a sample only when it leaves a just-noticeable band around the last one sent. Here the
+//! sample is the own tool's position, the input every site steps the world with. The band is
+//! haptic while the tool is near an object or touches one: the position change that changes the
+//! tool's contact force by a Weber fraction of it (`weber_fraction` × |F| / K, the penalty
+//! contact's stiffness K), never below the change an absolute force floor makes (`floor_n` / K);
+//! in free space it is coarser, `free_space_m`. Inside the band the input stays the last one
+//! sent (zero-order hold). The held position *is* the tick's input, at this site as at every
+//! other (the track carries it, and the wire sends a run of held ticks in a few bytes), exactly
+//! as the 0.01 mm quantization is the input: every site steps the same bits, and a rollback
+//! re-simulates the held positions it stepped before.
+
+use crate::body::Vec3;
+use crate::contact::{ContactForce, ContactParams};
+use crate::world::World;
+#[cfg(feature = "serde")]
+use serde::Deserialize;
+
+use super::super::copy::WorldCopy;
+use super::super::track::{position, Quantized, QUANTUM_M};
+
+/// A perceptual deadband on the tool positions a `timewarp` site sends and steps with
+/// (`[timewarp.deadband]`; see `method/timewarp/deadband.rs`): a position is sent when it leaves
+/// a band around the last one sent, and held in between.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(deny_unknown_fields, default)
+)]
+pub struct DeadbandSpec {
+    /// On (default off: every tick's position is sent).
+    pub enabled: bool,
+    /// Near or touching an object: the position change that changes the tool's contact force by
+    /// this fraction of it is the band (a Weber fraction, 0 to 1; default 0.1).
+    pub weber_fraction: f64,
+    /// ... never narrower than the change that makes this force, N (an absolute threshold, above
+    /// 0; default 0.05 N).
+    pub floor_n: f64,
+    /// Within this of an object's bounding sphere the tool is near it, m (0 to 1; default 0.01).
+    pub near_m: f64,
+    /// The band's half width in free space, m (above 0, at most 0.1; default 0.002).
+    pub free_space_m: f64,
+}
+
+impl Default for DeadbandSpec {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            weber_fraction: 0.1,
+            floor_n: 0.05,
+            near_m: 0.01,
+            free_space_m: 0.002,
+        }
+    }
+}
+
+/// The deadband's state: the last position sent, and what it did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deadband {
+    spec: DeadbandSpec,
+    held: Option<Quantized>,
+    /// Own ticks stepped, and those whose position left the band (a new sample).
+    pub ticks: u64,
+    pub samples: u64,
+}
+
+impl Deadband {
+    pub fn new(spec: DeadbandSpec) -> Self {
+        Self {
+            spec,
+            held: None,
+            ticks: 0,
+            samples: 0,
+        }
+    }
+
+    /// The band's half width, m, for the own tool at `tool` (radius `radius`) with its last
+    /// tick's contacts `own` (one per object), in `world` as `copy` has it.
+    pub fn width_m(
+        &self,
+        (world, copy): (&World, &WorldCopy),
+        contact: &ContactParams,
+        tool: Vec3,
+        radius: f64,
+        own: impl Iterator<Item = ContactForce>,
+    ) -> f64 {
+        let s = &self.spec;
+        let mut force = 0.0;
+        let mut near = false;
+        for (c, (body, object)) in own.zip(world.bodies().iter().zip(copy.objects())) {
+            force += c.force.norm();
+            near |= c.touching
+                || (tool - object.state.pos).norm() - body.shape.bounding_radius() - radius
+                    < s.near_m;
+        }
+        if near {
+            (s.weber_fraction * force).max(s.floor_n) / contact.stiffness_n_per_m
+        } else {
+            s.free_space_m
+        }
+    }
+
+    /// The input for a tick whose measured position is `q`: `q` if it leaves the band of half
+    /// width `width_m` around the last sent one (or none was sent), else the last sent.
+    pub fn filter(&mut self, q: Quantized, width_m: f64) -> Quantized {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.ticks += 1;
+        let leaves = self.held.is_none_or(|h| {
+            let d = position(q) - position(h);
+            // (Compared in quanta, squared: integers in f64, exact.)
+            let limit = width_m / QUANTUM_M;
+            d.norm_squared() / (QUANTUM_M * QUANTUM_M) > limit * limit
+        });
+        if leaves {
+            self.held = Some(q);
+            self.samples += 1;
+        }
+        self.held.unwrap_or(q)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_position_is_sent_only_when_it_leaves_the_band() {
+        let mut d = Deadband::new(DeadbandSpec {
+            enabled: true,
+            ..DeadbandSpec::default()
+        });
+        assert_eq!(
+            d.filter([0, 0, 1000], 1e-3),
+            [0, 0, 1000],
+            "the first is sent"
+        );
+        // 0.5 mm away: inside a 1 mm band, held.
+        assert_eq!(d.filter([50, 0, 1000], 1e-3), [0, 0, 1000]);
+        assert_eq!(d.filter([0, 70, 1000], 1e-3), [0, 0, 1000]);
+        // 1.2 mm: out, sent, and the band moves with it.
+        assert_eq!(d.filter([120, 0, 1000], 1e-3), [120, 0, 1000]);
+        assert_eq!(d.filter([100, 0, 1000], 1e-3), [120, 0, 1000]);
+        // A narrower band (in contact) lets less through.
+        assert_eq!(d.filter([100, 0, 1000], 1e-4), [100, 0, 1000]);
+        assert_eq!((d.ticks, d.samples), (6, 3));
+    }
+}
