@@ -927,6 +927,10 @@ fn a_tray_carried_through_the_router_heals_after_a_partition_during_the_carry() 
             && y.hash_checks >= up_at.1.hash_checks + 20)
             .then_some((x, y))
     });
+    eprintln!(
+        "the comparisons after the partition: {} ticks after the link came back",
+        settled.0.ticks.saturating_sub(up_at.0.ticks)
+    );
     let after = wait_until("40 more comparisons at each", LIMIT, || {
         let (x, y) = (rollback("user1")?, rollback("user2")?);
         (x.hash_checks >= settled.0.hash_checks + 40 && y.hash_checks >= settled.1.hash_checks + 40)

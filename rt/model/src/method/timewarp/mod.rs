@@ -9,7 +9,8 @@
 //! tool's positions since its last report and those of the few reports before (so a lost report
 //! or two lose nothing; more while its receivers ask for gaps: [`MAX_REDUNDANCY`]). When more is
 //! lost in a row, the receiver holds later positions but not the gap's: it asks for the gap
-//! ([`ToolReport::need`]) and the sender sends [`WINDOW_TICKS`] from there in every other report.
+//! ([`ToolReport::need`]) and the sender sends [`WINDOW_TICKS`] from there besides the newest in
+//! every report.
 //!
 //! The copy's full state (body, momenta, environment friction memory, every tool's friction
 //! memory) is kept for every tick of the horizon. When a received position differs from what was
@@ -155,8 +156,6 @@ pub struct TimeWarp {
     asked: [i64; MAX_SITES],
     /// Per site: the gap its frontier waits at was given up (counted once).
     given_up: [bool; MAX_SITES],
-    /// Whether the last report repaired a gap (repairs alternate with the newest window).
-    repaired_last: std::cell::Cell<bool>,
     /// What the own tracks sent and how much of it they send again ([`Redundancy`]).
     sent: std::cell::Cell<Redundancy>,
     /// Per site: the share of its reports this site loses.
@@ -254,7 +253,6 @@ impl TimeWarp {
             newest: [-1; MAX_SITES],
             asked: [-1; MAX_SITES],
             given_up: [false; MAX_SITES],
-            repaired_last: std::cell::Cell::new(false),
             sent: std::cell::Cell::new(Redundancy::START),
             lost: [LossMeter::default(); MAX_SITES],
             losing: [0; MAX_SITES],
@@ -529,39 +527,49 @@ impl TimeWarp {
 }
 
 impl TimeWarp {
-    /// The own tool's track and the confirmed frontier (see [`Consistency::report`]).
+    /// The own tool's newest ticks (and the last reports' again: [`window`]) and the confirmed
+    /// frontier (see [`Consistency::report`]).
     fn track_report(&self) -> Report {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
         // this site's history starts at: it was not here.)
         let end = self.now_tick;
-        // The newest ticks and the last few reports' again (`window`).
         let mut sent = self.sent.get();
-        let window = sent.window_start(end, self.origin_tick);
-        // A peer that lost more reports in a row than that asked for the first tick it lacks:
-        // every other report sends the window from there instead (while it is still kept), so
-        // the newest positions keep flowing and the peer's frontier can pass the gap.
+        let first = sent.window_start(end, self.origin_tick);
+        sent.sent(end);
+        self.sent.set(sent);
+        self.track_from(first, true)
+    }
+
+    /// A peer that lost more reports in a row than the newest window covers asked for the first
+    /// tick it lacks: a track from there ([`WINDOW_TICKS`] of them), sent besides the newest
+    /// window in every report while it asks and the ticks are still kept, so the newest
+    /// positions keep flowing and the peer's frontier can pass the gap. `window`: where the
+    /// newest window starts.
+    fn repair_report(&self, window: i64) -> Option<Report> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let oldest = self.oldest_kept();
-        let repair = (0..self.sites)
+        let first = (0..self.sites)
             .filter(|&j| j != self.me)
             .map(|j| self.asked[j])
             .filter(|&t| t >= oldest && t < window)
-            .min()
-            .filter(|_| !self.repaired_last.get());
-        self.repaired_last.set(repair.is_some());
-        if repair.is_none() {
-            sent.sent(end);
-            self.sent.set(sent);
-        }
-        let first = repair.unwrap_or(window);
-        let count = (end - first).min(WINDOW_TICKS as i64);
+            .min()?;
+        Some(self.track_from(first, false))
+    }
+
+    /// A track of the own positions from tick `first` to now (at most [`WINDOW_TICKS`]), with
+    /// the confirmed frontier and what this site asks for; `with_state`: and the confirmed state
+    /// while a site asks for it.
+    fn track_from(&self, first: i64, with_state: bool) -> Report {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let count = (self.now_tick - first).min(WINDOW_TICKS as i64);
         let mut r = ToolReport {
             first_tick: first,
             count: count as usize,
             positions: [[0; 3]; WINDOW_TICKS],
-            // A repair's window ends before the frontier: the frontier (and its hash and state)
-            // is given at the window's end, a tick the sender has confirmed too, so that no
-            // report names a frontier past the last position it carries (the wire's rule,
+            // A repair's window ends before the frontier: the frontier (and its hash) is given
+            // at the window's end, a tick the sender has confirmed too, so that no report names
+            // a frontier past the last position it carries (the wire's rule,
             // `coop_rt::msg::ToolTrack::report`: a station refused every repair before).
             // (Nor past the last tick simulated: a site whose grid runs behind the others' knows
             // their positions beyond its own tick, and its frontier is then a state it has not
@@ -584,7 +592,9 @@ impl TimeWarp {
         r.confirmed_hash = self.hash_at(r.confirmed_tick).unwrap_or(0);
         // (Its first object: the others follow in reports of their own, `Consistency::report`.)
         let t = r.confirmed_tick;
-        r.state = (self.state_asked.iter().any(|&a| a) && self.slots[self.idx(t)].tick == t)
+        r.state = (with_state
+            && self.state_asked.iter().any(|&a| a)
+            && self.slots[self.idx(t)].tick == t)
             .then(|| self.snapshot_at(t, 0, r.confirmed_hash));
         for j in (0..self.sites).filter(|&j| j != self.me) {
             if self.newest[j] > self.known_until[j] {
@@ -637,6 +647,10 @@ impl Consistency for TimeWarp {
     /// whole state travels at once and arrives while its tick is still kept.
     fn report(&self, _copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let window = self
+            .sent
+            .get()
+            .window_start(self.now_tick, self.origin_tick);
         let first = self.track_report();
         let rest = match &first {
             Report::Tools(r) => r.state.map(|s| (*r, s)),
@@ -656,6 +670,9 @@ impl Consistency for TimeWarp {
                     ..r
                 }));
             }
+        }
+        if let Some(repair) = self.repair_report(window) {
+            out(repair);
         }
     }
     fn receive(

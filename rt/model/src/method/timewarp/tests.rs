@@ -616,6 +616,7 @@ fn two_sites(
         (tw, start.clone())
     });
     let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
+    let mut seqs = [0u64; 2];
     for k in 0..ticks {
         for (i, (tw, copy)) in sites.iter_mut().enumerate() {
             for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
@@ -627,15 +628,20 @@ fn two_sites(
         in_flight.retain(|m| m.0 > k);
         if k % 20 == 0 {
             for i in 0..2 {
-                let (tw, _) = &sites[i];
-                let mut r = tw.track_report();
-                if let Report::Tools(t) = &mut r {
-                    // Numbered as the wire numbers tracks.
-                    t.seq = (k / 20 + 1) as u64;
-                    seen(i, t, k, &sites);
-                }
-                if !lost(i, k) {
-                    in_flight.push((k + delay, i, r));
+                // Every track of the report (the newest window; a repair while one is asked
+                // for), numbered as the wire numbers tracks; a lost report loses them all.
+                let mut tracks = Vec::new();
+                let (tw, copy) = &sites[i];
+                tw.report(copy, &[], 0.0, &mut |r| tracks.push(r));
+                for mut r in tracks {
+                    if let Report::Tools(t) = &mut r {
+                        seqs[i] += 1;
+                        t.seq = seqs[i];
+                        seen(i, t, k, &sites);
+                    }
+                    if !lost(i, k) {
+                        in_flight.push((k + delay, i, r));
+                    }
                 }
             }
         }
