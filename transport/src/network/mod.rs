@@ -377,7 +377,7 @@ impl Loop {
         }
         publish.count_replies(traffic);
         if let Some((p, ring)) = &mut self.tracks {
-            p.newest(ring, traffic);
+            p.all(ring, traffic);
         }
         let now = monotonic_ns();
         let (log, peers) = {

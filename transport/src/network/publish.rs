@@ -197,13 +197,14 @@ impl Publish {
 }
 
 /// This site's tool-track key (methods that exchange tools): each track is put as it comes, at
-/// the state's QoS. Only the newest waiting one: a track repeats the last 256 ticks, so a newer
-/// one holds everything an older one said.
+/// the state's QoS, every one: a track carries the ticks since the last report (and a few
+/// reports' again), a repair or a world's other objects' states, so an older waiting one says
+/// what a newer one may not. Only a stale one (older than a state may be) is skipped.
 pub(super) struct TrackPublish {
     publisher: Publisher<'static>,
     /// Tracks published.
     pub(super) published: u64,
-    /// Tracks not published: replaced by a newer one, or stale.
+    /// Tracks not published: stale.
     pub(super) stale_skipped: u64,
 }
 
@@ -226,21 +227,9 @@ impl TrackPublish {
         })
     }
 
-    /// Publishes the newest fresh track in `tracks`, with the world's other objects' states
-    /// that physics sent after it (the same report: a confirmed state travels whole); counted in
-    /// `traffic`.
-    pub(super) fn newest(&mut self, tracks: &mut Consumer<ToolTrack>, traffic: &Traffic) {
-        let mut burst: Vec<ToolTrack> = Vec::new();
+    /// Publishes every fresh track waiting in `tracks`, in order; counted in `traffic`.
+    pub(super) fn all(&mut self, tracks: &mut Consumer<ToolTrack>, traffic: &Traffic) {
         while let Ok(t) = tracks.pop() {
-            // A track of the world's first object (or none) starts a report; the others' states
-            // follow it in tracks with no positions.
-            if t.has_state == 0 || t.state_object == 0 {
-                self.stale_skipped += burst.len() as u64;
-                burst.clear();
-            }
-            burst.push(t);
-        }
-        for t in burst {
             if monotonic_ns().saturating_sub(t.t_ns) > STALE_REPORT_NS {
                 self.stale_skipped += 1;
                 continue;
