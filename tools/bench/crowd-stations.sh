@@ -16,35 +16,13 @@
 #   --quick: --sites 2 (CI smoke run).
 # Goal: the crowd's physics compute p99 inside its 1 ms period, no overruns.
 set -euo pipefail
-sites=8; method=timewarp
-while [ $# -gt 0 ]; do
-  case "$1" in
-    --quick) sites=2 ;;
-    --sites) sites="$2"; shift ;;
-    --method) method="$2"; shift ;;
-    -h|--help) sed -n '2,/^[^#]/{/^#/p}' "$0"; exit 0 ;;
-    *) echo "unknown argument: $1 (see --help)" >&2; exit 2 ;;
-  esac
-  shift
-done
-root=$(cd "$(dirname "$0")/../.." && pwd)
-cargo build --release --quiet --manifest-path "$root/Cargo.toml" -p coop-tools --bin session --bin station
-target=${CARGO_TARGET_DIR:-$root/target}
-work=$(mktemp -d)
+# shellcheck source=crowd-common.sh
+source "$(dirname "$0")/crowd-common.sh" "$@"
 trap 'rm -rf "$work"' EXIT
 crowd="$root/scenarios/crowd.toml"
 if [ "$sites" != 8 ]; then
   # The crowd's first N users, and the phases about those only.
-  python3 - "$crowd" "$work/crowd$sites.toml" "$sites" <<'PY'
-import re, sys
-text = open(sys.argv[1]).read()
-head, *blocks = re.split(r'(?m)^(?=\[\[(?:site|phase)\]\])', text)
-sites = [b for b in blocks if b.startswith("[[site]]")][:int(sys.argv[3])]
-names = [re.search(r'(?m)^name\s*=\s*"([^"]+)"', s).group(1) for s in sites]
-phases = [b for b in blocks if b.startswith("[[phase]]")
-          and all(n in names for n in re.findall(r'"(user\d+)"', b))]
-open(sys.argv[2], "w").write(head + "".join(sites) + "".join(phases))
-PY
+  python3 "$root/tools/bench/crowd-subset.py" "$crowd" "$work/crowd$sites.toml" "$sites"
   crowd="$work/crowd$sites.toml"
 fi
 echo "# real stations, method $method, $(nproc) CPUs, commit $(git -C "$root" rev-parse --short HEAD)"

@@ -135,43 +135,26 @@ fn the_deadband_is_configured_and_checked() {
 /// site steps the same inputs: the confirmed states agree to the bit.
 #[test]
 fn held_positions_are_every_site_s_inputs() {
-    let (sc, w) = paper_world();
-    let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
-    let mut radii = [0.0; MAX_SITES];
-    radii[..2].fill(0.005);
-    let mut sites = [0, 1].map(|i| {
-        let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, 600, &start);
-        tw.set_deadband(DeadbandSpec {
-            enabled: true,
-            ..DeadbandSpec::default()
-        });
-        (tw, start.clone())
-    });
-    let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
     let mut held_runs = 0;
-    for k in 0..3000i64 {
-        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
-            for (_, from, r) in in_flight.iter().filter(|m| m.0 == k && m.1 != i) {
-                tw.receive(&w, copy, *from, r, k as f64 * 1e-3);
-            }
-            tw.own_tool(sweep_into_the_disk(i, k));
-            tw.physics_step(&w, copy, &[ContactForce::default()], 1e-3);
-        }
-        in_flight.retain(|m| m.0 > k);
-        if k % 20 == 0 {
-            for (i, (tw, _)) in sites.iter().enumerate() {
-                let mut r = tw.track_report();
-                if let Report::Tools(t) = &mut r {
-                    t.seq = (k / 20 + 1) as u64;
-                    held_runs += t.positions[..t.count]
-                        .windows(2)
-                        .filter(|p| p[0] == p[1])
-                        .count();
-                }
-                in_flight.push((k + 50, i, r));
-            }
-        }
-    }
+    let sites = two_sites(
+        600,
+        |_, tw| {
+            tw.set_deadband(DeadbandSpec {
+                enabled: true,
+                ..DeadbandSpec::default()
+            })
+        },
+        3000,
+        sweep_into_the_disk,
+        50,
+        |_, _| false,
+        |_, t, _, _| {
+            held_runs += t.positions[..t.count]
+                .windows(2)
+                .filter(|p| p[0] == p[1])
+                .count();
+        },
+    );
     let [(a, ca), (b, cb)] = &sites;
     for (name, tw) in [("site 0", a), ("site 1", b)] {
         let st = tw.rollback_stats();
@@ -592,14 +575,14 @@ fn stations_started_apart_compare_their_confirmed_states() {
     }
 }
 
-/// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's physics started at
-/// tick `started_tick[i]`, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
+/// Two sites of the disk at rest, 1 kHz, `history` ticks kept, site i's method set up by
+/// `configure(i, _)`, for `ticks` ticks: site i's tool at `tool(i, k)`, a report every 20
 /// ticks arriving `delay` ticks later unless `lost(from, k)`; `seen(i, report, k)` sees every
 /// report sent.
 #[allow(clippy::too_many_arguments)]
 fn two_sites(
     history: usize,
-    started_tick: [u64; 2],
+    configure: impl Fn(usize, &mut TimeWarp),
     ticks: i64,
     tool: impl Fn(usize, i64) -> Vec3,
     delay: i64,
@@ -612,7 +595,7 @@ fn two_sites(
     radii[..2].fill(0.005);
     let mut sites = [0, 1].map(|i| {
         let mut tw = TimeWarp::new(i, 2, 1e-3, sc.contact, radii, history, &start);
-        tw.set_started_tick(started_tick[i]);
+        configure(i, &mut tw);
         (tw, start.clone())
     });
     let mut in_flight: Vec<(i64, usize, Report)> = Vec::new();
@@ -674,7 +657,7 @@ fn a_gap_of_lost_reports_is_asked_for_and_sent_again() {
     let mut asked = false;
     let sites = two_sites(
         1000,
-        [0, 0],
+        |_, _| {},
         3000,
         sweep_into_the_disk,
         100,
@@ -711,7 +694,7 @@ fn at_thirty_percent_loss_short_tracks_lose_nothing() {
     let (mut counts, mut repairs, mut asked) = (Vec::new(), 0, 0);
     let sites = two_sites(
         1000,
-        [0, 0],
+        |_, _| {},
         3000,
         sweep_into_the_disk,
         30,
@@ -727,7 +710,7 @@ fn at_thirty_percent_loss_short_tracks_lose_nothing() {
     );
     let clean = two_sites(
         1000,
-        [0, 0],
+        |_, _| {},
         3000,
         sweep_into_the_disk,
         30,
@@ -789,7 +772,7 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
         // Site 1 → site 0 is down for 1.2 s, twice the history.
         let sites = two_sites(
             600,
-            started_tick,
+            |i, tw| tw.set_started_tick(started_tick[i]),
             4000,
             sweep_into_the_disk,
             50,
@@ -842,7 +825,7 @@ fn a_state_deep_in_the_table_is_not_adopted() {
     let (_, w) = paper_world();
     let mut sites = two_sites(
         600,
-        [0, 0],
+        |_, _| {},
         500,
         |_, _| Vec3::new(0.2, 0.0, 0.01),
         10,
