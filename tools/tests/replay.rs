@@ -145,12 +145,23 @@ fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
     session(&dir.join("replay.toml"), &second);
     let replayed = load_trajectory(&second.join("paper/user1.mcap")).expect("second user1");
     // Compare over the session (both are timed from their session's start).
-    let (mut errors, mut travel, mut last) = (Vec::new(), 0.0, None::<Vec3>);
+    let (mut errors, mut off_path, mut travel, mut last) =
+        (Vec::new(), Vec::new(), 0.0, None::<Vec3>);
     let end = recorded.end_s().min(replayed.end_s());
     let mut t = 0.0;
     while t <= end {
         let (a, b) = (recorded.at(t).0, replayed.at(t).0);
         errors.push((a - b).norm());
+        // A station's trace samples the newest tool sample physics has: a servo period old, or
+        // as old as the servo was kept from running on a loaded machine (a shared CPU stalls it
+        // for tens of ms now and then). So where the replayed tool was, the recorded hand was at
+        // most `STALE_S` before (or a few ms after: the two sessions' time 0s are each taken
+        // with a measured clock offset): the distance to that stretch of the recorded path.
+        const STALE_S: f64 = 0.1;
+        let nearest = (-5..=100)
+            .map(|ms| (recorded.at(t - STALE_S * f64::from(ms) / 100.0).0 - b).norm())
+            .fold(f64::INFINITY, f64::min);
+        off_path.push(nearest);
         if let Some(l) = last {
             travel += (b - l).norm();
         }
@@ -160,17 +171,20 @@ fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
     assert!(errors.len() > 500, "the sessions overlap ({end} s)");
     assert!(travel > 0.1, "the replayed hand moved ({travel} m)");
     errors.sort_by(f64::total_cmp);
+    off_path.sort_by(f64::total_cmp);
     let (median, worst) = (errors[errors.len() / 2], errors[errors.len() - 1]);
+    let farthest = off_path[off_path.len() - 1];
     eprintln!(
-        "replayed on a station: {} points over {end:.1} s, travel {travel:.3} m, error median {:.3} mm, worst {:.3} mm",
+        "replayed on a station: {} points over {end:.1} s, travel {travel:.3} m, error median {:.3} mm, worst {:.3} mm at the same time, {:.3} mm off the recorded path",
         errors.len(),
         median * 1e3,
-        worst * 1e3
+        worst * 1e3,
+        farthest * 1e3
     );
-    // A station's trace samples the newest tool sample physics has: up to a servo period old.
     assert!(
-        median < 1e-3 && worst < 5e-3,
-        "replayed tool off the recorded one: median {median} m, worst {worst} m"
+        median < 1e-3 && farthest < 5e-3,
+        "replayed tool off the recorded one: median {median} m, {farthest} m off the path \
+         (worst at the same time {worst} m)"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
