@@ -543,7 +543,7 @@ impl ToolTrack {
             out.lay_out_state(&snap);
         }
         for (c, &v) in r.positions[..count].iter().flatten().enumerate() {
-            out.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+            out.put_coordinate(c, v);
         }
         out
     }
@@ -605,9 +605,14 @@ impl ToolTrack {
         }
     }
 
-    /// Coordinate `c` (of `3 * count`).
-    fn coordinate(&self, c: usize) -> i32 {
+    /// Coordinate `c` (of `3 * count`: x, y, z of tick `first_tick + c / 3`).
+    pub fn coordinate(&self, c: usize) -> i32 {
         (self.positions[c / 2] >> (32 * (c % 2))) as u32 as i32
+    }
+
+    /// Lays out coordinate `c` as `v` (its half of the word must be 0).
+    pub fn put_coordinate(&mut self, c: usize, v: i32) {
+        self.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
     }
 
     /// The sender and the model's report, or `None` for a site out of range, more than

@@ -12,7 +12,7 @@
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
-use coop_model::metrics::{self, Metrics};
+use coop_model::metrics;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
 
@@ -44,21 +44,12 @@ pub struct Row {
 }
 
 /// The share of `e` (JND) within 1, and its 99th percentile.
-fn within_and_p99(mut e: Vec<f64>) -> (f64, f64) {
-    e.sort_by(f64::total_cmp);
-    let within = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len().max(1) as f64;
-    let p99 = e
-        .get(((e.len() as f64 * 0.99).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(0.0);
-    (within, p99)
-}
-
-fn busiest_kbit_s(m: &Metrics, duration_s: f64) -> f64 {
-    m.sites
-        .iter()
-        .map(|s| crate::sim::sent_kbit_s(s.sent_bytes, duration_s))
-        .fold(0.0, f64::max)
+fn within_and_p99(e: Vec<f64>) -> (f64, f64) {
+    if e.is_empty() {
+        return (0.0, 0.0);
+    }
+    let within = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len() as f64;
+    (within, crate::simbench::quantile(e, 0.99))
 }
 
 /// The displayed force's difference between `db` and `full`, sample by sample, in JND of `spec`.
@@ -120,8 +111,8 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 delay_ms,
                 sent_share: samples as f64 / ticks.max(1) as f64,
                 kbit_s: [
-                    busiest_kbit_s(&ma, base.duration_s),
-                    busiest_kbit_s(&mb, base.duration_s),
+                    crate::sim::busiest_sent_kbit_s(&ma, base.duration_s),
+                    crate::sim::busiest_sent_kbit_s(&mb, base.duration_s),
                 ],
                 phases: [ma.phases_passed, mb.phases_passed],
                 phases_total: mb.phases_total,

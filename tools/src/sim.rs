@@ -299,6 +299,14 @@ pub fn sent_kbit_s(bytes: u64, duration_s: f64) -> f64 {
     bytes as f64 * 8e-3 / duration_s.max(1e-9)
 }
 
+/// The payload the busiest site of `m` puts, kbit/s over `duration_s`.
+pub fn busiest_sent_kbit_s(m: &coop_model::metrics::Metrics, duration_s: f64) -> f64 {
+    m.sites
+        .iter()
+        .map(|s| sent_kbit_s(s.sent_bytes, duration_s))
+        .fold(0.0, f64::max)
+}
+
 /// The bytes a station puts for `msg` ([`sim::Sizer`]): each message encoded as the wire
 /// encodes it, with the simulator's time as the sender's (a station's CLOCK_MONOTONIC is larger:
 /// its varint a byte or two longer).
@@ -316,11 +324,7 @@ pub fn wire_bytes(site: usize, t_ns: u64, puts: [u64; 2], msg: &coop_model::meth
     });
     let state = match msg {
         Report::Tools(_) => 0,
-        _ => {
-            let mut r = SiteReport::new(site, puts[0] + 1, msg);
-            r.t_ns = t_ns;
-            wire::encode(&r).len()
-        }
+        _ => wire::encode(&SiteReport::new(site, puts[0] + 1, msg)).len(),
     };
     (track + state) as u64
 }
@@ -406,12 +410,7 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             cell(worst(&|s| s.others_work_j) * 1e3, 11, 2),
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
             m.bounded_corrections,
-            match m
-                .sites
-                .iter()
-                .map(|s| sent_kbit_s(s.sent_bytes, sc.duration_s))
-                .fold(0.0, f64::max)
-            {
+            match busiest_sent_kbit_s(m, sc.duration_s) {
                 0.0 => format!("{:>9}", "-"),
                 k => format!("{k:>9.0}"),
             },

@@ -35,7 +35,7 @@ fn median(v: Vec<f64>) -> f64 {
 }
 
 /// The `q` quantile (nearest rank) of `v`, which is not empty.
-fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
+pub(crate) fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
     v[rank - 1]

@@ -90,11 +90,7 @@ pub struct Row {
 impl Row {
     fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64) -> Self {
         Self {
-            sent_kbit_s: m
-                .sites
-                .iter()
-                .map(|s| crate::sim::sent_kbit_s(s.sent_bytes, duration_s))
-                .fold(0.0, f64::max),
+            sent_kbit_s: crate::sim::busiest_sent_kbit_s(m, duration_s),
             method: m.method.clone(),
             delay_ms,
             seed,

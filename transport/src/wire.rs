@@ -163,11 +163,6 @@ pub fn decode(bytes: &[u8]) -> Result<SiteReport, DecodeError> {
     Ok(r)
 }
 
-/// Coordinate `c` of a track's packed positions.
-fn coordinate(t: &ToolTrack, c: usize) -> i32 {
-    (t.positions[c / 2] >> (32 * (c % 2))) as u32 as i32
-}
-
 /// Encodes a tool track: [`TRACK_VERSION`], its header words, its carried state's words when it
 /// has one (`has_state` not 0), each in the compact encoding, then its `count` positions: the
 /// first tick's coordinates, then every later tick that moved as its difference from the tick
@@ -188,7 +183,7 @@ pub fn encode_track(t: &ToolTrack) -> Vec<u8> {
             &words[TRACK_STATE_AT..TRACK_POSITIONS_AT],
         );
     }
-    let at = |k: usize| [0, 1, 2].map(|c| i64::from(coordinate(t, 3 * k + c)));
+    let at = |k: usize| [0, 1, 2].map(|c| i64::from(t.coordinate(3 * k + c)));
     let (mut prev, mut k) = ([0i64; 3], 0);
     while k < count {
         let p = at(k);
@@ -229,6 +224,7 @@ pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
     if count > WINDOW_TICKS as u64 {
         return Err(DecodeError::Invalid);
     }
+    let mut t = ToolTrack::from_words(&words);
     let (count, mut k, mut prev) = (count as usize, 0usize, [0i64; 3]);
     while k < count {
         let x = rd.varint()?;
@@ -252,14 +248,13 @@ pub fn decode_track(bytes: &[u8]) -> Result<ToolTrack, DecodeError> {
         }
         for tick in k..=k + run.unwrap_or(0) {
             for (c, &v) in prev.iter().enumerate() {
-                let c = 3 * tick + c;
-                words[TRACK_POSITIONS_AT + c / 2] |= u64::from(v as i32 as u32) << (32 * (c % 2));
+                // (In the i32 range: checked above.)
+                t.put_coordinate(3 * tick + c, v as i32);
             }
         }
         k += 1 + run.unwrap_or(0);
     }
     rd.end()?;
-    let t = ToolTrack::from_words(&words);
     t.report().ok_or(DecodeError::Invalid)?;
     Ok(t)
 }
@@ -611,7 +606,7 @@ mod tests {
         longest.positions = [0; TRACK_POSITION_WORDS];
         for c in 0..3 * WINDOW_TICKS {
             let v = if (c / 3) % 2 == 0 { i32::MIN } else { i32::MAX };
-            longest.positions[c / 2] |= u64::from(v as u32) << (32 * (c % 2));
+            longest.put_coordinate(c, v);
         }
         assert_eq!(encode_track(&longest).len() + 8, MAX_TRACK_ENCODED_LEN);
         // Flipping any single byte never panics.

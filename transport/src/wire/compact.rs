@@ -92,16 +92,12 @@ pub fn unzigzag(u: u64) -> i64 {
     ((u >> 1) as i64) ^ -((u & 1) as i64)
 }
 
-/// Whether word `i` of `layout` is a float.
-pub fn float_word(layout: Layout, i: usize) -> bool {
-    let mut at = 0;
-    for &(_, kind, n) in layout {
-        if i < at + n {
-            return kind == "f64";
-        }
-        at += n;
-    }
-    false
+/// Per word of `layout` from word `from` on: whether it is a float (one walk over the fields).
+fn floats(layout: Layout, from: usize) -> impl Iterator<Item = bool> {
+    layout
+        .iter()
+        .flat_map(|&(_, kind, n)| std::iter::repeat_n(kind == "f64", n))
+        .skip(from)
 }
 
 /// The word at which field `name` of `layout` starts (its end if there is none).
@@ -157,9 +153,12 @@ pub const fn max_words_len(layout: Layout, from: usize, to: usize) -> usize {
 pub fn put_words(out: &mut Vec<u8>, layout: Layout, from: usize, words: &[u64]) {
     let map = out.len();
     out.resize(map + words.len().div_ceil(8), 0);
-    for (i, &w) in words.iter().enumerate().filter(|(_, &w)| w != 0) {
+    for ((i, &w), float) in words.iter().enumerate().zip(floats(layout, from)) {
+        if w == 0 {
+            continue;
+        }
         out[map + i / 8] |= 1 << (i % 8);
-        if float_word(layout, from + i) {
+        if float {
             out.extend_from_slice(&w.to_le_bytes());
         } else {
             put_varint(out, w);
@@ -180,16 +179,12 @@ pub fn take_words(
     if spare > 0 && map[map.len() - 1] >> (8 - spare) != 0 {
         return Err(DecodeError::Invalid);
     }
-    for (i, w) in words.iter_mut().enumerate() {
+    for ((i, w), float) in words.iter_mut().enumerate().zip(floats(layout, from)) {
         if map[i / 8] & (1 << (i % 8)) == 0 {
             *w = 0;
             continue;
         }
-        *w = if float_word(layout, from + i) {
-            r.word()?
-        } else {
-            r.varint()?
-        };
+        *w = if float { r.word()? } else { r.varint()? };
         // A word marked nonzero is not zero (one encoding per message).
         if *w == 0 {
             return Err(DecodeError::Invalid);

@@ -529,7 +529,13 @@ impl TimeWarp {
 impl TimeWarp {
     /// The own tool's newest ticks (and the last reports' again: [`window`]) and the confirmed
     /// frontier (see [`Consistency::report`]).
+    #[cfg(test)]
     fn track_report(&self) -> Report {
+        self.newest_track().1
+    }
+
+    /// [`Self::track_report`], and the tick its window starts at.
+    fn newest_track(&self) -> (i64, Report) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
         // this site's history starts at: it was not here.)
@@ -538,7 +544,7 @@ impl TimeWarp {
         let first = sent.window_start(end, self.origin_tick);
         sent.sent(end);
         self.sent.set(sent);
-        self.track_from(first, true)
+        (first, self.track_from(first, true))
     }
 
     /// A peer that lost more reports in a row than the newest window covers asked for the first
@@ -647,11 +653,7 @@ impl Consistency for TimeWarp {
     /// whole state travels at once and arrives while its tick is still kept.
     fn report(&self, _copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let window = self
-            .sent
-            .get()
-            .window_start(self.now_tick, self.origin_tick);
-        let first = self.track_report();
+        let (window, first) = self.newest_track();
         let rest = match &first {
             Report::Tools(r) => r.state.map(|s| (*r, s)),
             _ => None,
@@ -698,7 +700,7 @@ impl Consistency for TimeWarp {
         self.lost[from].arrived(r.seq);
         self.losing[from] = r.loss[self.me];
         let worst = (0..self.sites).map(|j| self.losing[j]).max().unwrap_or(0);
-        sent.set_loss(f64::from(worst) / 255.0);
+        sent.set_loss(worst);
         self.sent.set(sent);
         self.state_asked[from] = r.need_state & (1 << self.me) != 0;
         let oldest = self.oldest_kept();

@@ -38,8 +38,9 @@ pub struct Redundancy {
     ends: [i64; MAX_REDUNDANCY + 1],
     /// How many reports before the newest a track sends again for the gaps asked for...
     reports: usize,
-    /// ...and for the loss the receivers measure.
+    /// ...and for the loss the receivers measure (`loss`, in 255ths).
     for_loss: usize,
+    loss: u8,
     /// Reports since the last new gap was asked for.
     quiet: u32,
 }
@@ -50,6 +51,7 @@ impl Redundancy {
         ends: [i64::MIN; MAX_REDUNDANCY + 1],
         reports: MIN_REDUNDANCY,
         for_loss: MIN_REDUNDANCY,
+        loss: 0,
         quiet: 0,
     };
 
@@ -58,8 +60,13 @@ impl Redundancy {
         self.reports.max(self.for_loss)
     }
 
-    /// The worst receiver loses `loss` (0 to 1) of this site's tracks.
-    pub fn set_loss(&mut self, loss: f64) {
+    /// The worst receiver loses `share` 255ths of this site's tracks.
+    pub fn set_loss(&mut self, share: u8) {
+        if share == self.loss {
+            return;
+        }
+        self.loss = share;
+        let loss = f64::from(share) / 255.0;
         // The fewest k with loss^(k + 1) ≤ GAP_CHANCE.
         self.for_loss = if loss > 0.0 {
             let k = (GAP_CHANCE.ln() / loss.min(0.99).ln()).ceil() - 1.0;
@@ -137,7 +144,7 @@ mod tests {
         // A measured loss sizes it by itself: 0.3 needs every report (0.3^8 < 1e-4), 0.1 four
         // (0.1^4), 1 % two (0.01^2).
         for (loss, reports) in [(0.3, 7), (0.1, 3), (0.01, 1), (0.0, 1), (1.0, 7)] {
-            r.set_loss(loss);
+            r.set_loss((loss * 255.0) as u8);
             assert_eq!(r.reports(), reports, "at {loss}");
         }
     }
