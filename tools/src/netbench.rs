@@ -104,6 +104,7 @@ pub(crate) fn bench_scenario(
         stop: crate::cli::StopFlag::manual(),
         record_max_file_s: None,
         attach: None,
+        ros2: None,
     };
     let session = format!("b{}{}", std::process::id(), &name[..1]);
     let o = crate::session::run_method(&a, &sc, MethodName::Paper, &session)?;

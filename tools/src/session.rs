@@ -72,6 +72,18 @@ pub struct RunArgs {
     pub live: Option<Arc<coop_transport::live_view::LiveView>>,
     /// Drive stations already running instead of starting them (`--attach`).
     pub attach: Option<attach::Attach>,
+    /// Publish every site as ROS 2 topics (`--ros2`).
+    pub ros2: Option<Ros2Run>,
+}
+
+/// `session run --ros2`: the domain, and the zenoh router the ROS 2 graph meets at.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ros2Run {
+    /// The ROS domain.
+    pub domain_id: u32,
+    /// A router every station connects to as well, where `rmw_zenoh`'s nodes find one
+    /// (`rmw_zenohd`: `tcp/localhost:7447`); `None`: the stations' own endpoints only.
+    pub router: Option<String>,
 }
 
 /// Locks `m`; a panic in a zenoh callback that held it does not poison the launcher.
@@ -377,12 +389,24 @@ fn station_config(
         record: Some(record.to_owned()),
         network: network::NetworkConfig {
             listen: vec![listen.to_owned()],
-            connect: connect.to_vec(),
+            connect: connect
+                .iter()
+                .cloned()
+                .chain(a.ros2.as_ref().and_then(|r| r.router.clone()))
+                .collect(),
             emulate,
             ..network::NetworkConfig::default()
         },
         record_max_file_s: a.record_max_file_s.unwrap_or(defaults.record_max_file_s),
         physics,
+        ros2: match &a.ros2 {
+            Some(r) => coop_transport::ros2::Ros2Config {
+                publish: true,
+                domain_id: r.domain_id,
+                ..defaults.ros2.clone()
+            },
+            None => defaults.ros2.clone(),
+        },
         ..defaults
     };
     Ok(format!(

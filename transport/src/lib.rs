@@ -23,5 +23,6 @@ pub mod live_view;
 pub mod log;
 pub mod network;
 pub mod recording;
+pub mod ros2;
 pub mod router;
 pub mod wire;

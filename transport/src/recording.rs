@@ -466,7 +466,7 @@ json_message! {
 }
 
 /// How many kinds of traffic a [`TrafficMsg`] counts.
-pub const WIRE_KINDS: usize = 5;
+pub const WIRE_KINDS: usize = 6;
 
 impl TrafficMsg {
     /// The counts in `t` now.

@@ -330,6 +330,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             .with_context(|| format!("the scenario has no site {}", cfg.site))?,
         record_foxglove: cfg.config.record_foxglove,
         live_view: cfg.config.live.clone(),
+        ros2: cfg.config.ros2.publish.then(|| cfg.config.ros2.clone()),
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.

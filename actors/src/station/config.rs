@@ -132,6 +132,10 @@ pub struct StationConfig {
     /// this address, `host:port` (port 0: one chosen at start, printed); from the network
     /// process, off the real-time loops. Default: none (`station run --live` sets it).
     pub live: Option<String>,
+    /// ROS 2: publish this site's poses, force, frames and events as ROS 2 topics under
+    /// `rmw_zenoh`'s conventions (`[ros2] publish = true`, `domain_id`, `rate_hz`), from the
+    /// network process. Default: off.
+    pub ros2: coop_transport::ros2::Ros2Config,
 }
 
 impl Default for StationConfig {
@@ -158,6 +162,7 @@ impl Default for StationConfig {
             device: crate::station::device::DeviceSpec::default(),
             record_foxglove: true,
             live: None,
+            ros2: coop_transport::ros2::Ros2Config::default(),
         }
     }
 }
@@ -442,6 +447,7 @@ impl StationConfig {
                 );
             }
         }
+        self.ros2.validate().map_err(anyhow::Error::msg)?;
         let mut config = self;
         let rebase = |p: &mut PathBuf| {
             if let Some(b) = base.filter(|_| p.is_relative()) {

@@ -202,6 +202,8 @@ pub enum WireKind {
     Presence,
     /// The live view's samples (put only).
     Live,
+    /// ROS 2 topics: poses, forces, frames and events (put), a ROS 2 device's poses (got).
+    Ros2,
 }
 
 impl CounterKey for WireKind {
@@ -211,6 +213,7 @@ impl CounterKey for WireKind {
         WireKind::Clock,
         WireKind::Presence,
         WireKind::Live,
+        WireKind::Ros2,
     ];
     fn slot(self) -> usize {
         self as usize
@@ -222,6 +225,7 @@ impl CounterKey for WireKind {
             WireKind::Clock => "clock",
             WireKind::Presence => "presence",
             WireKind::Live => "live",
+            WireKind::Ros2 => "ros2",
         }
     }
 }

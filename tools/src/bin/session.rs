@@ -27,6 +27,8 @@ struct Args {
     command: Command,
 }
 
+// Parsed once per run: the size of its largest variant costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the scenario on real stations, once per method; print the metrics table.
@@ -93,6 +95,23 @@ enum Command {
         /// (a directory the stations write to that this machine sees).
         #[arg(long, value_name = "DIR", requires = "attach")]
         recordings: Option<PathBuf>,
+        /// Publish every site as ROS 2 topics under rmw_zenoh's conventions (poses, force, /tf,
+        /// /rosout under /coop/<session>/<site>; docs/ros2.md): `ros2 topic list` on a machine
+        /// with rmw_zenoh sees them, with no ROS installed here.
+        #[arg(long)]
+        ros2: bool,
+        /// With --ros2: the ROS domain (default: $ROS_DOMAIN_ID, else 0).
+        #[arg(long, value_name = "ID", requires = "ros2")]
+        ros2_domain: Option<u32>,
+        /// With --ros2: the zenoh router of the ROS 2 graph, which every station connects to
+        /// (rmw_zenoh's default, where `ros2 run rmw_zenoh_cpp rmw_zenohd` listens), or `none`.
+        #[arg(
+            long,
+            value_name = "LOCATOR",
+            requires = "ros2",
+            default_value = "tcp/127.0.0.1:7447"
+        )]
+        ros2_router: String,
     },
     /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
     /// the same payload (run from the repository root).
@@ -277,6 +296,9 @@ fn main() -> std::process::ExitCode {
             certs,
             recording,
             recordings,
+            ros2,
+            ros2_domain,
+            ros2_router,
         } => {
             if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
                 anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
@@ -329,6 +351,9 @@ fn main() -> std::process::ExitCode {
                     None => None,
                 },
                 attach,
+                ros2: ros2
+                    .then(|| ros2_run(ros2_domain, &ros2_router))
+                    .transpose()?,
             };
             let (sc, rows, v) = coop_tools::session::run(&a)?;
             if json {
@@ -411,5 +436,27 @@ fn station_bin_or_default(b: Option<PathBuf>) -> anyhow::Result<coop_tools::sess
             program: std::env::current_exe()?,
             prefix: vec!["station".into()],
         },
+    })
+}
+
+/// `--ros2`'s domain (given, or `$ROS_DOMAIN_ID`, or 0) and router (`none`: none).
+fn ros2_run(domain: Option<u32>, router: &str) -> anyhow::Result<coop_tools::session::Ros2Run> {
+    let domain_id = match domain {
+        Some(d) => d,
+        None => match std::env::var("ROS_DOMAIN_ID") {
+            Ok(v) if !v.trim().is_empty() => v
+                .trim()
+                .parse()
+                .map_err(|_| anyhow::anyhow!("ROS_DOMAIN_ID = {v:?}: not a domain id (0..=232)"))?,
+            _ => 0,
+        },
+    };
+    let max = coop_transport::ros2::MAX_DOMAIN_ID;
+    if domain_id > max {
+        anyhow::bail!("--ros2-domain {domain_id}: must be 0..={max} (ROS 2's range)");
+    }
+    Ok(coop_tools::session::Ros2Run {
+        domain_id,
+        router: (router != "none").then(|| router.to_owned()),
     })
 }

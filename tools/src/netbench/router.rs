@@ -186,6 +186,7 @@ fn through_router(
         record_max_file_s: None,
         live: None,
         attach: None,
+        ros2: None,
     };
     let at = Attach {
         connect: vec![router.to_owned()],

@@ -61,6 +61,8 @@ pub use error::NetworkError;
 pub use live::LIVE_EVERY_NS;
 pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_REPORT_NS};
 
+use crate::ros2::cdr::Log;
+use crate::ros2::publish::Ros2Publisher;
 use live::Live;
 use presence::Presence;
 use publish::{Publish, TrackPublish};
@@ -114,6 +116,8 @@ pub struct NetworkArgs<'a> {
     pub record_foxglove: bool,
     /// Serve this station's own live view on this address (`host:port`), if any.
     pub live_view: Option<String>,
+    /// Publish this site as ROS 2 topics (`crate::ros2`), if asked.
+    pub ros2: Option<crate::ros2::Ros2Config>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -222,6 +226,19 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
     let receiver = Mutex::new(rx);
     let names = (a.scenario, a.method);
     let live = Live::declare(&session, ctx.session_name, &site)?;
+    let ros2 = match &a.ros2 {
+        Some(c) => {
+            let p = Ros2Publisher::declare(&session, ctx.session_name, &a.scene, c)?;
+            eprintln!(
+                "network {site}: ROS 2: node {}/station in domain {}, at most {} Hz",
+                crate::ros2::namespace(ctx.session_name, &site),
+                c.domain_id,
+                c.rate_hz
+            );
+            Some(p)
+        }
+        None => None,
+    };
     let status = serve(
         &ctx,
         &session,
@@ -235,6 +252,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             events,
             live,
             view,
+            ros2,
             names,
         },
     )?;
@@ -273,6 +291,8 @@ struct Loop {
     live: Live,
     /// The station's own live view, if it serves one.
     view: Option<LiveView>,
+    /// The station's ROS 2 node, if it publishes one.
+    ros2: Option<Ros2Publisher>,
     /// Scenario and method names, for the recording's session message.
     names: (String, String),
 }
@@ -335,11 +355,14 @@ fn serve(
             if !matches!(ctx.ctl.run_state(), RunState::Starting | RunState::Running) {
                 break;
             }
-            coop_rt::timer::sleep_until(next_wake(
+            let wake = next_wake(
                 ctx.ctl.physics.report_period_ns.load(Ordering::Relaxed),
                 ctx.ctl.physics.last_report_ns.load(Ordering::Relaxed),
                 monotonic_ns(),
-            ));
+            );
+            // A ROS 2 sample due before the next report is put on time.
+            let ros2_due = lp.ros2.as_ref().and_then(Ros2Publisher::due_ns);
+            coop_rt::timer::sleep_until(ros2_due.map_or(wake, |d| d.max(now).min(wake)));
         }
         stop.store(1, Ordering::Relaxed);
         let status = {
@@ -410,23 +433,44 @@ impl Loop {
                     ),
                 );
             }
+            if let Some(r) = &mut self.ros2 {
+                let level = if m.event == "lost" {
+                    Log::WARN
+                } else {
+                    Log::INFO
+                };
+                let text = format!(
+                    "{} {} after {:.3} s of silence",
+                    m.site, m.event, m.silent_s
+                );
+                r.log(level, &text, traffic);
+            }
         }
         let newest = self.recording.drain_trace(&mut self.trace);
         if let (Some(v), Some((t, others))) = (&self.view, &newest) {
             v.offer(0, LiveSample::from_trace(t, others));
+        }
+        if let Some(r) = &mut self.ros2 {
+            r.offer(newest.as_ref(), now, traffic);
         }
         self.live.offer(newest, now, &ctx.ctl.network.traffic);
         for (level, text) in self.events.look(ctx.ctl) {
             if let Some(v) = &self.view {
                 v.log(level, text.clone());
             }
+            if let Some(r) = &mut self.ros2 {
+                r.log(ros2_level(level), &text, traffic);
+            }
             self.recording.write(|w| w.event(now, level, text));
         }
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
+            let what = if m.present { "joined" } else { "left" };
             if let Some(v) = &self.view {
-                let what = if m.present { "joined" } else { "left" };
                 v.log(Level::Info, format!("{} {what}", m.site));
+            }
+            if let Some(r) = &mut self.ros2 {
+                r.log(Log::INFO, &format!("{} {what}", m.site), traffic);
             }
         }
         for m in clocks.take_log() {
@@ -452,5 +496,14 @@ impl Loop {
         };
         self.recording.write(|w| w.session(&m));
         true
+    }
+}
+
+/// A station event's level as `/rosout` writes it.
+fn ros2_level(l: Level) -> u8 {
+    match l {
+        Level::Warning => Log::WARN,
+        Level::Error | Level::Fatal => Log::ERROR,
+        _ => Log::INFO,
     }
 }

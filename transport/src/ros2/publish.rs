@@ -1,0 +1,409 @@
+//! The station's ROS 2 publisher, in the network process: what physics' trace ring already
+//! brings it (this site's copy of every object, its tool, the force displayed to its user), at
+//! most [`Ros2Config::rate_hz`], and the station's events, as a ROS 2 node under `rmw_zenoh`'s
+//! conventions on the station's own zenoh session.
+//!
+//! | topic | type | QoS |
+//! |---|---|---|
+//! | `<ns>/tool` | `geometry_msgs/msg/PoseStamped` (frame `world`) | best effort |
+//! | `<ns>/force` | `geometry_msgs/msg/WrenchStamped`: the force on the user's hand (frame `world`) | best effort |
+//! | `<ns>/object` (a world of one), `<ns>/object/<name>` (several) | `geometry_msgs/msg/PoseStamped` | best effort |
+//! | `/tf` | `tf2_msgs/msg/TFMessage`: `world → tool/<site>`, `world → object/<site>` (`object/<name>/<site>`) | best effort |
+//! | `/rosout` | `rcl_interfaces/msg/Log`: the station's events | reliable, transient local |
+//!
+//! `<ns>` is [`super::namespace`], the node is `station` in it. Nothing here waits: puts are
+//! dropped, not queued, under congestion, at background priority, and skipped altogether while no
+//! one subscribes. Stamps are the samples' monotonic times translated to wall time.
+
+use std::sync::{Arc, Mutex};
+
+use coop_rt::msg::TraceRecord;
+use coop_rt::shm::control::{Traffic, WireKind};
+use zenoh::bytes::Encoding;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::Publisher;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::Queryable;
+use zenoh::{Session, Wait};
+
+use super::cdr::{self, Header, Log, PoseStamped, TransformStamped, WrenchStamped};
+use super::graph::{self, Attachment, Kind, MsgType, Node, Qos};
+use super::Ros2Config;
+use crate::network::NetworkError;
+use crate::recording::Scene;
+
+/// The encoding `rmw_zenoh` labels its samples with.
+pub const CDR_ENCODING: &str = "application/cdr";
+
+/// How many `/rosout` lines a late subscriber can still get (as `rcl` keeps: its depth).
+const ROSOUT_KEPT: usize = 1000;
+
+/// The `/rosout` lines kept for late subscribers: each line's CDR bytes and attachment.
+type Kept = Arc<Mutex<std::collections::VecDeque<(Vec<u8>, Vec<u8>)>>>;
+
+/// One ROS 2 publisher: its zenoh publisher, its token, its numbering.
+struct Endpoint {
+    publisher: Publisher<'static>,
+    _token: LivelinessToken,
+    gid: [u8; 16],
+    seq: i64,
+}
+
+impl Endpoint {
+    fn declare(
+        session: &Session,
+        node: &Node,
+        entity: u32,
+        topic: &str,
+        ty: &MsgType,
+        qos: Qos,
+    ) -> Result<Self, NetworkError> {
+        let key = graph::topic_key(node.domain, topic, ty);
+        let publisher = session
+            .declare_publisher(key)
+            .encoding(Encoding::from(CDR_ENCODING))
+            .congestion_control(if qos.best_effort {
+                CongestionControl::Drop
+            } else {
+                CongestionControl::Block
+            })
+            .priority(Priority::Background)
+            .wait()
+            .map_err(NetworkError::declare("ROS 2 publisher"))?;
+        let token = session
+            .liveliness()
+            .declare_token(node.endpoint_token(entity, Kind::Publisher, topic, ty, qos))
+            .wait()
+            .map_err(NetworkError::declare("ROS 2 publisher token"))?;
+        Ok(Self {
+            publisher,
+            _token: token,
+            gid: graph::gid(session.zid().to_le_bytes(), entity),
+            seq: 0,
+        })
+    }
+
+    /// Whether anyone subscribes (zenoh's matching status; unknown counts as yes).
+    fn watched(&self) -> bool {
+        self.publisher
+            .matching_status()
+            .wait()
+            .map_or(true, |m| m.matching())
+    }
+
+    /// Puts `bytes` with the attachment; counts it.
+    fn put(&mut self, bytes: Vec<u8>, wall_ns: i64, traffic: &Traffic) {
+        self.seq += 1;
+        let attachment = Attachment {
+            seq: self.seq,
+            source_ns: wall_ns,
+            gid: self.gid,
+        }
+        .encode();
+        let len = bytes.len();
+        // A failed put loses one sample of a ROS view, nothing else.
+        if self
+            .publisher
+            .put(bytes)
+            .attachment(attachment.to_vec())
+            .wait()
+            .is_ok()
+        {
+            traffic.sent(WireKind::Ros2, len);
+        }
+    }
+}
+
+/// The station's ROS 2 node.
+pub struct Ros2Publisher {
+    _node: LivelinessToken,
+    tool: Endpoint,
+    force: Endpoint,
+    objects: Vec<Endpoint>,
+    tf: Endpoint,
+    rosout: Endpoint,
+    /// The lines kept for late `/rosout` subscribers, with their attachments.
+    kept: Kept,
+    _cache: Queryable<()>,
+    frames: Frames,
+    logger: String,
+    period_ns: u64,
+    last_ns: Option<u64>,
+    pending: Option<(TraceRecord, Vec<TraceRecord>)>,
+}
+
+/// The frames of this site's tool and objects (the recording's Foxglove frames).
+struct Frames {
+    tool: String,
+    objects: Vec<String>,
+}
+
+impl std::fmt::Debug for Ros2Publisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ros2Publisher")
+            .field("logger", &self.logger)
+            .field("period_ns", &self.period_ns)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The topic names of a site, relative to nothing: `(tool, force, objects)`.
+pub fn topics(session: &str, scene: &Scene) -> (String, String, Vec<String>) {
+    let ns = super::namespace(session, &scene.site);
+    let objects = if scene.others.is_empty() {
+        vec![format!("{ns}/object")]
+    } else {
+        std::iter::once(scene.first_name.as_str())
+            .chain(scene.others.iter().map(|(n, _)| n.as_str()))
+            .map(|n| format!("{ns}/object/{}", graph::ros_name(n)))
+            .collect()
+    };
+    (format!("{ns}/tool"), format!("{ns}/force"), objects)
+}
+
+impl Ros2Publisher {
+    /// Declares the node, its publishers and their tokens on `session`.
+    ///
+    /// # Errors
+    /// A declaration zenoh refuses (an access control that does not allow the ROS 2 keys).
+    pub fn declare(
+        session: &Session,
+        session_name: &str,
+        scene: &Scene,
+        config: &Ros2Config,
+    ) -> Result<Self, NetworkError> {
+        let node = Node {
+            domain: config.domain_id,
+            zid: session.zid().to_string(),
+            id: 0,
+            namespace: super::namespace(session_name, &scene.site),
+            name: "station".into(),
+        };
+        let token = session
+            .liveliness()
+            .declare_token(node.token())
+            .wait()
+            .map_err(NetworkError::declare("ROS 2 node token"))?;
+        let (tool_topic, force_topic, object_topics) = topics(session_name, scene);
+        let mut entity = 0;
+        let mut next = || {
+            entity += 1;
+            entity
+        };
+        let tool = Endpoint::declare(
+            session,
+            &node,
+            next(),
+            &tool_topic,
+            &graph::POSE_STAMPED,
+            Qos::STREAM,
+        )?;
+        let force = Endpoint::declare(
+            session,
+            &node,
+            next(),
+            &force_topic,
+            &graph::WRENCH_STAMPED,
+            Qos::STREAM,
+        )?;
+        let objects = object_topics
+            .iter()
+            .map(|t| {
+                Endpoint::declare(session, &node, next(), t, &graph::POSE_STAMPED, Qos::STREAM)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let tf = Endpoint::declare(
+            session,
+            &node,
+            next(),
+            "/tf",
+            &graph::TF_MESSAGE,
+            Qos::STREAM,
+        )?;
+        let rosout_entity = next();
+        let rosout = Endpoint::declare(
+            session,
+            &node,
+            rosout_entity,
+            "/rosout",
+            &graph::LOG,
+            Qos::ROSOUT,
+        )?;
+        let kept = Arc::new(Mutex::new(std::collections::VecDeque::new()));
+        let cache = declare_cache(session, &node, rosout_entity, kept.clone())?;
+        let mut frames = Frames {
+            tool: scene.tool_frame(),
+            objects: vec![scene.object_frame()],
+        };
+        frames
+            .objects
+            .extend(scene.others.iter().map(|(n, _)| scene.other_frame(n)));
+        Ok(Self {
+            _node: token,
+            tool,
+            force,
+            objects,
+            tf,
+            rosout,
+            kept,
+            _cache: cache,
+            frames,
+            logger: format!(
+                "coop.{}.{}",
+                graph::ros_name(session_name),
+                graph::ros_name(&scene.site)
+            ),
+            period_ns: config.period_ns(),
+            last_ns: None,
+            pending: None,
+        })
+    }
+
+    /// When the next sample is due, if one waits (the network loop wakes for it).
+    pub fn due_ns(&self) -> Option<u64> {
+        self.pending.as_ref()?;
+        Some(self.last_ns.map_or(0, |t| t + self.period_ns))
+    }
+
+    /// Keeps `newest` (the newest sample drained this turn, if any) and publishes the newest kept
+    /// one when the period has passed since the last.
+    pub fn offer(
+        &mut self,
+        newest: Option<&(TraceRecord, Vec<TraceRecord>)>,
+        now: u64,
+        traffic: &Traffic,
+    ) {
+        if let Some(n) = newest {
+            self.pending = Some(n.clone());
+        }
+        if self
+            .last_ns
+            .is_some_and(|t| now.saturating_sub(t) < self.period_ns)
+        {
+            return;
+        }
+        let Some((first, others)) = self.pending.take() else {
+            return;
+        };
+        self.last_ns = Some(now);
+        let offset = super::wall_minus_monotonic_ns();
+        let stamp = super::stamp(first.t_ns, offset);
+        let wall_ns = i64::try_from(i128::from(now) + offset).unwrap_or(0);
+        let header = Header {
+            stamp,
+            frame_id: crate::recording::scene::WORLD.into(),
+        };
+        let records: Vec<&TraceRecord> = std::iter::once(&first).chain(&others).collect();
+        if self.tool.watched() {
+            let m = PoseStamped {
+                header: header.clone(),
+                position: first.tool_pos,
+                orientation: [0.0, 0.0, 0.0, 1.0],
+            };
+            self.tool.put(m.encode(), wall_ns, traffic);
+        }
+        if self.force.watched() {
+            let m = WrenchStamped {
+                header: header.clone(),
+                force: first.f_desired,
+                torque: [0.0; 3],
+            };
+            self.force.put(m.encode(), wall_ns, traffic);
+        }
+        for (e, r) in self.objects.iter_mut().zip(&records) {
+            if e.watched() {
+                let m = PoseStamped {
+                    header: header.clone(),
+                    position: r.pos,
+                    orientation: xyzw(r.rot),
+                };
+                e.put(m.encode(), wall_ns, traffic);
+            }
+        }
+        if self.tf.watched() {
+            let mut transforms = vec![TransformStamped {
+                header: header.clone(),
+                child_frame_id: self.frames.tool.clone(),
+                translation: first.tool_pos,
+                rotation: [0.0, 0.0, 0.0, 1.0],
+            }];
+            transforms.extend(self.frames.objects.iter().zip(&records).map(|(f, r)| {
+                TransformStamped {
+                    header: header.clone(),
+                    child_frame_id: f.clone(),
+                    translation: r.pos,
+                    rotation: xyzw(r.rot),
+                }
+            }));
+            self.tf.put(cdr::encode_tf(&transforms), wall_ns, traffic);
+        }
+    }
+
+    /// One line on `/rosout` (kept for late subscribers, whether anyone listens now or not).
+    pub fn log(&mut self, level: u8, text: &str, traffic: &Traffic) {
+        let offset = super::wall_minus_monotonic_ns();
+        let now = coop_rt::timer::monotonic_ns();
+        let m = Log {
+            stamp: super::stamp(now, offset),
+            level,
+            name: self.logger.clone(),
+            msg: text.to_owned(),
+            ..Log::default()
+        };
+        let bytes = m.encode();
+        let wall_ns = i64::try_from(i128::from(now) + offset).unwrap_or(0);
+        let attachment = Attachment {
+            seq: self.rosout.seq + 1,
+            source_ns: wall_ns,
+            gid: self.rosout.gid,
+        }
+        .encode()
+        .to_vec();
+        {
+            let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+            if kept.len() == ROSOUT_KEPT {
+                kept.pop_front();
+            }
+            kept.push_back((bytes.clone(), attachment));
+        }
+        self.rosout.put(bytes, wall_ns, traffic);
+    }
+}
+
+/// ROS orders a quaternion x, y, z, w; ours is w, x, y, z.
+fn xyzw(r: [f64; 4]) -> [f64; 4] {
+    [r[1], r[2], r[3], r[0]]
+}
+
+/// The transient-local cache of `/rosout` as `rmw_zenoh` serves it (zenoh's advanced
+/// publisher): a late subscriber asks `<key>/@adv/pub/<zid>/…` and gets the kept lines, on the
+/// topic's key.
+fn declare_cache(
+    session: &Session,
+    node: &Node,
+    entity: u32,
+    kept: Kept,
+) -> Result<Queryable<()>, NetworkError> {
+    let key = graph::topic_key(node.domain, "/rosout", &graph::LOG);
+    let cache_key = format!("{key}/@adv/pub/{}/{entity}/**", node.zid);
+    session
+        .declare_queryable(cache_key)
+        .callback(move |q| {
+            let lines: Vec<(Vec<u8>, Vec<u8>)> = kept
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .iter()
+                .cloned()
+                .collect();
+            for (bytes, attachment) in lines {
+                // A reply that cannot go is a line the late subscriber misses.
+                let _ = q
+                    .reply(key.clone(), bytes)
+                    .encoding(Encoding::from(CDR_ENCODING))
+                    .attachment(attachment)
+                    .wait();
+            }
+        })
+        .wait()
+        .map_err(NetworkError::declare("ROS 2 /rosout cache"))
+}
