@@ -4,7 +4,7 @@
 //!
 //! ```toml
 //! [device]
-//! device = "sim"          # sim | replay | haply | dhd
+//! device = "sim"          # sim | replay | haply | dhd | ros2
 //! loop = "station"        # station: our servo loop calls the device; vendor: its thread calls us
 //!
 //! [device.placement]      # world = translation_m + rotation · (workspace_scale · device)
@@ -27,6 +27,11 @@
 //!
 //! [device.dhd]            # device = "dhd": `coop_rt::device::dhd::DhdConfig`
 //! library = "/opt/forcedimension/lib/libdhd.so"
+//!
+//! [device.ros2]           # device = "ros2": `coop_transport::ros2::device::Ros2DeviceConfig`
+//! pose_topic = "/haptic/pose"                # the driver's PoseStamped
+//! wrench_topic = "/haptic/wrench_command"    # our WrenchStamped back
+//! connect = ["tcp/127.0.0.1:7447"]           # the ROS 2 graph's router (rmw_zenohd)
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -40,6 +45,7 @@ use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
 use coop_rt::device::replay::Replay;
 use coop_rt::device::safety::SafetyLimits;
 use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
+use coop_transport::ros2::device::{Ros2Device, Ros2DeviceConfig};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 
@@ -56,6 +62,8 @@ pub enum BackendName {
     Haply,
     /// Force Dimension / Novint Falcon (DHD SDK).
     Dhd,
+    /// A device's ROS 2 driver (its pose in, a wrench out), over zenoh.
+    Ros2,
 }
 
 impl BackendName {
@@ -66,6 +74,7 @@ impl BackendName {
             BackendName::Replay => Backend::Replay,
             BackendName::Haply => Backend::Haply,
             BackendName::Dhd => Backend::Dhd,
+            BackendName::Ros2 => Backend::Ros2,
         }
     }
 }
@@ -165,6 +174,10 @@ pub struct DeviceSpec {
     /// The DHD backend's table (`device = "dhd"`), read as [`coop_rt::device::dhd::DhdConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dhd: Option<toml::Table>,
+    /// The ROS 2 backend's table (`device = "ros2"`), read as
+    /// [`coop_transport::ros2::device::Ros2DeviceConfig`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<toml::Table>,
 }
 
 /// A `[device]` table checked and its files loaded.
@@ -182,6 +195,8 @@ pub struct DeviceSetup {
     pub haply: HaplyConfig,
     /// The DHD table (its defaults when absent).
     pub dhd: DhdConfig,
+    /// The ROS 2 table (its defaults when absent).
+    pub ros2: Ros2DeviceConfig,
 }
 
 /// A backend's table (`[device.<name>]`) as its config type: unknown fields and wrong types are
@@ -278,6 +293,7 @@ impl DeviceSpec {
             ("replay", self.replay.is_some()),
             ("haply", self.haply.is_some()),
             ("dhd", self.dhd.is_some()),
+            ("ros2", self.ros2.is_some()),
         ] {
             if present && name != backend.name() {
                 bail!(
@@ -290,6 +306,9 @@ impl DeviceSpec {
         haply
             .validate()
             .map_err(|e| anyhow::anyhow!("device.haply.{e}"))?;
+        let ros2: Ros2DeviceConfig = backend_table("ros2", self.ros2.as_ref())?;
+        ros2.validate()
+            .map_err(|e| anyhow::anyhow!("device.ros2.{e}"))?;
         let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
         dhd.validate()
             .map_err(|e| anyhow::anyhow!("device.dhd.{e}"))?;
@@ -319,7 +338,7 @@ impl DeviceSpec {
                     format!("device.replay.file = {:?}", spec.file.display().to_string())
                 })?)
             }
-            Backend::Haply | Backend::Dhd => None,
+            Backend::Haply | Backend::Dhd | Backend::Ros2 => None,
         };
         Ok(DeviceSetup {
             backend,
@@ -328,6 +347,7 @@ impl DeviceSpec {
             replay,
             haply,
             dhd,
+            ros2,
         })
     }
 }
@@ -419,6 +439,9 @@ pub fn open(
         Backend::Dhd => Ok(StationDevice::Other(Box::new(
             DhdDevice::open(&setup.dhd).map_err(anyhow::Error::from)?,
         ))),
+        Backend::Ros2 => Ok(StationDevice::Other(Box::new(
+            Ros2Device::open(&setup.ros2).map_err(anyhow::Error::from)?,
+        ))),
     }
 }
 
@@ -484,6 +507,7 @@ pub fn probe_all(
             }
             Backend::Haply => coop_rt::device::haply::probe(&setup.haply),
             Backend::Dhd => coop_rt::device::dhd::probe(&setup.dhd),
+            Backend::Ros2 => coop_transport::ros2::device::probe(&setup.ros2),
         })
         .collect()
 }

@@ -12,7 +12,7 @@ use nalgebra::UnitQuaternion;
 /// path.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DeviceInfo {
-    /// The backend's name: `"sim"`, `"replay"`, `"haply"`, `"dhd"`.
+    /// The backend's name: `"sim"`, `"replay"`, `"haply"`, `"dhd"`, `"ros2"`.
     pub backend: &'static str,
     /// The model, e.g. `"Inverse3"`, `"omega.3"`, `"Novint Falcon"`, `"SCARA (simulated)"`.
     pub model: String,

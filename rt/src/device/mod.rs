@@ -14,6 +14,7 @@ pub mod placement;
 pub mod replay;
 pub mod safety;
 mod scara;
+mod slot;
 mod station;
 
 pub use cartesian::{
@@ -22,4 +23,5 @@ pub use cartesian::{
 
 pub use placement::Placement;
 pub use scara::SimScara;
+pub use slot::CommandSlot;
 pub use station::{Backend, StationDevice};

@@ -15,11 +15,20 @@ pub enum Backend {
     Haply,
     /// Force Dimension (and Novint Falcon) through the DHD SDK.
     Dhd,
+    /// Any device whose ROS 2 driver publishes its end effector's pose (a bridge over zenoh,
+    /// `coop_transport::ros2::device`).
+    Ros2,
 }
 
 impl Backend {
     /// Every backend.
-    pub const ALL: [Backend; 4] = [Backend::Sim, Backend::Replay, Backend::Haply, Backend::Dhd];
+    pub const ALL: [Backend; 5] = [
+        Backend::Sim,
+        Backend::Replay,
+        Backend::Haply,
+        Backend::Dhd,
+        Backend::Ros2,
+    ];
 
     /// Its name in the config.
     pub fn name(self) -> &'static str {
@@ -28,6 +37,7 @@ impl Backend {
             Backend::Replay => "replay",
             Backend::Haply => "haply",
             Backend::Dhd => "dhd",
+            Backend::Ros2 => "ros2",
         }
     }
 }

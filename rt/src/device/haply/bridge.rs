@@ -12,7 +12,6 @@
 //! after a frame it refused until the servo commands after the next good one.
 
 use std::net::{TcpStream, ToSocketAddrs};
-use std::sync::atomic::fence;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -21,7 +20,7 @@ use tungstenite::{Message, WebSocket};
 
 use super::wire::{self, FrameError};
 use super::HaplyOpenError;
-use crate::device::{Command, DeviceFault, Sample};
+use crate::device::{Command, CommandSlot, DeviceFault, Sample};
 use crate::sync::{AtomicU64, Ordering};
 use crate::timer::{monotonic_ns, sleep_until};
 
@@ -37,66 +36,6 @@ pub(super) enum BridgeMsg {
     },
     /// The connection is gone, or a frame was refused.
     Fault(DeviceFault),
-}
-
-/// The newest command, written by the servo (one writer) and read by the bridge: a seqlock over
-/// atomics, so the writer never waits and a reader retries a torn read.
-#[derive(Debug, Default)]
-pub(super) struct CommandSlot {
-    /// Even when stable; odd while the writer is in the middle. Counts writes × 2.
-    seq: AtomicU64,
-    /// 0 = release, 1 = force.
-    kind: AtomicU64,
-    xyz: [AtomicU64; 3],
-}
-
-impl CommandSlot {
-    /// Stores `cmd` (servo side; one writer only).
-    pub(super) fn store(&self, cmd: Command) {
-        // REAL-TIME: no allocation, no lock, no syscall.
-        let s = self.seq.load(Ordering::Relaxed);
-        self.seq.store(s.wrapping_add(1), Ordering::Relaxed);
-        // SYNC: orders the odd seq before the field stores; pairs with the reader's Acquire fence.
-        fence(Ordering::Release);
-        let (kind, f) = match cmd {
-            Command::Force(f) => (1, f),
-            Command::Release => (0, Vec3::zeros()),
-        };
-        self.kind.store(kind, Ordering::Relaxed);
-        for (a, v) in self.xyz.iter().zip(f.iter()) {
-            a.store(v.to_bits(), Ordering::Relaxed);
-        }
-        // SYNC: publishes the fields; pairs with the reader's Acquire load of seq.
-        self.seq.store(s.wrapping_add(2), Ordering::Release);
-    }
-
-    /// The newest command and its write count (bridge side).
-    pub(super) fn load(&self) -> (u64, Command) {
-        loop {
-            // SYNC: pairs with the writer's final Release store.
-            let s1 = self.seq.load(Ordering::Acquire);
-            if s1 % 2 == 1 {
-                std::hint::spin_loop();
-                continue;
-            }
-            let kind = self.kind.load(Ordering::Relaxed);
-            let f = Vec3::new(
-                f64::from_bits(self.xyz[0].load(Ordering::Relaxed)),
-                f64::from_bits(self.xyz[1].load(Ordering::Relaxed)),
-                f64::from_bits(self.xyz[2].load(Ordering::Relaxed)),
-            );
-            // SYNC: keeps the field loads before the re-check; pairs with the writer's Release fence.
-            fence(Ordering::Acquire);
-            if self.seq.load(Ordering::Relaxed) == s1 {
-                let cmd = if kind == 1 {
-                    Command::Force(f)
-                } else {
-                    Command::Release
-                };
-                return (s1 / 2, cmd);
-            }
-        }
-    }
 }
 
 /// Counters and status both halves and the station's status can read.
@@ -387,45 +326,5 @@ impl Bridge {
             }
         }
         None
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn command_slot_keeps_the_newest_and_counts_writes() {
-        let s = CommandSlot::default();
-        assert_eq!(s.load(), (0, Command::Release));
-        s.store(Command::Force(Vec3::new(1.0, 2.0, 3.0)));
-        s.store(Command::Force(Vec3::new(4.0, 5.0, 6.0)));
-        assert_eq!(s.load(), (2, Command::Force(Vec3::new(4.0, 5.0, 6.0))));
-        s.store(Command::Release);
-        assert_eq!(s.load(), (3, Command::Release));
-    }
-
-    #[test]
-    fn command_slot_never_tears_across_threads() {
-        let s = Arc::new(CommandSlot::default());
-        let w = {
-            let s = Arc::clone(&s);
-            std::thread::spawn(move || {
-                for i in 1..=100_000u32 {
-                    let v = f64::from(i);
-                    s.store(Command::Force(Vec3::new(v, v, v)));
-                }
-            })
-        };
-        let mut last = 0;
-        while last < 100_000 {
-            let (n, c) = s.load();
-            assert!(n >= last, "write count went back");
-            last = n;
-            if let Command::Force(f) = c {
-                assert!(f.x == f.y && f.y == f.z, "torn read {f:?}");
-            }
-        }
-        w.join().expect("writer");
     }
 }

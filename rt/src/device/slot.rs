@@ -1,0 +1,113 @@
+//! The newest force command, from the servo to a device's bridge thread: a single-writer seqlock
+//! over atomics (the Haply and ROS 2 backends). The servo never waits; a bridge that reads while
+//! the servo writes retries; a servo that commands faster than the bridge sends overwrites, never
+//! queues.
+
+use std::sync::atomic::fence;
+
+use coop_model::body::Vec3;
+
+use super::Command;
+use crate::sync::{AtomicU64, Ordering};
+
+/// The newest command, written by the servo (one writer) and read by the bridge: a seqlock over
+/// atomics, so the writer never waits and a reader retries a torn read.
+#[derive(Debug, Default)]
+pub struct CommandSlot {
+    /// Even when stable; odd while the writer is in the middle. Counts writes × 2.
+    seq: AtomicU64,
+    /// 0 = release, 1 = force.
+    kind: AtomicU64,
+    xyz: [AtomicU64; 3],
+}
+
+impl CommandSlot {
+    /// Stores `cmd` (servo side; one writer only).
+    pub fn store(&self, cmd: Command) {
+        // REAL-TIME: no allocation, no lock, no syscall.
+        let s = self.seq.load(Ordering::Relaxed);
+        self.seq.store(s.wrapping_add(1), Ordering::Relaxed);
+        // SYNC: orders the odd seq before the field stores; pairs with the reader's Acquire fence.
+        fence(Ordering::Release);
+        let (kind, f) = match cmd {
+            Command::Force(f) => (1, f),
+            Command::Release => (0, Vec3::zeros()),
+        };
+        self.kind.store(kind, Ordering::Relaxed);
+        for (a, v) in self.xyz.iter().zip(f.iter()) {
+            a.store(v.to_bits(), Ordering::Relaxed);
+        }
+        // SYNC: publishes the fields; pairs with the reader's Acquire load of seq.
+        self.seq.store(s.wrapping_add(2), Ordering::Release);
+    }
+
+    /// The newest command and its write count (bridge side).
+    pub fn load(&self) -> (u64, Command) {
+        loop {
+            // SYNC: pairs with the writer's final Release store.
+            let s1 = self.seq.load(Ordering::Acquire);
+            if s1 % 2 == 1 {
+                std::hint::spin_loop();
+                continue;
+            }
+            let kind = self.kind.load(Ordering::Relaxed);
+            let f = Vec3::new(
+                f64::from_bits(self.xyz[0].load(Ordering::Relaxed)),
+                f64::from_bits(self.xyz[1].load(Ordering::Relaxed)),
+                f64::from_bits(self.xyz[2].load(Ordering::Relaxed)),
+            );
+            // SYNC: keeps the field loads before the re-check; pairs with the writer's Release fence.
+            fence(Ordering::Acquire);
+            if self.seq.load(Ordering::Relaxed) == s1 {
+                let cmd = if kind == 1 {
+                    Command::Force(f)
+                } else {
+                    Command::Release
+                };
+                return (s1 / 2, cmd);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+
+    #[test]
+    fn command_slot_keeps_the_newest_and_counts_writes() {
+        let s = CommandSlot::default();
+        assert_eq!(s.load(), (0, Command::Release));
+        s.store(Command::Force(Vec3::new(1.0, 2.0, 3.0)));
+        s.store(Command::Force(Vec3::new(4.0, 5.0, 6.0)));
+        assert_eq!(s.load(), (2, Command::Force(Vec3::new(4.0, 5.0, 6.0))));
+        s.store(Command::Release);
+        assert_eq!(s.load(), (3, Command::Release));
+    }
+
+    #[test]
+    fn command_slot_never_tears_across_threads() {
+        let s = Arc::new(CommandSlot::default());
+        let w = {
+            let s = Arc::clone(&s);
+            std::thread::spawn(move || {
+                for i in 1..=100_000u32 {
+                    let v = f64::from(i);
+                    s.store(Command::Force(Vec3::new(v, v, v)));
+                }
+            })
+        };
+        let mut last = 0;
+        while last < 100_000 {
+            let (n, c) = s.load();
+            assert!(n >= last, "write count went back");
+            last = n;
+            if let Command::Force(f) = c {
+                assert!(f.x == f.y && f.y == f.z, "torn read {f:?}");
+            }
+        }
+        w.join().expect("writer");
+    }
+}
