@@ -33,6 +33,11 @@ pub struct CertsArgs {
     pub days: u32,
     /// Output directory (made if absent).
     pub out: PathBuf,
+    /// The ROS 2 domain the stations publish in (`--ros2-domain`), if they do.
+    pub ros2_domain: Option<u32>,
+    /// ROS 2 tools that may look at the domain through the routers (`--ros2-viewer`), each with a
+    /// certificate of its own.
+    pub ros2_viewers: Vec<String>,
 }
 
 /// What was written.
@@ -81,10 +86,23 @@ pub fn make(a: &CertsArgs) -> anyhow::Result<Written> {
     let mut names: Vec<String> = a.sites.clone();
     names.push(acl::LAUNCHER.to_owned());
     names.extend(a.routers.iter().cloned());
+    if !a.ros2_viewers.is_empty() && a.ros2_domain.is_none() {
+        bail!("--ros2-viewer without --ros2-domain: a viewer looks at a ROS 2 domain");
+    }
+    if let Some(d) = a
+        .ros2_domain
+        .filter(|&d| d > coop_transport::ros2::MAX_DOMAIN_ID)
+    {
+        bail!(
+            "--ros2-domain {d}: must be 0..={} (ROS 2's range)",
+            coop_transport::ros2::MAX_DOMAIN_ID
+        );
+    }
+    names.extend(a.ros2_viewers.iter().cloned());
     for (i, n) in names.iter().enumerate() {
         name_rule("name", n)?;
         if names[..i].contains(n) {
-            bail!("name {n:?} is used twice (sites, `launcher` and the routers need distinct names: the access control tells them apart by it)");
+            bail!("name {n:?} is used twice (sites, `launcher`, the routers and the ROS 2 viewers need distinct names: the access control tells them apart by it)");
         }
     }
     for h in a.hosts.keys() {
@@ -155,6 +173,10 @@ pub fn make(a: &CertsArgs) -> anyhow::Result<Written> {
         sites: &a.sites,
         launcher: acl::LAUNCHER,
         routers: &a.routers,
+        ros2: a.ros2_domain.map(|domain| acl::Ros2Members {
+            domain,
+            viewers: &a.ros2_viewers,
+        }),
     });
     let acl_path = a.out.join("acl.json5");
     std::fs::write(&acl_path, serde_json::to_string_pretty(&acl_value)? + "\n")
@@ -195,6 +217,8 @@ mod tests {
             hosts: BTreeMap::from([("r1".to_owned(), vec!["192.0.2.1".to_owned()])]),
             days: 2,
             out: out.clone(),
+            ros2_domain: None,
+            ros2_viewers: Vec::new(),
         };
         let w = make(&a).expect("certs");
         let names: Vec<&str> = w.certs.keys().map(String::as_str).collect();

@@ -1,6 +1,7 @@
 //! `devbench`: the servo loop's wake-up latency and overruns with the Haply backend (its bridge
-//! thread talking to a stand-in Inverse Service on loopback) against the simulated SCARA arm, in the
-//! same run, and the Haply device round trip through the bridge.
+//! thread talking to a stand-in Inverse Service on loopback) and the ROS 2 backend (its bridge
+//! talking zenoh to a stand-in ROS 2 driver, [`ros2_driver`]) against the simulated SCARA arm, in
+//! the same run, and each bridge's device round trip.
 //!
 //! Each phase runs the servo's device path at the servo period on a periodic timer: sample through
 //! the safety layer, a spring force toward the start point, display through the safety layer. The
@@ -10,7 +11,11 @@
 //! the service's `current_cursor_force` equal to it, p50/p99 (servo-observed, so in whole periods
 //! of the bridge and the servo).
 //!
-//! The stand-in service is `rt/tests/fixtures/haply_service.py` (python3 with `websockets`).
+//! The stand-in service is `rt/tests/fixtures/haply_service.py` (python3 with `websockets`). The
+//! ROS 2 round trip is the driver's: from the put of a pose that steps the end effector to the
+//! first wrench reflecting the step (pose in, force out).
+
+mod ros2_driver;
 
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
@@ -34,7 +39,7 @@ use hdrhistogram::Histogram;
 #[command(
     name = "devbench",
     version,
-    about = "Servo wake-up latency with the Haply backend (against a stand-in service) vs the simulated arm, and the Haply round trip."
+    about = "Servo wake-up latency with the Haply and ROS 2 backends (against stand-ins) vs the simulated arm, and each bridge's round trip."
 )]
 pub struct Args {
     /// Seconds per phase.
@@ -133,6 +138,9 @@ fn sim_device(now_ns: u64) -> anyhow::Result<SimScara> {
     ))
 }
 
+/// The spring the phases display toward where the hand started, N/m.
+const SPRING_N_PER_M: f64 = 50.0;
+
 /// Where a phase measuring the round trip records it, and how it reads the force the device shows
 /// back.
 type RoundTrip<'a, D> = (&'a mut Histogram<u64>, fn(&D) -> Option<Vec3>);
@@ -175,10 +183,16 @@ fn phase<D: CartesianDevice>(
                 }
             }
         }
-        // A spring toward where the hand started, plus a distinct bias per tick so each command
-        // can be recognised when the service reports it back.
-        let bias = Vec3::new(0.4 + 1e-4 * (k % 1000) as f64, 0.0, 0.0);
-        let shown = dev.display(now, bias - 50.0 * (pos - anchor), 1.0);
+        // A spring toward where the hand started, plus (measuring the Haply round trip) a
+        // distinct bias per tick so each command can be recognised when the service reports it
+        // back; the ROS 2 driver recognises its pose's steps in the spring's force instead.
+        let vary = if rtt.is_some() {
+            1e-4 * (k % 1000) as f64
+        } else {
+            0.0
+        };
+        let bias = Vec3::new(0.4 + vary, 0.0, 0.0);
+        let shown = dev.display(now, bias - SPRING_N_PER_M * (pos - anchor), 1.0);
         pending[head] = (shown, now);
         head = (head + 1) % pending.len();
         if head == oldest_live {
@@ -207,6 +221,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let period = Duration::from_micros(args.period_us);
     let ticks = (seconds * 1e6 / args.period_us as f64) as u64;
     let (_mock, port) = start_mock(&args.mock)?;
+    let driver = ros2_driver::Driver::start()?;
     // The servo's scheduling, after the stand-in started (it must not inherit it). The Haply bridge
     // thread, started from this thread, drops back to SCHED_OTHER itself.
     let policy = if args.fifo_priority > 0 {
@@ -238,6 +253,15 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut sim_fig = Figures::new()?;
     let mut haply_fig = Figures::new()?;
     let mut rtt = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)?;
+    let mut ros2_fig = Figures::new()?;
+    let mut ros2_rtt = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)?;
+    let ros2_cfg = coop_transport::ros2::device::Ros2DeviceConfig {
+        pose_topic: ros2_driver::POSE_TOPIC.into(),
+        wrench_topic: ros2_driver::WRENCH_TOPIC.into(),
+        connect: vec![driver.locator.clone()],
+        rate_hz: ros2_driver::RATE_HZ,
+        ..Default::default()
+    };
     for _ in 0..rounds {
         let now = monotonic_ns();
         let mut sim = Guarded::new(sim_device(now)?, SafetyLimits::default(), now);
@@ -254,9 +278,19 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             Some((&mut rtt, HaplyDevice::displayed_force_n)),
         );
         haply.close(monotonic_ns());
+
+        let dev = coop_transport::ros2::device::Ros2Device::open(&ros2_cfg)
+            .context("opening the ROS 2 backend on the stand-in driver")?;
+        let mut ros2 = Guarded::new(dev, SafetyLimits::default(), monotonic_ns());
+        driver.recording.store(1, coop_rt::sync::Ordering::Relaxed);
+        phase(&mut ros2, period, ticks, &mut ros2_fig, None);
+        driver.recording.store(0, coop_rt::sync::Ordering::Relaxed);
+        ros2.close(monotonic_ns());
     }
+    driver.round_trips(SPRING_N_PER_M, &mut ros2_rtt);
     let q = |h: &Histogram<u64>, p: f64| h.value_at_quantile(p) as f64 / 1e3;
     let ratio = q(&haply_fig.wake, 0.999) / q(&sim_fig.wake, 0.999).max(1e-3);
+    let ros2_ratio = q(&ros2_fig.wake, 0.999) / q(&sim_fig.wake, 0.999).max(1e-3);
     if args.json {
         let side = |f: &Figures| {
             serde_json::json!({
@@ -270,9 +304,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             serde_json::json!({
                 "period_us": args.period_us, "seconds_per_phase": seconds, "rounds": rounds,
                 "servo_thread": policy,
-                "sim": side(&sim_fig), "haply": side(&haply_fig),
+                "sim": side(&sim_fig), "haply": side(&haply_fig), "ros2": side(&ros2_fig),
                 "p999_ratio_haply_over_sim": ratio,
+                "p999_ratio_ros2_over_sim": ros2_ratio,
                 "roundtrip": { "count": rtt.len(), "p50_us": q(&rtt, 0.5), "p99_us": q(&rtt, 0.99) },
+                "ros2_roundtrip": { "count": ros2_rtt.len(), "p50_us": q(&ros2_rtt, 0.5), "p99_us": q(&ros2_rtt, 0.99) },
             })
         );
     } else {
@@ -282,7 +318,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         );
         println!("servo thread: {policy}");
         println!("backend  ticks    overruns  wake p50 µs  p99 µs   p99.9 µs  max µs");
-        for (name, f) in [("sim", &sim_fig), ("haply", &haply_fig)] {
+        for (name, f) in [
+            ("sim", &sim_fig),
+            ("haply", &haply_fig),
+            ("ros2", &ros2_fig),
+        ] {
             println!(
                 "{name:<8} {:<8} {:<9} {:<12.1} {:<8.1} {:<9.1} {:.1}",
                 f.ticks,
@@ -293,13 +333,22 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 f.wake.max() as f64 / 1e3
             );
         }
-        println!("wake-up p99.9 haply/sim: {ratio:.2} (goal <= 1.2)");
+        println!("wake-up p99.9 haply/sim: {ratio:.2} (goal <= 1.2), ros2/sim: {ros2_ratio:.2}");
         println!(
             "Haply round trip (command to the first sample reflecting it, servo-observed): n = {}, p50 {:.0} µs, p99 {:.0} µs",
             rtt.len(),
             q(&rtt, 0.5),
             q(&rtt, 0.99)
         );
+        println!(
+            "ROS 2 round trip (a pose step put by the driver to the first wrench reflecting it, driver-observed): n = {}, p50 {:.0} µs, p99 {:.0} µs",
+            ros2_rtt.len(),
+            q(&ros2_rtt, 0.5),
+            q(&ros2_rtt, 0.99)
+        );
+    }
+    if ros2_rtt.is_empty() {
+        bail!("no ROS 2 round trip was observed: the stand-in driver never got a force reflecting its pose");
     }
     if rtt.is_empty() {
         bail!("no Haply round trip was observed: the stand-in never showed a commanded force back");

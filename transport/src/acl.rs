@@ -20,6 +20,13 @@
 //!   have applied these rules at their own edge);
 //! - going out, to any of them: anything on the session's keys (what goes out was let in).
 //!
+//! With ROS 2 ([`Ros2Members`]: the session's stations publish as ROS 2 topics in a domain), site
+//! X may also put on its own namespace (`<domain>/coop/<session>/<X>/**`) and on `/tf` and
+//! `/rosout` (shared by every ROS 2 node: their contents are not ours to split), declare the
+//! liveliness tokens of its own node (the namespace in the token is X's) and answer queries for
+//! its `/rosout` cache; a ROS 2 viewer (RViz, `ros2 bag`, `ros2 topic`, by certificate) may
+//! subscribe to and query the domain, watch and declare its graph tokens, and put nothing.
+//!
 //! A router enforces it on every link. A station can load it too (`network.access_control`):
 //! on its links to other stations (peer to peer) it then refuses what a peer may not say; on its
 //! link to a router it can only check that the other side is a router of the session.
@@ -42,6 +49,43 @@ pub struct Members<'a> {
     pub launcher: &'a str,
     /// The routers' common names.
     pub routers: &'a [String],
+    /// The ROS 2 side, if the session publishes as ROS 2 topics.
+    pub ros2: Option<Ros2Members<'a>>,
+}
+
+/// A session's ROS 2 side: its domain and who may look at it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Ros2Members<'a> {
+    /// The ROS domain the stations publish in.
+    pub domain: u32,
+    /// The common names of the ROS 2 tools' certificates (RViz, `ros2 bag`, a bridge).
+    pub viewers: &'a [String],
+}
+
+/// The ROS 2 keys a site puts (its namespace, `/tf`, `/rosout`), answers (its `/rosout` cache)
+/// and declares tokens on.
+fn ros2_site_keys(d: u32, session: &str, site: &str) -> (Vec<String>, Vec<String>, Vec<String>) {
+    let ns = crate::ros2::namespace(session, site);
+    let puts = vec![
+        format!("{d}{ns}/**"),
+        format!("{d}/tf/**"),
+        format!("{d}/rosout/**"),
+    ];
+    let answers = vec![format!("{d}/rosout/*/*/@adv/**"), format!("{d}/rosout/**")];
+    let tokens = vec![format!(
+        "@ros2_lv/{d}/*/*/*/*/%/{}/**",
+        crate::ros2::graph::mangle(&ns)
+    )];
+    (puts, answers, tokens)
+}
+
+/// Everything of ROS 2 domain `d`: its data, the transient-local caches, its graph tokens.
+fn ros2_domain_keys(d: u32) -> Vec<String> {
+    vec![
+        format!("{d}/**"),
+        format!("{d}/**/@adv/**"),
+        format!("@ros2_lv/{d}/**"),
+    ]
 }
 
 /// Zenoh message kinds, as its ACL spells them.
@@ -71,6 +115,11 @@ fn rule(id: &str, flow: &str, messages: &[&str], key_exprs: &[String]) -> Value 
 /// follows from `m`: see the module's documentation.
 pub fn session_acl(m: &Members<'_>) -> Value {
     let s = m.session;
+    // What routers may say and anyone may be told: the session's keys, and its ROS 2 domain's.
+    let mut session_keys = vec![keys::session_keys(s)];
+    if let Some(r) = &m.ros2 {
+        session_keys.extend(ros2_domain_keys(r.domain));
+    }
     let mut rules = vec![
         rule(
             "watch-subscribe",
@@ -111,13 +160,8 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &["declare_queryable", "reply"],
             &[keys::clock(s, m.launcher)],
         ),
-        rule(
-            "router-anything",
-            "ingress",
-            &EVERY_MESSAGE,
-            &[keys::session_keys(s)],
-        ),
-        rule("out", "egress", &EVERY_MESSAGE, &[keys::session_keys(s)]),
+        rule("router-anything", "ingress", &EVERY_MESSAGE, &session_keys),
+        rule("out", "egress", &EVERY_MESSAGE, &session_keys),
     ];
     let watch = ["watch-subscribe", "watch-query", "watch-presence", "out"];
     let mut subjects = vec![json!({"id": "launcher", "cert_common_names": [m.launcher]})];
@@ -160,11 +204,49 @@ pub fn session_acl(m: &Members<'_>) -> Value {
         ));
         let mut mine: Vec<String> = watch.iter().map(|r| (*r).to_owned()).collect();
         mine.extend([own("puts"), own("answers"), own("presence")]);
+        if let Some(r) = &m.ros2 {
+            let (puts, answers, tokens) = ros2_site_keys(r.domain, s, site);
+            rules.push(rule(&own("ros2-puts"), "ingress", &["put"], &puts));
+            rules.push(rule(
+                &own("ros2-answers"),
+                "ingress",
+                &["declare_queryable", "reply"],
+                &answers,
+            ));
+            rules.push(rule(
+                &own("ros2-tokens"),
+                "ingress",
+                &["liveliness_token"],
+                &tokens,
+            ));
+            mine.extend([own("ros2-puts"), own("ros2-answers"), own("ros2-tokens")]);
+        }
         subjects.push(json!({"id": format!("site-{site}"), "cert_common_names": [site]}));
         policies.push(json!({
             "id": format!("site-{site}"),
             "subjects": [format!("site-{site}")],
             "rules": mine,
+        }));
+    }
+    if let Some(r) = m.ros2.as_ref().filter(|r| !r.viewers.is_empty()) {
+        let d = r.domain;
+        rules.push(rule(
+            "ros2-view",
+            "ingress",
+            &[
+                "declare_subscriber",
+                "query",
+                "declare_liveliness_subscriber",
+                "liveliness_query",
+                "liveliness_token",
+            ],
+            &ros2_domain_keys(d),
+        ));
+        subjects.push(json!({"id": "ros2-viewers", "cert_common_names": r.viewers}));
+        policies.push(json!({
+            "id": "ros2-viewers",
+            "subjects": ["ros2-viewers"],
+            "rules": ["ros2-view", "out"],
         }));
     }
     json!({
@@ -195,6 +277,10 @@ mod tests {
             sites: &sites,
             launcher: LAUNCHER,
             routers: &routers,
+            ros2: Some(Ros2Members {
+                domain: 7,
+                viewers: &["rviz".to_owned()],
+            }),
         });
         let mut c = zenoh::Config::default();
         c.insert_json5("access_control", &acl.to_string())
@@ -216,6 +302,7 @@ mod tests {
             sites: &sites,
             launcher: LAUNCHER,
             routers: &routers,
+            ros2: None,
         });
         let rules = acl["rules"].as_array().expect("rules");
         let rule = |id: &str| {
@@ -281,5 +368,57 @@ mod tests {
         assert!(subjects
             .iter()
             .any(|s| s["id"] == "routers" && s["cert_common_names"] == json!(["r1"])));
+    }
+
+    #[test]
+    fn with_ros2_a_site_puts_only_its_own_namespace_and_a_viewer_puts_nothing() {
+        let (sites, routers) = members();
+        let viewers = ["rviz".to_owned()];
+        let acl = session_acl(&Members {
+            session: "s1-timewarp",
+            sites: &sites,
+            launcher: LAUNCHER,
+            routers: &routers,
+            ros2: Some(Ros2Members {
+                domain: 3,
+                viewers: &viewers,
+            }),
+        });
+        let rules = acl["rules"].as_array().expect("rules");
+        let rule = |id: &str| {
+            rules
+                .iter()
+                .find(|r| r["id"] == id)
+                .unwrap_or_else(|| panic!("rule {id}"))
+                .clone()
+        };
+        assert_eq!(
+            rule("site-user2-ros2-puts")["key_exprs"],
+            json!(["3/coop/s1_timewarp/user2/**", "3/tf/**", "3/rosout/**"])
+        );
+        assert_eq!(
+            rule("site-user2-ros2-tokens")["key_exprs"],
+            json!(["@ros2_lv/3/*/*/*/*/%/%coop%s1_timewarp%user2/**"])
+        );
+        let view = rule("ros2-view");
+        assert!(!view["messages"].to_string().contains("\"put\""), "{view}");
+        let policies = acl["policies"].as_array().expect("policies");
+        let p2 = policies
+            .iter()
+            .find(|p| p["id"] == "site-user2")
+            .expect("user2");
+        assert!(!p2["rules"].to_string().contains("user1"), "{p2}");
+        assert!(policies
+            .iter()
+            .any(|p| p["id"] == "ros2-viewers" && p["rules"] == json!(["ros2-view", "out"])));
+        // Without ROS 2, no ROS 2 key anywhere.
+        let plain = session_acl(&Members {
+            session: "s1",
+            sites: &sites,
+            launcher: LAUNCHER,
+            routers: &routers,
+            ros2: None,
+        });
+        assert!(!plain.to_string().contains("ros2"), "{plain}");
     }
 }

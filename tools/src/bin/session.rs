@@ -148,6 +148,15 @@ enum Command {
         /// Days the certificates are valid.
         #[arg(long, default_value_t = 365)]
         days: u32,
+        /// The ROS 2 domain the stations publish in (`[ros2] publish = true`): each site may
+        /// also put its own ROS 2 topics, /tf and /rosout, and declare its own node's tokens.
+        #[arg(long, value_name = "ID")]
+        ros2_domain: Option<u32>,
+        /// A ROS 2 tool (RViz, ros2 bag, a bridge) that may look at that domain through the
+        /// routers: it gets a certificate and may subscribe, query and declare graph tokens, but
+        /// put nothing (repeatable; needs --ros2-domain).
+        #[arg(long = "ros2-viewer", value_name = "NAME", requires = "ros2_domain")]
+        ros2_viewers: Vec<String>,
     },
     /// Benchmark: station-to-station state latency through one zenoh router (`station router`,
     /// loopback) next to peer to peer and to a bare zenoh ping-pong through the same router, in
@@ -401,6 +410,8 @@ fn main() -> std::process::ExitCode {
             routers,
             hosts,
             days,
+            ros2_domain,
+            ros2_viewers,
         } => {
             let sc = coop_actors::scenario_file::load(&scenario)?;
             let mut by_name = std::collections::BTreeMap::<String, Vec<String>>::new();
@@ -414,6 +425,8 @@ fn main() -> std::process::ExitCode {
                 hosts: by_name,
                 days,
                 out,
+                ros2_domain,
+                ros2_viewers,
             })?;
             println!("ca {}", w.ca.display());
             for (n, (c, k)) in &w.certs {

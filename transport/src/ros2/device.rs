@@ -344,82 +344,16 @@ impl Ros2Device {
     /// A bad config, zenoh refusing, or no pose from the driver in time.
     pub fn open(config: &Ros2DeviceConfig) -> Result<Self, Ros2OpenError> {
         config.validate().map_err(Ros2OpenError::Config)?;
-        let net = NetworkConfig {
-            listen: Vec::new(),
-            connect: config.connect.clone(),
-            mode: Mode::Peer,
-            ..NetworkConfig::default()
-        };
-        let zerr = |e: &dyn std::fmt::Display| Ros2OpenError::Zenoh(e.to_string());
-        let session = zenoh::open(crate::network::config(&net).map_err(|e| zerr(&e))?)
-            .wait()
-            .map_err(|e| zerr(&e))?;
-        let node = Node {
-            domain: config.domain_id,
-            zid: session.zid().to_string(),
-            id: 0,
-            namespace: "/".into(),
-            name: "coop_haptics_device".into(),
-        };
-        let mut tokens = Vec::new();
-        for key in [
-            node.token(),
-            node.endpoint_token(
-                1,
-                Kind::Subscription,
-                &config.pose_topic,
-                &graph::POSE_STAMPED,
-                Qos::STREAM,
-            ),
-            node.endpoint_token(
-                2,
-                Kind::Publisher,
-                &config.wrench_topic,
-                &graph::WRENCH_STAMPED,
-                Qos::STREAM,
-            ),
-        ] {
-            tokens.push(
-                session
-                    .liveliness()
-                    .declare_token(key)
-                    .wait()
-                    .map_err(|e| zerr(&e))?,
-            );
-        }
-        let poses = session
-            .declare_subscriber(graph::topic_key(
-                config.domain_id,
-                &config.pose_topic,
-                &graph::POSE_STAMPED,
-            ))
-            .with(RingChannel::new(64))
-            .wait()
-            .map_err(|e| zerr(&e))?;
-        let wrench = session
-            .declare_publisher(graph::topic_key(
-                config.domain_id,
-                &config.wrench_topic,
-                &graph::WRENCH_STAMPED,
-            ))
-            .congestion_control(CongestionControl::Drop)
-            .priority(Priority::InteractiveHigh)
-            .express(true)
-            .wait()
-            .map_err(|e| zerr(&e))?;
-        let first = poses
-            .recv_timeout(Duration::from_millis(config.first_pose_timeout_ms))
-            .ok()
-            .flatten()
-            .ok_or_else(|| Ros2OpenError::NoPose {
-                what: config.where_(),
-                ms: config.first_pose_timeout_ms,
-            })?;
-        let pose = PoseStamped::decode(&first.payload().to_bytes()).map_err(|e| {
-            Ros2OpenError::BadPose {
-                what: config.where_(),
-                reason: e.to_string(),
-            }
+        // Zenoh's threads are made by whichever thread opens the first session and inherit its
+        // policy and affinity: opened from a servo thread already under SCHED_FIFO, they would
+        // compete with it. Join the graph from an ordinary thread.
+        let (session, tokens, poses, wrench, pose) = std::thread::scope(|s| {
+            s.spawn(|| {
+                ordinary_thread();
+                join(config)
+            })
+            .join()
+            .unwrap_or_else(|_| Err(Ros2OpenError::Thread("joining the graph panicked".into())))
         })?;
         let (newest, stamp) = to_sample(&pose, monotonic_ns(), None);
         let (tx, rx) = rtrb::RingBuffer::new(RING_SLOTS);
@@ -534,6 +468,8 @@ impl Drop for Ros2Device {
 impl Bridge {
     /// Until stopped: each pose to the servo, each new command to the driver.
     fn run(mut self) {
+        // Started from the servo's thread, it would inherit its SCHED_FIFO and CPU.
+        ordinary_thread();
         // Nothing is sent until the servo commands: the write count at start is not ours.
         let mut sent = self.shared.cmd.load().0;
         let mut last_put: Option<std::time::Instant> = None;
@@ -607,6 +543,107 @@ impl Bridge {
             .attachment(attachment.encode().to_vec())
             .wait();
     }
+}
+
+/// Makes the calling thread an ordinary one (SCHED_OTHER, any CPU): the bridge is not real-time.
+fn ordinary_thread() {
+    let _ = coop_rt::sched::apply_to_current_thread(&coop_rt::sched::Request {
+        policy: coop_rt::sched::Policy::Other,
+        priority: 0,
+        cpus: Some(coop_rt::sched::allowed_cpus()),
+        prefault_stack_bytes: 0,
+    });
+}
+
+/// The bridge's zenoh declarations, and the driver's first pose.
+type Joined = (
+    Session,
+    Vec<LivelinessToken>,
+    Subscriber<RingChannelHandler<ZSample>>,
+    Publisher<'static>,
+    PoseStamped,
+);
+
+/// Joins the ROS 2 graph as a node with one subscription (the pose) and one publisher (the
+/// wrench), and waits for the driver's first pose.
+fn join(config: &Ros2DeviceConfig) -> Result<Joined, Ros2OpenError> {
+    let net = NetworkConfig {
+        listen: Vec::new(),
+        connect: config.connect.clone(),
+        mode: Mode::Peer,
+        ..NetworkConfig::default()
+    };
+    let zerr = |e: &dyn std::fmt::Display| Ros2OpenError::Zenoh(e.to_string());
+    let session = zenoh::open(crate::network::config(&net).map_err(|e| zerr(&e))?)
+        .wait()
+        .map_err(|e| zerr(&e))?;
+    let node = Node {
+        domain: config.domain_id,
+        zid: session.zid().to_string(),
+        id: 0,
+        namespace: "/".into(),
+        name: "coop_haptics_device".into(),
+    };
+    let mut tokens = Vec::new();
+    for key in [
+        node.token(),
+        node.endpoint_token(
+            1,
+            Kind::Subscription,
+            &config.pose_topic,
+            &graph::POSE_STAMPED,
+            Qos::STREAM,
+        ),
+        node.endpoint_token(
+            2,
+            Kind::Publisher,
+            &config.wrench_topic,
+            &graph::WRENCH_STAMPED,
+            Qos::STREAM,
+        ),
+    ] {
+        tokens.push(
+            session
+                .liveliness()
+                .declare_token(key)
+                .wait()
+                .map_err(|e| zerr(&e))?,
+        );
+    }
+    let poses = session
+        .declare_subscriber(graph::topic_key(
+            config.domain_id,
+            &config.pose_topic,
+            &graph::POSE_STAMPED,
+        ))
+        .with(RingChannel::new(64))
+        .wait()
+        .map_err(|e| zerr(&e))?;
+    let wrench = session
+        .declare_publisher(graph::topic_key(
+            config.domain_id,
+            &config.wrench_topic,
+            &graph::WRENCH_STAMPED,
+        ))
+        .congestion_control(CongestionControl::Drop)
+        .priority(Priority::InteractiveHigh)
+        .express(true)
+        .wait()
+        .map_err(|e| zerr(&e))?;
+    let first = poses
+        .recv_timeout(Duration::from_millis(config.first_pose_timeout_ms))
+        .ok()
+        .flatten()
+        .ok_or_else(|| Ros2OpenError::NoPose {
+            what: config.where_(),
+            ms: config.first_pose_timeout_ms,
+        })?;
+    let pose =
+        PoseStamped::decode(&first.payload().to_bytes()).map_err(|e| Ros2OpenError::BadPose {
+            what: config.where_(),
+            reason: e.to_string(),
+        })?;
+    Ok((session, tokens, poses, wrench, pose))
 }
 
 /// What `station devices` says of the ROS 2 backend: whether a pose comes on the configured topic
