@@ -381,3 +381,185 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     // Pressing when it went silent, released after (how long after is the benchmark's figure).
     assert!(d["released_after_s"].as_f64().is_some(), "{d}");
 }
+
+/// The ROS 2 side through a router with mutual TLS and the session's access control (`session
+/// certs --ros2-domain 0 --ros2-viewer rviz`): a viewer holding the `rviz` certificate receives a
+/// station's ROS 2 topics; neither it nor another site's certificate can put on that station's
+/// topics (the router refuses and says so), while a site's put on its own namespace goes through.
+#[test]
+fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
+    use coop_transport::network::{Mode, NetworkConfig, Tls};
+    use coop_transport::ros2::graph;
+    use zenoh::Wait;
+
+    const LIMIT: Duration = Duration::from_secs(60);
+    let _turn = ONE_AT_A_TIME.lock();
+    let dir = out_dir("acl");
+    let session = coop_tests::unique_session();
+    let certs = dir.join("certs");
+    let made = Command::new(env!("CARGO_BIN_EXE_session"))
+        .current_dir(root())
+        .args(["certs", "scenarios/paper.toml", "--session", &session])
+        .args([
+            "--router",
+            "r1",
+            "--ros2-domain",
+            "0",
+            "--ros2-viewer",
+            "rviz",
+        ])
+        .arg("--out")
+        .arg(&certs)
+        .output()
+        .expect("session certs");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let locator = coop_transport::network::concrete_listen(&["tcp/127.0.0.1:0".into()])
+        .remove(0)
+        .replacen("tcp/", "tls/", 1);
+    let status_file = dir.join("r1.json");
+    let cfg = dir.join("r1.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "name = \"r1\"\nlisten = [{locator:?}]\naccess_control = {acl:?}\nstatus_file = {status:?}\n\
+             [tls]\nroot_ca_certificate = {ca:?}\nlisten_certificate = {c:?}\nlisten_private_key = {k:?}\nenable_mtls = true\n",
+            acl = certs.join("acl.json5"),
+            status = status_file,
+            ca = certs.join("ca.pem"),
+            c = certs.join("r1.pem"),
+            k = certs.join("r1.key"),
+        ),
+    )
+    .expect("router config");
+    let _router = Reaped(
+        Command::new(env!("CARGO_BIN_EXE_station"))
+            .args(["router", "run", "--config"])
+            .arg(&cfg)
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(dir.join("router.log")).expect("log"))
+            .spawn()
+            .expect("router"),
+    );
+    let tls = |who: &str| Tls {
+        root_ca_certificate: Some(certs.join("ca.pem")),
+        connect_certificate: Some(certs.join(format!("{who}.pem"))),
+        connect_private_key: Some(certs.join(format!("{who}.key"))),
+        enable_mtls: true,
+        ..Tls::default()
+    };
+    // The station: user1, a client of the router, publishing its ROS 2 topics.
+    let station_cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
+        c.scenario = Some(root().join("scenarios/paper.toml"));
+        c.network = NetworkConfig {
+            mode: Mode::Client,
+            listen: Vec::new(),
+            connect: vec![locator.clone()],
+            tls: Some(tls("user1")),
+            access_control: Some(certs.join("acl.json5")),
+            ..NetworkConfig::default()
+        };
+        c.ros2.publish = true;
+    });
+    let station = coop_tests::Reaped::spawn(
+        Command::new(env!("CARGO_BIN_EXE_station"))
+            .arg("run")
+            .arg("--config")
+            .arg(&station_cfg),
+    );
+    let client = |who: &str| {
+        let net = NetworkConfig {
+            mode: Mode::Client,
+            listen: Vec::new(),
+            connect: vec![locator.clone()],
+            tls: Some(tls(who)),
+            ..NetworkConfig::default()
+        };
+        let waited = Instant::now();
+        loop {
+            match zenoh::open(coop_transport::network::config(&net).expect("config")).wait() {
+                Ok(z) => break z,
+                Err(e) => {
+                    assert!(waited.elapsed() < LIMIT, "{who} cannot connect: {e}");
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+            }
+        }
+    };
+    let viewer = client("rviz");
+    let seen: std::sync::Arc<Mutex<Vec<(String, Vec<u8>)>>> = std::sync::Arc::default();
+    let s2 = seen.clone();
+    let _sub = viewer
+        .declare_subscriber("0/**")
+        .callback(move |s| {
+            s2.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push((s.key_expr().to_string(), s.payload().to_bytes().to_vec()));
+        })
+        .wait()
+        .expect("the viewer may subscribe");
+    let ns = |site: &str| coop_transport::ros2::namespace(&session, site);
+    let user1_tool = graph::topic_key(0, &format!("{}/tool", ns("user1")), &graph::POSE_STAMPED);
+    let user2_tool = graph::topic_key(0, &format!("{}/tool", ns("user2")), &graph::POSE_STAMPED);
+    let got = |pred: &dyn Fn(&(String, Vec<u8>)) -> bool| {
+        seen.lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .iter()
+            .any(pred)
+    };
+    coop_tests::wait_until("the viewer receiving user1's tool", LIMIT, || {
+        got(&|(k, b)| *k == user1_tool && coop_transport::ros2::cdr::PoseStamped::decode(b).is_ok())
+            .then_some(())
+    });
+
+    // Forgeries on user1's tool, by a viewer (another session holding the viewer's certificate:
+    // a session's own subscriber would get its put without the router) and by user2, then user2
+    // on its own namespace.
+    let forged = b"forged".to_vec();
+    let viewer2 = client("rviz");
+    viewer2
+        .put(&user1_tool, forged.clone())
+        .wait()
+        .expect("put (refused at the router, not here)");
+    let impostor = client("user2");
+    impostor
+        .put(&user1_tool, forged.clone())
+        .wait()
+        .expect("put");
+    impostor
+        .put(&user2_tool, b"own".to_vec())
+        .wait()
+        .expect("put");
+    coop_tests::wait_until(
+        "the viewer receiving user2's put on its own topic",
+        LIMIT,
+        || got(&|(k, b)| *k == user2_tool && b == b"own").then_some(()),
+    );
+    assert!(
+        !got(&|(_, b)| *b == forged),
+        "a forgery on user1's ROS 2 topic reached the viewer"
+    );
+    let refused = coop_tests::wait_until("the router's refusals of both puts", LIMIT, || {
+        let v: Value = serde_json::from_str(&std::fs::read_to_string(&status_file).ok()?).ok()?;
+        let on_user1 = v["recent_refusals"]
+            .as_array()?
+            .iter()
+            .filter(|r| r["key"].as_str() == Some(user1_tool.as_str()))
+            .count();
+        (on_user1 >= 2).then_some(v)
+    });
+    eprintln!("router refusals: {}", refused["recent_refusals"]);
+    drop(impostor);
+    drop(viewer2);
+    drop(viewer);
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(station.pid() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .expect("SIGTERM");
+    let (status, _) = station.finish();
+    assert!(status.success(), "exit {status}");
+}
