@@ -382,6 +382,9 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     assert!(d["released_after_s"].as_f64().is_some(), "{d}");
 }
 
+/// A sample a subscriber got: its key and payload.
+type Seen = (String, Vec<u8>);
+
 /// The ROS 2 side through a router with mutual TLS and the session's access control (`session
 /// certs --ros2-domain 0 --ros2-viewer rviz`): a viewer holding the `rviz` certificate receives a
 /// station's ROS 2 topics; neither it nor another site's certificate can put on that station's
@@ -490,7 +493,7 @@ fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
         }
     };
     let viewer = client("rviz");
-    let seen: std::sync::Arc<Mutex<Vec<(String, Vec<u8>)>>> = std::sync::Arc::default();
+    let seen: std::sync::Arc<Mutex<Vec<Seen>>> = std::sync::Arc::default();
     let s2 = seen.clone();
     let _sub = viewer
         .declare_subscriber("0/**")
@@ -504,7 +507,7 @@ fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
     let ns = |site: &str| coop_transport::ros2::namespace(&session, site);
     let user1_tool = graph::topic_key(0, &format!("{}/tool", ns("user1")), &graph::POSE_STAMPED);
     let user2_tool = graph::topic_key(0, &format!("{}/tool", ns("user2")), &graph::POSE_STAMPED);
-    let got = |pred: &dyn Fn(&(String, Vec<u8>)) -> bool| {
+    let got = |pred: &dyn Fn(&Seen) -> bool| {
         seen.lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .iter()
