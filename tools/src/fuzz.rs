@@ -68,6 +68,8 @@ pub enum Target {
     Scenario,
     /// The station configuration parser and validation.
     Config,
+    /// The ROS 2 decoders (what a `ros2` device takes from its driver, and the other messages).
+    Ros2,
 }
 
 /// What a run found.
@@ -117,6 +119,7 @@ pub fn main(a: &Args) -> anyhow::Result<()> {
             Target::Wire => wire_target(a, &progress),
             Target::Scenario => scenario_target(a, &progress),
             Target::Config => config_target(a, &progress),
+            Target::Ros2 => ros2_target(a, &progress),
         };
         done.store(1, Ordering::Relaxed);
         (out, watchdog.join().ok().flatten())
@@ -626,6 +629,101 @@ fn config_target(a: &Args, progress: &AtomicU64) -> Outcome {
             && r.config.rings.tool_slots.is_power_of_two();
         if !ok {
             implausible(out, || format!("input {i}: accepted {t}"));
+        }
+    });
+    out
+}
+
+/// Genuine ROS 2 messages of every type we decode, mutated byte-wise: a decoder may refuse, never
+/// panic, and what it accepts must be finite and decode again to the same message once encoded
+/// (padding aside, the bytes carry nothing else).
+fn ros2_target(a: &Args, progress: &AtomicU64) -> Outcome {
+    use coop_transport::ros2::cdr::{
+        decode_tf, encode_tf, Header, Log, PoseStamped, Time, TransformStamped, WrenchStamped,
+    };
+    let mut rng = Rng::new(a.seed);
+    let mut out = Outcome::default();
+    each(a, progress, &mut out, |i, out| {
+        let stamp = Time::from_unix_ns(rng.next_u64() >> 4);
+        let frame: String = (0..rng.next_u64() % 12)
+            .map(|_| char::from(b'a' + (rng.next_u64() % 26) as u8))
+            .collect();
+        let header = Header {
+            stamp,
+            frame_id: frame.clone(),
+        };
+        let v3 = |rng: &mut Rng| {
+            [
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            ]
+        };
+        let kind = rng.next_u64() % 4;
+        let mut bytes = match kind {
+            0 => PoseStamped {
+                header,
+                position: v3(&mut rng),
+                orientation: [0.0, 0.0, 0.0, 1.0],
+            }
+            .encode(),
+            1 => WrenchStamped {
+                header,
+                force: v3(&mut rng),
+                torque: v3(&mut rng),
+            }
+            .encode(),
+            2 => encode_tf(
+                &(0..rng.next_u64() % 4)
+                    .map(|_| TransformStamped {
+                        header: header.clone(),
+                        child_frame_id: frame.clone(),
+                        translation: v3(&mut rng),
+                        rotation: [0.0, 0.0, 0.0, 1.0],
+                    })
+                    .collect::<Vec<_>>(),
+            ),
+            _ => Log {
+                stamp,
+                level: Log::INFO,
+                name: frame.clone(),
+                msg: frame.clone(),
+                ..Log::default()
+            }
+            .encode(),
+        };
+        mutate_bytes(&mut rng, &mut bytes);
+        let again = match kind {
+            0 => PoseStamped::decode(&bytes).map(|m| {
+                let finite = m
+                    .position
+                    .iter()
+                    .chain(&m.orientation)
+                    .all(|x| x.is_finite());
+                (finite, PoseStamped::decode(&m.encode()) == Ok(m))
+            }),
+            1 => WrenchStamped::decode(&bytes).map(|m| {
+                let finite = m.force.iter().chain(&m.torque).all(|x| x.is_finite());
+                (finite, WrenchStamped::decode(&m.encode()) == Ok(m))
+            }),
+            2 => decode_tf(&bytes).map(|m| {
+                let finite = m.iter().all(|t| {
+                    t.translation
+                        .iter()
+                        .chain(&t.rotation)
+                        .all(|x| x.is_finite())
+                });
+                (finite, decode_tf(&encode_tf(&m)) == Ok(m))
+            }),
+            _ => Log::decode(&bytes).map(|m| (true, Log::decode(&m.encode()) == Ok(m))),
+        };
+        if let Ok((finite, same)) = again {
+            out.accepted += 1;
+            if !(finite && same) {
+                implausible(out, || {
+                    format!("input {i}: accepted kind {kind}, finite {finite}, round trip {same}: {bytes:02x?}")
+                });
+            }
         }
     });
     out

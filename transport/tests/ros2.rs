@@ -124,6 +124,10 @@ fn bad_bytes_are_refused_with_the_reason() {
     let mut no_nul = good.clone();
     no_nul[21] = b'x';
     assert_eq!(PoseStamped::decode(&no_nul), Err(CdrError::String(12)));
+    // A NUL inside the frame id (a ROS string cannot hold one; found by `fuzz ros2`).
+    let mut inner_nul = good.clone();
+    inner_nul[18] = 0;
+    assert_eq!(PoseStamped::decode(&inner_nul), Err(CdrError::String(12)));
     // A TFMessage claiming a billion transforms is refused before anything is allocated for them.
     let mut many = hex(TF);
     many[4..8].copy_from_slice(&1_000_000_000u32.to_le_bytes());

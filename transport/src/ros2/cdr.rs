@@ -119,8 +119,8 @@ pub enum CdrError {
         /// The message's length.
         len: usize,
     },
-    /// A string without its closing NUL, or not UTF-8.
-    #[error("string at offset {0} is not NUL-terminated UTF-8")]
+    /// A string without its closing NUL, with one inside, or not UTF-8.
+    #[error("string at offset {0} is not UTF-8 ending in its only NUL")]
     String(usize),
     /// More bytes than the message (beyond the 3 of padding CDR allows at the end).
     #[error("{0} bytes left over after the message")]
@@ -320,7 +320,8 @@ impl<'a> Reader<'a> {
         }
         let b = self.take(1, n)?;
         let (text, nul) = b.split_at(n - 1);
-        if nul != [0] {
+        // One NUL, at the end: a ROS string cannot hold one inside.
+        if nul != [0] || text.contains(&0) {
             return Err(CdrError::String(at));
         }
         std::str::from_utf8(text)
