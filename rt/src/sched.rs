@@ -248,6 +248,19 @@ fn current_cpus() -> Vec<usize> {
     }
 }
 
+/// Makes the calling thread an ordinary one: SCHED_OTHER at priority 0, on any CPU the process
+/// may use. For a thread that is not real-time (a device's bridge) started from one that is: a
+/// thread takes its creator's policy and affinity, and would compete with the servo at its
+/// priority on its CPU. Best effort: a thread that cannot be changed stays as it was.
+pub fn make_ordinary() {
+    let _ = apply_to_current_thread(&Request {
+        policy: Policy::Other,
+        priority: 0,
+        cpus: Some(allowed_cpus()),
+        prefault_stack_bytes: 0,
+    });
+}
+
 /// CPUs this process may be pinned to: the cgroup's effective cpuset, or else the online CPUs.
 ///
 /// Not the calling thread's mask: a thread already pinned to one CPU may still pin a new thread to

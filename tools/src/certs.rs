@@ -98,6 +98,10 @@ pub fn make(a: &CertsArgs) -> anyhow::Result<Written> {
             coop_transport::ros2::MAX_DOMAIN_ID
         );
     }
+    if a.ros2_domain.is_some() {
+        coop_transport::ros2::check_names(a.sites.iter().map(String::as_str), [])
+            .map_err(|e| anyhow::anyhow!("--ros2-domain: {e}"))?;
+    }
     names.extend(a.ros2_viewers.iter().cloned());
     for (i, n) in names.iter().enumerate() {
         name_rule("name", n)?;

@@ -243,3 +243,12 @@ fn the_attachment_is_sequence_time_and_gid() {
     let zid = [7u8; 16];
     assert_ne!(graph::gid(zid, 1), graph::gid(zid, 2));
 }
+
+#[test]
+fn names_that_become_one_ros_name_are_refused() {
+    use coop_transport::ros2::check_names;
+    assert_eq!(check_names(["user1", "user2"], ["cup", "tray"]), Ok(()));
+    let e = check_names(["a-b", "a_b"], []).expect_err("one namespace for two sites");
+    assert!(e.contains("\"a-b\"") && e.contains("\"a_b\""), "{e}");
+    assert!(check_names(["u"], ["big cup", "big_cup"]).is_err());
+}

@@ -400,6 +400,15 @@ impl StationConfig {
                 );
             }
         }
+        if self.ros2.publish {
+            coop_transport::ros2::check_names(
+                scenario.site.iter().map(|s| s.name.as_str()),
+                scenario.objects.iter().map(|o| o.name.as_str()),
+            )
+            .map_err(|e| {
+                anyhow::anyhow!("ros2.publish = true: scenario {:?}: {e}", scenario.name)
+            })?;
+        }
         let name = self
             .station
             .clone()

@@ -202,7 +202,8 @@ pub enum WireKind {
     Presence,
     /// The live view's samples (put only).
     Live,
-    /// ROS 2 topics: poses, forces, frames and events (put), a ROS 2 device's poses (got).
+    /// ROS 2 topics the network process puts: poses, forces, frames and events (a `ros2`
+    /// device's own traffic is its bridge's, in the servo process, and not counted here).
     Ros2,
 }
 

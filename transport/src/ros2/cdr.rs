@@ -3,7 +3,7 @@
 //! own size counted from the end of the header, strings as a `u32` length that counts the closing
 //! NUL, then the bytes and the NUL, sequences as a `u32` count then the elements.
 //!
-//! Written by hand rather than generated: five message types, all of fixed shape but for their
+//! Written by hand rather than generated: four message types (and the transform inside one), all of fixed shape but for their
 //! strings and one sequence, and every byte pinned by golden tests that `rosbags` (the Python
 //! reader ROS users record with) produced.
 

@@ -12,8 +12,12 @@
 //!   an rtrb SPSC ring (a pose that is not a finite `PoseStamped` is a
 //!   [`DeviceFault::BadValue`]);
 //! - servo → driver: the newest command through a [`CommandSlot`] (seqlock), put as a
-//!   `WrenchStamped` in the driver's frame each time it changes (a release is a zero wrench), at
-//!   most at the driver's rate.
+//!   `WrenchStamped` in the driver's frame each time the servo writes it (a release is a zero
+//!   wrench), at most at the driver's rate; a servo that stops writing for `stale_limit_ms`
+//!   leaves the driver a zero wrench.
+//!
+//! The driver is the publisher of the first pose (its GID, from `rmw_zenoh`'s attachment): poses
+//! from any other (a second driver, a bag played on the same topic) are refused and counted.
 //!
 //! A driver that goes silent leaves the newest sample ageing: past `stale_limit_ms`, `sample` and
 //! `command` say [`DeviceFault::Disconnected`] and the safety layer releases the device. Closing
@@ -267,6 +271,9 @@ pub struct Ros2DeviceStats {
     pub poses: AtomicU64,
     /// Messages refused (not a finite `PoseStamped`).
     pub bad_poses: AtomicU64,
+    /// Poses refused for coming from another publisher than the first pose's (a second driver, a
+    /// bag played on the same topic).
+    pub foreign_poses: AtomicU64,
     /// Wrenches put.
     pub wrenches: AtomicU64,
     /// Wrenches put that were not zero.
@@ -303,14 +310,24 @@ struct Bridge {
     poses: Subscriber<RingChannelHandler<ZSample>>,
     wrench: Publisher<'static>,
     gid: [u8; 16],
+    /// The driver's GID (from its first pose's attachment): poses of any other are refused.
+    driver: Option<[u8; 16]>,
     frame_id: String,
     period: Duration,
+    stale_limit: Duration,
     shared: Arc<Shared>,
     tx: rtrb::Producer<BridgeMsg>,
     last: Option<(Sample, i128)>,
 }
 
-/// A pose as a device sample (device frame), its velocity from the previous pose's stamp.
+/// The longest gap between two poses a velocity is taken over, ns: beyond it the hand may have done
+/// anything in between, and the velocity is not known (zero).
+const VELOCITY_GAP_NS: i128 = 100_000_000;
+
+/// A pose as a device sample (device frame), stamped `now_ns` (its arrival), its velocity from the
+/// previous pose: over the stamps' interval where the driver's stamps advance by a plausible
+/// amount (at least a tenth of a millisecond, at most [`VELOCITY_GAP_NS`]), else over the arrivals'
+/// (a driver that leaves its stamps at 0, or repeats them).
 fn to_sample(p: &PoseStamped, now_ns: u64, previous: Option<&(Sample, i128)>) -> (Sample, i128) {
     let stamp = i128::from(p.header.stamp.sec) * 1_000_000_000 + i128::from(p.header.stamp.nanosec);
     let position = Vec3::from(p.position);
@@ -318,10 +335,17 @@ fn to_sample(p: &PoseStamped, now_ns: u64, previous: Option<&(Sample, i128)>) ->
     let q = Quaternion::new(w, x, y, z);
     // A driver that does not sense orientation publishes zeros: no orientation, not a NaN.
     let orientation = ((q.norm() - 1.0).abs() < 1e-3).then(|| UnitQuaternion::from_quaternion(q));
+    let plausible = |dt: i128| (100_000..=VELOCITY_GAP_NS).contains(&dt);
     let velocity = match previous {
-        Some((s, t)) if stamp > *t => (position - s.position_m) / ((stamp - t) as f64 * 1e-9),
-        Some((s, _)) => s.velocity_m_s,
-        None => Vec3::zeros(),
+        Some((s, t)) if plausible(stamp - t) => {
+            (position - s.position_m) / ((stamp - t) as f64 * 1e-9)
+        }
+        Some((s, _)) if plausible(i128::from(now_ns) - i128::from(s.t_ns)) => {
+            (position - s.position_m) / ((now_ns - s.t_ns) as f64 * 1e-9)
+        }
+        // The same instant (a burst), or too long ago to say.
+        Some((s, _)) if now_ns.saturating_sub(s.t_ns) < 100_000 => s.velocity_m_s,
+        _ => Vec3::zeros(),
     };
     (
         Sample {
@@ -337,8 +361,8 @@ fn to_sample(p: &PoseStamped, now_ns: u64, previous: Option<&(Sample, i128)>) ->
 }
 
 impl Ros2Device {
-    /// Joins the ROS 2 graph, waits for the driver's first pose, and starts the bridge. Until the
-    /// servo commands, the driver is sent nothing (then a zero wrench for a release).
+    /// Joins the ROS 2 graph, waits for the driver's first pose (its publisher is the driver from
+    /// then on), and starts the bridge. Until the servo commands, the driver is sent nothing.
     ///
     /// # Errors
     /// A bad config, zenoh refusing, or no pose from the driver in time.
@@ -347,9 +371,9 @@ impl Ros2Device {
         // Zenoh's threads are made by whichever thread opens the first session and inherit its
         // policy and affinity: opened from a servo thread already under SCHED_FIFO, they would
         // compete with it. Join the graph from an ordinary thread.
-        let (session, tokens, poses, wrench, pose) = std::thread::scope(|s| {
+        let (session, tokens, poses, wrench, (pose, driver)) = std::thread::scope(|s| {
             s.spawn(|| {
-                ordinary_thread();
+                coop_rt::sched::make_ordinary();
                 join(config)
             })
             .join()
@@ -365,8 +389,10 @@ impl Ros2Device {
             _tokens: tokens,
             poses,
             wrench,
+            driver,
             frame_id: pose.header.frame_id.clone(),
             period: Duration::from_secs_f64(1.0 / config.rate_hz),
+            stale_limit: Duration::from_secs_f64(config.stale_limit_ms * 1e-3),
             shared: Arc::clone(&shared),
             tx,
             last: Some((newest, stamp)),
@@ -466,35 +492,72 @@ impl Drop for Ros2Device {
 }
 
 impl Bridge {
-    /// Until stopped: each pose to the servo, each new command to the driver.
+    /// Until stopped: each pose to the servo, each new command to the driver, and a release
+    /// when the servo stops commanding.
     fn run(mut self) {
+        use std::time::Instant;
         // Started from the servo's thread, it would inherit its SCHED_FIFO and CPU.
-        ordinary_thread();
+        coop_rt::sched::make_ordinary();
         // Nothing is sent until the servo commands: the write count at start is not ours.
-        let mut sent = self.shared.cmd.load().0;
-        let mut last_put: Option<std::time::Instant> = None;
+        let mut seen = self.shared.cmd.load().0;
+        let mut last_write = Instant::now();
+        let mut last_put: Option<Instant> = None;
+        // What the driver displays now, as far as we told it: nothing until we put.
+        let mut displaying: Option<Command> = None;
         while self.shared.stop.load(Ordering::Acquire) == 0 {
             match self.poses.recv_timeout(self.period) {
-                Ok(Some(z)) => self.take(&z),
+                Ok(Some(z)) => {
+                    self.take(&z);
+                    // Everything that queued meanwhile, in order: the newest pose is the last.
+                    while let Ok(Some(z)) = self.poses.try_recv() {
+                        self.take(&z);
+                    }
+                }
                 Ok(None) => {}
                 // The session is closing.
                 Err(_) => break,
             }
             let (n, cmd) = self.shared.cmd.load();
-            let due = last_put.is_none_or(|t| t.elapsed() >= self.period);
-            if n != sent && due {
-                sent = n;
-                last_put = Some(std::time::Instant::now());
-                self.put(cmd);
+            if n != seen {
+                seen = n;
+                last_write = Instant::now();
+                if last_put.is_none_or(|t| t.elapsed() >= self.period) {
+                    last_put = Some(Instant::now());
+                    self.put(cmd, false);
+                    displaying = Some(cmd);
+                }
+            } else if last_write.elapsed() > self.stale_limit
+                && matches!(displaying, Some(Command::Force(_)))
+            {
+                // The servo stopped commanding (stalled, or gone): no force it no longer vouches
+                // for stays on the hand.
+                self.put(Command::Release, true);
+                displaying = Some(Command::Release);
             }
         }
-        // Whatever the driver was displaying, it displays nothing now.
-        self.put(Command::Release);
+        // Whatever the driver was displaying, it displays nothing now; sent reliably (the
+        // session closes next). A driver never commanded is not touched (a probe, say).
+        if displaying.is_some() {
+            self.put(Command::Release, true);
+        }
         let _ = self.session.close().wait();
     }
 
-    /// A driver's message: a pose for the servo, or a fault.
+    /// A driver's message: a pose for the servo, or a fault; another publisher's is refused.
     fn take(&mut self, z: &ZSample) {
+        if let Some(driver) = self.driver {
+            let from = z
+                .attachment()
+                .and_then(|a| Attachment::decode(&a.to_bytes()))
+                .map(|a| a.gid);
+            if from != Some(driver) {
+                self.shared
+                    .stats
+                    .foreign_poses
+                    .fetch_add(1, Ordering::Relaxed);
+                return;
+            }
+        }
         let msg = match PoseStamped::decode(&z.payload().to_bytes()) {
             Ok(p) => {
                 let (s, stamp) = to_sample(&p, monotonic_ns(), self.last.as_ref());
@@ -511,8 +574,9 @@ impl Bridge {
         let _ = self.tx.push(msg);
     }
 
-    /// Puts `cmd` as a wrench in the driver's frame.
-    fn put(&mut self, cmd: Command) {
+    /// Puts `cmd` as a wrench in the driver's frame; `reliably`: waiting for room rather than
+    /// dropping it under congestion (a release that must not be lost).
+    fn put(&mut self, cmd: Command, reliably: bool) {
         let force = match cmd {
             Command::Force(f) => [f.x, f.y, f.z],
             Command::Release => [0.0; 3],
@@ -533,26 +597,24 @@ impl Bridge {
         }
         let attachment = Attachment {
             seq: i64::try_from(seq).unwrap_or(i64::MAX),
-            source_ns: i64::try_from(i128::from(now) + offset).unwrap_or(0),
+            source_ns: super::wall_ns(now, offset),
             gid: self.gid,
         };
+        let (bytes, attachment) = (m.encode(), attachment.encode().to_vec());
         // A put that fails is one command the driver misses; the next replaces it.
-        let _ = self
-            .wrench
-            .put(m.encode())
-            .attachment(attachment.encode().to_vec())
-            .wait();
+        let _ = if reliably {
+            // The publisher drops under congestion; this one waits for room, on the same key.
+            self.session
+                .put(self.wrench.key_expr(), bytes)
+                .congestion_control(CongestionControl::Block)
+                .priority(Priority::InteractiveHigh)
+                .express(true)
+                .attachment(attachment)
+                .wait()
+        } else {
+            self.wrench.put(bytes).attachment(attachment).wait()
+        };
     }
-}
-
-/// Makes the calling thread an ordinary one (SCHED_OTHER, any CPU): the bridge is not real-time.
-fn ordinary_thread() {
-    let _ = coop_rt::sched::apply_to_current_thread(&coop_rt::sched::Request {
-        policy: coop_rt::sched::Policy::Other,
-        priority: 0,
-        cpus: Some(coop_rt::sched::allowed_cpus()),
-        prefault_stack_bytes: 0,
-    });
 }
 
 /// The bridge's zenoh declarations, and the driver's first pose.
@@ -561,7 +623,7 @@ type Joined = (
     Vec<LivelinessToken>,
     Subscriber<RingChannelHandler<ZSample>>,
     Publisher<'static>,
-    PoseStamped,
+    (PoseStamped, Option<[u8; 16]>),
 );
 
 /// Joins the ROS 2 graph as a node with one subscription (the pose) and one publisher (the
@@ -643,7 +705,11 @@ fn join(config: &Ros2DeviceConfig) -> Result<Joined, Ros2OpenError> {
             what: config.where_(),
             reason: e.to_string(),
         })?;
-    Ok((session, tokens, poses, wrench, pose))
+    let driver = first
+        .attachment()
+        .and_then(|a| Attachment::decode(&a.to_bytes()))
+        .map(|a| a.gid);
+    Ok((session, tokens, poses, wrench, (pose, driver)))
 }
 
 /// What `station devices` says of the ROS 2 backend: whether a pose comes on the configured topic

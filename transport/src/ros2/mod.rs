@@ -92,3 +92,36 @@ pub fn stamp(monotonic_ns: u64, offset_ns: i128) -> cdr::Time {
     let wall = (i128::from(monotonic_ns) + offset_ns).max(0);
     cdr::Time::from_unix_ns(u64::try_from(wall).unwrap_or(u64::MAX))
 }
+
+/// A monotonic time as wall ns since the Unix epoch (an attachment's source time), given
+/// [`wall_minus_monotonic_ns`]; 0 if it does not fit.
+pub fn wall_ns(monotonic_ns: u64, offset_ns: i128) -> i64 {
+    i64::try_from(i128::from(monotonic_ns) + offset_ns).unwrap_or(0)
+}
+
+/// Checks that the session's sites, and the world's objects, stay distinct as ROS names
+/// ([`graph::ros_name`] makes `a-b` and `a_b` one name: two sites would then share a namespace,
+/// and the access control could not tell their topics apart).
+///
+/// # Errors
+/// The two names that collide, and the name they both become.
+pub fn check_names<'a>(
+    sites: impl IntoIterator<Item = &'a str>,
+    objects: impl IntoIterator<Item = &'a str>,
+) -> Result<(), String> {
+    for (what, names) in [
+        ("sites", sites.into_iter().collect::<Vec<_>>()),
+        ("objects", objects.into_iter().collect::<Vec<_>>()),
+    ] {
+        let mut seen = std::collections::BTreeMap::new();
+        for n in names {
+            if let Some(other) = seen.insert(graph::ros_name(n), n) {
+                return Err(format!(
+                    "{what} {other:?} and {n:?} are both {:?} as ROS 2 names: rename one to publish as ROS 2 topics",
+                    graph::ros_name(n)
+                ));
+            }
+        }
+    }
+    Ok(())
+}

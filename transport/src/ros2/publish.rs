@@ -12,8 +12,10 @@
 //! | `/rosout` | `rcl_interfaces/msg/Log`: the station's events | reliable, transient local |
 //!
 //! `<ns>` is [`super::namespace`], the node is `station` in it. Nothing here waits: puts are
-//! dropped, not queued, under congestion, at background priority, and skipped altogether while no
-//! one subscribes. Stamps are the samples' monotonic times translated to wall time.
+//! dropped, not queued, under congestion, at background priority, and the streams' are skipped
+//! altogether while no one subscribes (a `/rosout` line is always put, and kept for late
+//! subscribers: the last 1000 of the last 10 s, `_max` of them if a query asks). Stamps are the
+//! samples' monotonic times translated to wall time.
 
 use std::sync::{Arc, Mutex};
 
@@ -38,8 +40,11 @@ pub const CDR_ENCODING: &str = "application/cdr";
 /// How many `/rosout` lines a late subscriber can still get (as `rcl` keeps: its depth).
 const ROSOUT_KEPT: usize = 1000;
 
-/// The `/rosout` lines kept for late subscribers: each line's CDR bytes and attachment.
-type Kept = Arc<Mutex<std::collections::VecDeque<(Vec<u8>, Vec<u8>)>>>;
+/// The `/rosout` lines kept for late subscribers: when each was put, its CDR bytes and attachment.
+type Kept = Arc<Mutex<std::collections::VecDeque<(std::time::Instant, Vec<u8>, Vec<u8>)>>>;
+
+/// How long a `/rosout` line stays worth serving to a late subscriber (rcl's lifespan).
+const ROSOUT_LIFESPAN: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// One ROS 2 publisher: its zenoh publisher, its token, its numbering.
 struct Endpoint {
@@ -62,11 +67,10 @@ impl Endpoint {
         let publisher = session
             .declare_publisher(key)
             .encoding(Encoding::from(CDR_ENCODING))
-            .congestion_control(if qos.best_effort {
-                CongestionControl::Drop
-            } else {
-                CongestionControl::Block
-            })
+            // Dropped, never waited for, even on the reliable /rosout: a slow subscriber must not
+            // hold up the network process (nor, by zenoh closing a blocked link, cut the link
+            // the session's states share); a line it misses is still in the cache.
+            .congestion_control(CongestionControl::Drop)
             .priority(Priority::Background)
             .wait()
             .map_err(NetworkError::declare("ROS 2 publisher"))?;
@@ -288,7 +292,7 @@ impl Ros2Publisher {
         self.last_ns = Some(now);
         let offset = super::wall_minus_monotonic_ns();
         let stamp = super::stamp(first.t_ns, offset);
-        let wall_ns = i64::try_from(i128::from(now) + offset).unwrap_or(0);
+        let wall_ns = super::wall_ns(now, offset);
         let header = Header {
             stamp,
             frame_id: crate::recording::scene::WORLD.into(),
@@ -351,7 +355,7 @@ impl Ros2Publisher {
             ..Log::default()
         };
         let bytes = m.encode();
-        let wall_ns = i64::try_from(i128::from(now) + offset).unwrap_or(0);
+        let wall_ns = super::wall_ns(now, offset);
         let attachment = Attachment {
             seq: self.rosout.seq + 1,
             source_ns: wall_ns,
@@ -364,7 +368,7 @@ impl Ros2Publisher {
             if kept.len() == ROSOUT_KEPT {
                 kept.pop_front();
             }
-            kept.push_back((bytes.clone(), attachment));
+            kept.push_back((std::time::Instant::now(), bytes.clone(), attachment));
         }
         self.rosout.put(bytes, wall_ns, traffic);
     }
@@ -389,12 +393,23 @@ fn declare_cache(
     session
         .declare_queryable(cache_key)
         .callback(move |q| {
-            let lines: Vec<(Vec<u8>, Vec<u8>)> = kept
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .iter()
-                .cloned()
-                .collect();
+            // The newest `_max` lines (the subscriber's depth) younger than the lifespan.
+            let max = q
+                .parameters()
+                .get("_max")
+                .and_then(|m| m.parse::<usize>().ok())
+                .unwrap_or(ROSOUT_KEPT);
+            let lines: Vec<(Vec<u8>, Vec<u8>)> = {
+                let kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+                let young: Vec<_> = kept
+                    .iter()
+                    .filter(|(t, _, _)| t.elapsed() < ROSOUT_LIFESPAN)
+                    .collect();
+                young[young.len().saturating_sub(max)..]
+                    .iter()
+                    .map(|(_, b, a)| (b.clone(), a.clone()))
+                    .collect()
+            };
             for (bytes, attachment) in lines {
                 // A reply that cannot go is a line the late subscriber misses.
                 let _ = q

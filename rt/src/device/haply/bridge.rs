@@ -195,12 +195,7 @@ impl Bridge {
         // A thread inherits its creator's policy and affinity: a bridge started from the servo
         // thread would be SCHED_FIFO on the servo's CPU. It is not real-time: make it an ordinary
         // thread that may run on any CPU, so it never competes with the servo at its priority.
-        let _ = crate::sched::apply_to_current_thread(&crate::sched::Request {
-            policy: crate::sched::Policy::Other,
-            priority: 0,
-            cpus: Some(crate::sched::allowed_cpus()),
-            prefault_stack_bytes: 0,
-        });
+        crate::sched::make_ordinary();
         let id_json = serde_json::Value::from(self.device_id.as_str()).to_string();
         let mut out = String::with_capacity(160);
         let mut conn = Some(ws);
