@@ -1,6 +1,10 @@
 //! `device = "ros2"` against a driver on a real zenoh session in this process: a pose that is not
 //! one is a fault, a second publisher's poses are refused, a servo that stops commanding leaves
-//! the driver a zero wrench, and a silent driver makes the device stale.
+//! the driver a zero wrench, and a silent driver makes the device stale; the servo's calls
+//! allocate nothing.
+
+#[path = "../../rt/tests/common/counting_alloc.rs"]
+mod counting_alloc;
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -101,6 +105,22 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
     let mut dev = Ros2Device::open(&cfg).expect("the device opens on the driver's pose");
     let got = until("a pose", || dev.sample(monotonic_ns()).ok());
     assert_eq!(got.position_m, Vec3::new(0.01, 0.0, 0.1));
+    // The servo path: sample and command, while the bridge takes poses and puts wrenches.
+    let mut taken = 0;
+    let n = counting_alloc::allocations_during(|| {
+        for k in 0..2000u32 {
+            let now = monotonic_ns();
+            if dev.sample(now).is_ok() {
+                taken += 1;
+            }
+            let _ = dev.command(
+                now,
+                Command::Force(Vec3::new(0.0, 0.0, 1e-3 * f64::from(k % 7))),
+            );
+        }
+    });
+    assert_eq!(n, 0, "the servo's calls allocated {n} times");
+    assert!(taken > 0);
     let put = |bytes: Vec<u8>, gid: u8| {
         driver
             .put(&pose_key, bytes)
