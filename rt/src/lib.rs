@@ -19,8 +19,9 @@
 //! `clock_nanosleep` (`rt/tests/alloc_free.rs` and `rt/tests/loops.rs` check the allocation part).
 //! Everything else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
 //!
-//! `unsafe` lives only in [`shm`], [`sched`] (H2) and `device::dhd` (calls into the DHD SDK, a C
-//! library loaded at run time: nothing else can reach it); every block says why it is sound.
+//! `unsafe` lives only in [`shm`], [`sched`] (H2), [`msg`] (each ring message's `unsafe impl
+//! ShmPod`) and `device::dhd` (calls into the DHD SDK, a C library loaded at run time: nothing else
+//! can reach it); every block says why it is sound.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 

@@ -398,7 +398,7 @@ unsafe impl ShmPod for SiteReport {
     const TYPE_NAME: &'static str = "coop.SiteReport.v2";
 }
 
-// ---- tool tracks (timewarp / coupled: the tools on the wire, issue 12 item 1) ----
+// ---- tool tracks (timewarp / coupled: the tools on the wire) ----
 
 /// Words holding a [`ToolTrack`]'s positions: two quantized coordinates (i32) per word.
 pub const TRACK_POSITION_WORDS: usize = WINDOW_TICKS * 3 / 2;

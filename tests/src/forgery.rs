@@ -1,5 +1,5 @@
 //! What an impostor forges: a state of another site that is well formed and plausible, so that
-//! only the access control can keep it from a receiver's physics (issue 15). Shared by the
+//! only the access control can keep it from a receiver's physics. Shared by the
 //! `impostor` fixture (which includes this file with `#[path]`, being built by `coop-tools` too,
 //! where this crate is only a dev-dependency) and the tests that look for its traces.
 

@@ -528,7 +528,7 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// Issue 12: the paper's task under `timewarp` on real stations (tool tracks over zenoh, rollbacks
+/// The paper's task under `timewarp` on real stations (tool tracks over zenoh, rollbacks
 /// in the physics process): all six phases at both stations, rollbacks that happened, confirmed
 /// frontiers compared and never different.
 #[test]
@@ -587,7 +587,7 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
     let _ = std::fs::remove_dir_all(&out);
 }
 
-/// Issue 12, item 7: the paper's task under `coupled` on real stations (tool tracks and states over
+/// The paper's task under `coupled` on real stations (tool tracks and states over
 /// zenoh, the remote tool played from the adaptive jitter buffer, pulls towards the site that
 /// touched first in the physics process): each station takes the other's tracks and states and
 /// pulls its copy, nothing rolls back, both users push and catch, the copies hold one object while

@@ -252,7 +252,7 @@ fn force_steps_are_counted_per_servo_tick() {
     );
 }
 
-/// The display stages on the paper task at a constant 150 ms (issue 12, item 3): corrections are
+/// The display stages on the paper task at a constant 150 ms: corrections are
 /// blended out instead of felt, so `timewarp` and `coupled` (which correct every few ticks) step
 /// the displayed force over the JND less often than without them, no step beyond the displayed
 /// object's own contact change exceeds the JND of the force, and the stages really act.
@@ -412,7 +412,7 @@ fn timewarp_confirmed_states_agree_under_30_percent_loss() {
     assert_eq!(m.phases_passed, m.phases_total, "{m:?}");
 }
 
-/// `timewarp` at a constant 150 ms on the paper task (issue 12's must-show figures): the copies
+/// `timewarp` at a constant 150 ms on the paper task: the copies
 /// agree within 10 mm (1 mm RMS) while both users hold the disk, stay within 10 mm RMS of the
 /// reference, and its rollbacks give the copies no energy beyond what the forces of the corrected
 /// history did. The corrections' gross energy change is user 1's push learned late (the disk's
@@ -440,7 +440,7 @@ fn timewarp_at_150_ms_agrees_and_its_rollbacks_inject_nothing() {
     );
 }
 
-/// The 3-D one (issue 12): two users lift the disk off the table (friction at the two tools alone
+/// The 3-D one: two users lift the disk off the table (friction at the two tools alone
 /// holds it up), carry it through the air and set it down (`scenarios/lift.toml`). At a constant
 /// 200 ms `timewarp` does every phase at both sites, lift included, with confirmed states agreeing;
 /// `paper` (the object's state exchanged) loses the lift.

@@ -417,7 +417,7 @@ pub struct ServoStatus {
     pub display_scale: f64,
     /// The device safety limit that acted last, if any.
     pub safety: Option<SafetyStatus>,
-    /// What the display stages did (issue 12, item 3).
+    /// What the display stages did.
     pub display: DisplayStatus,
 }
 

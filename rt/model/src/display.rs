@@ -1,4 +1,4 @@
-//! Display continuity and passivity (issue 12, item 3): what the servo renders when the copy it
+//! Display continuity and passivity: what the servo renders when the copy it
 //! renders against is corrected.
 //!
 //! A consistency method corrects its copy of the object: `paper` adopts a received state, `timewarp`
@@ -217,7 +217,7 @@ impl DisplayedObject {
 /// between them (a passivity damping, the stale reset of the displayed object) closes at most that
 /// fast, while a contact without correction is rendered exactly.
 ///
-/// NB (issue 12, item 3): limiting the whole displayed force instead (every step of the contact
+/// NB: limiting the whole displayed force instead (every step of the contact
 /// itself) lags every contact onset and release and softens the rendered stiffness; on the paper
 /// task it broke the reference run's own phases (12 → 7 of 12). Following the copy's contact
 /// change instead of the displayed object's let a copy far from its displayed pose (an adoption
@@ -318,7 +318,7 @@ impl PassivityObserver {
 /// The scenario's `[display]` table: [`DisplayParams`] with units in the names. Every field is
 /// optional; the defaults are [`DisplayParams::default`]'s.
 ///
-/// NB (issue 12, item 3): off by default for now. On, every correction reaches the hand within
+/// NB: off by default for now. On, every correction reaches the hand within
 /// the JND and the display's deviation injects no net energy, but rendering against the displayed
 /// object moves the scripted hands differently, and on the paper task that costs phases the
 /// committed tests assert (`timewarp` 12/12 at 0 and 150 ms in `tools/tests/sweep.rs`: 12/12 and

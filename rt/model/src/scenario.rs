@@ -115,7 +115,7 @@ pub struct Scenario {
     pub site: Vec<SiteSpec>,
     /// Task phases to check per site.
     pub phase: Vec<PhaseSpec>,
-    /// Display continuity and passivity of every site's servo (issue 12, item 3).
+    /// Display continuity and passivity of every site's servo.
     pub display: crate::display::DisplaySpec,
     /// The `timewarp` method's settings.
     pub timewarp: TimewarpSpec,

@@ -425,7 +425,7 @@ pub struct ServoShared {
     pub roundtrip_count: AtomicU64,
     /// Their histogram.
     pub roundtrip: SharedHistogram,
-    /// What the display stages did (`coop_model::display`; issue 12, item 3).
+    /// What the display stages did (`coop_model::display`).
     pub display: DisplayShared,
 }
 
@@ -490,7 +490,7 @@ pub struct PhysicsShared {
     pub rollback: RollbackShared,
 }
 
-// ---- physics/network: rollback and tool-track figures (issue 12, timewarp on stations) ----
+// ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
 
 /// What physics writes of a rolling-back method (`coop_model::method::RollbackStats`) and of the tool
 /// tracks it exchanges: relaxed stores by physics, the one writer.
