@@ -35,7 +35,9 @@ pub struct RouterConfig {
     /// The session's access control (relative to the file's directory), as `session certs`
     /// writes it. Without it, anyone who can connect may say anything.
     pub access_control: Option<PathBuf>,
-    /// Where the status goes (default `/tmp/coop_router_<name>.json`).
+    /// Where the status goes (default `/tmp/coop_router_<name>_<port>.json`, the port of its first
+    /// `listen` locator: two routers that share a name on one machine, say in two sessions or
+    /// parallel tests, cannot share a port, so they do not share a status file either).
     pub status_file: Option<PathBuf>,
     /// How often the status is written, ms.
     #[serde(default = "default_status_every_ms")]
@@ -148,7 +150,11 @@ impl RouterConfig {
                 rebase(p);
                 p.clone()
             }
-            None => std::env::temp_dir().join(format!("coop_router_{}.json", self.name)),
+            None => {
+                // Checked above: at least one locator, each of which parses.
+                let port = Locator::parse(&self.listen[0]).map_or(0, |l| l.port);
+                std::env::temp_dir().join(format!("coop_router_{}_{port}.json", self.name))
+            }
         };
         let endpoints = RouterEndpoints {
             listen: self.listen.clone(),
@@ -186,6 +192,13 @@ pub fn run(
     stop: &dyn Fn() -> bool,
 ) -> anyhow::Result<RouterStatus> {
     let refusals = Refusals::install().map_err(anyhow::Error::msg)?;
+    if let Some(pid) = live_writer(&r.status_file) {
+        bail!(
+            "router {}: its status file {} is written by another running router (pid {pid}); give this one a status_file of its own",
+            r.config.name,
+            r.status_file.display()
+        );
+    }
     let session =
         router::open(&r.endpoints).map_err(|e| anyhow::anyhow!("router {}: {e}", r.config.name))?;
     let start = Instant::now();
@@ -201,9 +214,29 @@ pub fn run(
             std::thread::sleep(Duration::from_millis(20));
         }
     })();
-    let _ = std::fs::remove_file(&r.status_file);
+    // Ours to remove only while it is ours: a router started later with the same file (it was
+    // refused above while this one ran, but not after) keeps its own.
+    if status_pid(&r.status_file) == Some(std::process::id()) {
+        let _ = std::fs::remove_file(&r.status_file);
+    }
     router::close(&session);
     result
+}
+
+/// The pid that wrote the status file at `path`, if it holds one.
+fn status_pid(path: &Path) -> Option<u32> {
+    let text = std::fs::read(path).ok()?;
+    serde_json::from_slice::<RouterStatus>(&text)
+        .ok()
+        .map(|s| s.pid)
+}
+
+/// The pid of another process, still running, that writes the status file at `path`.
+fn live_writer(path: &Path) -> Option<u32> {
+    status_pid(path).filter(|&pid| {
+        pid != std::process::id()
+            && nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), None).is_ok()
+    })
 }
 
 /// Reads a running router's status from its status file.
@@ -300,8 +333,55 @@ mod tests {
         let r = RouterConfig::load(&ok).expect("valid");
         assert_eq!(
             r.status_file,
-            std::env::temp_dir().join("coop_router_r1.json")
+            std::env::temp_dir().join("coop_router_r1_0.json")
         );
+        let ok7447 = dir.join("ok7447.toml");
+        std::fs::write(&ok7447, "name = \"r1\"\nlisten = [\"tcp/127.0.0.1:7447\"]")
+            .expect("config");
+        assert_eq!(
+            RouterConfig::load(&ok7447).expect("valid").status_file,
+            std::env::temp_dir().join("coop_router_r1_7447.json"),
+            "two routers r1 on one machine listen on different ports"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_status_file_another_running_router_writes_is_refused_and_left_alone() {
+        let dir = std::env::temp_dir().join(format!("coop-router-clash-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let f = dir.join("r1.toml");
+        let status = dir.join("r1.json");
+        std::fs::write(
+            &f,
+            format!("name = \"r1\"\nlisten = [\"tcp/127.0.0.1:0\"]\nstatus_file = {status:?}"),
+        )
+        .expect("config");
+        let r = RouterConfig::load(&f).expect("valid");
+        // Another live process (this test's parent) wrote it.
+        let other = RouterStatus {
+            name: "r1".into(),
+            pid: std::os::unix::process::parent_id(),
+            t_ns: 0,
+            zid: String::new(),
+            listen: Vec::new(),
+            connect: Vec::new(),
+            access_control: false,
+            sessions: Vec::new(),
+            present: Vec::new(),
+            refused: 0,
+            refused_by_action: std::collections::BTreeMap::new(),
+            recent_refusals: Vec::new(),
+        };
+        let written = serde_json::to_vec(&other).expect("json");
+        std::fs::write(&status, &written).expect("status");
+        let e = run(&r, Some(Duration::from_millis(10)), &|| true).expect_err("a live clash");
+        let msg = format!("{e:#}");
+        assert!(
+            msg.contains("written by another running router") && msg.contains(&other.pid.to_string()),
+            "{msg}"
+        );
+        assert_eq!(std::fs::read(&status).expect("still there"), written);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
