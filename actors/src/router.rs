@@ -378,7 +378,8 @@ mod tests {
         let e = run(&r, Some(Duration::from_millis(10)), &|| true).expect_err("a live clash");
         let msg = format!("{e:#}");
         assert!(
-            msg.contains("written by another running router") && msg.contains(&other.pid.to_string()),
+            msg.contains("written by another running router")
+                && msg.contains(&other.pid.to_string()),
             "{msg}"
         );
         assert_eq!(std::fs::read(&status).expect("still there"), written);
