@@ -1,6 +1,6 @@
 //! `devbench`: the servo loop's wake-up latency and overruns with the Haply backend (its bridge
 //! thread talking to a stand-in Inverse Service on loopback) and the ROS 2 backend (its bridge
-//! talking zenoh to a stand-in ROS 2 driver, [`ros2_driver`]) against the simulated SCARA arm, in
+//! talking zenoh to a stand-in ROS 2 driver, `devbench/ros2_driver.rs`) against the simulated SCARA arm, in
 //! the same run, and each bridge's device round trip.
 //!
 //! Each phase runs the servo's device path at the servo period on a periodic timer: sample through

@@ -4,7 +4,7 @@
 //! A site report is `version: u8 = 6`, then [`SiteReport::to_words`] (its fields in declaration
 //! order, as `pod_message!` declares them) in the compact encoding: a bitmap of the nonzero
 //! words, then each of them, an integer as a LEB128 varint and a float as its 8 bytes
-//! ([`compact`]); at most [`MAX_ENCODED_LEN`] bytes. There is no second field list here: the
+//! (`compact`); at most [`MAX_ENCODED_LEN`] bytes. There is no second field list here: the
 //! layout is the struct's, and [`PINNED`] ties it to [`VERSION`] and to the table in
 //! `docs/wire.md` (a unit test fails when the struct changes without a version bump and the doc).
 //! Decoding checks the version, the framing (no truncation, no trailing bytes, minimal varints,

@@ -287,7 +287,7 @@ impl TimeWarp {
     }
 
     /// Sends (and steps with) the own tool's positions through a perceptual deadband
-    /// (`[timewarp.deadband]`, [`deadband`]).
+    /// (`[timewarp.deadband]`, the `deadband` module).
     pub fn set_deadband(&mut self, spec: DeadbandSpec) {
         self.deadband = Some(deadband::Deadband::new(spec));
     }
