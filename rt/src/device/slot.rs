@@ -7,7 +7,7 @@ use std::sync::atomic::fence;
 
 use coop_model::body::Vec3;
 
-use super::Command;
+use super::{Command, DeviceFault, Sample};
 use crate::sync::{AtomicU64, Ordering};
 
 /// The newest command, written by the servo (one writer) and read by the bridge: a seqlock over
@@ -67,6 +67,95 @@ impl CommandSlot {
                 return (s1 / 2, cmd);
             }
         }
+    }
+}
+
+/// What the servo knows of a device behind a bridge thread (Haply's, ROS 2's): the newest sample
+/// the bridge delivered and the fault it last reported, and how old a sample may be before the
+/// device counts as gone.
+#[derive(Debug, Clone, Copy)]
+pub struct BridgedState {
+    newest: Sample,
+    fault: Option<DeviceFault>,
+    stale_limit_ns: u64,
+}
+
+impl BridgedState {
+    /// Starts from the bridge's first sample.
+    pub fn new(first: Sample, stale_limit_ns: u64) -> Self {
+        Self {
+            newest: first,
+            fault: None,
+            stale_limit_ns,
+        }
+    }
+
+    /// A new sample from the bridge: the newest, and the fault (if any) is over.
+    pub fn take(&mut self, s: Sample) {
+        self.newest = s;
+        self.fault = None;
+    }
+
+    /// A fault the bridge reports: it stands until the next sample.
+    pub fn fail(&mut self, f: DeviceFault) {
+        self.fault = Some(f);
+    }
+
+    /// The newest sample, fresh or not.
+    pub fn newest(&self) -> Sample {
+        self.newest
+    }
+
+    /// The stale limit, ns.
+    pub fn stale_limit_ns(&self) -> u64 {
+        self.stale_limit_ns
+    }
+
+    /// The newest sample if the device is known at `now_ns`: no fault, and not older than the
+    /// stale limit (else [`DeviceFault::Disconnected`]).
+    ///
+    /// # Errors
+    /// The bridge's fault, or a sample too old.
+    pub fn fresh(&self, now_ns: u64) -> Result<Sample, DeviceFault> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if let Some(f) = self.fault {
+            return Err(f);
+        }
+        if now_ns.saturating_sub(self.newest.t_ns) > self.stale_limit_ns {
+            return Err(DeviceFault::Disconnected);
+        }
+        Ok(self.newest)
+    }
+}
+
+impl CommandSlot {
+    /// The servo's command for a bridged device in `state` at `now_ns`: stored as given, except a
+    /// force that is not finite or meant for a device not known now, which stores a release
+    /// instead (no force on a hand whose device we cannot see) and says why.
+    ///
+    /// # Errors
+    /// A non-finite force, or the device's fault or staleness.
+    pub fn command(
+        &self,
+        state: &BridgedState,
+        now_ns: u64,
+        cmd: Command,
+    ) -> Result<(), DeviceFault> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls (one seqlock write).
+        if let Command::Force(f) = cmd {
+            if !f.iter().all(|c| c.is_finite()) {
+                self.store(Command::Release);
+                return Err(DeviceFault::BadValue {
+                    what: "force command",
+                });
+            }
+            if let Err(e) = state.fresh(now_ns) {
+                self.store(Command::Release);
+                return Err(e);
+            }
+        }
+        self.store(cmd);
+        Ok(())
     }
 }
 

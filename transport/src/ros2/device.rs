@@ -29,8 +29,8 @@ use std::time::Duration;
 
 use coop_model::body::Vec3;
 use coop_rt::device::{
-    CartesianDevice, Command, CommandSlot, ConfigError, DeviceFault, DeviceInfo, ProbeReport,
-    Sample,
+    BridgedState, CartesianDevice, Command, CommandSlot, ConfigError, DeviceFault, DeviceInfo,
+    ProbeReport, Sample,
 };
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
@@ -298,9 +298,7 @@ pub struct Ros2Device {
     rx: rtrb::Consumer<BridgeMsg>,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
-    newest: Sample,
-    fault: Option<DeviceFault>,
-    stale_limit_ns: u64,
+    state: BridgedState,
 }
 
 /// The bridge's half: the zenoh session and its declarations.
@@ -406,9 +404,7 @@ impl Ros2Device {
             rx,
             shared,
             thread: Some(thread),
-            newest,
-            fault: None,
-            stale_limit_ns: (config.stale_limit_ms * 1e6) as u64,
+            state: BridgedState::new(newest, (config.stale_limit_ms * 1e6) as u64),
         })
     }
 
@@ -419,29 +415,16 @@ impl Ros2Device {
 
     /// The newest sample the bridge delivered, fresh or not.
     pub fn last_sample(&self) -> Sample {
-        self.newest
+        self.state.newest()
     }
 
     fn drain(&mut self) {
         while let Ok(m) = self.rx.pop() {
             match m {
-                BridgeMsg::Pose(s) => {
-                    self.newest = s;
-                    self.fault = None;
-                }
-                BridgeMsg::Fault(f) => self.fault = Some(f),
+                BridgeMsg::Pose(s) => self.state.take(s),
+                BridgeMsg::Fault(f) => self.state.fail(f),
             }
         }
-    }
-
-    fn fresh(&self, now_ns: u64) -> Result<(), DeviceFault> {
-        if let Some(f) = self.fault {
-            return Err(f);
-        }
-        if now_ns.saturating_sub(self.newest.t_ns) > self.stale_limit_ns {
-            return Err(DeviceFault::Disconnected);
-        }
-        Ok(())
     }
 }
 
@@ -453,27 +436,12 @@ impl CartesianDevice for Ros2Device {
     fn sample(&mut self, now_ns: u64) -> Result<Sample, DeviceFault> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (ring pops only).
         self.drain();
-        self.fresh(now_ns)?;
-        Ok(self.newest)
+        self.state.fresh(now_ns)
     }
 
     fn command(&mut self, now_ns: u64, cmd: Command) -> Result<(), DeviceFault> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (one seqlock write).
-        if let Command::Force(f) = cmd {
-            if !f.iter().all(|c| c.is_finite()) {
-                self.shared.cmd.store(Command::Release);
-                return Err(DeviceFault::BadValue {
-                    what: "force command",
-                });
-            }
-            if let Err(e) = self.fresh(now_ns) {
-                // No force on a device whose state we do not know.
-                self.shared.cmd.store(Command::Release);
-                return Err(e);
-            }
-        }
-        self.shared.cmd.store(cmd);
-        Ok(())
+        self.shared.cmd.command(&self.state, now_ns, cmd)
     }
 
     fn close(&mut self) {

@@ -30,7 +30,8 @@ pub use bridge::BridgeStats;
 use bridge::{Bridge, BridgeMsg, Shared, Target};
 
 use crate::device::{
-    CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,
+    BridgedState, CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport,
+    Sample,
 };
 use crate::timer::monotonic_ns;
 
@@ -264,10 +265,8 @@ pub struct HaplyDevice {
     rx: rtrb::Consumer<BridgeMsg>,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
-    newest: Sample,
+    state: BridgedState,
     displayed_force_n: Option<Vec3>,
-    fault: Option<DeviceFault>,
-    stale_limit_ns: u64,
 }
 
 impl HaplyDevice {
@@ -333,10 +332,8 @@ impl HaplyDevice {
             rx,
             shared,
             thread: Some(thread),
-            newest,
+            state: BridgedState::new(newest, (config.stale_limit_ms * 1e6) as u64),
             displayed_force_n: first.displayed_force_n,
-            fault: None,
-            stale_limit_ns: (config.stale_limit_ms * 1e6) as u64,
         })
     }
 
@@ -347,12 +344,12 @@ impl HaplyDevice {
 
     /// The newest sample the bridge delivered, fresh or not (for status and tests).
     pub fn last_sample(&self) -> Sample {
-        self.newest
+        self.state.newest()
     }
 
     /// The stale limit, ns.
     pub fn stale_limit_ns(&self) -> u64 {
-        self.stale_limit_ns
+        self.state.stale_limit_ns()
     }
 
     /// What the service last said it displays (`current_cursor_force`), as of the newest sample
@@ -368,23 +365,12 @@ impl HaplyDevice {
                     sample,
                     displayed_force_n,
                 } => {
-                    self.newest = sample;
+                    self.state.take(sample);
                     self.displayed_force_n = displayed_force_n;
-                    self.fault = None;
                 }
-                BridgeMsg::Fault(f) => self.fault = Some(f),
+                BridgeMsg::Fault(f) => self.state.fail(f),
             }
         }
-    }
-
-    fn fresh(&self, now_ns: u64) -> Result<(), DeviceFault> {
-        if let Some(f) = self.fault {
-            return Err(f);
-        }
-        if now_ns.saturating_sub(self.newest.t_ns) > self.stale_limit_ns {
-            return Err(DeviceFault::Disconnected);
-        }
-        Ok(())
     }
 }
 
@@ -396,27 +382,12 @@ impl CartesianDevice for HaplyDevice {
     fn sample(&mut self, now_ns: u64) -> Result<Sample, DeviceFault> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (ring pops only).
         self.drain();
-        self.fresh(now_ns)?;
-        Ok(self.newest)
+        self.state.fresh(now_ns)
     }
 
     fn command(&mut self, now_ns: u64, cmd: Command) -> Result<(), DeviceFault> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (one seqlock write).
-        if let Command::Force(f) = cmd {
-            if !f.iter().all(|c| c.is_finite()) {
-                self.shared.cmd.store(Command::Release);
-                return Err(DeviceFault::BadValue {
-                    what: "force command",
-                });
-            }
-            if let Err(e) = self.fresh(now_ns) {
-                // No force on a device whose state we do not know.
-                self.shared.cmd.store(Command::Release);
-                return Err(e);
-            }
-        }
-        self.shared.cmd.store(cmd);
-        Ok(())
+        self.shared.cmd.command(&self.state, now_ns, cmd)
     }
 
     fn close(&mut self) {
