@@ -31,7 +31,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 
 use coop_rt::msg::{SiteReport, ToolTrack, TraceRecord};
-use coop_rt::shm::control::{Child, ControlBlock, RunState, MAX_SITES};
+use coop_rt::shm::control::{Child, ControlBlock, RunState, Traffic, MAX_SITES};
 use coop_rt::shm::{Consumer, Producer};
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
@@ -419,32 +419,18 @@ impl Loop {
         }
         for m in &peers {
             self.recording.write(|w| w.peer(m));
-            if let Some(v) = &self.view {
-                let level = if m.event == "lost" {
-                    Level::Warning
-                } else {
-                    Level::Info
-                };
-                v.log(
-                    level,
-                    format!(
-                        "{} {} after {:.3} s of silence",
-                        m.site, m.event, m.silent_s
-                    ),
-                );
-            }
-            if let Some(r) = &mut self.ros2 {
-                let level = if m.event == "lost" {
-                    Log::WARN
-                } else {
-                    Log::INFO
-                };
-                let text = format!(
+            let level = if m.event == "lost" {
+                Level::Warning
+            } else {
+                Level::Info
+            };
+            let text = || {
+                format!(
                     "{} {} after {:.3} s of silence",
                     m.site, m.event, m.silent_s
-                );
-                r.log(level, &text, traffic);
-            }
+                )
+            };
+            self.tell(level, text, traffic);
         }
         let newest = self.recording.drain_trace(&mut self.trace);
         if let (Some(v), Some((t, others))) = (&self.view, &newest) {
@@ -455,28 +441,33 @@ impl Loop {
         }
         self.live.offer(newest, now, &ctx.ctl.network.traffic);
         for (level, text) in self.events.look(ctx.ctl) {
-            if let Some(v) = &self.view {
-                v.log(level, text.clone());
-            }
-            if let Some(r) = &mut self.ros2 {
-                r.log(ros2_level(level), &text, traffic);
-            }
+            self.tell(level, || text.clone(), traffic);
             self.recording.write(|w| w.event(now, level, text));
         }
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));
             let what = if m.present { "joined" } else { "left" };
-            if let Some(v) = &self.view {
-                v.log(Level::Info, format!("{} {what}", m.site));
-            }
-            if let Some(r) = &mut self.ros2 {
-                r.log(Log::INFO, &format!("{} {what}", m.site), traffic);
-            }
+            self.tell(Level::Info, || format!("{} {what}", m.site), traffic);
         }
         for m in clocks.take_log() {
             self.recording.write(|w| w.clock(&m));
         }
         now
+    }
+
+    /// Tells whoever watches the station's events (its live view, `/rosout`) one of them; the
+    /// text is made only if someone does.
+    fn tell(&mut self, level: Level, text: impl FnOnce() -> String, traffic: &Traffic) {
+        if self.view.is_none() && self.ros2.is_none() {
+            return;
+        }
+        let text = text();
+        if let Some(r) = &mut self.ros2 {
+            r.log(ros2_level(level), &text, traffic);
+        }
+        if let Some(v) = &self.view {
+            v.log(level, text);
+        }
     }
 
     /// Records the session (names, time 0, emulation) once time 0 is known; whether it did.

@@ -95,21 +95,32 @@ impl Endpoint {
             .map_or(true, |m| m.matching())
     }
 
-    /// Puts `bytes` with the attachment; counts it.
-    fn put(&mut self, bytes: Vec<u8>, wall_ns: i64, traffic: &Traffic) {
+    /// The next sample's attachment: this publisher's next sequence number, `wall_ns`, its GID.
+    fn attachment(&mut self, wall_ns: i64) -> Vec<u8> {
         self.seq += 1;
-        let attachment = Attachment {
+        Attachment {
             seq: self.seq,
             source_ns: wall_ns,
             gid: self.gid,
         }
-        .encode();
+        .encode()
+        .to_vec()
+    }
+
+    /// Puts `bytes` with the next attachment; counts it.
+    fn put(&mut self, bytes: Vec<u8>, wall_ns: i64, traffic: &Traffic) {
+        let attachment = self.attachment(wall_ns);
+        self.put_with(bytes, attachment, traffic);
+    }
+
+    /// Puts `bytes` with `attachment`; counts it.
+    fn put_with(&mut self, bytes: Vec<u8>, attachment: Vec<u8>, traffic: &Traffic) {
         let len = bytes.len();
         // A failed put loses one sample of a ROS view, nothing else.
         if self
             .publisher
             .put(bytes)
-            .attachment(attachment.to_vec())
+            .attachment(attachment)
             .wait()
             .is_ok()
         {
@@ -355,22 +366,16 @@ impl Ros2Publisher {
             ..Log::default()
         };
         let bytes = m.encode();
-        let wall_ns = super::wall_ns(now, offset);
-        let attachment = Attachment {
-            seq: self.rosout.seq + 1,
-            source_ns: wall_ns,
-            gid: self.rosout.gid,
-        }
-        .encode()
-        .to_vec();
+        // The line is kept with the attachment it is put with.
+        let attachment = self.rosout.attachment(super::wall_ns(now, offset));
         {
             let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
             if kept.len() == ROSOUT_KEPT {
                 kept.pop_front();
             }
-            kept.push_back((std::time::Instant::now(), bytes.clone(), attachment));
+            kept.push_back((std::time::Instant::now(), bytes.clone(), attachment.clone()));
         }
-        self.rosout.put(bytes, wall_ns, traffic);
+        self.rosout.put_with(bytes, attachment, traffic);
     }
 }
 
