@@ -376,3 +376,25 @@ pub fn shifted_clock(shift_s: i64) -> Vec<String> {
     .map(str::to_owned)
     .to_vec()
 }
+
+/// Python with `packages` importable (module names), or `None` (skip) when one is missing and
+/// CI does not require them (`COOP_REQUIRE_MCAP_PY`, set by `.ci/run`: then a missing package
+/// fails the test).
+///
+/// # Panics
+/// A package missing while CI requires them.
+pub fn python_with(packages: &[&str]) -> Option<()> {
+    let imports = packages.join(", ");
+    let ok = Command::new("python3")
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(());
+    }
+    if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() {
+        panic!("python3 with {imports} is required (pip install {imports})");
+    }
+    eprintln!("SKIPPED the foreign-reader check: python3 -c 'import {imports}' fails");
+    None
+}

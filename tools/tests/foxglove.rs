@@ -23,24 +23,6 @@ fn out_dir(tag: &str) -> PathBuf {
     d
 }
 
-/// Python with `packages` importable, or `None` (skip) when one is missing and CI does not
-/// require them.
-fn python_with(packages: &[&str]) -> Option<()> {
-    let imports = packages.join(", ");
-    let ok = Command::new("python3")
-        .args(["-c", &format!("import {imports}")])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(());
-    }
-    if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() {
-        panic!("python3 with {imports} is required (pip install {imports})");
-    }
-    eprintln!("SKIPPED the foreign-reader check: python3 -c 'import {imports}' fails");
-    None
-}
-
 /// The Foxglove summary of one site's recording (its parts, in order), as the fixture script
 /// reads it.
 fn foxglove_summary(parts: &[PathBuf]) -> Value {
@@ -62,7 +44,7 @@ fn foxglove_summary(parts: &[PathBuf]) -> Value {
 #[test]
 fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
     let _turn = ONE_AT_A_TIME.lock();
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
     let scenario_path = root().join("scenarios/three-users.toml");
@@ -178,7 +160,7 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
 #[test]
 fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     let _turn = ONE_AT_A_TIME.lock();
-    if python_with(&["websockets", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["websockets", "google.protobuf"]).is_none() {
         return;
     }
     let scenario_path = root().join("scenarios/three-users.toml");
@@ -295,7 +277,7 @@ fn simulated_session(
 /// its own frame, entity and colour, with times increasing and frame ids that are all declared.
 #[test]
 fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_terms() {
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
     let (scenario, v, out) = simulated_session("sim", "three-users.toml", &["--method", "paper"]);
@@ -373,7 +355,7 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
 #[test]
 fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
     let _turn = ONE_AT_A_TIME.lock();
-    if python_with(&["websockets", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["websockets", "google.protobuf"]).is_none() {
         return;
     }
     let session = coop_tests::unique_session();
@@ -591,7 +573,7 @@ fn check_layout(file: &str, v: &Value) -> usize {
 /// file has, so it cannot rot when a channel or field is renamed.
 #[test]
 fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
     let out = out_dir("layout");
@@ -633,7 +615,7 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
 /// session file of that world has.
 #[test]
 fn the_world_layout_refers_only_to_what_a_stack_session_file_has() {
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
     let (_, v, out) = simulated_session("layout-world", "stack.toml", &[]);
@@ -705,7 +687,7 @@ fn live_url(
 /// object per sample, named.
 #[test]
 fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per_site() {
-    if python_with(&["mcap", "google.protobuf"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
     let (scenario, v, out) = simulated_session("sim-objects", "billiards.toml", &[]);
@@ -768,7 +750,7 @@ fn entities_sit_in_declared_frames(v: &serde_json::Value) {
 #[test]
 fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_recorded() {
     let _turn = ONE_AT_A_TIME.lock();
-    if python_with(&["mcap", "google.protobuf", "websockets"]).is_none() {
+    if coop_tests::python_with(&["mcap", "google.protobuf", "websockets"]).is_none() {
         return;
     }
     let scenario_path = root().join("scenarios/stack.toml");

@@ -27,25 +27,6 @@ fn out_dir(tag: &str) -> PathBuf {
     d
 }
 
-/// Python with the ROS 2 client's packages, or `None` (skip) when one is missing and CI does not
-/// require them.
-fn python_ready() -> Option<()> {
-    let ok = Command::new("python3")
-        .args(["-c", "import zenoh_ros2_sdk, rosbags, mcap"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if ok {
-        return Some(());
-    }
-    if std::env::var_os("COOP_REQUIRE_MCAP_PY").is_some() {
-        panic!("python3 with zenoh-ros2-sdk, rosbags and mcap is required (pip install zenoh-ros2-sdk rosbags mcap)");
-    }
-    eprintln!(
-        "SKIPPED the ROS 2 client check: python3 -c 'import zenoh_ros2_sdk, rosbags, mcap' fails"
-    );
-    None
-}
-
 /// A zenoh router on a free loopback port, as `rmw_zenohd` would be: its locator.
 fn router(dir: &Path) -> (Reaped, String) {
     let locator = coop_transport::network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0);
@@ -88,7 +69,7 @@ fn json_of(path: &Path) -> Value {
 #[test]
 fn a_ros2_client_sees_every_site_s_poses_and_forces_as_recorded() {
     let _turn = ONE_AT_A_TIME.lock();
-    if python_ready().is_none() {
+    if coop_tests::python_with(&["zenoh_ros2_sdk", "rosbags", "mcap"]).is_none() {
         return;
     }
     let dir = out_dir("session");
@@ -236,7 +217,7 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     const STATION: &str = env!("CARGO_BIN_EXE_station");
     const LIMIT: Duration = Duration::from_secs(60);
     let _turn = ONE_AT_A_TIME.lock();
-    if python_ready().is_none() {
+    if coop_tests::python_with(&["zenoh_ros2_sdk", "rosbags", "mcap"]).is_none() {
         return;
     }
     let dir = out_dir("device");
