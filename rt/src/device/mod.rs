@@ -23,5 +23,5 @@ pub use cartesian::{
 
 pub use placement::Placement;
 pub use scara::SimScara;
-pub use slot::{BridgedState, CommandSlot};
+pub use slot::{check_bridged, BridgedState, CommandSlot};
 pub use station::{Backend, StationDevice};

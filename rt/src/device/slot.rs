@@ -7,7 +7,7 @@ use std::sync::atomic::fence;
 
 use coop_model::body::Vec3;
 
-use super::{Command, DeviceFault, Sample};
+use super::{Command, ConfigError, DeviceFault, Sample};
 use crate::sync::{AtomicU64, Ordering};
 
 /// The newest command, written by the servo (one writer) and read by the bridge: a seqlock over
@@ -19,6 +19,52 @@ pub struct CommandSlot {
     /// 0 = release, 1 = force.
     kind: AtomicU64,
     xyz: [AtomicU64; 3],
+}
+
+/// The checks every bridged device's table shares: the rate its bridge exchanges at (1 Hz to
+/// 10 kHz), a stale limit of at least two of its periods and at most a second, and the maxima the
+/// device reports (positive, within what any desk device could). `rate_hz`, `stale_limit_ms`,
+/// `max_force_n`, `max_stiffness_n_per_m`, `max_damping_ns_per_m` and `workspace_radius_m` are
+/// those fields' values (positive containment: NaN fails).
+///
+/// # Errors
+/// The first field that breaks its rule, with its value.
+pub fn check_bridged(
+    rate_hz: f64,
+    stale_limit_ms: f64,
+    maxima: [f64; 4],
+) -> Result<(), ConfigError> {
+    let bad = |field: &str, value: f64, rule: String| ConfigError {
+        field: field.to_owned(),
+        value: value.to_string(),
+        rule,
+    };
+    if !(1.0..=10_000.0).contains(&rate_hz) {
+        return Err(bad("rate_hz", rate_hz, "must be in 1..=10000 Hz".into()));
+    }
+    let period_ms = 1e3 / rate_hz;
+    if !(stale_limit_ms >= 2.0 * period_ms && stale_limit_ms <= 1000.0) {
+        return Err(bad(
+            "stale_limit_ms",
+            stale_limit_ms,
+            format!(
+                "must be at least two periods at rate_hz ({:.3} ms) and at most 1000 ms",
+                2.0 * period_ms
+            ),
+        ));
+    }
+    let [force, stiffness, damping, radius] = maxima;
+    for (field, v, max) in [
+        ("max_force_n", force, 100.0),
+        ("max_stiffness_n_per_m", stiffness, 1e5),
+        ("max_damping_ns_per_m", damping, 1e3),
+        ("workspace_radius_m", radius, 2.0),
+    ] {
+        if !(v > 0.0 && v <= max) {
+            return Err(bad(field, v, format!("must be > 0 and <= {max}")));
+        }
+    }
+    Ok(())
 }
 
 impl CommandSlot {

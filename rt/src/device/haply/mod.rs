@@ -124,20 +124,16 @@ impl HaplyConfig {
                 ));
             }
         }
-        if !(self.rate_hz >= 1.0 && self.rate_hz <= 10_000.0) {
-            return Err(bad("rate_hz", self.rate_hz, "must be in 1..=10000 Hz"));
-        }
-        let period_ms = 1e3 / self.rate_hz;
-        if !(self.stale_limit_ms >= 2.0 * period_ms && self.stale_limit_ms <= 1000.0) {
-            return Err(bad(
-                "stale_limit_ms",
-                self.stale_limit_ms,
-                &format!(
-                    "must be at least two bridge periods ({:.3} ms at rate_hz) and at most 1000 ms",
-                    2.0 * period_ms
-                ),
-            ));
-        }
+        crate::device::check_bridged(
+            self.rate_hz,
+            self.stale_limit_ms,
+            [
+                self.max_force_n,
+                self.max_stiffness_n_per_m,
+                self.max_damping_ns_per_m,
+                self.workspace_radius_m,
+            ],
+        )?;
         for (field, v) in [
             ("connect_timeout_ms", self.connect_timeout_ms),
             ("io_timeout_ms", self.io_timeout_ms),
@@ -145,16 +141,6 @@ impl HaplyConfig {
         ] {
             if !(1..=60_000).contains(&v) {
                 return Err(bad(field, v, "must be in 1..=60000 ms"));
-            }
-        }
-        for (field, v, max) in [
-            ("max_force_n", self.max_force_n, 100.0),
-            ("max_stiffness_n_per_m", self.max_stiffness_n_per_m, 1e5),
-            ("max_damping_ns_per_m", self.max_damping_ns_per_m, 1e3),
-            ("workspace_radius_m", self.workspace_radius_m, 2.0),
-        ] {
-            if !(v > 0.0 && v <= max) {
-                return Err(bad(field, v, &format!("must be > 0 and <= {max}")));
             }
         }
         Ok(())
