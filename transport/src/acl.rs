@@ -262,6 +262,16 @@ pub fn session_acl(m: &Members<'_>) -> Value {
 mod tests {
     use super::*;
 
+    /// The rule or policy `id` of `acl`'s `what` ("rules", "policies").
+    fn entry<'a>(acl: &'a Value, what: &str, id: &str) -> &'a Value {
+        acl[what]
+            .as_array()
+            .unwrap_or_else(|| panic!("{what}"))
+            .iter()
+            .find(|r| r["id"] == id)
+            .unwrap_or_else(|| panic!("{what}: {id}"))
+    }
+
     fn members() -> (Vec<String>, Vec<String>) {
         (
             vec!["user1".to_owned(), "user2".to_owned()],
@@ -304,13 +314,7 @@ mod tests {
             routers: &routers,
             ros2: None,
         });
-        let rules = acl["rules"].as_array().expect("rules");
-        let rule = |id: &str| {
-            rules
-                .iter()
-                .find(|r| r["id"] == id)
-                .unwrap_or_else(|| panic!("rule {id}"))
-        };
+        let rule = |id: &str| entry(&acl, "rules", id);
         assert_eq!(
             rule("site-user2-puts")["key_exprs"],
             json!([
@@ -323,15 +327,7 @@ mod tests {
             rule("site-user2-answers")["key_exprs"],
             json!(["coop/s1/obj/*/current/user2", "coop/s1/clock/user2"])
         );
-        let policy = |id: &str| {
-            acl["policies"]
-                .as_array()
-                .expect("policies")
-                .iter()
-                .find(|p| p["id"] == id)
-                .unwrap_or_else(|| panic!("policy {id}"))
-                .clone()
-        };
+        let policy = |id: &str| entry(&acl, "policies", id).clone();
         let p2 = policy("site-user2");
         let p2_rules: Vec<&str> = p2["rules"]
             .as_array()
@@ -384,14 +380,7 @@ mod tests {
                 viewers: &viewers,
             }),
         });
-        let rules = acl["rules"].as_array().expect("rules");
-        let rule = |id: &str| {
-            rules
-                .iter()
-                .find(|r| r["id"] == id)
-                .unwrap_or_else(|| panic!("rule {id}"))
-                .clone()
-        };
+        let rule = |id: &str| entry(&acl, "rules", id).clone();
         assert_eq!(
             rule("site-user2-ros2-puts")["key_exprs"],
             json!(["3/coop/s1_timewarp/user2/**", "3/tf/**", "3/rosout/**"])
@@ -402,15 +391,12 @@ mod tests {
         );
         let view = rule("ros2-view");
         assert!(!view["messages"].to_string().contains("\"put\""), "{view}");
-        let policies = acl["policies"].as_array().expect("policies");
-        let p2 = policies
-            .iter()
-            .find(|p| p["id"] == "site-user2")
-            .expect("user2");
+        let p2 = entry(&acl, "policies", "site-user2");
         assert!(!p2["rules"].to_string().contains("user1"), "{p2}");
-        assert!(policies
-            .iter()
-            .any(|p| p["id"] == "ros2-viewers" && p["rules"] == json!(["ros2-view", "out"])));
+        assert_eq!(
+            entry(&acl, "policies", "ros2-viewers")["rules"],
+            json!(["ros2-view", "out"])
+        );
         // Without ROS 2, no ROS 2 key anywhere.
         let plain = session_acl(&Members {
             session: "s1",
