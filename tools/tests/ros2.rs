@@ -487,21 +487,30 @@ fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
     // Forgeries on user1's tool, by a viewer (another session holding the viewer's certificate:
     // a session's own subscriber would get its put without the router) and by user2, then user2
     // on its own namespace.
+    // Each put goes once its session knows a subscriber waits for the key: a client drops a put
+    // nobody is known to want, and the router would then have nothing to refuse.
+    let put_when_heard = |z: &zenoh::Session, key: &str, bytes: Vec<u8>| {
+        let p = z
+            .declare_publisher(key.to_owned())
+            .wait()
+            .expect("publisher");
+        coop_tests::wait_until("a subscriber known to the putting session", LIMIT, || {
+            p.matching_status()
+                .wait()
+                .ok()
+                .filter(|m| m.matching())
+                .map(drop)
+        });
+        p.put(bytes)
+            .wait()
+            .expect("put (refused at the router, not here)");
+    };
     let forged = b"forged".to_vec();
     let viewer2 = client("rviz");
-    viewer2
-        .put(&user1_tool, forged.clone())
-        .wait()
-        .expect("put (refused at the router, not here)");
+    put_when_heard(&viewer2, &user1_tool, forged.clone());
     let impostor = client("user2");
-    impostor
-        .put(&user1_tool, forged.clone())
-        .wait()
-        .expect("put");
-    impostor
-        .put(&user2_tool, b"own".to_vec())
-        .wait()
-        .expect("put");
+    put_when_heard(&impostor, &user1_tool, forged.clone());
+    put_when_heard(&impostor, &user2_tool, b"own".to_vec());
     coop_tests::wait_until(
         "the viewer receiving user2's put on its own topic",
         LIMIT,
