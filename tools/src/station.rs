@@ -169,6 +169,27 @@ fn finite_or_null(v: f64) -> serde_json::Value {
     }
 }
 
+/// A backend's probe as `station devices --json` prints it.
+fn probe_json(p: &coop_rt::device::cartesian::ProbeReport, selected: &str) -> serde_json::Value {
+    serde_json::json!({
+        "backend": p.backend,
+        "built_in": p.built_in,
+        "selected": p.backend == selected,
+        "status": p.status,
+        "devices": p.devices.iter().map(|i| serde_json::json!({
+            "model": i.model,
+            "serial": i.serial,
+            "dof": i.dof,
+            "max_force_n": finite_or_null(i.max_force_n),
+            "max_stiffness_n_per_m": finite_or_null(i.max_stiffness_n_per_m),
+            "max_damping_ns_per_m": finite_or_null(i.max_damping_ns_per_m),
+            "workspace_radius_m": finite_or_null(i.workspace_radius_m),
+            "native_rate_hz": finite_or_null(i.native_rate_hz),
+            "senses_force": i.senses_force,
+        })).collect::<Vec<_>>(),
+    })
+}
+
 /// Runs the station command line `args` (the first is the program name). `exe_prefix` are the
 /// arguments that come before the subcommand when this executable re-runs itself (empty for the
 /// `station` binary, `["station"]` inside `session`).
@@ -215,28 +236,8 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             let selected = r.device.backend.name();
             let reports = device::probe_all(&r.device, &r.scenario, r.site);
             if json {
-                let v: Vec<serde_json::Value> = reports
-                    .iter()
-                    .map(|p| {
-                        serde_json::json!({
-                            "backend": p.backend,
-                            "built_in": p.built_in,
-                            "selected": p.backend == selected,
-                            "status": p.status,
-                            "devices": p.devices.iter().map(|i| serde_json::json!({
-                                "model": i.model,
-                                "serial": i.serial,
-                                "dof": i.dof,
-                                "max_force_n": finite_or_null(i.max_force_n),
-                                "max_stiffness_n_per_m": finite_or_null(i.max_stiffness_n_per_m),
-                                "max_damping_ns_per_m": finite_or_null(i.max_damping_ns_per_m),
-                                "workspace_radius_m": finite_or_null(i.workspace_radius_m),
-                                "native_rate_hz": finite_or_null(i.native_rate_hz),
-                                "senses_force": i.senses_force,
-                            })).collect::<Vec<_>>(),
-                        })
-                    })
-                    .collect();
+                let v: Vec<serde_json::Value> =
+                    reports.iter().map(|p| probe_json(p, selected)).collect();
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
                 for p in &reports {
@@ -316,6 +317,11 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
         }
         Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
         Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),
-        Command::Network(a) => child::run_network(&resolve(&a)?, a.parent),
+        Command::Network(a) => {
+            // The network process's zenoh speaks on stderr when RUST_LOG asks: installed here, by
+            // the binary, as a library must not install a process's log subscriber.
+            coop_transport::log::zenoh_to_stderr();
+            child::run_network(&resolve(&a)?, a.parent)
+        }
     })
 }

@@ -141,7 +141,6 @@ struct Ctx<'a> {
 /// # Errors
 /// The zenoh session or a declaration cannot be set up, or the recording cannot be created.
 pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
-    crate::log::zenoh_to_stderr();
     let site = a
         .sites
         .get(a.site_index)

@@ -1,0 +1,176 @@
+#!/usr/bin/env python3
+"""Results pages: figures that name the run they came from.
+
+Every figure the book quotes lives on a results page under `docs/results/`, written by this script
+from one run of one command. The page is stamped with the command, the commit (and whether the tree
+had changes), the machine (CPU model, CPUs, memory, kernel) and the date, and holds the command's
+output as printed. A design page links to the results page instead of copying figures into prose,
+so a figure can be traced to its run and rerun with one line.
+
+usage:
+  tools/results.py write NAME [--title T] -- COMMAND [ARG...]   run COMMAND, write docs/results/NAME.md
+  tools/results.py rerun NAME [NAME...] | --all                  run the command a page names again
+  tools/results.py list                                          each page with its command and commit
+  tools/results.py check                                         every page stamped and in SUMMARY.md
+
+The command runs in the repository's root. A command that fails writes no page (the old one stays).
+"""
+
+import datetime
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+PAGES = os.path.join(ROOT, "docs", "results")
+STAMP = "<!-- results: "
+
+
+def git(*args):
+    return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+
+
+def machine():
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    mem = ""
+    try:
+        with open("/proc/meminfo") as f:
+            kib = int(f.readline().split()[1])
+            mem = f", {kib / 2**20:.0f} GiB"
+    except (OSError, ValueError, IndexError):
+        pass
+    return f"{cpu}, {os.cpu_count()} CPUs{mem}, {platform.system()} {platform.release()}"
+
+
+def read_stamp(path):
+    with open(path) as f:
+        for line in f:
+            if line.startswith(STAMP):
+                return json.loads(line[len(STAMP):].rsplit("-->", 1)[0])
+    return None
+
+
+def write(name, title, command):
+    started = time.monotonic()
+    print(f"results {name}: running {shlex.join(command)}", file=sys.stderr)
+    proc = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out = []
+    for line in proc.stdout:
+        sys.stderr.write(line)
+        out.append(line)
+    code = proc.wait()
+    took = time.monotonic() - started
+    if code != 0:
+        print(f"results {name}: `{shlex.join(command)}` exited {code}: no page written", file=sys.stderr)
+        return code
+    commit = git("rev-parse", "--short=10", "HEAD") or "unknown"
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    stamp = {
+        "name": name,
+        "title": title,
+        "command": command,
+        "commit": commit,
+        "dirty": dirty,
+        "machine": machine(),
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "seconds": round(took),
+    }
+    text = "".join(out).rstrip("\n")
+    fence = "````" if "```" in text else "```"
+    page = (
+        f"# {title}\n\n"
+        f"{STAMP}{json.dumps(stamp)} -->\n"
+        f"Written by `tools/results.py write {name}` from one run of\n\n"
+        f"```bash\n{shlex.join(command)}\n```\n\n"
+        f"- commit: `{commit}`{' with uncommitted changes' if dirty else ''}\n"
+        f"- machine: {stamp['machine']}\n"
+        f"- date: {stamp['date']} ({stamp['seconds']} s)\n\n"
+        f"Rerun: `tools/results.py rerun {name}`. The output, as printed:\n\n"
+        f"{fence}text\n{text}\n{fence}\n"
+    )
+    os.makedirs(PAGES, exist_ok=True)
+    with open(os.path.join(PAGES, f"{name}.md"), "w") as f:
+        f.write(page)
+    print(f"results {name}: docs/results/{name}.md at {commit}{' (dirty)' if dirty else ''}", file=sys.stderr)
+    return 0
+
+
+def pages():
+    if not os.path.isdir(PAGES):
+        return []
+    return sorted(f[:-3] for f in os.listdir(PAGES) if f.endswith(".md"))
+
+
+def main(argv):
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0 if argv else 2
+    verb, rest = argv[0], argv[1:]
+    if verb == "write":
+        if "--" not in rest:
+            print("write: NAME [--title T] -- COMMAND...", file=sys.stderr)
+            return 2
+        head, command = rest[: rest.index("--")], rest[rest.index("--") + 1 :]
+        if not head or not command:
+            print("write: NAME [--title T] -- COMMAND...", file=sys.stderr)
+            return 2
+        name, title = head[0], head[0]
+        if len(head) == 3 and head[1] == "--title":
+            title = head[2]
+        elif len(head) != 1:
+            print(f"write: unexpected {head[1:]}", file=sys.stderr)
+            return 2
+        if not all(c.isalnum() or c in "-_" for c in name):
+            print(f"write: the name {name!r} must be letters, digits, '-' or '_'", file=sys.stderr)
+            return 2
+        return write(name, title, command)
+    if verb == "rerun":
+        names = pages() if rest == ["--all"] else rest
+        for name in names:
+            path = os.path.join(PAGES, f"{name}.md")
+            stamp = read_stamp(path) if os.path.exists(path) else None
+            if stamp is None:
+                print(f"rerun: docs/results/{name}.md has no stamp", file=sys.stderr)
+                return 1
+            code = write(name, stamp["title"], stamp["command"])
+            if code:
+                return code
+        return 0
+    if verb == "list":
+        for name in pages():
+            s = read_stamp(os.path.join(PAGES, f"{name}.md")) or {}
+            print(f"{name:28} {s.get('commit', '?'):11} {s.get('date', '?'):21} {shlex.join(s.get('command', ['?']))}")
+        return 0
+    if verb == "check":
+        bad = []
+        with open(os.path.join(ROOT, "docs", "SUMMARY.md")) as f:
+            summary = f.read()
+        for name in pages():
+            s = read_stamp(os.path.join(PAGES, f"{name}.md"))
+            if not s or not s.get("command") or not s.get("commit"):
+                bad.append(f"docs/results/{name}.md: no stamp naming its command and commit")
+            if f"(results/{name}.md)" not in summary:
+                bad.append(f"docs/results/{name}.md: not in docs/SUMMARY.md")
+        for b in bad:
+            print(b, file=sys.stderr)
+        if not bad:
+            print(f"results: {len(pages())} pages, each stamped with its command and commit")
+        return 1 if bad else 0
+    print(f"unknown verb {verb!r}; see --help", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
