@@ -22,10 +22,10 @@ use crate::device::{Plant, ScaraForceLoop};
 use crate::link::DueQueue;
 use crate::method::{integrate, Consistency, EnergyAccount, Report, WorldCopy};
 use crate::rng::Rng;
-use crate::scenario::{MethodName, Scenario};
+use crate::scenario::{LinkSpec, MethodName, Scenario};
 use crate::servo::{Servo, ServoInput};
 use crate::user::{target_at, Keyframe};
-use crate::world::{MAX_OBJECTS, MAX_SITES};
+use crate::world::{World, MAX_OBJECTS, MAX_SITES};
 
 /// Largest plant integration step: 100 µs (the grip spring's period is ~20 ms).
 pub const PLANT_STEP_NS: u64 = 100_000;
@@ -286,87 +286,11 @@ pub fn run_sized(
     progress: &mut dyn FnMut(f64),
     size: &Sizer,
 ) -> RunResult {
-    let world = scenario.world();
-    let start = scenario.start_copy();
-    let objects = start.len();
-    let mut sites: Vec<Site> = (0..scenario.site.len())
-        .map(|i| {
-            let spec = &scenario.site[i];
-            let script = scenario.script(i);
-            let arm = scenario.arm(i);
-            let p0 = script[0].target;
-            Site {
-                plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
-                plant_ns: 0,
-                script,
-                servo: Servo::new(scenario.servo_params(i)),
-                force_loop: scenario.force_loop(i),
-                replay: spec.hand_trajectory.clone(),
-                tau: Vec3::zeros(),
-                own: [ContactForce::default(); MAX_OBJECTS],
-                copy: start.clone(),
-                method: site_method(scenario, mode, i),
-                noise: Rng::derive(scenario.seed, 1000 + i as u64),
-                period_servo: period_ns(spec.servo_rate_hz),
-                period_physics: period_ns(spec.physics_rate_hz),
-                period_report: period_ns(spec.report_rate_hz),
-                next_servo: 0,
-                next_physics: 0,
-                next_report: 0,
-                pending_adoptions: Vec::new(),
-                last_f_desired: Vec3::zeros(),
-                last_f_measured: Vec3::zeros(),
-                sensor_noise: spec.sensor_noise_n,
-                force_steps: ForceSteps::default(),
-            }
-        })
-        .collect();
-    let n = sites.len();
-    // Reference: one shared copy stepped at the fastest physics rate.
-    let mut shared = start.clone();
-    let ref_period = sites
-        .iter()
-        .map(|s| s.period_physics)
-        .min()
-        .unwrap_or(1_000_000);
-    let mut next_ref = 0u64;
-    let mut links: Vec<Rng> = (0..n * n)
-        .map(|k| Rng::derive(scenario.seed, k as u64))
-        .collect();
-    let net = &scenario.network;
-    let mut in_flight: DueQueue<InFlight> = DueQueue::new();
-    let mut messages = (0u64, 0u64, 0u64);
+    let mut run = Run::new(scenario, mode);
     let end_ns = (scenario.duration_s * 1e9).round() as u64;
-    let period_sample = period_ns(scenario.sample_rate_hz);
-    let mut next_sample = 0u64;
-    let mut result = RunResult {
-        sites: vec![
-            SiteTrace {
-                others: vec![ObjectTrace::default(); objects - 1],
-                ..SiteTrace::default()
-            };
-            n
-        ],
-        ..RunResult::empty(mode)
-    };
-    let e0 = start.mechanical_energy(&world);
     let mut next_progress = 0u64;
-    let reference = mode == Mode::Reference;
-
     loop {
-        let mut t = next_sample;
-        for s in &sites {
-            t = t.min(s.next_servo).min(s.next_physics);
-            if !reference {
-                t = t.min(s.next_report);
-            }
-        }
-        if reference {
-            t = t.min(next_ref);
-        }
-        if let Some(at_ns) = in_flight.next_at() {
-            t = t.min(at_ns);
-        }
+        let t = run.next_event();
         if t > end_ns {
             break;
         }
@@ -374,8 +298,156 @@ pub fn run_sized(
             progress(t as f64 / end_ns.max(1) as f64);
             next_progress = t + end_ns / 100 + 1;
         }
-        // Plants up to now.
-        for s in &mut sites {
+        run.step(t, size);
+    }
+    progress(1.0);
+    run.finish()
+}
+
+/// A run under way: every site, the virtual network between them, and what is recorded so far.
+struct Run<'a> {
+    reference: bool,
+    world: World,
+    objects: usize,
+    sites: Vec<Site>,
+    /// Reference: one shared copy stepped at the fastest physics rate.
+    shared: WorldCopy,
+    ref_period: u64,
+    next_ref: u64,
+    /// Per ordered pair of sites `(from, to)`, at `from * n + to`: its link's generator.
+    links: Vec<Rng>,
+    net: &'a LinkSpec,
+    in_flight: DueQueue<InFlight>,
+    /// Messages sent, delivered, lost.
+    messages: (u64, u64, u64),
+    period_sample: u64,
+    next_sample: u64,
+    result: RunResult,
+    /// The world's mechanical energy at the start, J.
+    e0: f64,
+}
+
+impl<'a> Run<'a> {
+    /// Every site at its script's first target, nothing sent, nothing recorded.
+    fn new(scenario: &'a Scenario, mode: Mode) -> Self {
+        let world = scenario.world();
+        let start = scenario.start_copy();
+        let objects = start.len();
+        let sites: Vec<Site> = (0..scenario.site.len())
+            .map(|i| {
+                let spec = &scenario.site[i];
+                let script = scenario.script(i);
+                let arm = scenario.arm(i);
+                let p0 = script[0].target;
+                Site {
+                    plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
+                    plant_ns: 0,
+                    script,
+                    servo: Servo::new(scenario.servo_params(i)),
+                    force_loop: scenario.force_loop(i),
+                    replay: spec.hand_trajectory.clone(),
+                    tau: Vec3::zeros(),
+                    own: [ContactForce::default(); MAX_OBJECTS],
+                    copy: start.clone(),
+                    method: site_method(scenario, mode, i),
+                    noise: Rng::derive(scenario.seed, 1000 + i as u64),
+                    period_servo: period_ns(spec.servo_rate_hz),
+                    period_physics: period_ns(spec.physics_rate_hz),
+                    period_report: period_ns(spec.report_rate_hz),
+                    next_servo: 0,
+                    next_physics: 0,
+                    next_report: 0,
+                    pending_adoptions: Vec::new(),
+                    last_f_desired: Vec3::zeros(),
+                    last_f_measured: Vec3::zeros(),
+                    sensor_noise: spec.sensor_noise_n,
+                    force_steps: ForceSteps::default(),
+                }
+            })
+            .collect();
+        let n = sites.len();
+        // Reference: one shared copy stepped at the fastest physics rate.
+        let shared = start.clone();
+        let ref_period = sites
+            .iter()
+            .map(|s| s.period_physics)
+            .min()
+            .unwrap_or(1_000_000);
+        let links: Vec<Rng> = (0..n * n)
+            .map(|k| Rng::derive(scenario.seed, k as u64))
+            .collect();
+        let result = RunResult {
+            sites: vec![
+                SiteTrace {
+                    others: vec![ObjectTrace::default(); objects - 1],
+                    ..SiteTrace::default()
+                };
+                n
+            ],
+            ..RunResult::empty(mode)
+        };
+        let e0 = start.mechanical_energy(&world);
+        Self {
+            reference: mode == Mode::Reference,
+            world,
+            objects,
+            sites,
+            shared,
+            ref_period,
+            next_ref: 0,
+            links,
+            net: &scenario.network,
+            in_flight: DueQueue::new(),
+            messages: (0, 0, 0),
+            period_sample: period_ns(scenario.sample_rate_hz),
+            next_sample: 0,
+            result,
+            e0,
+        }
+    }
+
+    /// The earliest instant anything happens: a sample, a site's timer, a delivery.
+    fn next_event(&self) -> u64 {
+        let mut t = self.next_sample;
+        for s in &self.sites {
+            t = t.min(s.next_servo).min(s.next_physics);
+            if !self.reference {
+                t = t.min(s.next_report);
+            }
+        }
+        if self.reference {
+            t = t.min(self.next_ref);
+        }
+        if let Some(at_ns) = self.in_flight.next_at() {
+            t = t.min(at_ns);
+        }
+        t
+    }
+
+    /// Everything due at `t`, in the fixed order: plants up to now, deliveries, the reference's
+    /// shared step, then per site in index order physics, servo, report; then the sample.
+    fn step(&mut self, t: u64, size: &Sizer) {
+        self.plants_to(t);
+        self.deliver(t);
+        if self.reference && self.next_ref == t {
+            self.reference_step(t);
+        }
+        for i in 0..self.sites.len() {
+            self.physics(i, t);
+            self.servo(i, t);
+            if !self.reference && self.sites[i].next_report == t {
+                self.report(i, t, size);
+            }
+        }
+        if self.next_sample == t {
+            self.sample(t);
+            self.next_sample += self.period_sample;
+        }
+    }
+
+    /// Plants up to now.
+    fn plants_to(&mut self, t: u64) {
+        for s in &mut self.sites {
             while s.replay.is_none() && s.plant_ns < t {
                 let step = (t - s.plant_ns).min(PLANT_STEP_NS);
                 let mid = ns_to_s(s.plant_ns + step);
@@ -384,17 +456,20 @@ pub fn run_sized(
                 s.plant_ns += step;
             }
         }
-        // Deliveries.
+    }
+
+    /// Deliveries.
+    fn deliver(&mut self, t: u64) {
         // Nothing is due before `t` (it is the earliest event), so due means due now.
-        while let Some(m) = in_flight.pop_due(t) {
-            messages.1 += 1;
-            let s = &mut sites[m.to];
+        while let Some(m) = self.in_flight.pop_due(t) {
+            self.messages.1 += 1;
+            let s = &mut self.sites[m.to];
             if let Some(a) = s
                 .method
-                .receive(&world, &mut s.copy, m.from, &m.msg, ns_to_s(t))
+                .receive(&self.world, &mut s.copy, m.from, &m.msg, ns_to_s(t))
             {
-                s.pending_adoptions.push(result.adoptions.len());
-                result.adoptions.push(AdoptionEvent {
+                s.pending_adoptions.push(self.result.adoptions.len());
+                self.result.adoptions.push(AdoptionEvent {
                     t_s: ns_to_s(t),
                     site: m.to,
                     from: m.from,
@@ -407,188 +482,227 @@ pub fn run_sized(
                 });
             }
         }
-        if reference && next_ref == t {
-            let mut users = [ContactForce::default(); MAX_SITES * MAX_OBJECTS];
-            for k in 0..objects {
-                for (i, s) in sites.iter().enumerate() {
-                    users[k * n + i] = s.own[k];
-                }
-            }
-            let users = &users[..objects * n];
-            integrate(
-                &world,
-                &mut shared,
-                users,
-                n,
-                n,
-                ns_to_s(ref_period),
-                &mut [],
-            );
-            shared.set_time(ns_to_s(t));
-            next_ref += ref_period;
-        }
-        for i in 0..n {
-            let s = &mut sites[i];
-            if s.next_physics == t {
-                if !reference {
-                    s.method.own_tool(s.tool_pos(t));
-                    let dt = ns_to_s(s.period_physics);
-                    s.method
-                        .physics_step(&world, &mut s.copy, &s.own[..objects], dt);
-                    s.copy.set_time(ns_to_s(t));
-                }
-                s.next_physics += s.period_physics;
-            }
-            if s.next_servo == t {
-                // A recorded hand has no force sensor.
-                let f_measured = if s.replay.is_some() {
-                    Vec3::zeros()
-                } else {
-                    let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
-                    s.plant.grip_force + noise
-                };
-                let copy = if reference { &shared } else { &s.copy };
-                // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                let mut shown = [BodyState::at_rest(Vec3::zeros()); MAX_OBJECTS];
-                for (k, o) in shown.iter_mut().enumerate().take(objects) {
-                    *o = s.method.shown(copy, k);
-                }
-                let (tool_pos, tool_vel) = match &s.replay {
-                    Some(r) => r.at(ns_to_s(t)),
-                    None => {
-                        let arm = &s.force_loop.arm;
-                        (
-                            arm.forward(&s.plant.q),
-                            arm.jacobian(&s.plant.q) * s.plant.qd,
-                        )
-                    }
-                };
-                let out = s.servo.step(
-                    &ServoInput {
-                        now_s: ns_to_s(t),
-                        dt_s: ns_to_s(s.period_servo),
-                        tool_pos,
-                        tool_vel,
-                        objects: &shown[..objects],
-                        object_time_s: copy.first().time_s,
-                        adopted: !s.pending_adoptions.is_empty(),
-                        stopping: false,
-                    },
-                    world.bodies(),
-                );
-                let step_n = (out.f_desired - s.last_f_desired).norm();
-                for k in s.pending_adoptions.drain(..) {
-                    result.adoptions[k].force_step_n = step_n;
-                }
-                s.force_steps.record(s.last_f_desired, out.f_desired);
-                // The arm's own force loop (a recorded hand displays nothing).
-                let (_, tau) = s.force_loop.step(
-                    out.f_desired,
-                    out.scale,
-                    f_measured,
-                    &s.plant.q,
-                    ns_to_s(s.period_servo),
-                );
-                s.tau = tau;
-                s.own = out.contacts;
-                s.last_f_desired = out.f_desired;
-                s.last_f_measured = f_measured;
-                s.next_servo += s.period_servo;
-            }
-            if !reference && s.next_report == t {
-                // Each report takes its own chance on each link (a world's objects may travel in
-                // several).
-                let trace = &mut result.sites[i];
-                let (puts, bytes) = (&mut trace.puts, &mut trace.sent_bytes);
-                let mut send = |mut msg: Report| {
-                    *bytes += size(i, t, *puts, &msg);
-                    // Numbered as a station's network numbers its tracks.
-                    match &mut msg {
-                        Report::State { .. } | Report::Force { .. } => puts[0] += 1,
-                        Report::Tools(r) => {
-                            puts[1] += 1;
-                            r.seq = puts[1];
-                        }
-                        Report::Coupled(c) => {
-                            puts[0] += 1;
-                            puts[1] += u64::from(c.tools.count > 0);
-                            c.tools.seq = puts[1];
-                        }
-                    }
-                    for to in (0..n).filter(|&to| to != i) {
-                        messages.0 += 1;
-                        let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t))
-                        else {
-                            messages.2 += 1;
-                            continue;
-                        };
-                        in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
-                    }
-                };
-                s.method
-                    .report(&s.copy, &s.own[..objects], ns_to_s(t), &mut send);
-                s.next_report += s.period_report;
-            }
-        }
-        if next_sample == t {
-            result.t.push(ns_to_s(t));
-            for (i, s) in sites.iter().enumerate() {
-                let copy = if reference { &shared } else { &s.copy };
-                let tr = &mut result.sites[i];
-                let first = &copy.first().state;
-                tr.obj_pos.push(first.pos);
-                tr.obj_vel.push(first.vel);
-                let q = first.rot.quaternion();
-                tr.obj_rot.push([q.w, q.i, q.j, q.k]);
-                for (o, c) in tr.others.iter_mut().zip(&copy.objects()[1..]) {
-                    o.pos.push(c.state.pos);
-                    o.vel.push(c.state.vel);
-                    let q = c.state.rot.quaternion();
-                    o.rot.push([q.w, q.i, q.j, q.k]);
-                }
-                tr.tool_pos.push(s.tool_pos(t));
-                tr.f_desired.push(s.last_f_desired);
-                tr.f_measured.push(s.last_f_measured);
-                tr.touching.push(s.own.iter().any(|c| c.touching));
-                let bits = (0..objects).fold(0u16, |b, k| b | (u16::from(s.own[k].touching) << k));
-                tr.touched.push(bits);
-                let own = |s: &Site| {
-                    s.own[1..objects]
-                        .iter()
-                        .fold(s.own[0].force, |a, c| a + c.force)
-                };
-                let on_object = if reference {
-                    sites.iter().map(own).sum()
-                } else {
-                    own(s) + s.method.remote_force()
-                };
-                tr.f_on_object.push(on_object);
-            }
-            next_sample += period_sample;
-        }
     }
-    progress(1.0);
-    messages.1 = messages.1.min(messages.0);
-    result.messages = messages;
-    for s in &sites {
-        let copy = if reference { &shared } else { &s.copy };
-        result.energy.push(
-            copy.objects()
-                .iter()
-                .map(|o| o.energy)
-                .reduce(|a, b| a.plus(&b))
-                .unwrap_or_default(),
+
+    /// The reference's one shared copy, every user's contact summed at once.
+    fn reference_step(&mut self, t: u64) {
+        let (objects, n) = (self.objects, self.sites.len());
+        let mut users = [ContactForce::default(); MAX_SITES * MAX_OBJECTS];
+        for k in 0..objects {
+            for (i, s) in self.sites.iter().enumerate() {
+                users[k * n + i] = s.own[k];
+            }
+        }
+        let users = &users[..objects * n];
+        integrate(
+            &self.world,
+            &mut self.shared,
+            users,
+            n,
+            n,
+            ns_to_s(self.ref_period),
+            &mut [],
         );
-        result
-            .mech_energy
-            .push((e0, copy.mechanical_energy(&world)));
-        result.rollback.push(s.method.stats().rollback().copied());
-        result.force_steps.push(ForceSteps {
-            display: *s.servo.display_stats(),
-            ..s.force_steps
-        });
+        self.shared.set_time(ns_to_s(t));
+        self.next_ref += self.ref_period;
     }
-    result
+
+    /// Site `i`'s physics step, if due.
+    fn physics(&mut self, i: usize, t: u64) {
+        let s = &mut self.sites[i];
+        if s.next_physics == t {
+            if !self.reference {
+                s.method.own_tool(s.tool_pos(t));
+                let dt = ns_to_s(s.period_physics);
+                s.method
+                    .physics_step(&self.world, &mut s.copy, &s.own[..self.objects], dt);
+                s.copy.set_time(ns_to_s(t));
+            }
+            s.next_physics += s.period_physics;
+        }
+    }
+
+    /// Site `i`'s servo tick, if due: the displayed force, and the arm's force loop.
+    fn servo(&mut self, i: usize, t: u64) {
+        let objects = self.objects;
+        let s = &mut self.sites[i];
+        if s.next_servo != t {
+            return;
+        }
+        // A recorded hand has no force sensor.
+        let f_measured = if s.replay.is_some() {
+            Vec3::zeros()
+        } else {
+            let noise = Vec3::from_fn(|_, _| s.noise.normal()) * s.sensor_noise;
+            s.plant.grip_force + noise
+        };
+        let copy = if self.reference {
+            &self.shared
+        } else {
+            &s.copy
+        };
+        // What the user is shown: the copy, or a missed contact replayed (timewarp).
+        let mut shown = [BodyState::at_rest(Vec3::zeros()); MAX_OBJECTS];
+        for (k, o) in shown.iter_mut().enumerate().take(objects) {
+            *o = s.method.shown(copy, k);
+        }
+        let (tool_pos, tool_vel) = match &s.replay {
+            Some(r) => r.at(ns_to_s(t)),
+            None => {
+                let arm = &s.force_loop.arm;
+                (
+                    arm.forward(&s.plant.q),
+                    arm.jacobian(&s.plant.q) * s.plant.qd,
+                )
+            }
+        };
+        let out = s.servo.step(
+            &ServoInput {
+                now_s: ns_to_s(t),
+                dt_s: ns_to_s(s.period_servo),
+                tool_pos,
+                tool_vel,
+                objects: &shown[..objects],
+                object_time_s: copy.first().time_s,
+                adopted: !s.pending_adoptions.is_empty(),
+                stopping: false,
+            },
+            self.world.bodies(),
+        );
+        let step_n = (out.f_desired - s.last_f_desired).norm();
+        for k in s.pending_adoptions.drain(..) {
+            self.result.adoptions[k].force_step_n = step_n;
+        }
+        s.force_steps.record(s.last_f_desired, out.f_desired);
+        // The arm's own force loop (a recorded hand displays nothing).
+        let (_, tau) = s.force_loop.step(
+            out.f_desired,
+            out.scale,
+            f_measured,
+            &s.plant.q,
+            ns_to_s(s.period_servo),
+        );
+        s.tau = tau;
+        s.own = out.contacts;
+        s.last_f_desired = out.f_desired;
+        s.last_f_measured = f_measured;
+        s.next_servo += s.period_servo;
+    }
+
+    /// Site `i`'s reports (it is due), each sent on every link to the others.
+    fn report(&mut self, i: usize, t: u64, size: &Sizer) {
+        let n = self.sites.len();
+        let s = &mut self.sites[i];
+        let (links, in_flight, messages) =
+            (&mut self.links, &mut self.in_flight, &mut self.messages);
+        let net = self.net;
+        // Each report takes its own chance on each link (a world's objects may travel in
+        // several).
+        let trace = &mut self.result.sites[i];
+        let (puts, bytes) = (&mut trace.puts, &mut trace.sent_bytes);
+        let mut send = |mut msg: Report| {
+            *bytes += size(i, t, *puts, &msg);
+            // Numbered as a station's network numbers its tracks.
+            match &mut msg {
+                Report::State { .. } | Report::Force { .. } => puts[0] += 1,
+                Report::Tools(r) => {
+                    puts[1] += 1;
+                    r.seq = puts[1];
+                }
+                Report::Coupled(c) => {
+                    puts[0] += 1;
+                    puts[1] += u64::from(c.tools.count > 0);
+                    c.tools.seq = puts[1];
+                }
+            }
+            for to in (0..n).filter(|&to| to != i) {
+                messages.0 += 1;
+                let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
+                    messages.2 += 1;
+                    continue;
+                };
+                in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
+            }
+        };
+        s.method
+            .report(&s.copy, &s.own[..self.objects], ns_to_s(t), &mut send);
+        s.next_report += s.period_report;
+    }
+
+    /// A row of every site's trace.
+    fn sample(&mut self, t: u64) {
+        let objects = self.objects;
+        let reference = self.reference;
+        let sites = &self.sites;
+        self.result.t.push(ns_to_s(t));
+        for (i, s) in sites.iter().enumerate() {
+            let copy = if reference { &self.shared } else { &s.copy };
+            let tr = &mut self.result.sites[i];
+            let first = &copy.first().state;
+            tr.obj_pos.push(first.pos);
+            tr.obj_vel.push(first.vel);
+            let q = first.rot.quaternion();
+            tr.obj_rot.push([q.w, q.i, q.j, q.k]);
+            for (o, c) in tr.others.iter_mut().zip(&copy.objects()[1..]) {
+                o.pos.push(c.state.pos);
+                o.vel.push(c.state.vel);
+                let q = c.state.rot.quaternion();
+                o.rot.push([q.w, q.i, q.j, q.k]);
+            }
+            tr.tool_pos.push(s.tool_pos(t));
+            tr.f_desired.push(s.last_f_desired);
+            tr.f_measured.push(s.last_f_measured);
+            tr.touching.push(s.own.iter().any(|c| c.touching));
+            let bits = (0..objects).fold(0u16, |b, k| b | (u16::from(s.own[k].touching) << k));
+            tr.touched.push(bits);
+            let own = |s: &Site| {
+                s.own[1..objects]
+                    .iter()
+                    .fold(s.own[0].force, |a, c| a + c.force)
+            };
+            let on_object = if reference {
+                sites.iter().map(own).sum()
+            } else {
+                own(s) + s.method.remote_force()
+            };
+            tr.f_on_object.push(on_object);
+        }
+    }
+
+    /// The result: the traces, and per site its energy account, rollbacks and force steps.
+    fn finish(self) -> RunResult {
+        let Self {
+            reference,
+            world,
+            sites,
+            shared,
+            mut messages,
+            mut result,
+            e0,
+            ..
+        } = self;
+        messages.1 = messages.1.min(messages.0);
+        result.messages = messages;
+        for s in &sites {
+            let copy = if reference { &shared } else { &s.copy };
+            result.energy.push(
+                copy.objects()
+                    .iter()
+                    .map(|o| o.energy)
+                    .reduce(|a, b| a.plus(&b))
+                    .unwrap_or_default(),
+            );
+            result
+                .mech_energy
+                .push((e0, copy.mechanical_energy(&world)));
+            result.rollback.push(s.method.stats().rollback().copied());
+            result.force_steps.push(ForceSteps {
+                display: *s.servo.display_stats(),
+                ..s.force_steps
+            });
+        }
+        result
+    }
 }
 
 impl RunResult {
