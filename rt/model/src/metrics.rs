@@ -56,7 +56,7 @@
 
 use crate::body::Vec3;
 use crate::scenario::Scenario;
-use crate::sim::RunResult;
+use crate::sim::{RunResult, SiteTrace};
 
 #[cfg(feature = "serde")]
 use serde::Serialize;
@@ -273,138 +273,20 @@ fn rms(v: impl Iterator<Item = f64>) -> f64 {
 pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> Metrics {
     let samples = run.t.len();
     let divs: Vec<f64> = (0..samples).map(|k| divergence(run, k)).collect();
-    let last_k = (0..samples)
-        .rev()
-        .find(|&k| run.sites.iter().any(|s| s.touching[k]));
-    let last_contact = last_k.map_or(0.0, |k| run.t[k]);
-    // The site whose user touched last holds the final change; when does its copy come to rest?
-    let author = last_k
-        .and_then(|k| run.sites.iter().position(|s| s.touching[k]))
-        .unwrap_or(0);
-    let dt = 1.0 / scenario.sample_rate_hz;
-    let at = &run.sites[author];
-    let settled = (1..samples)
-        .rev()
-        .find(|&k| {
-            (0..at.objects()).any(|o| {
-                let pos = at.object_pos(o);
-                (pos[k] - pos[k - 1]).norm() / dt > 1e-3
-            })
-        })
-        .map_or(0.0, |k| run.t[k]);
-    let slowest_report = scenario
-        .site
-        .iter()
-        .map(|s| 1.0 / s.report_rate_hz)
-        .fold(0.0, f64::max);
-    let settle =
-        (scenario.network.delay_max_ms + scenario.network.jitter_ms) / 1e3 + 2.0 * slowest_report;
-    let from = last_contact.max(settled) + settle;
-    // NaN when that moment never came within the run (a user still touching at the end): there is
-    // nothing to measure, and 0 would read as "together".
-    let after = if run.t.last().is_some_and(|&end| from <= end) {
-        (0..samples)
-            .filter(|&k| run.t[k] >= from)
-            .map(|k| divs[k])
-            .fold(0.0, f64::max)
-    } else {
-        f64::NAN
-    };
+    let AfterContact {
+        last_contact,
+        settled,
+        from,
+        after,
+    } = after_contact(scenario, run, &divs);
     let all_users_j: f64 = run.energy.iter().map(|e| e.own_j).sum();
-    let sites = run
+    let sites: Vec<SiteMetrics> = run
         .sites
         .iter()
         .enumerate()
-        .map(|(i, s)| {
-            // Every object's error, the worst at each sample.
-            let errs = (0..samples).map(|k| {
-                let err =
-                    |o: usize| (s.object_pos(o)[k] - reference.sites[i].object_pos(o)[k]).norm();
-                // (From the first object's: a NaN error stays NaN.)
-                (1..s.objects()).fold(err(0), |a, o| a.max(err(o)))
-            });
-            let adoptions: Vec<_> = run.adoptions.iter().filter(|a| a.site == i).collect();
-            let e = run.energy[i];
-            let (e0, e1) = run.mech_energy[i];
-            let steps = run.force_steps.get(i).copied().unwrap_or_default();
-            let tw = run.rollback.get(i).copied().flatten().unwrap_or_default();
-            let ms = |ticks: u64| ticks as f64 * 1e3 / scenario.site[i].physics_rate_hz;
-            SiteMetrics {
-                name: scenario.site[i].name.clone(),
-                error_vs_reference_rms_m: rms(errs.clone()),
-                error_vs_reference_max_m: errs.fold(0.0, f64::max),
-                force_tracking_rms_n: rms(
-                    (0..samples).map(|k| (s.f_desired[k] - s.f_measured[k]).norm())
-                ),
-                adoptions: adoptions.len(),
-                puts: s.puts,
-                sent_bytes: s.sent_bytes,
-                max_adoption_force_step_n: adoptions
-                    .iter()
-                    .map(|a| a.force_step_n)
-                    .fold(0.0, f64::max),
-                energy_from_others_j: (e1 - e0) - e.own_j - e.env_j - e.objects_j,
-                others_work_j: if run.mode == crate::sim::Mode::Reference {
-                    0.0
-                } else {
-                    all_users_j - e.own_j
-                },
-                phases: scenario
-                    .phase
-                    .iter()
-                    .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
-                    .collect(),
-                max_force_step_n: if steps.servo_ticks == 0 {
-                    f64::NAN
-                } else {
-                    steps.max_step_n
-                },
-                force_steps_over_jnd: steps.over_jnd,
-                correction_energy_j: sum_known(
-                    adoptions
-                        .iter()
-                        .map(|a| positive_part(a.energy_j - a.work_j)),
-                ),
-                correction_energy_gross_j: sum_known(
-                    adoptions.iter().map(|a| positive_part(a.energy_j)),
-                ),
-                display_limited_ticks: steps.display.ticks_limited,
-                max_correction_force_step_n: if steps.servo_ticks == 0 || !scenario.display.enabled
-                {
-                    f64::NAN
-                } else {
-                    steps.display.max_correction_step_n
-                },
-                display_energy_max_j: if steps.servo_ticks == 0 || !scenario.display.enabled {
-                    f64::NAN
-                } else {
-                    steps.display.max_energy_j
-                },
-                bounded_corrections: adoptions.iter().filter(|a| a.clipped_j > 0.0).count(),
-                bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
-                rollbacks: tw.rollbacks,
-                resimulated_ticks: tw.resimulated_ticks,
-                unfelt_contact_ms: ms(tw.unfelt_contact_ticks),
-                phantom_contact_ms: ms(tw.phantom_contact_ticks),
-                replays: tw.replays,
-                local_lag_max_ms: ms(tw.max_local_lag_ticks),
-                lagged_s: ms(tw.lagged_ticks) / 1e3,
-            }
-        })
+        .map(|(i, s)| site_metrics(scenario, run, reference, all_users_j, i, s))
         .collect();
-    let sites: Vec<SiteMetrics> = sites;
-    // Co-contact: two or more users touching (each site's flag is its own user's contact).
-    let co: Vec<usize> = (0..samples)
-        .filter(|&k| run.sites.iter().filter(|s| s.touching[k]).count() >= 2)
-        .collect();
-    let (co_max, co_rms) = if co.is_empty() {
-        (f64::NAN, f64::NAN)
-    } else {
-        (
-            co.iter().map(|&k| divs[k]).fold(0.0, f64::max),
-            rms(co.iter().map(|&k| divs[k])),
-        )
-    };
+    let (co, co_max, co_rms) = co_contact(run, &divs);
     let mut depths = crate::histogram::DepthHistogram::default();
     let mut depth_max = 0;
     let mut mismatches = 0;
@@ -463,6 +345,165 @@ pub fn compute(scenario: &Scenario, run: &RunResult, reference: &RunResult) -> M
         messages: run.messages,
         sites,
     }
+}
+
+/// When contacts end and the copies can agree again, and the divergence from then on.
+struct AfterContact {
+    /// When the last contact ended, s.
+    last_contact: f64,
+    /// When the last-touching site's copy came to rest, s.
+    settled: f64,
+    /// From when the divergence after contact is measured, s.
+    from: f64,
+    /// The largest divergence from then on, m (NaN if that moment never came).
+    after: f64,
+}
+
+/// The moment every site can know the final state after the last contact (the module docs'
+/// divergence "after contacts end"), and the largest divergence from then on; `divs` is the
+/// divergence at each sample.
+fn after_contact(scenario: &Scenario, run: &RunResult, divs: &[f64]) -> AfterContact {
+    let samples = run.t.len();
+    let last_k = (0..samples)
+        .rev()
+        .find(|&k| run.sites.iter().any(|s| s.touching[k]));
+    let last_contact = last_k.map_or(0.0, |k| run.t[k]);
+    // The site whose user touched last holds the final change; when does its copy come to rest?
+    let author = last_k
+        .and_then(|k| run.sites.iter().position(|s| s.touching[k]))
+        .unwrap_or(0);
+    let dt = 1.0 / scenario.sample_rate_hz;
+    let at = &run.sites[author];
+    let settled = (1..samples)
+        .rev()
+        .find(|&k| {
+            (0..at.objects()).any(|o| {
+                let pos = at.object_pos(o);
+                (pos[k] - pos[k - 1]).norm() / dt > 1e-3
+            })
+        })
+        .map_or(0.0, |k| run.t[k]);
+    let slowest_report = scenario
+        .site
+        .iter()
+        .map(|s| 1.0 / s.report_rate_hz)
+        .fold(0.0, f64::max);
+    let settle =
+        (scenario.network.delay_max_ms + scenario.network.jitter_ms) / 1e3 + 2.0 * slowest_report;
+    let from = last_contact.max(settled) + settle;
+    // NaN when that moment never came within the run (a user still touching at the end): there is
+    // nothing to measure, and 0 would read as "together".
+    let after = if run.t.last().is_some_and(|&end| from <= end) {
+        (0..samples)
+            .filter(|&k| run.t[k] >= from)
+            .map(|k| divs[k])
+            .fold(0.0, f64::max)
+    } else {
+        f64::NAN
+    };
+    AfterContact {
+        last_contact,
+        settled,
+        from,
+        after,
+    }
+}
+
+/// Site `i`'s figures (`s`, its trace in `run`); `all_users_j` is every user's work on its own
+/// site's copy, summed.
+fn site_metrics(
+    scenario: &Scenario,
+    run: &RunResult,
+    reference: &RunResult,
+    all_users_j: f64,
+    i: usize,
+    s: &SiteTrace,
+) -> SiteMetrics {
+    let samples = run.t.len();
+    // Every object's error, the worst at each sample.
+    let errs = (0..samples).map(|k| {
+        let err = |o: usize| (s.object_pos(o)[k] - reference.sites[i].object_pos(o)[k]).norm();
+        // (From the first object's: a NaN error stays NaN.)
+        (1..s.objects()).fold(err(0), |a, o| a.max(err(o)))
+    });
+    let adoptions: Vec<_> = run.adoptions.iter().filter(|a| a.site == i).collect();
+    let e = run.energy[i];
+    let (e0, e1) = run.mech_energy[i];
+    let steps = run.force_steps.get(i).copied().unwrap_or_default();
+    let tw = run.rollback.get(i).copied().flatten().unwrap_or_default();
+    let ms = |ticks: u64| ticks as f64 * 1e3 / scenario.site[i].physics_rate_hz;
+    SiteMetrics {
+        name: scenario.site[i].name.clone(),
+        error_vs_reference_rms_m: rms(errs.clone()),
+        error_vs_reference_max_m: errs.fold(0.0, f64::max),
+        force_tracking_rms_n: rms((0..samples).map(|k| (s.f_desired[k] - s.f_measured[k]).norm())),
+        adoptions: adoptions.len(),
+        puts: s.puts,
+        sent_bytes: s.sent_bytes,
+        max_adoption_force_step_n: adoptions.iter().map(|a| a.force_step_n).fold(0.0, f64::max),
+        energy_from_others_j: (e1 - e0) - e.own_j - e.env_j - e.objects_j,
+        others_work_j: if run.mode == crate::sim::Mode::Reference {
+            0.0
+        } else {
+            all_users_j - e.own_j
+        },
+        phases: scenario
+            .phase
+            .iter()
+            .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
+            .collect(),
+        max_force_step_n: if steps.servo_ticks == 0 {
+            f64::NAN
+        } else {
+            steps.max_step_n
+        },
+        force_steps_over_jnd: steps.over_jnd,
+        correction_energy_j: sum_known(
+            adoptions
+                .iter()
+                .map(|a| positive_part(a.energy_j - a.work_j)),
+        ),
+        correction_energy_gross_j: sum_known(adoptions.iter().map(|a| positive_part(a.energy_j))),
+        display_limited_ticks: steps.display.ticks_limited,
+        max_correction_force_step_n: if steps.servo_ticks == 0 || !scenario.display.enabled {
+            f64::NAN
+        } else {
+            steps.display.max_correction_step_n
+        },
+        display_energy_max_j: if steps.servo_ticks == 0 || !scenario.display.enabled {
+            f64::NAN
+        } else {
+            steps.display.max_energy_j
+        },
+        bounded_corrections: adoptions.iter().filter(|a| a.clipped_j > 0.0).count(),
+        bounded_energy_j: sum_known(adoptions.iter().map(|a| a.clipped_j)),
+        rollbacks: tw.rollbacks,
+        resimulated_ticks: tw.resimulated_ticks,
+        unfelt_contact_ms: ms(tw.unfelt_contact_ticks),
+        phantom_contact_ms: ms(tw.phantom_contact_ticks),
+        replays: tw.replays,
+        local_lag_max_ms: ms(tw.max_local_lag_ticks),
+        lagged_s: ms(tw.lagged_ticks) / 1e3,
+    }
+}
+
+/// The samples at which two or more users touch an object (each site's flag is its own user's
+/// contact), and the largest and RMS divergence over them (NaN: never).
+fn co_contact(run: &RunResult, divs: &[f64]) -> (Vec<usize>, f64, f64) {
+    let samples = run.t.len();
+    // Co-contact: two or more users touching (each site's flag is its own user's contact).
+    let co: Vec<usize> = (0..samples)
+        .filter(|&k| run.sites.iter().filter(|s| s.touching[k]).count() >= 2)
+        .collect();
+    let (co_max, co_rms) = if co.is_empty() {
+        (f64::NAN, f64::NAN)
+    } else {
+        (
+            co.iter().map(|&k| divs[k]).fold(0.0, f64::max),
+            rms(co.iter().map(|&k| divs[k])),
+        )
+    };
+    (co, co_max, co_rms)
 }
 
 /// See the module docs ("energy beyond the users' work").
