@@ -25,28 +25,19 @@ use std::path::Path;
 
 use coop_model::scenario::Scenario;
 use coop_model::sim::RunResult;
-use foxglove::messages::{log::Level, SceneUpdate};
+use foxglove::messages::{log::Level, Log, SceneUpdate};
 
+use super::messages::{DivergenceMsg, ObjectPart, SampleMsg, ToolPart};
+use super::part::Part;
 use super::scene::{encode, REFERENCE_COLOUR};
-use super::{
-    io_err, mcap_err, DivergenceMsg, ObjectPart, Part, RecordingError, SampleMsg, Scene, ToolPart,
-    SCENE_EVERY,
-};
+use super::topic::{FoxgloveTopic, Topic};
+use super::{io_err, RecordingError, Scene, SCENE_EVERY};
 
 /// The simulator's time 0 on the wall clock: 1 s past the Unix epoch (a fixed value keeps its
 /// file the same bits on every run; not 0, which some viewers read as "no time").
 pub const SIM_EPOCH_UNIX_NS: u64 = 1_000_000_000;
 /// The reference copy's site name, in its frame (`object/reference`), entity and `/object`.
 pub const REFERENCE: &str = "reference";
-/// The JSON channels of a session file, in order.
-const TOPICS: [&str; 3] = ["/object", "/tool", "/divergence"];
-const OBJECT: usize = 0;
-const TOOL: usize = 1;
-const DIVERGENCE: usize = 2;
-/// Indices into [`super::FOXGLOVE_TOPICS`].
-const TF: usize = 0;
-const SCENE: usize = 1;
-const LOG: usize = 2;
 
 /// Where `run` came from, for the metadata and the first log line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -158,22 +149,53 @@ impl Writer {
     }
     fn json<T: serde::Serialize>(
         &mut self,
-        topic: usize,
+        topic: Topic,
         t_ns: u64,
         m: &T,
     ) -> Result<(), RecordingError> {
         let data = serde_json::to_vec(m).unwrap_or_default();
-        self.put(self.part.channels[topic], t_ns, &data)
+        self.put(self.part.channel(topic)?, t_ns, &data)
     }
     fn foxglove<T: foxglove::Encode>(
         &mut self,
-        topic: usize,
+        topic: FoxgloveTopic,
         t_ns: u64,
         m: &T,
     ) -> Result<(), RecordingError> {
-        let id = self.part.foxglove.map_or(0, |ids| ids[topic]);
+        let id = self.part.foxglove_channel(topic).unwrap_or(0);
         self.put(id, t_ns, &encode(m))
     }
+}
+
+/// The session's start, the file's first `/log` line: where `run` of `sc` came from, its method
+/// and its sites (`scenes`, `first` the first's), and whether a reference copy is shown.
+fn start_line(
+    (sc, run, source): (&Scenario, &RunResult, Source),
+    (first, scenes): (&Scene, &[Scene]),
+    with_reference: bool,
+    epoch_unix_ns: u64,
+) -> Log {
+    let names: Vec<&str> = scenes.iter().map(|s| s.site.as_str()).collect();
+    Scene {
+        site: "session".into(),
+        ..first.clone()
+    }
+    .log(
+        epoch_unix_ns,
+        Level::Info,
+        format!(
+            "session ({}): scenario {}, method {}, sites {}{}",
+            source.as_str(),
+            sc.name,
+            run.mode.name(),
+            names.join(", "),
+            if with_reference {
+                ", reference copy (grey) from the simulator"
+            } else {
+                ""
+            }
+        ),
+    )
 }
 
 /// Writes `run` of scenario `sc` (and its `reference` run, when given, on the same grid) to
@@ -207,11 +229,17 @@ pub fn write(
     metadata.insert("source".into(), source.as_str().into());
     metadata.insert("started_unix_ns".into(), epoch_unix_ns.to_string());
     let mut w = Writer {
-        part: Part::create(path.to_owned(), 0, &metadata, &TOPICS, true, true)?,
+        part: Part::create(
+            path.to_owned(),
+            0,
+            &metadata,
+            &Topic::SESSION_FILE,
+            true,
+            true,
+        )?,
         seq: 0,
         epoch_unix_ns,
     };
-    let names: Vec<&str> = scenes.iter().map(|s| s.site.as_str()).collect();
     // A world of one object names none (its `/object` is a station recording's).
     let objects: Vec<String> = if sc.objects.len() > 1 {
         sc.objects.iter().map(|o| o.name.clone()).collect()
@@ -219,27 +247,13 @@ pub fn write(
         Vec::new()
     };
     let first_object = objects.first().map_or("", String::as_str);
-    let start = Scene {
-        site: "session".into(),
-        ..first.clone()
-    }
-    .log(
+    let start = start_line(
+        (sc, run, source),
+        (first, &scenes),
+        reference.is_some(),
         epoch_unix_ns,
-        Level::Info,
-        format!(
-            "session ({}): scenario {}, method {}, sites {}{}",
-            source.as_str(),
-            sc.name,
-            run.mode.name(),
-            names.join(", "),
-            if reference.is_some() {
-                ", reference copy (grey) from the simulator"
-            } else {
-                ""
-            }
-        ),
     );
-    w.foxglove(LOG, 0, &start)?;
+    w.foxglove(FoxgloveTopic::Log, 0, &start)?;
     let scene_every = SCENE_EVERY.as_nanos() as u64;
     let mut scene_ns: Option<u64> = None;
     for (k, &t) in run.t.iter().enumerate() {
@@ -252,30 +266,38 @@ pub fn write(
             .filter(|r| k < r.t.len())
             .map(|r| sample_of(r, 0, k, t_ns));
         for (i, (scene, m)) in scenes.iter().zip(&samples).enumerate() {
-            w.json(OBJECT, t_ns, &object_part(&scene.site, first_object, m))?;
+            w.json(
+                Topic::Object,
+                t_ns,
+                &object_part(&scene.site, first_object, m),
+            )?;
             for part in other_object_parts(run, (i, k), &scene.site, &objects, m) {
-                w.json(OBJECT, t_ns, &part)?;
+                w.json(Topic::Object, t_ns, &part)?;
             }
-            w.json(TOOL, t_ns, &tool_part(&scene.site, m))?;
+            w.json(Topic::Tool, t_ns, &tool_part(&scene.site, m))?;
             for f in &scene.transforms(m, wall) {
-                w.foxglove(TF, t_ns, f)?;
+                w.foxglove(FoxgloveTopic::Tf, t_ns, f)?;
             }
             for f in &scene.other_transforms(&other_poses(run, i, k), wall) {
-                w.foxglove(TF, t_ns, f)?;
+                w.foxglove(FoxgloveTopic::Tf, t_ns, f)?;
             }
         }
         if let Some(m) = &reference_sample {
-            w.json(OBJECT, t_ns, &object_part(REFERENCE, first_object, m))?;
+            w.json(
+                Topic::Object,
+                t_ns,
+                &object_part(REFERENCE, first_object, m),
+            )?;
             if let Some(r) = reference {
                 for part in other_object_parts(r, (0, k), REFERENCE, &objects, m) {
-                    w.json(OBJECT, t_ns, &part)?;
+                    w.json(Topic::Object, t_ns, &part)?;
                 }
             }
             let [object, _tool] = reference_scene.transforms(m, wall);
-            w.foxglove(TF, t_ns, &object)?;
+            w.foxglove(FoxgloveTopic::Tf, t_ns, &object)?;
             if let Some(r) = reference {
                 for f in &reference_scene.other_transforms(&other_poses(r, 0, k), wall) {
-                    w.foxglove(TF, t_ns, f)?;
+                    w.foxglove(FoxgloveTopic::Tf, t_ns, f)?;
                 }
             }
         }
@@ -283,7 +305,7 @@ pub fn write(
             ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
         };
         w.json(
-            DIVERGENCE,
+            Topic::Divergence,
             t_ns,
             &DivergenceMsg {
                 t_ns,
@@ -306,7 +328,7 @@ pub fn write(
                 entities.extend(reference_scene.other_entities(wall));
             }
             w.foxglove(
-                SCENE,
+                FoxgloveTopic::Scene,
                 t_ns,
                 &SceneUpdate {
                     deletions: Vec::new(),
@@ -316,6 +338,5 @@ pub fn write(
             scene_ns = Some(t_ns);
         }
     }
-    w.part.w.finish().map_err(mcap_err(path))?;
-    Ok(())
+    w.part.finish()
 }
