@@ -32,87 +32,7 @@ struct Args {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the scenario on real stations, once per method; print the metrics table.
-    Run {
-        /// Scenario file (TOML), as for `sim`.
-        scenario: PathBuf,
-        /// Output directory: per method the station configs, logs, MCAP recordings, metrics.json
-        /// and plots.
-        #[arg(long, value_name = "DIR", default_value = "out/session")]
-        out: PathBuf,
-        /// naive, paper, timewarp, coupled, or all (each, one session each).
-        #[arg(long, default_value = "all", value_parser = parse_methods)]
-        method: Methods,
-        /// Print JSON instead of the table.
-        #[arg(long)]
-        json: bool,
-        /// Session name prefix (default: s<pid>); each method's session is <prefix>-<method>.
-        #[arg(long)]
-        session: Option<String>,
-        /// Start a site late: SITE=SECONDS after the session's start (repeatable).
-        #[arg(long, value_name = "SITE=S", value_parser = parse_late)]
-        late: Vec<(String, f64)>,
-        /// Do not emulate the scenario's network delay, jitter and loss (loopback only).
-        #[arg(long)]
-        no_emulation: bool,
-        /// Seconds the stations get to be present.
-        #[arg(long, default_value_t = 30.0)]
-        start_timeout_s: f64,
-        /// A separate station binary to run (default: this executable, as `session station`).
-        #[arg(long)]
-        station_bin: Option<PathBuf>,
-        /// Each station's recording goes on in its next part after this many seconds (the
-        /// station's `record_max_file_s`; default: the station's default).
-        #[arg(long, value_name = "S")]
-        record_max_file_s: Option<u64>,
-        /// Serve the session live to Foxglove or Lichtblick (foxglove.websocket.v1) on ADDR, by
-        /// default 127.0.0.1:8765 (loopback); port 0 picks a free one. The address is printed.
-        #[arg(long, value_name = "ADDR", num_args = 0..=1,
-              default_missing_value = coop_transport::live_view::DEFAULT_ADDR)]
-        live: Option<String>,
-        /// Drive stations already running (started by hand, with `start = "session"`, on this or
-        /// other machines) instead of starting them: wait for every site's presence through
-        /// --connect, announce time 0 in this launcher's clock (each station translates it with
-        /// its measured offset to it), and read their recordings from --recording/--recordings.
-        /// Needs --session and one --method, those of the stations' configurations.
-        #[arg(long)]
-        attach: bool,
-        /// With --attach: a zenoh locator to connect to (repeatable): a router's, e.g.
-        /// tls/192.0.2.1:7447, or with --peer a station's.
-        #[arg(long, value_name = "LOCATOR", requires = "attach")]
-        connect: Vec<String>,
-        /// With --attach: connect as a zenoh peer of the stations (default: a client of routers).
-        #[arg(long, requires = "attach")]
-        peer: bool,
-        /// With --attach: the directory `session certs` wrote; the launcher connects with mutual
-        /// TLS as `launcher` (DIR/ca.pem, DIR/launcher.pem, DIR/launcher.key).
-        #[arg(long, value_name = "DIR", requires = "attach")]
-        certs: Option<PathBuf>,
-        /// With --attach: where a site's recording is, as this machine sees it (its station's
-        /// `record`; repeatable).
-        #[arg(long, value_name = "SITE=PATH", value_parser = parse_recording, requires = "attach")]
-        recording: Vec<(String, PathBuf)>,
-        /// With --attach: the recordings of the sites not given by --recording are DIR/<site>.mcap
-        /// (a directory the stations write to that this machine sees).
-        #[arg(long, value_name = "DIR", requires = "attach")]
-        recordings: Option<PathBuf>,
-        /// Publish every site as ROS 2 topics under rmw_zenoh's conventions (poses, force, /tf,
-        /// /rosout under /coop/<session>/<site>; docs/ros2.md): `ros2 topic list` on a machine
-        /// with rmw_zenoh sees them, with no ROS installed here.
-        #[arg(long)]
-        ros2: bool,
-        /// With --ros2: the ROS domain (default: $ROS_DOMAIN_ID, else 0).
-        #[arg(long, value_name = "ID", requires = "ros2")]
-        ros2_domain: Option<u32>,
-        /// With --ros2: the zenoh router of the ROS 2 graph, which every station connects to
-        /// (rmw_zenoh's default, where `ros2 run rmw_zenoh_cpp rmw_zenohd` listens), or `none`.
-        #[arg(
-            long,
-            value_name = "LOCATOR",
-            requires = "ros2",
-            default_value = "tcp/127.0.0.1:7447"
-        )]
-        ros2_router: String,
-    },
+    Run(RunCmd),
     /// Benchmark: station-to-station state latency on loopback next to a bare zenoh ping-pong of
     /// the same payload (run from the repository root).
     Bench {
@@ -184,62 +104,88 @@ enum Command {
     },
 }
 
-/// Per method and station, from the statuses read just before the end: physics overruns during
-/// the session and compute p99 (methods side by side, so timewarp's cost shows beside paper's),
-/// and a rolling-back method's rollbacks, hash checks, confirmed states adopted, contact unfelt
-/// and phantom, missed contacts replayed, and ticks the own tool was lagged.
-fn print_station_loops(v: &serde_json::Value) {
-    println!(
-        "# stations: {:<9} {:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}  {:>12}",
-        "method",
-        "site",
-        "physics overruns",
-        "compute p99 us",
-        "rollbacks",
-        "depth max/p99 ticks",
-        "fallbacks",
-        "hash checks",
-        "mismatches",
-        "adopted",
-        "unfelt/phantom ticks",
-        "replayed",
-        "lagged ticks"
-    );
-    for (m, r) in v["methods"].as_object().into_iter().flatten() {
-        for (site, st) in r["stations"].as_object().into_iter().flatten() {
-            let live = &st["live"];
-            let rb = &live["physics"]["rollback"];
-            let or_dash = |x: &serde_json::Value| {
-                if x.is_null() {
-                    "-".to_owned()
-                } else {
-                    x.to_string()
-                }
-            };
-            // Two of the rollback figures as "a/b" ("-": the method does not roll back).
-            let pair = |a: &str, b: &str| {
-                if rb.is_null() {
-                    "-".to_owned()
-                } else {
-                    format!("{}/{}", rb[a], rb[b])
-                }
-            };
-            println!(
-                "# stations: {m:<9} {site:<6} {:>16}  {:>14}  {:>9}  {:>19}  {:>9}  {:>11}  {:>10}  {:>7}  {:>20}  {:>8}  {:>12}",
-                or_dash(&live["overruns_during_session"]["physics"]),
-                or_dash(&live["loops"]["physics"]["compute_us"]["p99"]),
-                or_dash(&rb["rollbacks"]),
-                pair("max_depth", "depth_p99"),
-                or_dash(&rb["fallbacks"]),
-                or_dash(&rb["hash_checks"]),
-                or_dash(&rb["hash_mismatches"]),
-                or_dash(&rb["adopted_states"]),
-                pair("unfelt_contact_ticks", "phantom_contact_ticks"),
-                or_dash(&rb["replays"]),
-                or_dash(&rb["lagged_ticks"]),
-            );
-        }
-    }
+// `session run`'s arguments (the help text is the `Run` variant's doc comment).
+#[derive(Debug, clap::Args)]
+struct RunCmd {
+    /// Scenario file (TOML), as for `sim`.
+    scenario: PathBuf,
+    /// Output directory: per method the station configs, logs, MCAP recordings, metrics.json
+    /// and plots.
+    #[arg(long, value_name = "DIR", default_value = "out/session")]
+    out: PathBuf,
+    /// naive, paper, timewarp, coupled, or all (each, one session each).
+    #[arg(long, default_value = "all", value_parser = parse_methods)]
+    method: Methods,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Session name prefix (default: s<pid>); each method's session is <prefix>-<method>.
+    #[arg(long)]
+    session: Option<String>,
+    /// Start a site late: SITE=SECONDS after the session's start (repeatable).
+    #[arg(long, value_name = "SITE=S", value_parser = parse_late)]
+    late: Vec<(String, f64)>,
+    /// Do not emulate the scenario's network delay, jitter and loss (loopback only).
+    #[arg(long)]
+    no_emulation: bool,
+    /// Seconds the stations get to be present.
+    #[arg(long, default_value_t = 30.0)]
+    start_timeout_s: f64,
+    /// A separate station binary to run (default: this executable, as `session station`).
+    #[arg(long)]
+    station_bin: Option<PathBuf>,
+    /// Each station's recording goes on in its next part after this many seconds (the
+    /// station's `record_max_file_s`; default: the station's default).
+    #[arg(long, value_name = "S")]
+    record_max_file_s: Option<u64>,
+    /// Serve the session live to Foxglove or Lichtblick (foxglove.websocket.v1) on ADDR, by
+    /// default 127.0.0.1:8765 (loopback); port 0 picks a free one. The address is printed.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1,
+          default_missing_value = coop_transport::live_view::DEFAULT_ADDR)]
+    live: Option<String>,
+    /// Drive stations already running (started by hand, with `start = "session"`, on this or
+    /// other machines) instead of starting them: wait for every site's presence through
+    /// --connect, announce time 0 in this launcher's clock (each station translates it with
+    /// its measured offset to it), and read their recordings from --recording/--recordings.
+    /// Needs --session and one --method, those of the stations' configurations.
+    #[arg(long)]
+    attach: bool,
+    /// With --attach: a zenoh locator to connect to (repeatable): a router's, e.g.
+    /// tls/192.0.2.1:7447, or with --peer a station's.
+    #[arg(long, value_name = "LOCATOR", requires = "attach")]
+    connect: Vec<String>,
+    /// With --attach: connect as a zenoh peer of the stations (default: a client of routers).
+    #[arg(long, requires = "attach")]
+    peer: bool,
+    /// With --attach: the directory `session certs` wrote; the launcher connects with mutual
+    /// TLS as `launcher` (DIR/ca.pem, DIR/launcher.pem, DIR/launcher.key).
+    #[arg(long, value_name = "DIR", requires = "attach")]
+    certs: Option<PathBuf>,
+    /// With --attach: where a site's recording is, as this machine sees it (its station's
+    /// `record`; repeatable).
+    #[arg(long, value_name = "SITE=PATH", value_parser = parse_recording, requires = "attach")]
+    recording: Vec<(String, PathBuf)>,
+    /// With --attach: the recordings of the sites not given by --recording are DIR/<site>.mcap
+    /// (a directory the stations write to that this machine sees).
+    #[arg(long, value_name = "DIR", requires = "attach")]
+    recordings: Option<PathBuf>,
+    /// Publish every site as ROS 2 topics under rmw_zenoh's conventions (poses, force, /tf,
+    /// /rosout under /coop/<session>/<site>; docs/ros2.md): `ros2 topic list` on a machine
+    /// with rmw_zenoh sees them, with no ROS installed here.
+    #[arg(long)]
+    ros2: bool,
+    /// With --ros2: the ROS domain (default: $ROS_DOMAIN_ID, else 0).
+    #[arg(long, value_name = "ID", requires = "ros2")]
+    ros2_domain: Option<u32>,
+    /// With --ros2: the zenoh router of the ROS 2 graph, which every station connects to
+    /// (rmw_zenoh's default, where `ros2 run rmw_zenoh_cpp rmw_zenohd` listens), or `none`.
+    #[arg(
+        long,
+        value_name = "LOCATOR",
+        requires = "ros2",
+        default_value = "tcp/127.0.0.1:7447"
+    )]
+    ros2_router: String,
 }
 
 #[derive(Debug, Clone)]
@@ -287,111 +233,7 @@ fn main() -> std::process::ExitCode {
     }
     let args = Args::parse();
     coop_tools::run_main(|| match args.command {
-        Command::Run {
-            scenario,
-            out,
-            method,
-            json,
-            session,
-            late,
-            no_emulation,
-            start_timeout_s,
-            station_bin,
-            record_max_file_s,
-            live,
-            attach,
-            connect,
-            peer,
-            certs,
-            recording,
-            recordings,
-            ros2,
-            ros2_domain,
-            ros2_router,
-        } => {
-            if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
-                anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
-            }
-            let station_bin = station_bin_or_default(station_bin)?;
-            let attach = if attach {
-                let sc = coop_actors::scenario_file::load(&scenario)?;
-                Some(coop_tools::session::attach::Attach {
-                    connect,
-                    mode: if peer {
-                        coop_transport::network::Mode::Peer
-                    } else {
-                        coop_transport::network::Mode::Client
-                    },
-                    tls: certs
-                        .as_deref()
-                        .map(coop_tools::session::attach::Attach::tls_from_certs),
-                    recordings: coop_tools::session::attach::Attach::recordings_for(
-                        &sc,
-                        &recording,
-                        recordings.as_deref(),
-                    )?,
-                })
-            } else {
-                None
-            };
-            // Before any thread (zenoh's) starts: SIGINT/SIGTERM stop the session cleanly.
-            let stop = coop_tools::cli::StopFlag::on_sigint_sigterm()?;
-            let a = coop_tools::session::RunArgs {
-                scenario,
-                out,
-                methods: method.0,
-                session,
-                late,
-                emulate: !no_emulation,
-                start_timeout: std::time::Duration::from_secs_f64(start_timeout_s),
-                station_bin,
-                progress: !json,
-                stop,
-                record_max_file_s,
-                live: match live {
-                    Some(addr) => {
-                        let view = coop_transport::live_view::LiveView::start(&addr)?;
-                        eprintln!(
-                            "live view: {} (foxglove.websocket.v1: open it in Foxglove or Lichtblick)",
-                            view.url()
-                        );
-                        Some(std::sync::Arc::new(view))
-                    }
-                    None => None,
-                },
-                attach,
-                ros2: ros2
-                    .then(|| ros2_run(ros2_domain, &ros2_router))
-                    .transpose()?,
-            };
-            let (sc, rows, v) = coop_tools::session::run(&a)?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&v)?);
-            } else {
-                coop_tools::sim::print_table(&sc, &rows);
-                coop_tools::session::print_objects(&v["methods"])?;
-                coop_tools::session::print_wire(&v["methods"])?;
-                if a.attach.is_some() {
-                    for (m, r) in v["methods"].as_object().into_iter().flatten() {
-                        let stations = r["stations"].as_object().into_iter().flatten();
-                        let theirs: Vec<String> = stations
-                            .map(|(site, s)| format!("{site} {}", s["epoch_ns"]))
-                            .collect();
-                        println!(
-                            "# {m}: time 0 in the launcher's clock: {} ns; in the stations' clocks: {} ns",
-                            r["launcher_epoch_ns"],
-                            theirs.join(", ")
-                        );
-                    }
-                }
-                print_station_loops(&v);
-                println!(
-                    "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
-                    a.out.display()
-                );
-            }
-            Ok(())
-        }
+        Command::Run(cmd) => run(cmd),
         Command::Bench { json, station_bin } => {
             coop_tools::netbench::run(json, &station_bin_or_default(station_bin)?)
         }
@@ -436,6 +278,101 @@ fn main() -> std::process::ExitCode {
             Ok(())
         }
     })
+}
+
+/// `session run`: the sessions, then the report (or JSON).
+fn run(cmd: RunCmd) -> anyhow::Result<()> {
+    let json = cmd.json;
+    let a = run_args(cmd)?;
+    let (sc, run) = coop_tools::session::run(&a)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&run.to_json()?)?);
+    } else {
+        coop_tools::session::print_report(&sc, &run, a.attach.is_some());
+    }
+    Ok(())
+}
+
+/// What `session run` is asked, from its command line: the station program, the stations to
+/// attach to, the signal handlers, the live view and the ROS 2 graph.
+fn run_args(cmd: RunCmd) -> anyhow::Result<coop_tools::session::RunArgs> {
+    let RunCmd {
+        scenario,
+        out,
+        method,
+        json,
+        session,
+        late,
+        no_emulation,
+        start_timeout_s,
+        station_bin,
+        record_max_file_s,
+        live,
+        attach,
+        connect,
+        peer,
+        certs,
+        recording,
+        recordings,
+        ros2,
+        ros2_domain,
+        ros2_router,
+    } = cmd;
+    if !(start_timeout_s.is_finite() && start_timeout_s > 0.0) {
+        anyhow::bail!("--start-timeout-s {start_timeout_s}: must be a positive number");
+    }
+    let station_bin = station_bin_or_default(station_bin)?;
+    let attach = if attach {
+        let sc = coop_actors::scenario_file::load(&scenario)?;
+        Some(coop_tools::session::attach::Attach {
+            connect,
+            mode: if peer {
+                coop_transport::network::Mode::Peer
+            } else {
+                coop_transport::network::Mode::Client
+            },
+            tls: certs
+                .as_deref()
+                .map(coop_tools::session::attach::Attach::tls_from_certs),
+            recordings: coop_tools::session::attach::Attach::recordings_for(
+                &sc,
+                &recording,
+                recordings.as_deref(),
+            )?,
+        })
+    } else {
+        None
+    };
+    // Before any thread (zenoh's) starts: SIGINT/SIGTERM stop the session cleanly.
+    let stop = coop_tools::cli::StopFlag::on_sigint_sigterm()?;
+    Ok(coop_tools::session::RunArgs {
+        scenario,
+        out,
+        methods: method.0,
+        session,
+        late,
+        emulate: !no_emulation,
+        start_timeout: std::time::Duration::from_secs_f64(start_timeout_s),
+        station_bin,
+        progress: !json,
+        stop,
+        record_max_file_s,
+        live: live.map(|addr| live_view(&addr)).transpose()?,
+        attach,
+        ros2: ros2
+            .then(|| ros2_run(ros2_domain, &ros2_router))
+            .transpose()?,
+    })
+}
+
+/// `--live`: the Foxglove server, its address printed.
+fn live_view(addr: &str) -> anyhow::Result<std::sync::Arc<coop_transport::live_view::LiveView>> {
+    let view = coop_transport::live_view::LiveView::start(addr)?;
+    eprintln!(
+        "live view: {} (foxglove.websocket.v1: open it in Foxglove or Lichtblick)",
+        view.url()
+    );
+    Ok(std::sync::Arc::new(view))
 }
 
 /// The station program and the arguments before its subcommand.

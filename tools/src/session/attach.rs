@@ -230,17 +230,15 @@ pub fn run_attached(
         .iter()
         .map(|r| r.session.as_ref().map_or(0, |s| s.epoch_ns))
         .collect();
-    let mut o = super::outcome(
-        &sc,
-        method,
-        session,
-        super::unix_ns_of(t0),
-        &dir,
-        &sites,
-        &recordings,
-        &epochs,
-        &serde_json::Map::new(),
-    )?;
+    let recorded = super::outcome::Recorded {
+        sites: &sites,
+        recordings: &recordings,
+        epochs: &epochs,
+    };
+    // Their statuses are on their own machines: no live figures.
+    let live = BTreeMap::new();
+    let mut o =
+        super::outcome::outcome(&sc, session, super::unix_ns_of(t0), &dir, &recorded, live)?;
     o.launcher_epoch_ns = t0;
     Ok(o)
 }
