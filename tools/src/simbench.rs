@@ -16,19 +16,19 @@ use std::path::Path;
 use std::time::Instant;
 
 use coop_model::body::{BodyState, Vec3};
-use coop_model::contact::{
-    environment_wrench, pair_wrench, tool_contact, ContactForce, ContactParams, EnvContactState,
-    PairContactState, PairSide, Plane, ToolContactState,
-};
+use coop_model::contact::ContactForce;
 use coop_model::method::track::{quantize, ToolReport, QUANTUM_M, WINDOW_TICKS};
-use coop_model::method::{integrate, Consistency, Report, WorldCopy};
+use coop_model::method::{Consistency, Report, WorldCopy};
 use coop_model::metrics;
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario};
 use coop_model::servo::{Servo, ServoInput};
 use coop_model::sim::{self, Mode};
-use coop_model::world::{cube_heap, World, MAX_OBJECTS, SLEEP_AFTER_STEPS};
 
 use coop_actors::scenario_file;
+
+mod world;
+
+pub use world::{world_step_figures, WorldStepCost};
 
 fn median(v: Vec<f64>) -> f64 {
     quantile(v, 0.5)
@@ -237,234 +237,6 @@ fn rollback_figures(
     Ok((costs, loads))
 }
 
-/// What one physics step of a world of several objects costs.
-#[derive(Debug, serde::Serialize)]
-pub struct WorldStepCost {
-    /// Objects in the world.
-    pub objects: usize,
-    /// Tools, each touching an object.
-    pub tools: usize,
-    /// One step: every tool's contact with every object, then the objects stepped together
-    /// (environment, every pair, Verlet), median, ns: objects at rest and untouched sleep.
-    pub step_ns: f64,
-    /// ... as a share of the 1 ms physics period.
-    pub period_share: f64,
-    /// The same with nothing asleep, ns.
-    pub step_awake_ns: f64,
-    /// The step's contact geometry and laws alone, ours, nothing asleep: every tool with every
-    /// object, every object with the table, every pair of objects (points, depths, normals,
-    /// penalty, damping, friction memory), median, ns.
-    pub contacts_ns: f64,
-    /// The same pairs' contact *geometry* alone through `parry3d-f64` 0.25 (`query::contact`:
-    /// the deepest point and normal of each pair, no law, no friction; the least a parry-based
-    /// step would spend where our contact code is), median, ns.
-    pub parry_contacts_ns: f64,
-}
-
-/// Our shapes as parry's (the bench's scene is boxes; tools are balls).
-fn parry_cuboid(shape: &coop_model::shape::Shape) -> parry3d_f64::shape::Cuboid {
-    match *shape {
-        coop_model::shape::Shape::Box { half } => parry3d_f64::shape::Cuboid::new(half),
-        _ => unreachable!("the world-step scene is a heap of boxes"),
-    }
-}
-
-/// The world-step figures: `objects` boxes (4 cm, 0.1 kg) in a heap on a table, two layers, each
-/// touching its neighbours, and `tools` tool tips (5 mm) pressed 1 mm into boxes around the heap;
-/// one step computes every tool's contact with every object (held over the step) and steps the
-/// objects together, every contact under `sc`'s environment law with rotational friction.
-pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
-    let (batches, per_batch) = if quick { (3, 200) } else { (15, 2_000) };
-    let law = ContactParams {
-        rotational_friction_radius_m: 0.01,
-        ..sc.environment_contact
-    };
-    let table = [Plane {
-        normal: Vec3::z(),
-        offset: 0.0,
-    }];
-    let mut out = Vec::new();
-    for objects in [1usize, 4, 16] {
-        for tools in [2usize, 8] {
-            let (bodies, states) = cube_heap(objects, 0.02, 0.1);
-            let mut sleeping =
-                World::new(&bodies[..objects], Vec3::new(0.0, 0.0, -9.81), &table, law);
-            // A lone object sleeps too here: the figures compare like with like.
-            sleeping.sleep_after_steps = SLEEP_AFTER_STEPS;
-            let awake = World {
-                sleep_after_steps: 0,
-                ..sleeping
-            };
-            // Set down and settled (untimed): a world mid-session, not one just placed.
-            let mut settled = WorldCopy::new(&states[..objects]);
-            for _ in 0..1500 {
-                integrate(&sleeping, &mut settled, &[], 0, 0, 1e-3, &mut []);
-            }
-            let start: Vec<BodyState> = settled.objects().iter().map(|o| o.state).collect();
-            // Tool k presses into object k mod n from outside the heap's side.
-            let tips: Vec<(Vec3, usize)> = (0..tools)
-                .map(|k| {
-                    let o = k % objects;
-                    let side = if k % 2 == 0 { -1.0 } else { 1.0 };
-                    (start[o].pos + Vec3::new(side * 0.024, 0.0, 0.0), o)
-                })
-                .collect();
-            let time = |world: &World| {
-                median(
-                    (0..batches)
-                        .map(|_| {
-                            let mut copy = settled.clone();
-                            let mut memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
-                            let mut users = [ContactForce::default(); 8 * MAX_OBJECTS];
-                            let t0 = Instant::now();
-                            for _ in 0..per_batch {
-                                for (t, (tip, _)) in tips.iter().enumerate() {
-                                    for (o, c) in copy.objects().iter().enumerate() {
-                                        users[o * tools + t] = tool_contact(
-                                            &law,
-                                            &mut memory[t][o],
-                                            &bodies[o].shape,
-                                            &c.state,
-                                            &bodies[o].mass,
-                                            black_box(*tip),
-                                            Vec3::zeros(),
-                                            0.005,
-                                        );
-                                    }
-                                }
-                                let users = &users[..objects * tools];
-                                integrate(world, &mut copy, users, tools, tools, 1e-3, &mut []);
-                            }
-                            black_box(&copy);
-                            t0.elapsed().as_nanos() as f64 / per_batch as f64
-                        })
-                        .collect(),
-                )
-            };
-            let (step_ns, step_awake_ns) = (time(&sleeping), time(&awake));
-            // The contacts alone, ours and parry's, on the settled heap with the tools pressing.
-            let states: Vec<BodyState> = settled.objects().iter().map(|o| o.state).collect();
-            let ours = || {
-                median(
-                    (0..batches)
-                        .map(|_| {
-                            let mut tool_memory = [[ToolContactState::default(); MAX_OBJECTS]; 8];
-                            let mut env = [EnvContactState::default(); MAX_OBJECTS];
-                            let mut pairs =
-                                [PairContactState::default(); MAX_OBJECTS * MAX_OBJECTS];
-                            let t0 = Instant::now();
-                            for _ in 0..per_batch {
-                                for (t, (tip, _)) in tips.iter().enumerate() {
-                                    for (o, state) in states.iter().enumerate() {
-                                        black_box(tool_contact(
-                                            &law,
-                                            &mut tool_memory[t][o],
-                                            &bodies[o].shape,
-                                            state,
-                                            &bodies[o].mass,
-                                            black_box(*tip),
-                                            Vec3::zeros(),
-                                            0.005,
-                                        ));
-                                    }
-                                }
-                                for (o, state) in states.iter().enumerate() {
-                                    black_box(environment_wrench(
-                                        &law,
-                                        &mut env[o],
-                                        &table,
-                                        &bodies[o].shape,
-                                        state,
-                                        &bodies[o].mass,
-                                    ));
-                                }
-                                for i in 0..objects {
-                                    for j in i + 1..objects {
-                                        let side = |k: usize| PairSide {
-                                            shape: &bodies[k].shape,
-                                            body: &states[k],
-                                            mass: &bodies[k].mass,
-                                        };
-                                        black_box(pair_wrench(
-                                            &law,
-                                            &mut pairs[i * MAX_OBJECTS + j],
-                                            side(i),
-                                            side(j),
-                                        ));
-                                    }
-                                }
-                            }
-                            t0.elapsed().as_nanos() as f64 / per_batch as f64
-                        })
-                        .collect(),
-                )
-            };
-            let parry = || {
-                use parry3d_f64::math::Isometry;
-                use parry3d_f64::query::contact;
-                use parry3d_f64::shape::{Ball, HalfSpace};
-                let cuboids: Vec<_> = bodies[..objects]
-                    .iter()
-                    .map(|b| parry_cuboid(&b.shape))
-                    .collect();
-                let poses: Vec<Isometry<f64>> = states
-                    .iter()
-                    .map(|s| Isometry::from_parts(s.pos.into(), s.rot))
-                    .collect();
-                let ball = Ball::new(0.005);
-                let tip_poses: Vec<Isometry<f64>> = tips
-                    .iter()
-                    .map(|(tip, _)| Isometry::translation(tip.x, tip.y, tip.z))
-                    .collect();
-                let floor = HalfSpace::new(nalgebra::Vector3::z_axis());
-                let origin = Isometry::identity();
-                median(
-                    (0..batches)
-                        .map(|_| {
-                            let t0 = Instant::now();
-                            for _ in 0..per_batch {
-                                for tp in &tip_poses {
-                                    for (pose, c) in poses.iter().zip(&cuboids) {
-                                        black_box(contact(black_box(tp), &ball, pose, c, 0.0).ok());
-                                    }
-                                }
-                                for (pose, c) in poses.iter().zip(&cuboids) {
-                                    black_box(contact(&origin, &floor, pose, c, 0.0).ok());
-                                }
-                                for i in 0..objects {
-                                    for j in i + 1..objects {
-                                        black_box(
-                                            contact(
-                                                &poses[i],
-                                                &cuboids[i],
-                                                &poses[j],
-                                                &cuboids[j],
-                                                0.0,
-                                            )
-                                            .ok(),
-                                        );
-                                    }
-                                }
-                            }
-                            t0.elapsed().as_nanos() as f64 / per_batch as f64
-                        })
-                        .collect(),
-                )
-            };
-            out.push(WorldStepCost {
-                objects,
-                tools,
-                step_ns,
-                period_share: step_ns / 1e6,
-                step_awake_ns,
-                contacts_ns: ours(),
-                parry_contacts_ns: parry(),
-            });
-        }
-    }
-    out
-}
-
 /// Runs the benchmark and prints its figures.
 ///
 /// # Errors
@@ -479,11 +251,42 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             sc.objects.len()
         );
     }
-    let world = sc.world();
     let (batches, per_batch) = if quick { (5, 2_000) } else { (21, 50_000) };
+    let physics_ns = physics_step_ns(&sc, batches, per_batch);
+    let servo_ns = servo_step_ns(&sc, batches, per_batch);
+    let speeds = speeds(&sc, quick);
+    // The crowd (eight users, sixteen objects) beside the scenario, if it is there.
+    let crowd = match scenario.parent().map(|d| d.join("crowd.toml")) {
+        Some(p) if p.exists() => Some(scenario_file::load(&p)?),
+        _ => None,
+    };
+    let (costs, loads) = rollback_figures(&sc, crowd.as_ref(), quick)?;
+    let figures = Figures {
+        physics_ns,
+        servo_ns,
+        speeds,
+        costs,
+        loads,
+        worlds: world_step_figures(&sc, quick),
+    };
+    if json {
+        figures.print_json(&sc)
+    } else {
+        figures.print(&sc, quick, batches, per_batch);
+        Ok(())
+    }
+}
 
-    // Physics: one object resting on the table with the own user pushing it (contact + environment).
-    let start = BodyState::at_rest(Vec3::from(sc.objects[0].start_m));
+/// The object resting on the table at the scenario's start.
+fn resting(sc: &Scenario) -> BodyState {
+    BodyState::at_rest(Vec3::from(sc.objects[0].start_m))
+}
+
+/// Physics: one object resting on the table with the own user pushing it (contact + environment),
+/// median ns per step.
+fn physics_step_ns(sc: &Scenario, batches: usize, per_batch: usize) -> f64 {
+    let world = sc.world();
+    let start = resting(sc);
     let mut method = sc.method(0, MethodName::Paper);
     let push = ContactForce {
         force: Vec3::new(0.3, 0.05, 0.0),
@@ -493,7 +296,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
         ..ContactForce::default()
     };
     let dt = 1e-3;
-    let physics_ns = median(
+    median(
         (0..batches)
             .map(|_| {
                 let mut copy = WorldCopy::one(start);
@@ -505,9 +308,15 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                 t0.elapsed().as_nanos() as f64 / per_batch as f64
             })
             .collect(),
-    );
+    )
+}
 
-    // Servo: kinematics, contact, Eq. 12 controller on site 0's device, tool touching the object.
+/// Servo: kinematics, contact, Eq. 12 controller on site 0's device, tool touching the object;
+/// median ns per step.
+fn servo_step_ns(sc: &Scenario, batches: usize, per_batch: usize) -> f64 {
+    let world = sc.world();
+    let start = resting(sc);
+    let dt = 1e-3;
     let arm = sc.arm(0);
     let mut servo = Servo::new(sc.servo_params(0));
     let mut force_loop = sc.force_loop(0);
@@ -520,7 +329,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             arm.inverse(Vec3::from(sc.site[0].script[0].target_m), sc.site[0].elbow)
                 .unwrap_or_default()
         });
-    let servo_ns = median(
+    median(
         (0..batches)
             .map(|_| {
                 let t0 = Instant::now();
@@ -546,9 +355,11 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
                 t0.elapsed().as_nanos() as f64 / per_batch as f64
             })
             .collect(),
-    );
+    )
+}
 
-    // Whole-run speed per mode.
+/// Whole-run speed per mode: simulated seconds per wall-clock second, median of whole runs.
+fn speeds(sc: &Scenario, quick: bool) -> Vec<(&'static str, f64)> {
     let runs = if quick { 1 } else { 3 };
     let mut speeds = Vec::new();
     for mode in [
@@ -560,51 +371,65 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             (0..runs)
                 .map(|_| {
                     let t0 = Instant::now();
-                    black_box(sim::run(&sc, mode, &mut |_| {}));
+                    black_box(sim::run(sc, mode, &mut |_| {}));
                     sc.duration_s / t0.elapsed().as_secs_f64()
                 })
                 .collect(),
         );
         speeds.push((mode.name(), s));
     }
-    // The crowd (eight users, sixteen objects) beside the scenario, if it is there.
-    let crowd = match scenario.parent().map(|d| d.join("crowd.toml")) {
-        Some(p) if p.exists() => Some(scenario_file::load(&p)?),
-        _ => None,
-    };
-    let (costs, loads) = rollback_figures(&sc, crowd.as_ref(), quick)?;
-    let worlds = world_step_figures(&sc, quick);
-    if json {
+    speeds
+}
+
+/// Everything `sim bench` measured.
+struct Figures {
+    physics_ns: f64,
+    servo_ns: f64,
+    /// Per mode's name, simulated seconds per wall-clock second.
+    speeds: Vec<(&'static str, f64)>,
+    costs: Vec<RollbackCost>,
+    loads: Vec<RollbackLoad>,
+    worlds: Vec<WorldStepCost>,
+}
+
+impl Figures {
+    /// As JSON, with the goals they are held to.
+    fn print_json(&self, sc: &Scenario) -> anyhow::Result<()> {
         let v = serde_json::json!({
             "scenario": sc.name,
-            "physics_step_ns": physics_ns,
-            "servo_step_ns": servo_ns,
-            "realtime_factor": speeds.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
-            "rollback_cost": costs,
-            "rollback_load": loads,
-            "world_step": worlds,
+            "physics_step_ns": self.physics_ns,
+            "servo_step_ns": self.servo_ns,
+            "realtime_factor": self.speeds.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
+            "rollback_cost": self.costs,
+            "rollback_load": self.loads,
+            "world_step": self.worlds,
             "goal": "physics step < 1000 ns; paper scenario >= 100x real time; 8 users at 150 ms (and 8 users with 16 objects, the crowd): p99 rollback inside the 1 ms physics period",
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
-    } else {
+        Ok(())
+    }
+
+    /// For people, each figure beside its goal.
+    fn print(&self, sc: &Scenario, quick: bool, batches: usize, per_batch: usize) {
+        let (physics_ns, servo_ns) = (self.physics_ns, self.servo_ns);
         println!("# sim bench: median of {batches} batches of {per_batch} steps; speed over whole {} s runs of scenario {}", sc.duration_s, sc.name);
         println!("physics step (own contact + environment, Verlet): {physics_ns:>8.0} ns   (goal < 1000 ns)");
         println!("servo step (FK, contact, Eq. 12 PI):              {servo_ns:>8.0} ns");
-        for (name, s) in &speeds {
+        for (name, s) in &self.speeds {
             println!("simulator speed, {name:<9}: {s:>8.0}x real time   (goal >= 100x)");
         }
         println!(
             "# timewarp rollback, every tool touching (site 0; median / p99 of {} rollbacks)",
             if quick { 5 } else { 41 }
         );
-        for c in &costs {
+        for c in &self.costs {
             println!(
                 "{:<20} {} users, {:>2} objects: one {ROLLBACK_TICKS}-tick rollback {:>9.0} / {:>9.0} ns, {:>6.0} ns per re-simulated tick (every object stepped: {:>6.0} ns)",
                 c.scenario, c.users, c.objects, c.rollback_500_ticks_median_ns, c.rollback_500_ticks_p99_ns, c.per_resimulated_tick_ns, c.per_resimulated_tick_whole_ns
             );
         }
         println!("# a world of several objects (cubes set down in a heap, tools pressing some): one physics step, every tool's contact with every object, then the objects stepped together (median); resting untouched objects sleep, and with nothing asleep");
-        for w in &worlds {
+        for w in &self.worlds {
             println!(
                 "{:>2} objects, {} tools: {:>8.0} ns per step, {:>5.1} % of the 1 ms period; nothing asleep {:>8.0} ns; its contacts {:>8.0} ns (ours: points, laws, friction) vs {:>8.0} ns (parry3d-f64 geometry alone, {:.2}x ours)",
                 w.objects,
@@ -618,7 +443,7 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             );
         }
         println!("# timewarp run at a constant delay (busiest site): re-simulation as a share of one core; p99 rollback = (p99 depth + 1) ticks x cost per tick (goal: 8 users at 150 ms <= 1 ms)");
-        for l in &loads {
+        for l in &self.loads {
             println!(
                 "{:<20} {} users, {:>2} objects, {:>3.0} ms: {:>6.1} rollbacks/s, {:>8.0} re-simulated ticks/s, depth p99 {:>4} ticks, {:>5.1} % of a core, p99 rollback {:>7.0} ns {}, {} hash mismatches",
                 l.scenario,
@@ -635,5 +460,4 @@ pub fn run(scenario: &Path, json: bool, quick: bool) -> anyhow::Result<()> {
             );
         }
     }
-    Ok(())
 }
