@@ -4,6 +4,11 @@
 #![forbid(unsafe_code)]
 
 pub mod forgery;
+mod kit;
+mod scenario;
+
+pub use kit::{load_scenario, repo, scenario_path, TempDir};
+pub use scenario::ScenarioToml;
 
 pub use coop_actors::station::config::StationConfig;
 use coop_rt::sync::{AtomicU64, Ordering};
@@ -284,27 +289,15 @@ pub fn station_config(
 /// arrays, e.g. `[{ t_s = 0.0, target_m = [-0.2, 0.0, 0.01] }]`.
 ///
 /// # Panics
-/// If `scenarios/paper.toml` is not where this crate expects it.
+/// If `scenarios/paper.toml` has not two sites, or a script is not TOML.
 pub fn paper_with_scripts(name: &str, duration_s: f64, user1: &str, user2: &str) -> String {
-    let paper = include_str!("../../scenarios/paper.toml");
-    let world = &paper[..paper.find("[[site]]").expect("paper.toml has sites")];
-    let site = |n: usize| {
-        let from = paper.match_indices("[[site]]").nth(n).expect("two sites").0;
-        let text = &paper[from..];
-        let end = text.find("script = [").expect("a script");
-        text[..end].to_owned()
-    };
-    let mut s = format!(
-        "{world}{}script = {user1}\n\n{}script = {user2}\n",
-        site(0),
-        site(1)
-    );
-    s = s.replacen("name = \"paper\"", &format!("name = \"{name}\""), 1);
-    s.replacen(
-        "duration_s = 14.0",
-        &format!("duration_s = {duration_s}"),
-        1,
-    )
+    ScenarioToml::paper()
+        .set("name", name)
+        .set("duration_s", duration_s)
+        .set_toml("site.0.script", user1)
+        .set_toml("site.1.script", user2)
+        .remove("phase")
+        .text()
 }
 
 /// Runs `ip` with `args`; `Err` with its message when it fails (network-namespace tests).
