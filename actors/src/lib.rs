@@ -21,3 +21,18 @@ pub mod router;
 pub mod scenario_file;
 pub mod station;
 pub mod supervisor;
+
+/// What the unit tests share.
+#[cfg(test)]
+pub(crate) mod testing {
+    /// An error as the binaries print it (anyhow's `{:#}`): its message, then each source's.
+    pub(crate) fn chain(e: &dyn std::error::Error) -> String {
+        let mut out = e.to_string();
+        let mut next = e.source();
+        while let Some(s) = next {
+            out = format!("{out}: {s}");
+            next = s.source();
+        }
+        out
+    }
+}

@@ -36,7 +36,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
 use coop_model::body::Vec3;
 use coop_model::replay::Trajectory;
 use coop_rt::device::cartesian::{DeviceInfo, ProbeReport};
@@ -48,6 +47,43 @@ use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
 use coop_transport::ros2::device::{Ros2Device, Ros2DeviceConfig};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
+
+use crate::station::config::Problem;
+
+/// Why a recorded hand did not load (the caller names the file).
+#[derive(Debug, thiserror::Error)]
+pub enum TrajectoryFileError {
+    /// The CSV file cannot be read.
+    #[error("cannot be read")]
+    Read(#[source] std::io::Error),
+    /// The samples do not make a trajectory.
+    #[error(transparent)]
+    Trajectory(#[from] coop_model::replay::TrajectoryError),
+    /// The MCAP recording cannot be read.
+    #[error(transparent)]
+    Recording(#[from] coop_transport::recording::RecordingError),
+    /// The recording's session never started.
+    #[error("the recording has no /session message: its session never started, so its samples have no time 0")]
+    NoSession,
+}
+
+/// Why the configured device did not open in the servo process.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceOpenError {
+    /// `device = "replay"` resolved without its recorded hand (a setup not made by
+    /// [`DeviceSpec::resolve`]).
+    #[error("device = \"replay\" without a trajectory")]
+    NoTrajectory,
+    /// The Haply Inverse Service.
+    #[error(transparent)]
+    Haply(#[from] coop_rt::device::haply::HaplyOpenError),
+    /// The DHD library or device.
+    #[error(transparent)]
+    Dhd(#[from] coop_rt::device::dhd::DhdError),
+    /// The device's ROS 2 driver.
+    #[error(transparent)]
+    Ros2(#[from] coop_transport::ros2::device::Ros2OpenError),
+}
 
 /// `device = "…"`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -204,12 +240,21 @@ pub struct DeviceSetup {
 fn backend_table<T: serde::de::DeserializeOwned + Default>(
     name: &str,
     table: Option<&toml::Table>,
-) -> anyhow::Result<T> {
+) -> Result<T, Problem> {
     match table {
         None => Ok(T::default()),
         Some(t) => toml::Value::Table(t.clone())
             .try_into()
-            .map_err(|e| anyhow::anyhow!("device.{name}: {}", e.to_string().trim_end())),
+            .map_err(|e| Problem::table(format!("device.{name}"), e.to_string().trim_end())),
+    }
+}
+
+/// A backend's own rule (its `validate()`), its field named as `device.<name>.<field>`.
+fn backend_rule(name: &str, e: coop_rt::device::cartesian::ConfigError) -> Problem {
+    Problem::Value {
+        field: format!("device.{name}.{}", e.field),
+        value: e.value,
+        rule: e.rule,
     }
 }
 
@@ -219,40 +264,139 @@ impl DeviceSpec {
     ///
     /// # Errors
     /// A value that breaks a rule, a backend not built in, a replay file that does not load.
-    pub fn resolve(&mut self, base: Option<&Path>) -> anyhow::Result<DeviceSetup> {
+    pub fn resolve(&mut self, base: Option<&Path>) -> Result<DeviceSetup, Problem> {
         let backend = self.device.backend();
         if self.loop_owner == LoopOwner::Vendor {
-            bail!(
-                "device.loop = \"vendor\": device {:?} cannot call the station from its own thread in this build; use loop = \"station\"",
-                backend.name()
-            );
+            return Err(Problem::value(
+                "device.loop",
+                "\"vendor\"",
+                format!(
+                    "device {:?} cannot call the station from its own thread in this build; use loop = \"station\"",
+                    backend.name()
+                ),
+            ));
         }
-        let p = &self.placement;
+        let placement = self.placement.checked()?;
+        let limits = self.safety.checked()?;
+        self.only_the_selected_table()?;
+        let haply: HaplyConfig = backend_table("haply", self.haply.as_ref())?;
+        haply.validate().map_err(|e| backend_rule("haply", e))?;
+        let ros2: Ros2DeviceConfig = backend_table("ros2", self.ros2.as_ref())?;
+        ros2.validate().map_err(|e| backend_rule("ros2", e))?;
+        let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
+        dhd.validate().map_err(|e| backend_rule("dhd", e))?;
+        if let Some(lib) = &mut dhd.library {
+            // A bare file name is the dynamic loader's to find, not the configuration's.
+            if let Some(b) = base.filter(|_| lib.is_relative() && lib.components().count() > 1) {
+                *lib = b.join(&*lib);
+            }
+        }
+        let replay = match backend {
+            Backend::Sim => {
+                if !placement.is_identity() {
+                    return Err(Problem::value(
+                        "device.placement",
+                        format!("{:?}", self.placement),
+                        "must be the identity for device = \"sim\" (the simulated arm's base and its user's script are in world coordinates)",
+                    ));
+                }
+                None
+            }
+            Backend::Replay => Some(self.recorded_hand(base)?),
+            Backend::Haply | Backend::Dhd | Backend::Ros2 => None,
+        };
+        Ok(DeviceSetup {
+            backend,
+            placement,
+            limits,
+            replay,
+            haply,
+            dhd,
+            ros2,
+        })
+    }
+
+    /// A table for a backend not selected is a mistake worth saying.
+    fn only_the_selected_table(&self) -> Result<(), Problem> {
+        for (name, present) in [
+            (BackendName::Replay, self.replay.is_some()),
+            (BackendName::Haply, self.haply.is_some()),
+            (BackendName::Dhd, self.dhd.is_some()),
+            (BackendName::Ros2, self.ros2.is_some()),
+        ] {
+            if present && name != self.device {
+                let (name, selected) = (name.backend().name(), self.device.backend().name());
+                return Err(Problem::table(
+                    format!("device.{name}"),
+                    format!("a table for backend {name:?}, but device = {selected:?}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `[device.replay]`'s file, relative to `base`, loaded.
+    fn recorded_hand(&mut self, base: Option<&Path>) -> Result<Trajectory, Problem> {
+        let Some(spec) = &mut self.replay else {
+            return Err(Problem::missing(
+                "device.replay.file",
+                "device = \"replay\" plays a recorded hand from a file",
+            ));
+        };
+        if let Some(b) = base.filter(|_| spec.file.is_relative()) {
+            spec.file = b.join(&spec.file);
+        }
+        load_trajectory(&spec.file).map_err(|error| Problem::ReplayFile {
+            file: spec.file.display().to_string(),
+            error: Box::new(error),
+        })
+    }
+}
+
+impl PlacementSpec {
+    /// Checks the placement and makes it the transform from device to world.
+    fn checked(&self) -> Result<Placement, Problem> {
+        let p = self;
         for (k, v) in p.translation_m.iter().enumerate() {
             if !(v.is_finite() && v.abs() <= 100.0) {
-                bail!(
-                    "device.placement.translation_m[{k}] = {v}: must be finite and within ±100 m"
-                );
+                let rule = "must be finite and within ±100 m";
+                return Err(Problem::value(
+                    format!("device.placement.translation_m[{k}]"),
+                    v,
+                    rule,
+                ));
             }
         }
         for (k, v) in p.rotation_rpy_deg.iter().enumerate() {
             if !(v.is_finite() && v.abs() <= 360.0) {
-                bail!("device.placement.rotation_rpy_deg[{k}] = {v}: must be within ±360°");
+                let rule = "must be within ±360°";
+                return Err(Problem::value(
+                    format!("device.placement.rotation_rpy_deg[{k}]"),
+                    v,
+                    rule,
+                ));
             }
         }
         if !(p.workspace_scale.is_finite() && (1e-3..=1e3).contains(&p.workspace_scale)) {
-            bail!(
-                "device.placement.workspace_scale = {}: must be from 0.001 to 1000 (world metres per device metre)",
-                p.workspace_scale
-            );
+            return Err(Problem::value(
+                "device.placement.workspace_scale",
+                p.workspace_scale,
+                "must be from 0.001 to 1000 (world metres per device metre)",
+            ));
         }
         let [r, pi, y] = p.rotation_rpy_deg.map(f64::to_radians);
-        let placement = Placement::new(
+        Ok(Placement::new(
             Vec3::from(p.translation_m),
             UnitQuaternion::from_euler_angles(r, pi, y),
             p.workspace_scale,
-        );
-        let s = &self.safety;
+        ))
+    }
+}
+
+impl SafetySpec {
+    /// Checks the limits and makes them the safety contract's.
+    fn checked(&self) -> Result<SafetyLimits, Problem> {
+        let s = self;
         // (field, value, lowest, whether the lowest itself is allowed, highest, unit)
         for (field, v, lo, lo_ok, hi, unit) in [
             ("ramp_in_ms", s.ramp_in_ms, 0.0, true, 10_000.0, "ms"),
@@ -278,76 +422,16 @@ impl DeviceSpec {
             let above = if lo_ok { v >= lo } else { v > lo };
             if !(v.is_finite() && above && v <= hi) {
                 let from = if lo_ok { "from" } else { "above" };
-                bail!("device.safety.{field} = {v}: must be {from} {lo} and at most {hi} {unit}");
+                let rule = format!("must be {from} {lo} and at most {hi} {unit}");
+                return Err(Problem::value(format!("device.safety.{field}"), v, rule));
             }
         }
-        let limits = SafetyLimits {
+        Ok(SafetyLimits {
             ramp_in_s: s.ramp_in_ms / 1e3,
             max_force_n: s.max_force_n,
             max_velocity_m_s: s.max_velocity_m_s,
             max_force_step_n: s.max_force_step_n,
             watchdog_s: s.watchdog_ms / 1e3,
-        };
-        // A table for a backend not selected is a mistake worth saying.
-        for (name, present) in [
-            ("replay", self.replay.is_some()),
-            ("haply", self.haply.is_some()),
-            ("dhd", self.dhd.is_some()),
-            ("ros2", self.ros2.is_some()),
-        ] {
-            if present && name != backend.name() {
-                bail!(
-                    "device.{name}: a table for backend {name:?}, but device = {:?}",
-                    backend.name()
-                );
-            }
-        }
-        let haply: HaplyConfig = backend_table("haply", self.haply.as_ref())?;
-        haply
-            .validate()
-            .map_err(|e| anyhow::anyhow!("device.haply.{e}"))?;
-        let ros2: Ros2DeviceConfig = backend_table("ros2", self.ros2.as_ref())?;
-        ros2.validate()
-            .map_err(|e| anyhow::anyhow!("device.ros2.{e}"))?;
-        let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
-        dhd.validate()
-            .map_err(|e| anyhow::anyhow!("device.dhd.{e}"))?;
-        if let Some(lib) = &mut dhd.library {
-            if let Some(b) = base.filter(|_| lib.is_relative() && lib.components().count() > 1) {
-                *lib = b.join(&*lib);
-            }
-        }
-        let replay = match backend {
-            Backend::Sim => {
-                if !placement.is_identity() {
-                    bail!(
-                        "device.placement = {:?}: must be the identity for device = \"sim\" (the simulated arm's base and its user's script are in world coordinates)",
-                        self.placement
-                    );
-                }
-                None
-            }
-            Backend::Replay => {
-                let Some(spec) = &mut self.replay else {
-                    bail!("device.replay.file is missing: device = \"replay\" plays a recorded hand from a file");
-                };
-                if let Some(b) = base.filter(|_| spec.file.is_relative()) {
-                    spec.file = b.join(&spec.file);
-                }
-                Some(load_trajectory(&spec.file).with_context(|| {
-                    format!("device.replay.file = {:?}", spec.file.display().to_string())
-                })?)
-            }
-            Backend::Haply | Backend::Dhd | Backend::Ros2 => None,
-        };
-        Ok(DeviceSetup {
-            backend,
-            placement,
-            limits,
-            replay,
-            haply,
-            dhd,
-            ros2,
         })
     }
 }
@@ -357,17 +441,17 @@ impl DeviceSpec {
 ///
 /// # Errors
 /// The file cannot be read or parsed, has no samples, or a recording without a session start.
-pub fn load_trajectory(path: &Path) -> anyhow::Result<Trajectory> {
+pub fn load_trajectory(path: &Path) -> Result<Trajectory, TrajectoryFileError> {
     if path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
     {
-        let text = std::fs::read_to_string(path).context("cannot be read")?;
+        let text = std::fs::read_to_string(path).map_err(TrajectoryFileError::Read)?;
         return Ok(Trajectory::parse_csv(&text)?);
     }
     let rec = coop_transport::recording::read(path)?;
     let Some(session) = &rec.session else {
-        bail!("the recording has no /session message: its session never started, so its samples have no time 0");
+        return Err(TrajectoryFileError::NoSession);
     };
     let epoch = session.epoch_ns;
     let mut last: Option<u64> = None;
@@ -400,7 +484,7 @@ pub fn open(
     scenario: &coop_model::scenario::Scenario,
     site: usize,
     now_ns: u64,
-) -> anyhow::Result<StationDevice> {
+) -> Result<StationDevice, DeviceOpenError> {
     match setup.backend {
         // The scenario's user is a recorded hand: it plays on this station too.
         Backend::Sim if scenario.site[site].hand_trajectory.is_some() => {
@@ -427,21 +511,16 @@ pub fn open(
             )))
         }
         Backend::Replay => {
-            let t = setup
-                .replay
-                .clone()
-                .context("device = \"replay\" without a trajectory")?;
+            let t = setup.replay.clone().ok_or(DeviceOpenError::NoTrajectory)?;
             Ok(StationDevice::Replay(Replay::new(t, "device.replay.file")))
         }
-        Backend::Haply => Ok(StationDevice::Other(Box::new(
-            HaplyDevice::open(&setup.haply).map_err(anyhow::Error::from)?,
-        ))),
-        Backend::Dhd => Ok(StationDevice::Other(Box::new(
-            DhdDevice::open(&setup.dhd).map_err(anyhow::Error::from)?,
-        ))),
-        Backend::Ros2 => Ok(StationDevice::Other(Box::new(
-            Ros2Device::open(&setup.ros2).map_err(anyhow::Error::from)?,
-        ))),
+        Backend::Haply => Ok(StationDevice::Other(Box::new(HaplyDevice::open(
+            &setup.haply,
+        )?))),
+        Backend::Dhd => Ok(StationDevice::Other(Box::new(DhdDevice::open(&setup.dhd)?))),
+        Backend::Ros2 => Ok(StationDevice::Other(Box::new(Ros2Device::open(
+            &setup.ros2,
+        )?))),
     }
 }
 
