@@ -11,12 +11,98 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context};
 use coop_transport::network::{Locator, Tls};
 use coop_transport::router::{self, Refusals, RouterEndpoints, RouterStatus};
 use serde::{Deserialize, Serialize};
 
-use crate::station::config::{readable, tls_files_readable};
+use crate::station::config::{readable, tls_files_readable, Problem};
+
+/// Why a router could not be configured, run, or its status read.
+#[derive(Debug, thiserror::Error)]
+pub enum RouterError {
+    /// The configuration file cannot be read.
+    #[error("reading router config {}", .path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        error: std::io::Error,
+    },
+    /// The configuration file breaks a rule.
+    #[error("router config {}", .path.display())]
+    Config {
+        /// The file.
+        path: PathBuf,
+        /// The field, the value and the rule.
+        #[source]
+        problem: Problem,
+    },
+    /// The access-control refusals cannot be counted (another tracing subscriber was installed
+    /// first).
+    #[error("{0}")]
+    Refusals(String),
+    /// Another running router writes this router's status file.
+    #[error("router {name}: its status file {} is written by another running router (pid {pid}); give this one a status_file of its own", .file.display())]
+    StatusFileTaken {
+        /// This router.
+        name: String,
+        /// The status file.
+        file: PathBuf,
+        /// The other router's pid.
+        pid: u32,
+    },
+    /// Zenoh did not open the router.
+    #[error("router {name}: {error}")]
+    Open {
+        /// The router.
+        name: String,
+        /// Why.
+        error: coop_transport::network::NetworkError,
+    },
+    /// The status does not serialise.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    /// The status file cannot be written.
+    #[error("writing the router's status to {}", .file.display())]
+    Write {
+        /// The file (or its temporary twin).
+        file: PathBuf,
+        /// Why.
+        #[source]
+        error: std::io::Error,
+    },
+    /// No status file: the router is not running, or writes it elsewhere.
+    #[error("router {name} is not running (no status file {})", .file.display())]
+    NotRunning {
+        /// The router.
+        name: String,
+        /// The status file looked for.
+        file: PathBuf,
+        /// Why it cannot be read.
+        #[source]
+        error: std::io::Error,
+    },
+    /// The status file does not hold a status.
+    #[error("reading the router's status {}", .file.display())]
+    BadStatus {
+        /// The status file.
+        file: PathBuf,
+        /// Why.
+        #[source]
+        error: serde_json::Error,
+    },
+    /// The router that wrote the status file is gone.
+    #[error("router {name} is not running: its status file {} was left by pid {pid}, which is gone", .file.display())]
+    Gone {
+        /// The router.
+        name: String,
+        /// The status file.
+        file: PathBuf,
+        /// The pid that wrote it.
+        pid: u32,
+    },
+}
 
 /// The router's configuration file (TOML).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -65,45 +151,32 @@ impl RouterConfig {
     /// # Errors
     /// Unreadable file, bad TOML, unknown field, or a value that breaks a rule (the message names
     /// the file, the field, the value and the rule).
-    pub fn load(path: &Path) -> anyhow::Result<ResolvedRouter> {
-        let shown = path.display();
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading router config {shown}"))?;
-        let c: RouterConfig = toml::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}", e.to_string().trim_end()))
-            .with_context(|| format!("router config {shown}"))?;
-        c.resolve(path.parent())
-            .with_context(|| format!("router config {shown}"))
+    pub fn load(path: &Path) -> Result<ResolvedRouter, RouterError> {
+        let text = std::fs::read_to_string(path).map_err(|error| RouterError::Read {
+            path: path.to_owned(),
+            error,
+        })?;
+        let in_file = |problem| RouterError::Config {
+            path: path.to_owned(),
+            problem,
+        };
+        let c: RouterConfig = toml::from_str(&text).map_err(|e| in_file(Problem::Toml(e)))?;
+        c.resolve(path.parent()).map_err(in_file)
     }
 
     /// Checks every value (relative paths are relative to `base`).
     ///
     /// # Errors
     /// As [`RouterConfig::load`].
-    pub fn resolve(mut self, base: Option<&Path>) -> anyhow::Result<ResolvedRouter> {
-        if self.name.is_empty()
-            || self.name.len() > 64
-            || !self
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        {
-            bail!(
-                "name = {:?}: must be 1 to 64 letters, digits, - or _ (its certificate's common name)",
-                self.name
-            );
-        }
-        if self.listen.is_empty() {
-            bail!("listen = []: a router listens on at least one locator");
-        }
-        let mut tls_used = false;
-        for (field, list) in [("listen", &self.listen), ("connect", &self.connect)] {
-            for l in list {
-                let loc = Locator::parse(l)
-                    .map_err(|e| anyhow::anyhow!("{field} contains {l:?}: {e}"))?;
-                tls_used |= loc.protocol == "tls";
-            }
-        }
+    /// # Errors
+    /// As [`RouterConfig::load`], without the file.
+    pub fn resolve(mut self, base: Option<&Path>) -> Result<ResolvedRouter, Problem> {
+        self.check_values()?;
+        let tls_used = self
+            .listen
+            .iter()
+            .chain(&self.connect)
+            .any(|l| Locator::parse(l).is_ok_and(|l| l.protocol == "tls"));
         let rebase = |p: &mut PathBuf| {
             if let Some(b) = base.filter(|_| p.is_relative()) {
                 *p = b.join(&*p);
@@ -114,36 +187,26 @@ impl RouterConfig {
         }
         let t = self.tls.clone().unwrap_or_default();
         if tls_used {
-            for (field, ok) in [
-                ("listen_certificate", t.listen_certificate.is_some()),
-                ("listen_private_key", t.listen_private_key.is_some()),
-                ("root_ca_certificate", t.root_ca_certificate.is_some()),
-            ] {
-                if !ok {
-                    bail!("tls.{field} is missing: a router with tls/ locators needs its own certificate, its key and the session's CA");
-                }
-            }
-            if !self.connect.is_empty()
-                && (t.connect_certificate.is_none() || t.connect_private_key.is_none())
-            {
-                bail!("tls.connect_certificate and tls.connect_private_key are needed to connect to other routers over TLS (the router's own certificate)");
-            }
+            own_certificate_rules(&t, !self.connect.is_empty())?;
         }
         if let Some(acl) = &mut self.access_control {
             rebase(acl);
             readable("access_control", acl)?;
             if !t.enable_mtls {
-                bail!(
-                    "access_control = {:?}: needs tls.enable_mtls = true (its rules name the certificates the others present)",
-                    acl.display().to_string()
-                );
+                return Err(Problem::value(
+                    "access_control",
+                    format!("{:?}", acl.display().to_string()),
+                    "needs tls.enable_mtls = true (its rules name the certificates the others present)",
+                ));
             }
         }
         if !(50..=60_000).contains(&self.status_every_ms) {
-            bail!(
-                "status_every_ms = {}: must be from 50 to 60000",
-                self.status_every_ms
-            );
+            let rule = "must be from 50 to 60000";
+            return Err(Problem::value(
+                "status_every_ms",
+                self.status_every_ms,
+                rule,
+            ));
         }
         let status_file = match &mut self.status_file {
             Some(p) => {
@@ -164,43 +227,114 @@ impl RouterConfig {
         };
         // Zenoh's own checks of the files (the access control's rules, subjects and policies
         // are checked when it opens).
-        router::router_config(&endpoints).map_err(|e| anyhow::anyhow!("{e}"))?;
+        router::router_config(&endpoints).map_err(|e| Problem::Zenoh(Box::new(e)))?;
         Ok(ResolvedRouter {
             config: self,
             endpoints,
             status_file,
         })
     }
+
+    /// The rules that need only the file's values: the name, the locators, the status period.
+    fn check_values(&self) -> Result<(), Problem> {
+        if self.name.is_empty()
+            || self.name.len() > 64
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(Problem::value(
+                "name",
+                format!("{:?}", self.name),
+                "must be 1 to 64 letters, digits, - or _ (its certificate's common name)",
+            ));
+        }
+        if self.listen.is_empty() {
+            let rule = "a router listens on at least one locator";
+            return Err(Problem::value("listen", "[]", rule));
+        }
+        for (field, list) in [("listen", &self.listen), ("connect", &self.connect)] {
+            for l in list {
+                Locator::parse(l).map_err(|e| Problem::entry(field, format!("{l:?}"), e))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A router with `tls/` locators presents its own certificate, its key and the session's CA; and
+/// to connect to other routers (`connects`) its own client certificate.
+fn own_certificate_rules(t: &Tls, connects: bool) -> Result<(), Problem> {
+    for (field, ok) in [
+        ("listen_certificate", t.listen_certificate.is_some()),
+        ("listen_private_key", t.listen_private_key.is_some()),
+        ("root_ca_certificate", t.root_ca_certificate.is_some()),
+    ] {
+        if !ok {
+            return Err(Problem::missing(
+                format!("tls.{field}"),
+                "a router with tls/ locators needs its own certificate, its key and the session's CA",
+            ));
+        }
+    }
+    if connects && (t.connect_certificate.is_none() || t.connect_private_key.is_none()) {
+        return Err(Problem::Stated("tls.connect_certificate and tls.connect_private_key are needed to connect to other routers over TLS (the router's own certificate)".into()));
+    }
+    Ok(())
 }
 
 /// Writes `s` to `path` whole (a reader never sees half a file).
-fn write_status(path: &Path, s: &RouterStatus) -> anyhow::Result<()> {
+fn write_status(path: &Path, s: &RouterStatus) -> Result<(), RouterError> {
     let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-    std::fs::write(&tmp, serde_json::to_vec_pretty(s)?)
-        .with_context(|| format!("writing the router's status to {}", tmp.display()))?;
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("writing the router's status to {}", path.display()))
+    let writing = |file: &Path| {
+        let file = file.to_owned();
+        move |error| RouterError::Write { file, error }
+    };
+    std::fs::write(&tmp, serde_json::to_vec_pretty(s)?).map_err(writing(&tmp))?;
+    std::fs::rename(&tmp, path).map_err(writing(path))
 }
 
-/// Runs the router until `stop` says so (or `duration` passes); its last status.
+/// Runs the router until `stop` says so (or `duration` passes); its last status. Installs the
+/// process's tracing subscriber that counts the access control's refusals
+/// ([`Refusals::install`]) on the way: a binary that installs it itself, before anything else
+/// could, calls [`run_counting`].
 ///
 /// # Errors
-/// The router cannot open (a port taken, a file zenoh refuses), or its status cannot be written.
+/// Another tracing subscriber was installed first, or as [`run_counting`].
 pub fn run(
     r: &ResolvedRouter,
     duration: Option<Duration>,
     stop: &dyn Fn() -> bool,
-) -> anyhow::Result<RouterStatus> {
-    let refusals = Refusals::install().map_err(anyhow::Error::msg)?;
+) -> Result<RouterStatus, RouterError> {
+    let refusals = Refusals::install().map_err(RouterError::Refusals)?;
+    run_counting(r, duration, stop, refusals)
+}
+
+/// Runs the router until `stop` says so (or `duration` passes), `refusals` counting what its
+/// access control refuses (the process's tracing subscriber, which the binary installs with
+/// [`Refusals::install`]: a library does not choose a process's subscriber); its last status.
+///
+/// # Errors
+/// Another running router writes its status file, the router cannot open (a port taken, a file
+/// zenoh refuses), or its status cannot be written.
+pub fn run_counting(
+    r: &ResolvedRouter,
+    duration: Option<Duration>,
+    stop: &dyn Fn() -> bool,
+    refusals: &Refusals,
+) -> Result<RouterStatus, RouterError> {
     if let Some(pid) = live_writer(&r.status_file) {
-        bail!(
-            "router {}: its status file {} is written by another running router (pid {pid}); give this one a status_file of its own",
-            r.config.name,
-            r.status_file.display()
-        );
+        return Err(RouterError::StatusFileTaken {
+            name: r.config.name.clone(),
+            file: r.status_file.clone(),
+            pid,
+        });
     }
-    let session =
-        router::open(&r.endpoints).map_err(|e| anyhow::anyhow!("router {}: {e}", r.config.name))?;
+    let session = router::open(&r.endpoints).map_err(|error| RouterError::Open {
+        name: r.config.name.clone(),
+        error,
+    })?;
     let start = Instant::now();
     let every = Duration::from_millis(r.config.status_every_ms);
     let result = (|| loop {
@@ -244,24 +378,24 @@ fn live_writer(path: &Path) -> Option<u32> {
 /// # Errors
 /// No file (the router is not running, or writes it elsewhere), or the router that wrote it is
 /// gone.
-pub fn read_status(r: &ResolvedRouter) -> anyhow::Result<RouterStatus> {
+pub fn read_status(r: &ResolvedRouter) -> Result<RouterStatus, RouterError> {
     let p = &r.status_file;
-    let text = std::fs::read(p).with_context(|| {
-        format!(
-            "router {} is not running (no status file {})",
-            r.config.name,
-            p.display()
-        )
+    let text = std::fs::read(p).map_err(|error| RouterError::NotRunning {
+        name: r.config.name.clone(),
+        file: p.clone(),
+        error,
     })?;
-    let s: RouterStatus = serde_json::from_slice(&text)
-        .with_context(|| format!("reading the router's status {}", p.display()))?;
+    let s: RouterStatus =
+        serde_json::from_slice(&text).map_err(|error| RouterError::BadStatus {
+            file: p.clone(),
+            error,
+        })?;
     if nix::sys::signal::kill(nix::unistd::Pid::from_raw(s.pid as i32), None).is_err() {
-        bail!(
-            "router {} is not running: its status file {} was left by pid {}, which is gone",
-            r.config.name,
-            p.display(),
-            s.pid
-        );
+        return Err(RouterError::Gone {
+            name: r.config.name.clone(),
+            file: p.clone(),
+            pid: s.pid,
+        });
     }
     Ok(s)
 }
@@ -313,7 +447,7 @@ mod tests {
             let f = dir.join(format!("r{i}.toml"));
             std::fs::write(&f, text).expect("config");
             let err = RouterConfig::load(&f).expect_err(text);
-            let msg = format!("{err:#}");
+            let msg = crate::testing::chain(&err);
             assert!(msg.contains(needle), "{text}: {msg}");
             assert!(
                 msg.contains(&f.display().to_string()),
@@ -326,7 +460,7 @@ mod tests {
             "name = \"r1\"\nlisten = [\"tcp/127.0.0.1:0\"]\naccess_control = \"acl.json5\"",
         )
         .expect("config");
-        let msg = format!("{:#}", RouterConfig::load(&f).expect_err("no mtls"));
+        let msg = crate::testing::chain(&RouterConfig::load(&f).expect_err("no mtls"));
         assert!(msg.contains("needs tls.enable_mtls = true"), "{msg}");
         let ok = dir.join("ok.toml");
         std::fs::write(&ok, "name = \"r1\"\nlisten = [\"tcp/127.0.0.1:0\"]").expect("config");

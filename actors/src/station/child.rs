@@ -8,7 +8,6 @@
 
 use std::time::Duration;
 
-use anyhow::{bail, Context};
 use coop_model::method::{Consistency, ObjectCopy};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::servo::Servo;
@@ -24,19 +23,71 @@ use coop_rt::sync::Ordering;
 use coop_rt::timer::monotonic_ns;
 
 use super::config::Resolved;
+use super::device::DeviceOpenError;
 use coop_rt::shm::station::Names;
+
+/// Why a loop process could not start or run.
+#[derive(Debug, thiserror::Error)]
+pub enum ChildError {
+    /// The parent-death signal could not be set.
+    #[error("setting the parent-death signal")]
+    ParentDeathSignal(#[source] nix::Error),
+    /// The supervisor died before this child started.
+    #[error("the supervisor (pid {parent}) is gone (parent is now {now}); not starting")]
+    ParentGone {
+        /// The supervisor's pid, as it was given.
+        parent: u32,
+        /// This process's parent now.
+        now: i32,
+    },
+    /// The session or station name cannot make segment names.
+    #[error(transparent)]
+    Name(#[from] coop_rt::shm::NameError),
+    /// The station's control block does not open.
+    #[error(transparent)]
+    Control(#[from] coop_rt::shm::OpenError),
+    /// One of the station's rings does not open.
+    #[error("opening the {ring} ring")]
+    Ring {
+        /// Which ring.
+        ring: &'static str,
+        /// Why.
+        #[source]
+        error: coop_rt::shm::RingOpenError,
+    },
+    /// The scheduling request can never be honoured.
+    #[error(transparent)]
+    Sched(#[from] sched::RequestError),
+    /// The device does not open.
+    #[error(transparent)]
+    Device(#[from] DeviceOpenError),
+    /// The scenario has no site of this station's index.
+    #[error("the scenario has no site {0}")]
+    NoSite(usize),
+    /// The network process could not be set up or closed.
+    #[error(transparent)]
+    Network(#[from] coop_transport::network::NetworkError),
+}
+
+/// Names the ring a failed open was of.
+fn opening(ring: &'static str) -> impl FnOnce(coop_rt::shm::RingOpenError) -> ChildError {
+    move |error| ChildError::Ring { ring, error }
+}
 
 /// How long a child waits for its supervisor's segments to be ready.
 const OPEN_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// Dies with `parent` (SIGTERM on its death) and refuses to start if it is already gone.
-pub fn die_with_parent(parent: Option<u32>) -> anyhow::Result<()> {
+///
+/// # Errors
+/// The signal cannot be set, or `parent` is no longer this process's parent.
+pub fn die_with_parent(parent: Option<u32>) -> Result<(), ChildError> {
     nix::sys::prctl::set_pdeathsig(nix::sys::signal::Signal::SIGTERM)
-        .context("setting the parent-death signal")?;
+        .map_err(ChildError::ParentDeathSignal)?;
     if let Some(p) = parent {
         let now = nix::unistd::getppid().as_raw();
         if u32::try_from(now).ok() != Some(p) {
-            bail!("the supervisor (pid {p}) is gone (parent is now {now}); not starting");
+            return Err(ChildError::ParentGone { parent: p, now });
         }
     }
     Ok(())
@@ -61,7 +112,7 @@ pub fn keep_off_the_servo(cfg: &Resolved) {
 fn attach(
     cfg: &Resolved,
     parent: Option<u32>,
-) -> anyhow::Result<(Names, RingOpenOptions, BlockSegment<ControlBlock>)> {
+) -> Result<(Names, RingOpenOptions, BlockSegment<ControlBlock>), ChildError> {
     die_with_parent(parent)?;
     let names = Names::of(&cfg.config.session, &cfg.name)?;
     let opts = RingOpenOptions {
@@ -77,8 +128,9 @@ fn attach(
 fn setup(
     cfg: &Resolved,
     req: &Request,
-    what: &str,
-) -> anyhow::Result<(sched::InForce, Option<sched::DmaLatencyGuard>)> {
+    child: Child,
+) -> Result<(sched::InForce, Option<sched::DmaLatencyGuard>), ChildError> {
+    let what = child.name();
     if cfg.config.mlockall {
         if let Err(w) = sched::lock_memory() {
             eprintln!("station {what} {}: {w}", cfg.name);
@@ -114,12 +166,19 @@ fn period(rate_hz: f64) -> Duration {
 
 /// Runs the servo process of the configured station until a cooperative stop leaves it limp.
 ///
+/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
+/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
+///
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
-pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+pub fn run_servo<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
+    servo_process(cfg, parent).map_err(E::from)
+}
+
+fn servo_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
-    let objects = Consumer::open(&names.object, &opts).context("opening the object ring")?;
-    let tools = Producer::open(&names.tool, &opts).context("opening the tool ring")?;
+    let objects = Consumer::open(&names.object, &opts).map_err(opening("object"))?;
+    let tools = Producer::open(&names.tool, &opts).map_err(opening("tool"))?;
     let (sc, i) = (&cfg.scenario, cfg.site);
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
@@ -157,7 +216,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         tools,
         start,
     );
-    let (in_force, _dma) = setup(cfg, &cfg.servo_sched, "servo")?;
+    let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
     run_periodic(
         &ctl,
         Child::Servo,
@@ -185,16 +244,23 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
 
 /// Runs the physics process of the configured station until the run state asks it to stop.
 ///
+/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
+/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
+///
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
-pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+pub fn run_physics<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
+    physics_process(cfg, parent).map_err(E::from)
+}
+
+fn physics_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
     let rings = PhysicsRings {
-        tools: Consumer::open(&names.tool, &opts).context("opening the tool ring")?,
-        remote: Consumer::open(&names.remote, &opts).context("opening the remote ring")?,
-        objects: Producer::open(&names.object, &opts).context("opening the object ring")?,
-        reports: Producer::open(&names.report, &opts).context("opening the report ring")?,
-        trace: Some(Producer::open(&names.trace, &opts).context("opening the trace ring")?),
+        tools: Consumer::open(&names.tool, &opts).map_err(opening("tool"))?,
+        remote: Consumer::open(&names.remote, &opts).map_err(opening("remote"))?,
+        objects: Producer::open(&names.object, &opts).map_err(opening("object"))?,
+        reports: Producer::open(&names.report, &opts).map_err(opening("report"))?,
+        trace: Some(Producer::open(&names.trace, &opts).map_err(opening("trace"))?),
         tracks_out: None,
         tracks_in: None,
     };
@@ -202,9 +268,9 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     let mut rings = rings;
     if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
         rings.tracks_out =
-            Some(Producer::open(&names.track_out, &opts).context("opening the track-out ring")?);
+            Some(Producer::open(&names.track_out, &opts).map_err(opening("track-out"))?);
         rings.tracks_in =
-            Some(Consumer::open(&names.track_in, &opts).context("opening the track-in ring")?);
+            Some(Consumer::open(&names.track_in, &opts).map_err(opening("track-in"))?);
     }
     let (method, join_after) = physics_method(sc, i);
     let step = period(sc.site[i].physics_rate_hz);
@@ -251,7 +317,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
     if let Some(after) = join_after {
         physics.join_late(after, resumed);
     }
-    let (in_force, _dma) = setup(cfg, &cfg.physics_sched, "physics")?;
+    let (in_force, _dma) = setup(cfg, &cfg.physics_sched, Child::Physics)?;
     let mut last_report_seq = timing.report_seq;
     ctl.physics
         .report_period_ns
@@ -286,9 +352,16 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
 
 /// Runs the network process of the configured station until the run state asks it to stop.
 ///
+/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
+/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
+///
 /// # Errors
 /// The segments cannot be opened, or the zenoh session cannot be set up.
-pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
+pub fn run_network<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
+    network_process(cfg, parent).map_err(E::from)
+}
+
+fn network_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
     let sc = &cfg.scenario;
     let net = &cfg.config.network;
@@ -300,13 +373,13 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
         method: sc.method.as_str().to_owned(),
         endpoints: net.clone(),
         control: &ctl,
-        reports: Consumer::open(&names.report, &opts).context("opening the report ring")?,
-        remote: Producer::open(&names.remote, &opts).context("opening the remote ring")?,
-        trace: Consumer::open(&names.trace, &opts).context("opening the trace ring")?,
+        reports: Consumer::open(&names.report, &opts).map_err(opening("report"))?,
+        remote: Producer::open(&names.remote, &opts).map_err(opening("remote"))?,
+        trace: Consumer::open(&names.trace, &opts).map_err(opening("trace"))?,
         tracks: if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
             Some((
-                Consumer::open(&names.track_out, &opts).context("opening the track-out ring")?,
-                Producer::open(&names.track_in, &opts).context("opening the track-in ring")?,
+                Consumer::open(&names.track_out, &opts).map_err(opening("track-out"))?,
+                Producer::open(&names.track_in, &opts).map_err(opening("track-in"))?,
             ))
         } else {
             None
@@ -327,7 +400,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> anyhow::Result<()> {
             .map(|s| net.silence_ns(s.report_rate_hz))
             .collect(),
         scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
-            .with_context(|| format!("the scenario has no site {}", cfg.site))?,
+            .ok_or(ChildError::NoSite(cfg.site))?,
         record_foxglove: cfg.config.record_foxglove,
         live_view: cfg.config.live.clone(),
         ros2: cfg.config.ros2.publish.then(|| cfg.config.ros2.clone()),

@@ -22,7 +22,6 @@ use crate::policy::ChildPolicy;
 use crate::supervisor::{
     ChildState, End, StationSupervisor, Status, SupervisorArgs, SupervisorMsg,
 };
-use anyhow::{bail, Context};
 use coop_rt::shm::control::{Child, ControlBlock, Health, RunState};
 use coop_rt::shm::{self, SegmentName, SegmentStatus};
 use coop_rt::sync::Ordering;
@@ -31,8 +30,51 @@ use ractor::Actor;
 use tokio::signal::unix::{signal, SignalKind};
 use tokio::sync::watch;
 
-use super::config::Resolved;
+use super::config::{ConfigError, Resolved};
 use coop_rt::shm::station::{Names, StationSegments};
+
+/// Why `station run` could not start, or stopped on a failure.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The session or station name cannot make segment names.
+    #[error(transparent)]
+    Name(#[from] coop_rt::shm::NameError),
+    /// The segments could not be listed or removed, the runtime or a signal handler not set up.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// A station of the same name in the same session is running.
+    #[error("station {station} of session {session} is already running ({segment}: {status}); stop it first, or choose another --station or --session")]
+    AlreadyRunning {
+        /// The station.
+        station: String,
+        /// Its session.
+        session: String,
+        /// One of its live segments.
+        segment: String,
+        /// What that segment is.
+        status: SegmentStatus,
+    },
+    /// The configuration breaks a rule that looks at the machine (a listen port that is taken).
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The station's segments could not be created.
+    #[error("creating the station's segments")]
+    Segments(#[source] coop_rt::shm::CreateError),
+    /// This executable, which each child re-runs, cannot be found.
+    #[error("finding the station binary")]
+    Exe(#[source] std::io::Error),
+    /// The supervisor actor did not start.
+    #[error("starting the supervisor: {0}")]
+    Supervisor(ractor::SpawnErr),
+    /// A servo or physics failure the restart policy gave up on.
+    #[error("station {station} stopped: {why}")]
+    Stopped {
+        /// The station.
+        station: String,
+        /// The failure and the policy, in words.
+        why: String,
+    },
+}
 
 /// How long children get to stop by themselves after the run state says stop: the servo ramps its
 /// force to zero (50 ms by default) and each loop notices within one cycle; two seconds leaves room
@@ -61,10 +103,17 @@ pub struct RunOptions {
 /// Runs the station until a signal, the duration, or a servo or physics failure the policy gave up
 /// on (network failures never end it: it runs on degraded while the network is retried).
 ///
+/// Generic over the caller's error type (any that a [`RunError`] converts into: itself, or
+/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
+///
 /// # Errors
 /// A live station of the same name, a listen port that is taken, segments that cannot be created,
 /// or a child the policy gave up on (the message names the child and the policy).
-pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
+pub fn run<E: From<RunError>>(cfg: &Resolved, opts: &RunOptions) -> Result<(), E> {
+    run_station(cfg, opts).map_err(E::from)
+}
+
+fn run_station(cfg: &Resolved, opts: &RunOptions) -> Result<(), RunError> {
     let session = &cfg.config.session;
     let prefix = SegmentName::station_prefix(session, &cfg.name)?;
     let removed = shm::remove_stale(&prefix)?;
@@ -79,25 +128,19 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
         .into_iter()
         .find(|i| matches!(i.status, SegmentStatus::Live { .. }))
     {
-        bail!(
-            "station {} of session {session} is already running ({}: {}); stop it first, or choose another --station or --session",
-            cfg.name,
-            live.name,
-            live.status
-        );
+        return Err(RunError::AlreadyRunning {
+            station: cfg.name.clone(),
+            session: session.clone(),
+            segment: live.name,
+            status: live.status,
+        });
     }
-    cfg.check_listen_ports_free().with_context(|| {
-        format!(
-            "station config {}",
-            opts.config
-                .as_ref()
-                .map_or("(defaults)".into(), |p| p.display().to_string())
-        )
-    })?;
+    cfg.check_listen_ports_free()
+        .map_err(|problem| ConfigError::in_file(opts.config.as_deref(), problem))?;
     let names = Names::of(session, &cfg.name)?;
     let segs = Arc::new(
         StationSegments::create(&names, &cfg.config.rings_for(cfg.scenario.objects.len()))
-            .context("creating the station's segments")?,
+            .map_err(RunError::Segments)?,
     );
     segs.control.set_run_state(RunState::Starting);
     if cfg.config.start == super::config::StartMode::Now {
@@ -117,10 +160,10 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> anyhow::Result<()> {
     outcome
 }
 
-fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<ChildSpec> {
+fn child_spec(cfg: &Resolved, opts: &RunOptions, child: Child) -> Result<ChildSpec, RunError> {
     let mut args = opts.exe_prefix.clone();
     args.extend([
-        role.to_owned(),
+        child.name().to_owned(),
         "--session".into(),
         cfg.config.session.clone(),
         "--station".into(),
@@ -137,8 +180,8 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, role: &str) -> anyhow::Result<C
         args.push(format!("--live={l}"));
     }
     Ok(ChildSpec {
-        name: role.to_owned(),
-        program: std::env::current_exe().context("finding the station binary")?,
+        name: child.name().to_owned(),
+        program: std::env::current_exe().map_err(RunError::Exe)?,
         args,
     })
 }
@@ -196,7 +239,7 @@ async fn supervise(
     cfg: &Resolved,
     opts: &RunOptions,
     segs: Arc<StationSegments>,
-) -> anyhow::Result<()> {
+) -> Result<(), RunError> {
     let sup_cfg = &cfg.config.supervisor;
     let watch_of = |c: Child| {
         let s = segs.clone();
@@ -211,17 +254,17 @@ async fn supervise(
     let essential = ChildPolicy::Essential(cfg.policy);
     let children = vec![
         (
-            child_spec(cfg, opts, "servo")?,
+            child_spec(cfg, opts, Child::Servo)?,
             watch_of(Child::Servo),
             essential,
         ),
         (
-            child_spec(cfg, opts, "physics")?,
+            child_spec(cfg, opts, Child::Physics)?,
             watch_of(Child::Physics),
             essential,
         ),
         (
-            child_spec(cfg, opts, "network")?,
+            child_spec(cfg, opts, Child::Network)?,
             watch_of(Child::Network),
             ChildPolicy::Degradable(cfg.network_backoff),
         ),
@@ -237,7 +280,7 @@ async fn supervise(
         args,
     )
     .await
-    .map_err(|e| anyhow::anyhow!("starting the supervisor: {e}"))?;
+    .map_err(RunError::Supervisor)?;
     segs.control.set_run_state(RunState::Running);
     eprintln!(
         "station {} (session {}): running servo at {} Hz, physics at {} Hz and the network; Ctrl-C to stop",
@@ -317,7 +360,10 @@ async fn supervise(
     sup.stop(None);
     let _ = handle.await;
     match end {
-        Some(End::Failed(why)) => bail!("station {} stopped: {why}", cfg.name),
+        Some(End::Failed(why)) => Err(RunError::Stopped {
+            station: cfg.name.clone(),
+            why,
+        }),
         Some(End::Clean(why)) => {
             eprintln!("station {} stopped: {why}", cfg.name);
             Ok(())

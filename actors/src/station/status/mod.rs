@@ -7,7 +7,6 @@
 use std::fmt;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample, TraceRecord};
 use coop_rt::shm::control::{Child, ControlBlock, CounterKey, Health, Ring, RunState};
 use coop_rt::shm::station::Names;
@@ -563,10 +562,33 @@ impl fmt::Display for RingStatus {
     }
 }
 
-fn open(session: &str, station: &str) -> anyhow::Result<(Names, BlockSegment<ControlBlock>)> {
+/// Why a station's status cannot be read.
+#[derive(Debug, thiserror::Error)]
+pub enum StatusError {
+    /// The session or station name cannot make segment names.
+    #[error(transparent)]
+    Name(#[from] coop_rt::shm::NameError),
+    /// The station's control block does not open: no such station, or a stale one.
+    #[error("station {station} of session {session}")]
+    Open {
+        /// The station.
+        station: String,
+        /// Its session.
+        session: String,
+        /// Why.
+        #[source]
+        error: coop_rt::shm::OpenError,
+    },
+}
+
+fn open(session: &str, station: &str) -> Result<(Names, BlockSegment<ControlBlock>), StatusError> {
     let names = Names::of(session, station)?;
     let ctl = BlockSegment::<ControlBlock>::open(&names.control, Duration::from_millis(500))
-        .with_context(|| format!("station {station} of session {session}"))?;
+        .map_err(|error| StatusError::Open {
+            station: station.to_owned(),
+            session: session.to_owned(),
+            error,
+        })?;
     Ok((names, ctl))
 }
 
@@ -574,7 +596,7 @@ fn open(session: &str, station: &str) -> anyhow::Result<(Names, BlockSegment<Con
 ///
 /// # Errors
 /// No such station.
-pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
+pub fn overruns(session: &str, station: &str) -> Result<[u64; 2], StatusError> {
     let (_, ctl) = open(session, station)?;
     Ok([
         ctl.servo.stats.overruns.load(Ordering::Relaxed),
@@ -587,7 +609,7 @@ pub fn overruns(session: &str, station: &str) -> anyhow::Result<[u64; 2]> {
 ///
 /// # Errors
 /// No such station, or its segments fail validation (stale: run `station clean`).
-pub fn read(session: &str, station: &str, sites: &[String]) -> anyhow::Result<StationStatus> {
+pub fn read(session: &str, station: &str, sites: &[String]) -> Result<StationStatus, StatusError> {
     let (names, ctl) = open(session, station)?;
     let snap = || (ctl.servo.stats.snapshot(), ctl.physics.stats.snapshot());
     let traffic0 = coop_transport::recording::TrafficMsg::of(&ctl.network.traffic);
