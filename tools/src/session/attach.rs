@@ -20,8 +20,9 @@
 //! reader as on one machine, and still there to read again if anything fails. The launcher waits,
 //! bounded, for each recording to hold its final counters (what a station writes last).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
@@ -103,6 +104,43 @@ impl Attach {
         }
         Ok(out)
     }
+
+    /// The launcher's zenoh session, reaching the stations as configured.
+    ///
+    /// # Errors
+    /// A TLS file that is not there; zenoh refuses the configuration or cannot open.
+    fn open(&self) -> anyhow::Result<zenoh::Session> {
+        let endpoints = network::NetworkConfig {
+            listen: vec![],
+            connect: self.connect.clone(),
+            mode: self.mode,
+            tls: self.tls.clone(),
+            emulate: false,
+            ..network::NetworkConfig::default()
+        };
+        if let Some(t) = &self.tls {
+            for (field, path) in t.files() {
+                if let Some(p) = path {
+                    if !p.is_file() {
+                        bail!(
+                            "--certs: the launcher's TLS {field} {} is not a readable file (make it with `session certs`)",
+                            p.display()
+                        );
+                    }
+                }
+            }
+        }
+        let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
+            .wait()
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "opening the launcher's zenoh session ({} to {}): {e}",
+                    self.mode,
+                    self.connect.join(", ")
+                )
+            })?;
+        Ok(z)
+    }
 }
 
 /// Runs one session of stations already running (their configuration names `method` and
@@ -122,35 +160,7 @@ pub fn run_attached(
     sc.method = method;
     let dir = a.out.join(method.as_str());
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let endpoints = network::NetworkConfig {
-        listen: vec![],
-        connect: at.connect.clone(),
-        mode: at.mode,
-        tls: at.tls.clone(),
-        emulate: false,
-        ..network::NetworkConfig::default()
-    };
-    if let Some(t) = &at.tls {
-        for (field, path) in t.files() {
-            if let Some(p) = path {
-                if !p.is_file() {
-                    bail!(
-                        "--certs: the launcher's TLS {field} {} is not a readable file (make it with `session certs`)",
-                        p.display()
-                    );
-                }
-            }
-        }
-    }
-    let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
-        .wait()
-        .map_err(|e| {
-            anyhow::anyhow!(
-                "opening the launcher's zenoh session ({} to {}): {e}",
-                at.mode,
-                at.connect.join(", ")
-            )
-        })?;
+    let z = at.open()?;
     let (present, _presence) = super::watch_presence(&z, session)?;
     // From here on the launcher answers its clock: the stations measure their offset to it while
     // the others come.
@@ -172,32 +182,7 @@ pub fn run_attached(
             at.connect.join(", ")
         );
     }
-    let waited = Instant::now();
-    loop {
-        if a.stop.is_raised() {
-            bail!("interrupted before the session started (the stations were not told anything)");
-        }
-        let have = lock(&present).clone();
-        let missing: Vec<&str> = sc
-            .site
-            .iter()
-            .map(|s| s.name.as_str())
-            .filter(|s| !have.contains(*s))
-            .collect();
-        if missing.is_empty() {
-            break;
-        }
-        if waited.elapsed() > a.start_timeout {
-            bail!(
-                "stations not present after {:?}: {} (none of their presence tokens reached the launcher through {}; present: {}). Are they running with session = {session:?}, and reaching the same routers?",
-                a.start_timeout,
-                missing.join(", "),
-                at.connect.join(", "),
-                if have.is_empty() { "none".to_owned() } else { have.into_iter().collect::<Vec<_>>().join(", ") }
-            );
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_present(a, at, &sc, session, &present)?;
     let t0 = coop_rt::timer::monotonic_ns() + LEAD.as_nanos() as u64;
     epoch.announce(t0)?;
     if a.progress {
@@ -241,6 +226,45 @@ pub fn run_attached(
         super::outcome::outcome(&sc, session, super::unix_ns_of(t0), &dir, &recorded, live)?;
     o.launcher_epoch_ns = t0;
     Ok(o)
+}
+
+/// Waits until every site's presence is seen (`present`), within the start timeout.
+///
+/// # Errors
+/// Interrupted; a site not present in time (named, with those that are).
+fn wait_present(
+    a: &RunArgs,
+    at: &Attach,
+    sc: &Scenario,
+    session: &str,
+    present: &Arc<Mutex<BTreeSet<String>>>,
+) -> anyhow::Result<()> {
+    let waited = Instant::now();
+    loop {
+        if a.stop.is_raised() {
+            bail!("interrupted before the session started (the stations were not told anything)");
+        }
+        let have = lock(present).clone();
+        let missing: Vec<&str> = sc
+            .site
+            .iter()
+            .map(|s| s.name.as_str())
+            .filter(|s| !have.contains(*s))
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        if waited.elapsed() > a.start_timeout {
+            bail!(
+                "stations not present after {:?}: {} (none of their presence tokens reached the launcher through {}; present: {}). Are they running with session = {session:?}, and reaching the same routers?",
+                a.start_timeout,
+                missing.join(", "),
+                at.connect.join(", "),
+                if have.is_empty() { "none".to_owned() } else { have.into_iter().collect::<Vec<_>>().join(", ") }
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 /// Waits (up to [`COLLECT_TIMEOUT`]) for every site's recording to be finished, and checks it is
