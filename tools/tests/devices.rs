@@ -1,8 +1,9 @@
 //! `station devices`: every backend is listed with what it finds, the configuration's marked, in
 //! text and JSON; a config selecting a recorded hand shows that recording.
 
-use std::path::PathBuf;
 use std::process::Command;
+
+use coop_tests::TempDir;
 
 fn station(args: &[&str]) -> (String, String, bool) {
     let o = Command::new(env!("CARGO_BIN_EXE_station"))
@@ -14,13 +15,6 @@ fn station(args: &[&str]) -> (String, String, bool) {
         String::from_utf8_lossy(&o.stderr).into_owned(),
         o.status.success(),
     )
-}
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-devices-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
 }
 
 #[test]
@@ -53,7 +47,7 @@ fn lists_every_backend_with_what_it_finds_and_marks_the_configured_one() {
         "{text}"
     );
 
-    let dir = tempdir("replay");
+    let dir = TempDir::new("devices-replay");
     std::fs::write(
         dir.join("hand.csv"),
         "t_s,x,y,z\n0,-0.1,0,0.01\n1.5,-0.05,0,0.01\n",
@@ -89,5 +83,4 @@ fn lists_every_backend_with_what_it_finds_and_marks_the_configured_one() {
             && err.contains("bad.toml"),
         "{err}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,17 +2,14 @@
 //! world a whole re-simulation gives, to the bit: the crowd (eight users, sixteen pucks) at a
 //! constant 150 ms, run both ways.
 
-use std::path::Path;
-
-use coop_actors::scenario_file;
 use coop_model::scenario::MethodName;
 use coop_model::sim::{self, Mode};
+use coop_tests::load_scenario;
 use coop_tools::sweep::scenario_at;
 
 #[test]
 fn the_crowd_rolled_back_by_islands_is_the_crowd_rolled_back_whole() {
-    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/crowd.toml");
-    let base = scenario_file::load(&file).expect("crowd.toml");
+    let base = load_scenario("crowd.toml");
     let mut sc = scenario_at(&base, 150.0, base.seed).expect("valid");
     sc.duration_s = 2.5;
     let run = |islands: bool| {

@@ -6,6 +6,8 @@
 
 use std::process::Command;
 
+use coop_tests::TempDir;
+
 const LATENCY: &str = env!("CARGO_BIN_EXE_latency");
 
 fn run(cmd: &mut Command) -> (i32, String, String) {
@@ -57,7 +59,7 @@ fn as_root_it_runs_sched_fifo_without_warning() {
 #[test]
 fn unprivileged_it_warns_once_and_falls_back_to_sched_other() {
     let mut cmd;
-    let dir = tempdir();
+    let dir = TempDir::new("latency");
     if is_root() {
         if Command::new("setpriv").arg("--version").output().is_err() {
             eprintln!("SKIPPED: setpriv is not installed (util-linux); cannot drop root here");
@@ -80,7 +82,6 @@ fn unprivileged_it_warns_once_and_falls_back_to_sched_other() {
         cmd = Command::new(LATENCY);
     }
     let (code, out, err) = run(cmd.args(["-D", "1s", "-q", "-t", "2"]).current_dir(&dir));
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(code, 0, "stdout: {out}\nstderr: {err}");
     let warns: Vec<&str> = err.lines().filter(|l| l.starts_with("WARN:")).collect();
     assert_eq!(
@@ -127,7 +128,7 @@ fn bad_flags_are_clear_errors() {
 
 #[test]
 fn json_holds_the_same_figures() {
-    let dir = tempdir();
+    let dir = TempDir::new("latency");
     let path = dir.join("out.json");
     let (code, out, err) = run(Command::new(LATENCY)
         .args(["-l", "300", "-i", "500", "-q", "-h", "50", "--json"])
@@ -136,7 +137,6 @@ fn json_holds_the_same_figures() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).expect("json file"))
             .expect("valid json");
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(v["file_version"], 1);
     assert_eq!(v["return_code"], 0);
     assert!(v["cmdline"].as_str().is_some_and(|c| c.contains("-l 300")));
@@ -171,18 +171,6 @@ fn json_holds_the_same_figures() {
         out.contains("# Histogram") && out.contains("# Total: 00300"),
         "{out}"
     );
-}
-
-fn tempdir() -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "coop-latency-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos())
-    ));
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
 }
 
 fn set_mode(p: &std::path::Path, mode: u32) {

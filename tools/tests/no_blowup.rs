@@ -7,25 +7,15 @@
 //! and the worlds of several objects: `scenarios/billiards.toml`, `scenarios/stack.toml` and
 //! `scenarios/tray.toml`.
 
-use std::path::{Path, PathBuf};
-
-use coop_actors::scenario_file;
 use coop_model::body::Vec3;
 use coop_model::metrics;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
+use coop_tests::load_scenario;
 use coop_tools::sweep::{par_map, scenario_at, DEFAULT_DELAYS_MS};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn scenario(file: &str) -> Scenario {
-    scenario_file::load(&repo().join("scenarios").join(file)).expect(file)
-}
-
 fn paper() -> Scenario {
-    scenario("paper.toml")
+    load_scenario("paper.toml")
 }
 
 /// Where a copy's centre left the world, if it did: behind a plane by more than the object's own
@@ -116,7 +106,7 @@ fn no_method_delay_or_seed_of_the_sweep_blows_up() {
 /// The same on the 3-D lift: a disk held up by friction alone, on an open table.
 #[test]
 fn no_method_delay_or_seed_of_the_lift_sweep_blows_up() {
-    sweep_stays_within_the_users_work(&scenario("lift.toml"));
+    sweep_stays_within_the_users_work(&load_scenario("lift.toml"));
 }
 
 /// The same with three and four users passing the disk around and holding it together: `paper`
@@ -125,8 +115,8 @@ fn no_method_delay_or_seed_of_the_lift_sweep_blows_up() {
 /// before a reckoned state was bounded by the energy of the state sent.
 #[test]
 fn no_method_delay_or_seed_of_the_three_and_four_user_sweeps_blows_up() {
-    sweep_stays_within_the_users_work(&scenario("three-users.toml"));
-    sweep_stays_within_the_users_work(&scenario("four-users.toml"));
+    sweep_stays_within_the_users_work(&load_scenario("three-users.toml"));
+    sweep_stays_within_the_users_work(&load_scenario("four-users.toml"));
 }
 
 /// The same on the three-user lift, the users 120° apart: `naive` there pushed copies whose disk
@@ -135,14 +125,14 @@ fn no_method_delay_or_seed_of_the_three_and_four_user_sweeps_blows_up() {
 /// force stopped doing work as soon as it had done what its user gave.
 #[test]
 fn no_method_delay_or_seed_of_the_three_user_lift_sweep_blows_up() {
-    sweep_stays_within_the_users_work(&scenario("three-lift-balanced.toml"));
+    sweep_stays_within_the_users_work(&load_scenario("three-lift-balanced.toml"));
 }
 
 /// The same on the first world of several objects, every method: a puck struck into another,
 /// which knocks a waiting tool.
 #[test]
 fn no_method_delay_or_seed_of_the_billiards_sweep_blows_up() {
-    let sc = scenario("billiards.toml");
+    let sc = load_scenario("billiards.toml");
     assert_eq!(sc.objects.len(), 2);
     sweep_stays_within_the_users_work(&sc);
 }
@@ -152,7 +142,7 @@ fn no_method_delay_or_seed_of_the_billiards_sweep_blows_up() {
 #[test]
 fn no_method_delay_or_seed_of_the_stack_and_tray_sweeps_blows_up() {
     for file in ["stack.toml", "tray.toml"] {
-        let sc = scenario(file);
+        let sc = load_scenario(file);
         assert!(sc.objects.len() >= 2, "{file}: a world of several");
         sweep_stays_within_the_users_work(&sc);
     }

@@ -3,7 +3,7 @@
 //! real stations (`session run` on a scenario whose site names an earlier session's MCAP
 //! recording). Each replayed tool trajectory must match the recorded one.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use coop_actors::scenario_file;
@@ -12,33 +12,16 @@ use coop_model::body::Vec3;
 use coop_model::replay::Trajectory;
 use coop_model::scenario::MethodName;
 use coop_model::sim::{self, Mode};
+use coop_tests::{load_scenario, repo, scenario_path, ScenarioToml, TempDir};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-replay-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
-
-/// The paper's scenario with `hand_replay = file` on its first site (user1), as TOML text.
-fn paper_with_replay(file: &str) -> String {
-    let text = std::fs::read_to_string(repo().join("scenarios/paper.toml")).expect("paper.toml");
-    let mut v: toml::Table = toml::from_str(&text).expect("toml");
-    let sites = v
-        .get_mut("site")
-        .and_then(toml::Value::as_array_mut)
-        .expect("sites");
-    let user1 = sites[0].as_table_mut().expect("a site table");
+/// The paper's scenario with `hand_replay = file` on its first site (user1).
+fn paper_with_replay(file: &str) -> ScenarioToml {
+    let paper = ScenarioToml::paper();
     assert_eq!(
-        user1.get("name").and_then(toml::Value::as_str),
+        paper.get("site.0.name").and_then(toml::Value::as_str),
         Some("user1")
     );
-    user1.insert("hand_replay".into(), toml::Value::String(file.into()));
-    toml::to_string(&v).expect("toml out")
+    paper.set("site.0.hand_replay", file)
 }
 
 /// Tool positions of `site` in a `sim run` trace.csv: (t, position).
@@ -57,8 +40,8 @@ fn trace_tool(csv: &str, site: usize) -> Vec<(f64, Vec3)> {
 
 #[test]
 fn a_hand_recorded_in_one_simulator_run_replays_in_the_next() {
-    let dir = tempdir("sim");
-    let paper = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let dir = TempDir::new("replay-sim");
+    let paper = load_scenario("paper.toml");
     let first = sim::run(&paper, Mode::Distributed(MethodName::Paper), &mut |_| {});
     let recorded = Trajectory::new(
         first
@@ -70,7 +53,7 @@ fn a_hand_recorded_in_one_simulator_run_replays_in_the_next() {
     .expect("the first run's user1 trajectory");
     std::fs::write(dir.join("user1.csv"), recorded.to_csv()).expect("write csv");
     // Relative to the scenario file.
-    std::fs::write(dir.join("replay.toml"), paper_with_replay("user1.csv")).expect("scenario");
+    paper_with_replay("user1.csv").write(&dir.join("replay.toml"));
     let out = dir.join("out");
     let o = Command::new(env!("CARGO_BIN_EXE_sim"))
         .arg("run")
@@ -106,7 +89,6 @@ fn a_hand_recorded_in_one_simulator_run_replays_in_the_next() {
     // The other user still feels the disk the replayed hand pushes.
     let user2 = trace_tool(&csv, 1);
     assert_eq!(user2.len(), replayed.len());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn session(scenario: &Path, out: &Path) {
@@ -131,16 +113,12 @@ fn session(scenario: &Path, out: &Path) {
 /// user2 runs its script. The second run's recorded tool follows the first's.
 #[test]
 fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
-    let dir = tempdir("session");
+    let dir = TempDir::new("replay-session");
     let first = dir.join("first");
-    session(&repo().join("scenarios/paper.toml"), &first);
+    session(&scenario_path("paper.toml"), &first);
     let recording = first.join("paper/user1.mcap");
     let recorded = load_trajectory(&recording).expect("the first session's user1 hand");
-    std::fs::write(
-        dir.join("replay.toml"),
-        paper_with_replay(&recording.display().to_string()),
-    )
-    .expect("scenario");
+    paper_with_replay(&recording.display().to_string()).write(&dir.join("replay.toml"));
     let second = dir.join("second");
     session(&dir.join("replay.toml"), &second);
     let replayed = load_trajectory(&second.join("paper/user1.mcap")).expect("second user1");
@@ -186,7 +164,6 @@ fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
         "replayed tool off the recorded one: median {median} m, {farthest} m off the path \
          (worst at the same time {worst} m)"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The A/B harness on human-like input: both users' hands, recorded once, replayed under every
@@ -195,10 +172,9 @@ fn a_station_replays_the_hand_recorded_in_an_earlier_session() {
 /// the object still moves under them.
 #[test]
 fn recorded_hands_replay_identically_under_every_method_and_delay() {
-    let dir = tempdir("ab");
-    let paper = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let dir = TempDir::new("replay-ab");
+    let paper = load_scenario("paper.toml");
     let first = sim::run(&paper, Mode::Reference, &mut |_| {});
-    let mut text = paper_with_replay("user1.csv");
     for (i, name) in ["user1", "user2"].iter().enumerate() {
         let recorded = Trajectory::new(
             first
@@ -211,18 +187,9 @@ fn recorded_hands_replay_identically_under_every_method_and_delay() {
         std::fs::write(dir.join(format!("{name}.csv")), recorded.to_csv()).expect("write csv");
     }
     // user2 replays too.
-    let mut v: toml::Table = toml::from_str(&text).expect("toml");
-    v.get_mut("site")
-        .and_then(toml::Value::as_array_mut)
-        .expect("sites")[1]
-        .as_table_mut()
-        .expect("a site table")
-        .insert(
-            "hand_replay".into(),
-            toml::Value::String("user2.csv".into()),
-        );
-    text = toml::to_string(&v).expect("toml out");
-    std::fs::write(dir.join("replay.toml"), text).expect("scenario");
+    paper_with_replay("user1.csv")
+        .set("site.1.hand_replay", "user2.csv")
+        .write(&dir.join("replay.toml"));
     let replay = scenario_file::load(&dir.join("replay.toml")).expect("the replay scenario");
     let mut runs = 0;
     for method in MethodName::ALL {
@@ -254,5 +221,4 @@ fn recorded_hands_replay_identically_under_every_method_and_delay() {
         }
     }
     assert_eq!(runs, 2 * MethodName::ALL.len());
-    let _ = std::fs::remove_dir_all(&dir);
 }

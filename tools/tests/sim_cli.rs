@@ -3,25 +3,14 @@
 //! Eq. 8 method diverges far beyond the disk while the paper's method keeps the copies together once
 //! contacts end; with zero delay and equal rates both match the reference run.
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use coop_actors::scenario_file;
 use coop_model::metrics;
 use coop_model::scenario::MethodName;
 use coop_model::sim::{self, Mode};
+use coop_tests::{load_scenario, repo, TempDir};
 
 const SIM: &str = env!("CARGO_BIN_EXE_sim");
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn tempdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-sim-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
 
 #[test]
 fn bad_scenarios_name_the_field_and_create_nothing() {
@@ -32,8 +21,9 @@ fn bad_scenarios_name_the_field_and_create_nothing() {
     .expect("json");
     let expected = expected.as_object().expect("object");
     assert!(expected.len() >= 10, "one fixture per rule");
+    let bad = TempDir::unmade("sim-bad");
     for (file, needle) in expected {
-        let out = tempdir("bad").join(file);
+        let out = bad.join(file);
         let o = Command::new(SIM)
             .arg("run")
             .arg(dir.join(file))
@@ -60,7 +50,7 @@ fn bad_scenarios_name_the_field_and_create_nothing() {
 /// different seed gives a different trace (so the comparison can fail).
 #[test]
 fn same_seed_gives_byte_identical_outputs() {
-    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = load_scenario("paper.toml");
     let a = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
     let b = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
     assert_eq!(a.trace_csv(), b.trace_csv());
@@ -71,7 +61,7 @@ fn same_seed_gives_byte_identical_outputs() {
     assert_ne!(a.trace_csv(), c.trace_csv(), "the seed must matter");
 
     // And through the CLI, every output file.
-    let (d1, d2) = (tempdir("det1"), tempdir("det2"));
+    let (d1, d2) = (TempDir::unmade("sim-det1"), TempDir::unmade("sim-det2"));
     for d in [&d1, &d2] {
         let o = Command::new(SIM)
             .args(["run", "scenarios/paper.toml", "--method", "naive", "--out"])
@@ -100,8 +90,6 @@ fn same_seed_gives_byte_identical_outputs() {
     for f in ["fig_y.png", "fig_y.svg", "divergence.png", "divergence.svg"] {
         assert!(std::fs::metadata(d1.join(f)).expect(f).len() > 1000, "{f}");
     }
-    let _ = std::fs::remove_dir_all(&d1);
-    let _ = std::fs::remove_dir_all(&d2);
 }
 
 /// The paper's experiment: naive diverges beyond the disk's radius and stays apart; the paper's
@@ -111,7 +99,7 @@ fn same_seed_gives_byte_identical_outputs() {
 /// 253 mm.)
 #[test]
 fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
-    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = load_scenario("paper.toml");
     let radius = sc.objects[0].radius_m;
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
     let naive = metrics::compute(
@@ -162,8 +150,7 @@ fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
 /// Zero delay and equal 1 kHz rates: both methods match the reference run within 1 mm.
 #[test]
 fn zero_delay_both_methods_match_the_reference() {
-    let sc =
-        scenario_file::load(&repo().join("scenarios/zero-delay.toml")).expect("zero-delay.toml");
+    let sc = load_scenario("zero-delay.toml");
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
     // The two state-exchanging methods (`MethodName::ALL` also holds timewarp and coupled: they
     // predict or play the partner's tool late, and the sweep tests judge them).

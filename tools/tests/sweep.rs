@@ -3,20 +3,15 @@
 //! reason), the determinism the sweep rests on: two timewarp runs give the same bits, and coupled
 //! doing the task at 50 ms.
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use coop_actors::scenario_file;
 use coop_model::metrics;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode};
+use coop_tests::{load_scenario, repo};
 use coop_tools::sweep::scenario_at;
 
 const SIM: &str = env!("CARGO_BIN_EXE_sim");
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 /// `method` on the paper task at a constant `delay_ms` (the scenario's jitter) and `seed`: the run
 /// and its metrics against the reference.
@@ -42,7 +37,7 @@ fn scenario_run_with(
     seed: u64,
     change: impl FnOnce(&mut Scenario),
 ) -> (sim::RunResult, metrics::Metrics) {
-    let base = scenario_file::load(&repo().join("scenarios").join(file)).expect(file);
+    let base = load_scenario(file);
     let mut sc = scenario_at(&base, delay_ms, seed).expect("valid");
     change(&mut sc);
     let r = sim::run(&sc, Mode::Distributed(method), &mut |_| {});
@@ -191,7 +186,7 @@ fn sweep_refuses_bad_arguments_with_the_reason() {
 /// another seed gives another.
 #[test]
 fn timewarp_runs_are_bit_identical() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let base = load_scenario("paper.toml");
     let sc = scenario_at(&base, 150.0, 3).expect("valid");
     let mode = Mode::Distributed(MethodName::Timewarp);
     let a = sim::run(&sc, mode, &mut |_| {});
@@ -214,7 +209,7 @@ fn timewarp_runs_are_bit_identical() {
 /// sweep reports come from them.
 #[test]
 fn force_steps_are_counted_per_servo_tick() {
-    let sc = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let sc = load_scenario("paper.toml");
     let r = sim::run(&sc, Mode::Distributed(MethodName::Paper), &mut |_| {});
     for (i, (steps, site)) in r.force_steps.iter().zip(&sc.site).enumerate() {
         let ticks = (sc.duration_s * site.servo_rate_hz).floor() as u64 + 1;
@@ -258,7 +253,7 @@ fn force_steps_are_counted_per_servo_tick() {
 /// object's own contact change exceeds the JND of the force, and the stages really act.
 #[test]
 fn display_stages_keep_corrections_under_the_jnd() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let base = load_scenario("paper.toml");
     let off = scenario_at(&base, 150.0, 1).expect("valid");
     let mut on = off.clone();
     on.display.enabled = true;
@@ -300,7 +295,7 @@ fn display_stages_keep_corrections_under_the_jnd() {
 /// with timewarp's confirmed states agreeing.
 #[test]
 fn eight_user_bench_scenario_has_everyone_touching() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let base = load_scenario("paper.toml");
     let sc = scenario_at(&coop_tools::simbench::eight_users(&base), 150.0, 1).expect("valid");
     assert_eq!(sc.site.len(), 8);
     let run = |sc: &Scenario| {
@@ -398,7 +393,7 @@ fn timewarp_at_500_ms_replays_the_catch_user_2_missed() {
 /// sent again; the confirmed states agree and the task is done.
 #[test]
 fn timewarp_confirmed_states_agree_under_30_percent_loss() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper.toml");
+    let base = load_scenario("paper.toml");
     let mut sc = scenario_at(&base, 150.0, 1).expect("valid");
     sc.network.loss = 0.3;
     sc.validate().expect("valid with loss");
@@ -497,7 +492,7 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
         for s in &m.sites {
             assert!(s.lagged_s > 1.0, "{file}: {s:?}");
         }
-        let base = scenario_file::load(&repo().join("scenarios").join(file)).expect(file);
+        let base = load_scenario(file);
         let mut sc = scenario_at(&base, 200.0, seed).expect("valid");
         sc.timewarp.local_lag_share = 0.0;
         sc.validate().expect("valid without the lag");
@@ -517,7 +512,7 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
 /// the confirmed states agree; the force figures are shares and percentiles of something measured.
 #[test]
 fn the_deadband_sends_a_tenth_of_the_positions_and_the_task_still_passes() {
-    let base = scenario_file::load(&repo().join("scenarios/paper.toml")).expect("paper");
+    let base = load_scenario("paper.toml");
     let rows = coop_tools::deadband::rows(&base, &[100.0]).expect("runs");
     let r = &rows[0];
     assert!(r.sent_share > 0.0 && r.sent_share < 0.1, "{r:?}");
