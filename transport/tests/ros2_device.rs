@@ -7,11 +7,12 @@
 mod counting_alloc;
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use coop_model::body::Vec3;
 use coop_rt::device::{CartesianDevice, Command, DeviceFault};
 use coop_rt::timer::monotonic_ns;
+use coop_tests::wait_until;
 use coop_transport::network::{concrete_listen, config, NetworkConfig};
 use coop_transport::ros2::cdr::{Header, PoseStamped, WrenchStamped};
 use coop_transport::ros2::device::{Ros2Device, Ros2DeviceConfig};
@@ -19,18 +20,6 @@ use coop_transport::ros2::graph::{self, Attachment};
 use zenoh::Wait;
 
 const LIMIT: Duration = Duration::from_secs(30);
-
-/// Polls `f` until it gives a value, or panics naming `what` after [`LIMIT`].
-fn until<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
-    let start = Instant::now();
-    loop {
-        if let Some(v) = f() {
-            return v;
-        }
-        assert!(start.elapsed() < LIMIT, "timed out waiting for {what}");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
 
 fn pose(x: f64) -> Vec<u8> {
     PoseStamped {
@@ -103,7 +92,7 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
         })
     };
     let mut dev = Ros2Device::open(&cfg).expect("the device opens on the driver's pose");
-    let got = until("a pose", || dev.sample(monotonic_ns()).ok());
+    let got = wait_until("a pose", LIMIT, || dev.sample(monotonic_ns()).ok());
     assert_eq!(got.position_m, Vec3::new(0.01, 0.0, 0.1));
     // The servo path: sample and command, while the bridge takes poses and puts wrenches.
     let mut taken = 0;
@@ -131,7 +120,7 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
 
     // A second publisher on the topic is refused and counted; the driver's poses go on.
     put(pose(0.5), 2);
-    until("the foreign pose refused", || {
+    wait_until("the foreign pose refused", LIMIT, || {
         (dev.stats()
             .foreign_poses
             .load(coop_rt::sync::Ordering::Relaxed)
@@ -153,7 +142,7 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
 
     // A pose that is not one is a fault until the next good one.
     put(b"not a pose".to_vec(), 1);
-    until("the bad pose as a fault", || {
+    wait_until("the bad pose as a fault", LIMIT, || {
         matches!(
             dev.sample(monotonic_ns()),
             Err(DeviceFault::BadValue { what: "pose" })
@@ -161,12 +150,14 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
         .then_some(())
     });
     put(pose(0.02), 1);
-    until("a good pose again", || dev.sample(monotonic_ns()).ok());
+    wait_until("a good pose again", LIMIT, || {
+        dev.sample(monotonic_ns()).ok()
+    });
 
     // The servo commands a force, then stops commanding: the driver is left a zero wrench.
     dev.command(monotonic_ns(), Command::Force(Vec3::new(0.0, 0.0, 1.5)))
         .expect("command");
-    until("the force at the driver", || {
+    wait_until("the force at the driver", LIMIT, || {
         wrenches
             .lock()
             .expect("lock")
@@ -174,7 +165,7 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
             .is_some_and(|f| f[2] == 1.5)
             .then_some(())
     });
-    until("the zero wrench after the servo went quiet", || {
+    wait_until("the zero wrench after the servo went quiet", LIMIT, || {
         wrenches
             .lock()
             .expect("lock")
@@ -184,7 +175,7 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
     });
 
     // The driver is silent: the device is stale.
-    until("the device stale", || {
+    wait_until("the device stale", LIMIT, || {
         (dev.sample(monotonic_ns()) == Err(DeviceFault::Disconnected)).then_some(())
     });
     // And refuses a force on a hand it cannot see.
