@@ -38,10 +38,6 @@ pub enum RouterError {
         #[source]
         problem: Problem,
     },
-    /// The access-control refusals cannot be counted (another tracing subscriber was installed
-    /// first).
-    #[error("{0}")]
-    Refusals(String),
     /// Another running router writes this router's status file.
     #[error("router {name}: its status file {} is written by another running router (pid {pid}); give this one a status_file of its own", .file.display())]
     StatusFileTaken {
@@ -295,22 +291,6 @@ fn write_status(path: &Path, s: &RouterStatus) -> Result<(), RouterError> {
     std::fs::rename(&tmp, path).map_err(writing(path))
 }
 
-/// Runs the router until `stop` says so (or `duration` passes); its last status. Installs the
-/// process's tracing subscriber that counts the access control's refusals
-/// ([`Refusals::install`]) on the way: a binary that installs it itself, before anything else
-/// could, calls [`run_counting`].
-///
-/// # Errors
-/// Another tracing subscriber was installed first, or as [`run_counting`].
-pub fn run(
-    r: &ResolvedRouter,
-    duration: Option<Duration>,
-    stop: &dyn Fn() -> bool,
-) -> Result<RouterStatus, RouterError> {
-    let refusals = Refusals::install().map_err(RouterError::Refusals)?;
-    run_counting(r, duration, stop, refusals)
-}
-
 /// Runs the router until `stop` says so (or `duration` passes), `refusals` counting what its
 /// access control refuses (the process's tracing subscriber, which the binary installs with
 /// [`Refusals::install`]: a library does not choose a process's subscriber); its last status.
@@ -318,7 +298,7 @@ pub fn run(
 /// # Errors
 /// Another running router writes its status file, the router cannot open (a port taken, a file
 /// zenoh refuses), or its status cannot be written.
-pub fn run_counting(
+pub fn run(
     r: &ResolvedRouter,
     duration: Option<Duration>,
     stop: &dyn Fn() -> bool,

@@ -299,9 +299,13 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
                 Some(d) => anyhow::bail!("--duration-s {d}: must be a positive number of seconds"),
                 None => None,
             };
+            // The process's tracing subscriber counts the access control's refusals: installed
+            // by the binary, before anything else could claim it.
+            let refusals =
+                coop_transport::router::Refusals::install().map_err(anyhow::Error::msg)?;
             // Before zenoh's threads start: SIGINT/SIGTERM stop the router cleanly.
             let stop = crate::cli::StopFlag::on_sigint_sigterm()?;
-            let s = coop_actors::router::run(&r, duration, &|| stop.is_raised())?;
+            let s = coop_actors::router::run(&r, duration, &|| stop.is_raised(), refusals)?;
             eprintln!("{s}");
             Ok(())
         }
