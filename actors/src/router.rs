@@ -489,7 +489,10 @@ mod tests {
         };
         let written = serde_json::to_vec(&other).expect("json");
         std::fs::write(&status, &written).expect("status");
-        let e = run(&r, Some(Duration::from_millis(10)), &|| true).expect_err("a live clash");
+        // A counter not installed as the subscriber: the clash is refused before it counts.
+        let refusals = Refusals::default();
+        let e = run(&r, Some(Duration::from_millis(10)), &|| true, &refusals)
+            .expect_err("a live clash");
         let msg = format!("{e:#}");
         assert!(
             msg.contains("written by another running router")

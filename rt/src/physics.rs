@@ -483,33 +483,21 @@ impl PhysicsLoop {
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);
-        let r = &p.rollback;
-        let set = |a: &crate::sync::AtomicU64, v: u64| a.store(v, crate::sync::Ordering::Relaxed);
         let stats = self.method.stats();
+        let mut r = crate::shm::rollback::RollbackFigures {
+            tracks_received: self.tracks.received,
+            tracks_rejected: self.tracks.rejected,
+            track_drops: self.tracks.drops,
+            late_periods: self.tracks.late_periods,
+            ticks: self.ticks.done,
+            joined_tick: self.ticks.joined,
+            playout_ticks: stats.playout_ticks().map_or(0, |p| p.ceil() as u64),
+            ..Default::default()
+        };
         if let Some(st) = stats.rollback() {
-            set(&r.rollbacks, st.rollbacks);
-            set(&r.resimulated_ticks, st.resimulated_ticks);
-            set(&r.max_depth, st.max_depth);
-            set(&r.depth_p99, st.depths.quantile(0.99).unwrap_or(0));
-            set(&r.fallbacks, st.fallbacks);
-            set(&r.hash_checks, st.hash_checks);
-            set(&r.hash_mismatches, st.hash_mismatches);
-            set(&r.adopted_states, st.adopted_states);
-            set(&r.unfelt_contact_ticks, st.unfelt_contact_ticks);
-            set(&r.phantom_contact_ticks, st.phantom_contact_ticks);
-            set(&r.replays, st.replays);
-            set(&r.local_lag_ticks, st.local_lag_ticks);
-            set(&r.lagged_ticks, st.lagged_ticks);
+            r.take_method(st);
         }
-        if let Some(p) = stats.playout_ticks() {
-            set(&r.playout_ticks, p.ceil() as u64);
-        }
-        set(&r.tracks_received, self.tracks.received);
-        set(&r.tracks_rejected, self.tracks.rejected);
-        set(&r.track_drops, self.tracks.drops);
-        set(&r.late_periods, self.tracks.late_periods);
-        set(&r.ticks, self.ticks.done);
-        set(&r.joined_tick, self.ticks.joined);
+        p.rollback.store(&r);
     }
 
     /// The last report sequence number used.

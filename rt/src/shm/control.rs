@@ -492,57 +492,7 @@ pub struct PhysicsShared {
 
 // ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
 
-/// What physics writes of a rolling-back method (`coop_model::method::RollbackStats`) and of the tool
-/// tracks it exchanges: relaxed stores by physics, the one writer.
-#[derive(Debug)]
-#[repr(C)]
-pub struct RollbackShared {
-    /// Rollbacks (restores and re-simulations).
-    pub rollbacks: AtomicU64,
-    /// Ticks re-simulated in all.
-    pub resimulated_ticks: AtomicU64,
-    /// The deepest rollback, ticks.
-    pub max_depth: AtomicU64,
-    /// The 99th percentile of rollback depth, ticks (0: none yet).
-    pub depth_p99: AtomicU64,
-    /// Received positions older than the horizon (could not be undone).
-    pub fallbacks: AtomicU64,
-    /// Confirmed-frontier hashes compared with a sender's.
-    pub hash_checks: AtomicU64,
-    /// ... that differed: the sites' confirmed states are not the same bits.
-    pub hash_mismatches: AtomicU64,
-    /// Confirmed states adopted from a site before this one whose confirmed history differed.
-    pub adopted_states: AtomicU64,
-    /// Remote tool tracks taken from the ring.
-    pub tracks_received: AtomicU64,
-    /// ... that did not convert (a foreign writer of the ring), or named this site.
-    pub tracks_rejected: AtomicU64,
-    /// Own tracks not pushed: the ring to the network was full.
-    pub track_drops: AtomicU64,
-    /// Physics periods that stepped more than one tick to stay on the session's grid.
-    pub late_periods: AtomicU64,
-    /// Ticks of the session's grid stepped.
-    pub ticks: AtomicU64,
-    /// Confirmed ticks the own tool touched the object in but had not when first simulated
-    /// (contact the user was never shown).
-    pub unfelt_contact_ticks: AtomicU64,
-    /// Confirmed ticks the own tool did not touch the object in but had when first simulated
-    /// (contact shown to the user that the confirmed history took back).
-    pub phantom_contact_ticks: AtomicU64,
-    /// Missed own contacts replayed to the user from the confirmed history.
-    pub replays: AtomicU64,
-    /// The grid tick this physics process joined at (0: with the session, at its start; later:
-    /// a restarted or late one, where the session was).
-    pub joined_tick: AtomicU64,
-    /// The own tool's local lag now, ticks (`timewarp`: its positions enter the physics this late
-    /// while it and another site's are near the object).
-    pub local_lag_ticks: AtomicU64,
-    /// Ticks stepped with the own tool lagged.
-    pub lagged_ticks: AtomicU64,
-    /// How late the other sites' tools are played now, ticks, the largest over them (`coupled`:
-    /// its adaptive jitter buffer; rounded up; 0 under other methods).
-    pub playout_ticks: AtomicU64,
-}
+pub use super::rollback::{RollbackFigures, RollbackShared};
 
 /// What the network process writes.
 #[derive(Debug)]

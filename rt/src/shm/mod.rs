@@ -13,6 +13,8 @@ pub mod name;
 pub mod pod;
 pub mod ring;
 #[cfg(not(loom))]
+pub mod rollback;
+#[cfg(not(loom))]
 pub mod segment;
 #[cfg(not(loom))]
 pub mod station;

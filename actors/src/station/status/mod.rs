@@ -300,114 +300,9 @@ pub struct ObjectStatus {
 
 // ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
 
-/// A rolling-back method's figures (`ControlBlock::physics.rollback`).
-#[derive(Debug, Clone, Copy, Serialize, PartialEq, Eq)]
-pub struct RollbackStatus {
-    /// Ticks of the session's grid stepped.
-    pub ticks: u64,
-    /// Rollbacks.
-    pub rollbacks: u64,
-    /// Ticks re-simulated in all.
-    pub resimulated_ticks: u64,
-    /// Deepest rollback, ticks.
-    pub max_depth: u64,
-    /// Rollback depth, 99th percentile, ticks.
-    pub depth_p99: u64,
-    /// Positions older than the horizon (could not be undone).
-    pub fallbacks: u64,
-    /// Confirmed-frontier hashes compared.
-    pub hash_checks: u64,
-    /// ... that differed.
-    pub hash_mismatches: u64,
-    /// Confirmed states adopted from a site before this one after they differed.
-    pub adopted_states: u64,
-    /// Remote tool tracks taken, rejected; own tracks dropped (ring full).
-    pub tracks_received: u64,
-    /// See `tracks_received`.
-    pub tracks_rejected: u64,
-    /// See `tracks_received`.
-    pub track_drops: u64,
-    /// Physics periods that caught up more than one tick.
-    pub late_periods: u64,
-    /// Confirmed ticks of own contact never shown live.
-    pub unfelt_contact_ticks: u64,
-    /// Ticks of own contact shown live that the confirmed history took back.
-    pub phantom_contact_ticks: u64,
-    /// Missed own contacts replayed to the user.
-    pub replays: u64,
-    /// The grid tick physics joined at (0: at the session's start; later: a restart, a late
-    /// station, where the session was).
-    pub joined_tick: u64,
-    /// The own tool's local lag now, ticks.
-    pub local_lag_ticks: u64,
-    /// Ticks stepped with the own tool lagged.
-    pub lagged_ticks: u64,
-    /// How late the other sites' tools are played now, ticks (`coupled`; 0 otherwise).
-    pub playout_ticks: u64,
-}
-
-impl RollbackStatus {
-    /// Read from the control block; `None` if physics never stepped on the grid.
-    pub fn of(ctl: &ControlBlock) -> Option<Self> {
-        let r = &ctl.physics.rollback;
-        let l = |a: &coop_rt::sync::AtomicU64| a.load(Ordering::Relaxed);
-        let ticks = l(&r.ticks);
-        (ticks > 0).then(|| Self {
-            ticks,
-            rollbacks: l(&r.rollbacks),
-            resimulated_ticks: l(&r.resimulated_ticks),
-            max_depth: l(&r.max_depth),
-            depth_p99: l(&r.depth_p99),
-            fallbacks: l(&r.fallbacks),
-            hash_checks: l(&r.hash_checks),
-            hash_mismatches: l(&r.hash_mismatches),
-            adopted_states: l(&r.adopted_states),
-            tracks_received: l(&r.tracks_received),
-            tracks_rejected: l(&r.tracks_rejected),
-            track_drops: l(&r.track_drops),
-            late_periods: l(&r.late_periods),
-            unfelt_contact_ticks: l(&r.unfelt_contact_ticks),
-            phantom_contact_ticks: l(&r.phantom_contact_ticks),
-            replays: l(&r.replays),
-            joined_tick: l(&r.joined_tick),
-            local_lag_ticks: l(&r.local_lag_ticks),
-            lagged_ticks: l(&r.lagged_ticks),
-            playout_ticks: l(&r.playout_ticks),
-        })
-    }
-}
-
-impl std::fmt::Display for RollbackStatus {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "rollback: {} ticks (joined at {}), {} rollbacks ({} ticks re-simulated, depth max {} p99 {}), {} fallbacks past the horizon, hash checks {} mismatches {}, {} confirmed states adopted; tool tracks: took {} (rejected {}), dropped {} own; {} late periods caught up; own contact never shown live {} ticks (replayed late {} times), shown and taken back {} ticks; own tool lagged {} ticks now, {} ticks in all",
-            self.ticks,
-            self.joined_tick,
-            self.rollbacks,
-            self.resimulated_ticks,
-            self.max_depth,
-            self.depth_p99,
-            self.fallbacks,
-            self.hash_checks,
-            self.hash_mismatches,
-            self.adopted_states,
-            self.tracks_received,
-            self.tracks_rejected,
-            self.track_drops,
-            self.late_periods,
-            self.unfelt_contact_ticks,
-            self.replays,
-            self.phantom_contact_ticks,
-            self.local_lag_ticks,
-            self.lagged_ticks
-        )?;
-        if self.playout_ticks > 0 {
-            write!(f, "; other tools played {} ticks late", self.playout_ticks)?;
-        }
-        Ok(())
-    }
-}
+/// A rolling-back method's figures (`ControlBlock::physics.rollback`), declared once with the
+/// shared block they are read from.
+pub use coop_rt::shm::rollback::RollbackFigures as RollbackStatus;
 
 /// The servo's figures.
 #[derive(Debug, Clone, Serialize)]
@@ -675,7 +570,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> Result<StationSta
             adoptions: ctl.physics.adoptions.load(Ordering::Relaxed),
             nonfinite_kept: ctl.physics.nonfinite_kept.load(Ordering::Relaxed),
             objects: ObjectStatus::of(&ctl),
-            rollback: RollbackStatus::of(&ctl),
+            rollback: ctl.physics.rollback.figures(),
         },
         servo: ServoStatus {
             command_n: ControlBlock::load_f64(&ctl.servo.command_n),

@@ -81,3 +81,24 @@ pub struct RollbackStats {
     /// ... and the own positions sent (that left the band; the others were held).
     pub deadband_samples: u64,
 }
+
+impl std::fmt::Display for RollbackStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} rollbacks ({} ticks re-simulated, deepest {}), {} fallbacks past the horizon, {} confirmed-state hashes compared, {} mismatched, {} confirmed states adopted; confirmed contact never shown live {} ticks (replayed late {} times), shown live and taken back {} ticks; own tool lagged {} ticks, by up to {}",
+            self.rollbacks,
+            self.resimulated_ticks,
+            self.max_depth,
+            self.fallbacks,
+            self.hash_checks,
+            self.hash_mismatches,
+            self.adopted_states,
+            self.unfelt_contact_ticks,
+            self.replays,
+            self.phantom_contact_ticks,
+            self.lagged_ticks,
+            self.max_local_lag_ticks
+        )
+    }
+}
