@@ -290,14 +290,16 @@ fn four_stations(
     let _ = std::fs::remove_dir_all(&dir);
     let mut rows = Vec::new();
     for s in &sc.site {
-        let st = &o.stations[&s.name]["live"];
+        let live = o.stations.get(&s.name).and_then(|r| r.live.as_ref());
+        let overruns = live.and_then(|l| l.overruns_during_session);
+        let wake = live.map(|l| &l.status.loops.servo.wake_us);
         rows.push(serde_json::json!({
             "site": s.name.clone(),
             "servo_hz": s.servo_rate_hz,
-            "servo_overruns": st["overruns_during_session"]["servo"],
-            "physics_overruns": st["overruns_during_session"]["physics"],
-            "servo_wake_p999_us": st["loops"]["servo"]["wake_us"]["p999"],
-            "servo_wake_max_us": st["loops"]["servo"]["wake_us"]["max"],
+            "servo_overruns": overruns.map(|o| o.servo),
+            "physics_overruns": overruns.map(|o| o.physics),
+            "servo_wake_p999_us": wake.and_then(|w| w.p999),
+            "servo_wake_max_us": wake.map(|w| w.max),
         }));
     }
     let cpu = coop_rt::sched::allowed_cpus().last().copied().unwrap_or(0);

@@ -4,7 +4,6 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use anyhow::Context;
 use coop_actors::station::status::StationStatus;
@@ -125,21 +124,6 @@ pub struct StationReport {
     pub first_adoption_s: Option<f64>,
     /// States it took from the session's queryable at start.
     pub join_states: Option<u64>,
-    /// Its JSON, made when first looked up by key.
-    #[serde(skip)]
-    json: OnceLock<serde_json::Value>,
-}
-
-/// NB: a report looked up by its JSON keys, for the session benchmark's four-station figures that
-/// still read it so; the printer reads the fields.
-impl std::ops::Index<&str> for StationReport {
-    type Output = serde_json::Value;
-
-    fn index(&self, key: &str) -> &serde_json::Value {
-        &self
-            .json
-            .get_or_init(|| serde_json::to_value(self).unwrap_or_default())[key]
-    }
 }
 
 impl StationReport {
@@ -176,7 +160,6 @@ impl StationReport {
             truncated: rec.truncated,
             first_adoption_s: rec.adoptions.first().map(|a| since(a.t_ns)),
             join_states: rec.status.map(|s| s.join_states),
-            json: OnceLock::new(),
         }
     }
 }
@@ -469,7 +452,5 @@ mod tests {
             "join_states": 3,
         });
         assert_eq!(serde_json::to_value(&r).expect("serializes"), expected);
-        assert_eq!(r["join_states"], 3);
-        assert_eq!(r["live"], serde_json::Value::Null);
     }
 }
