@@ -5,28 +5,19 @@
 //! CI installs both packages and sets `COOP_REQUIRE_MCAP_PY=1` (see .ci/run): then a missing
 //! package fails the test instead of skipping the check.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::sync::Mutex;
 
+use coop_tests::{repo, TempDir};
 use serde_json::Value;
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn out_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-foxglove-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
-
 /// The Foxglove summary of one site's recording (its parts, in order), as the fixture script
 /// reads it.
 fn foxglove_summary(parts: &[PathBuf]) -> Value {
-    let script = root().join("tools/tests/fixtures/foxglove_recording.py");
+    let script = repo().join("tools/tests/fixtures/foxglove_recording.py");
     let out = Command::new("python3")
         .arg(&script)
         .args(parts)
@@ -47,11 +38,11 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
     if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario_path = coop_tests::scenario_path("three-users.toml");
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
-    let out = out_dir("recorded");
+    let out = TempDir::unmade("foxglove-recorded");
     let run = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
+        .current_dir(repo())
         .arg("run")
         .arg(&scenario_path)
         .args(["--method", "paper", "--record-max-file-s", "4", "--json"])
@@ -151,7 +142,6 @@ fn a_sessions_recordings_show_every_site_in_foxglove_terms() {
     let session_file = foxglove_summary(&[out.join("paper").join("session.mcap")]);
     assert_eq!(session_file["errors"], serde_json::json!([]));
     assert!(check_layout("foxglove-layout.json", &session_file) > 0);
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// `session run --live`: a Foxglove WebSocket client that is not ours (the `websockets` package,
@@ -163,16 +153,16 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     if coop_tests::python_with(&["websockets", "google.protobuf"]).is_none() {
         return;
     }
-    let scenario_path = root().join("scenarios/three-users.toml");
+    let scenario_path = coop_tests::scenario_path("three-users.toml");
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
-    let out = out_dir("live");
+    let out = TempDir::unmade("foxglove-live");
     let (child, url, log) = live_session(&scenario_path, "paper", &out);
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     // The client waits (up to 60 s) until it has seen every site; it connects before the stations
     // are up, so what it sees is the session as it runs.
     let client = Command::new("python3")
-        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .arg(repo().join("tools/tests/fixtures/foxglove_live.py"))
         .args([url.as_str(), "60"])
         .args(&sites)
         .output()
@@ -180,7 +170,7 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
     // A second viewer connects while the session runs and stays 2 s: it gets the whole scene
     // first (the last one, at once), then the turns' arrows as they change.
     let later = Command::new("python3")
-        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .arg(repo().join("tools/tests/fixtures/foxglove_live.py"))
         .args([url.as_str(), "60"])
         .args(&sites)
         .env("LISTEN_S", "2")
@@ -241,19 +231,19 @@ fn a_running_session_is_served_live_to_a_foxglove_websocket_client() {
         result["methods"]["paper"]["real"]["divergence_final_m"].as_f64() < Some(0.005),
         "{result}"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// `sim run scenarios/<file> <args> --out` into the test's directory `tag`: the scenario, and its
-/// `session.mcap` as the foreign reader summarises it (read without errors), and the directory.
+/// `session.mcap` as the foreign reader summarises it (read without errors), and the directory
+/// (removed when dropped).
 fn simulated_session(
     tag: &str,
     file: &str,
     args: &[&str],
-) -> (coop_model::scenario::Scenario, Value, PathBuf) {
-    let scenario_path = root().join("scenarios").join(file);
+) -> (coop_model::scenario::Scenario, Value, TempDir) {
+    let scenario_path = coop_tests::scenario_path(file);
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
-    let out = out_dir(tag);
+    let out = TempDir::unmade(&format!("foxglove-{tag}"));
     let run = Command::new(env!("CARGO_BIN_EXE_sim"))
         .arg("run")
         .arg(&scenario_path)
@@ -280,7 +270,7 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
     if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let (scenario, v, out) = simulated_session("sim", "three-users.toml", &["--method", "paper"]);
+    let (scenario, v, _out) = simulated_session("sim", "three-users.toml", &["--method", "paper"]);
     let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
     let mut sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     // Every site's copy and tool and the reference copy, one frame each per sample, in `world`.
@@ -346,7 +336,6 @@ fn a_simulated_runs_session_file_shows_every_site_and_the_reference_in_foxglove_
             .is_some_and(|m| m.contains("scenario three-users") && m.contains("simulated")),
         "{logs:?}"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// `station run --live`: the station serves its own live view (from its network process); a
@@ -359,7 +348,7 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
         return;
     }
     let session = coop_tests::unique_session();
-    let dir = out_dir("station-live");
+    let dir = TempDir::unmade("foxglove-station-live");
     let record = dir.join("user1.mcap");
     let cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
         c.record = Some(record.clone());
@@ -380,7 +369,7 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
     let (url, log) = live_url(stderr, 60, "the network process");
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback: {url}");
     let client = Command::new("python3")
-        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .arg(repo().join("tools/tests/fixtures/foxglove_live.py"))
         .args([url.as_str(), "60", "user1"])
         .output()
         .expect("python3 runs");
@@ -431,12 +420,11 @@ fn a_running_station_serves_its_own_live_view_to_a_foxglove_websocket_client() {
     );
     let rec = coop_transport::recording::read(&record).expect("the recording reads");
     assert!(!rec.truncated && !rec.samples.is_empty() && rec.status.is_some());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The shipped layout (`docs/foxglove-layout.json`).
 fn layout(file: &str) -> Value {
-    let path = root().join("docs").join(file);
+    let path = repo().join("docs").join(file);
     serde_json::from_str(&std::fs::read_to_string(&path).expect("the layout")).expect("JSON")
 }
 
@@ -576,10 +564,10 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
     if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let out = out_dir("layout");
+    let out = TempDir::unmade("foxglove-layout");
     let run = Command::new(env!("CARGO_BIN_EXE_sim"))
         .arg("run")
-        .arg(root().join("scenarios/paper.toml"))
+        .arg(coop_tests::scenario_path("paper.toml"))
         .arg("--out")
         .arg(&out)
         .output()
@@ -607,7 +595,6 @@ fn the_shipped_layout_refers_only_to_what_a_session_file_has() {
     ] {
         assert!(check_path(bad, &v).is_err(), "{bad} passed");
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The layout for a world of several objects (`docs/foxglove-layout-world.json`, written for
@@ -618,14 +605,13 @@ fn the_world_layout_refers_only_to_what_a_stack_session_file_has() {
     if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let (_, v, out) = simulated_session("layout-world", "stack.toml", &[]);
+    let (_, v, _out) = simulated_session("layout-world", "stack.toml", &[]);
     assert!(
         check_layout("foxglove-layout-world.json", &v) >= 18,
         "every object's series were checked"
     );
     assert!(check_path("/object{site==\"user1\"}{object==\"base\"}.pos[2]", &v).is_ok());
     assert!(check_path("/object{site==\"user1\"}{object==\"cup\"}.pos[2]", &v).is_err());
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// `session run SCENARIO --method METHOD --json --live 127.0.0.1:0 --out OUT`, running: the
@@ -636,7 +622,7 @@ fn live_session(
     out: &std::path::Path,
 ) -> (std::process::Child, String, std::thread::JoinHandle<String>) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
+        .current_dir(repo())
         .arg("run")
         .arg(scenario)
         .args(["--method", method, "--json", "--live", "127.0.0.1:0"])
@@ -690,7 +676,7 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
     if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
         return;
     }
-    let (scenario, v, out) = simulated_session("sim-objects", "billiards.toml", &[]);
+    let (scenario, v, _out) = simulated_session("sim-objects", "billiards.toml", &[]);
     assert_eq!(scenario.objects.len(), 2);
     let samples = (scenario.duration_s * scenario.sample_rate_hz).round() as u64 + 1;
     let frames = v["frames"].as_object().expect("frames");
@@ -724,7 +710,6 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
     }
     assert!(v["json_schemas"]["/object"]["properties"]["object"].is_object());
     entities_sit_in_declared_frames(&v);
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// Each entity of the reader's summary `v` sits in `world` or in a frame the file transforms.
@@ -753,11 +738,11 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
     if coop_tests::python_with(&["mcap", "google.protobuf", "websockets"]).is_none() {
         return;
     }
-    let scenario_path = root().join("scenarios/stack.toml");
+    let scenario_path = coop_tests::scenario_path("stack.toml");
     let scenario = coop_actors::scenario_file::load(&scenario_path).expect("scenario");
     assert_eq!(scenario.objects.len(), 2);
     let (first, second) = (scenario.object_name(0), scenario.object_name(1));
-    let out = out_dir("stack");
+    let out = TempDir::unmade("foxglove-stack");
     let (child, url, log) = live_session(&scenario_path, "timewarp", &out);
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     let others: Vec<String> = sites
@@ -765,7 +750,7 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
         .map(|s| format!("object/{second}/{s}"))
         .collect();
     let client = Command::new("python3")
-        .arg(root().join("tools/tests/fixtures/foxglove_live.py"))
+        .arg(repo().join("tools/tests/fixtures/foxglove_live.py"))
         .args([url.as_str(), "60"])
         .args(&sites)
         .env("WANT_TF", others.join(","))
@@ -864,5 +849,4 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
         .as_array()
         .expect("wire rows");
     assert_eq!(wire.len(), sites.len(), "{result}");
-    let _ = std::fs::remove_dir_all(&out);
 }

@@ -6,26 +6,15 @@
 //! CI installs the packages and sets `COOP_REQUIRE_MCAP_PY=1` (see .ci/run): then a missing package
 //! fails the test instead of skipping it.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use coop_tests::Reaped;
+use coop_tests::{repo, scenario_path, Reaped, TempDir};
 use serde_json::Value;
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn out_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-ros2-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("out dir");
-    d
-}
 
 /// A zenoh router on a free loopback port, as `rmw_zenohd` would be: its locator.
 fn router(dir: &Path) -> (Reaped, String) {
@@ -56,7 +45,7 @@ fn host_port(locator: &str) -> String {
 
 fn client() -> Command {
     let mut c = Command::new("python3");
-    c.arg(root().join("tools/tests/fixtures/ros2_client.py"));
+    c.arg(repo().join("tools/tests/fixtures/ros2_client.py"));
     c
 }
 
@@ -72,7 +61,7 @@ fn a_ros2_client_sees_every_site_s_poses_and_forces_as_recorded() {
     if coop_tests::python_with(&["zenoh_ros2_sdk", "rosbags", "mcap"]).is_none() {
         return;
     }
-    let dir = out_dir("session");
+    let dir = TempDir::new("ros2-session");
     let (_router, locator) = router(&dir);
     let stop = dir.join("stop");
     let got = dir.join("got.json");
@@ -92,7 +81,7 @@ fn a_ros2_client_sees_every_site_s_poses_and_forces_as_recorded() {
             .expect("python3 runs"),
     ));
     let out = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
+        .current_dir(repo())
         .args([
             "run",
             "scenarios/paper.toml",
@@ -220,7 +209,7 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     if coop_tests::python_with(&["zenoh_ros2_sdk", "rosbags", "mcap"]).is_none() {
         return;
     }
-    let dir = out_dir("device");
+    let dir = TempDir::new("ros2-device");
     let (_router, locator) = router(&dir);
     let silent = dir.join("silent");
     let got = dir.join("device.json");
@@ -363,11 +352,11 @@ fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
 
     const LIMIT: Duration = Duration::from_secs(60);
     let _turn = ONE_AT_A_TIME.lock();
-    let dir = out_dir("acl");
+    let dir = TempDir::new("ros2-acl");
     let session = coop_tests::unique_session();
     let certs = dir.join("certs");
     let made = Command::new(env!("CARGO_BIN_EXE_session"))
-        .current_dir(root())
+        .current_dir(repo())
         .args(["certs", "scenarios/paper.toml", "--session", &session])
         .args([
             "--router",
@@ -422,7 +411,7 @@ fn through_the_router_only_a_site_speaks_on_its_ros2_topics() {
     };
     // The station: user1, a client of the router, publishing its ROS 2 topics.
     let station_cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
-        c.scenario = Some(root().join("scenarios/paper.toml"));
+        c.scenario = Some(scenario_path("paper.toml"));
         c.network = NetworkConfig {
             mode: Mode::Client,
             listen: Vec::new(),

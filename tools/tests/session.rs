@@ -6,29 +6,20 @@
 //! zenoh on loopback. Sessions in this file take turns (one lock): each runs its scenario in real
 //! time, and the machine has two cores.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::sync::Mutex;
 use std::time::Duration;
 
 use coop_rt::sync::{AtomicU64, Ordering};
+use coop_tests::{repo, scenario_path, ScenarioToml, TempDir};
 use serde_json::Value;
 
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn out_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("coop-session-{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
-}
-
 fn session(args: &[&str], out: &Path) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_session"));
-    c.current_dir(root())
+    c.current_dir(repo())
         .arg("run")
         .args(args)
         .arg("--out")
@@ -87,7 +78,7 @@ fn foreign_topics(path: &Path) -> Option<Vec<(String, u64)>> {
 #[test]
 fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("paper");
+    let out = TempDir::unmade("session-paper");
     // Recordings in parts of 4 s: the metrics below come from rotated recordings read as one.
     let v = run_json(session(
         &["scenarios/paper.toml", "--record-max-file-s", "4"],
@@ -179,22 +170,18 @@ fn the_paper_experiment_on_real_stations_naive_diverges_paper_stays_together() {
             assert!(count(t) >= 1, "{t} missing: {topics:?}");
         }
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
 fn four_stations_run_to_the_end_and_report_their_overruns() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("four");
+    let out = TempDir::unmade("session-four");
     // Run from the output's parent with a relative --out (a user's `--out out/x`), the scenario
     // given by its full path.
     let base = out.parent().expect("temp dir").to_owned();
     let mut cmd = session(
         &[
-            &root()
-                .join("scenarios/four-users.toml")
-                .display()
-                .to_string(),
+            &scenario_path("four-users.toml").display().to_string(),
             "--method",
             "paper",
         ],
@@ -236,13 +223,12 @@ fn four_stations_run_to_the_end_and_report_their_overruns() {
         f(&real["divergence_final_m"]) < 0.005,
         "four copies together at the end: {real}"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
 fn a_late_joiner_adopts_the_session_state_within_one_report_period() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("late");
+    let out = TempDir::unmade("session-late");
     let v = run_json(session(
         &[
             "scenarios/paper.toml",
@@ -271,7 +257,6 @@ fn a_late_joiner_adopts_the_session_state_within_one_report_period() {
         waited <= report_period,
         "adopted {waited:.4} s after joining (one report period is {report_period:.4} s): {late}"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// What the attacker sent, per refusal reason.
@@ -377,7 +362,7 @@ fn attack(session: &str, stop: &AtomicU64) -> Sent {
 fn hostile_messages_are_counted_and_change_nothing() {
     let _turn = ONE_AT_A_TIME.lock();
     let name = format!("h{}", std::process::id());
-    let out = out_dir("hostile");
+    let out = TempDir::unmade("session-hostile");
     let cmd = session(
         &[
             "scenarios/zero-delay.toml",
@@ -456,14 +441,13 @@ fn hostile_messages_are_counted_and_change_nothing() {
     }
     let real = &v["methods"]["paper"]["real"];
     assert!(f(&real["divergence_final_m"]) < 0.005, "{real}");
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 #[test]
 fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
     let _turn = ONE_AT_A_TIME.lock();
     let name = format!("i{}", std::process::id());
-    let out = out_dir("interrupted");
+    let out = TempDir::unmade("session-interrupted");
     let mut cmd = session(
         &[
             "scenarios/zero-delay.toml",
@@ -525,7 +509,6 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
         coop_tests::shm_entries(&format!("coop_{session}_")).is_empty(),
         "segments left"
     );
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The paper's task under `timewarp` on real stations (tool tracks over zenoh, rollbacks
@@ -534,7 +517,7 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
 #[test]
 fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("timewarp");
+    let out = TempDir::unmade("session-timewarp");
     let v = run_json(session(
         &["scenarios/paper.toml", "--method", "timewarp"],
         &out,
@@ -584,7 +567,6 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
         // Both users grasp, squeeze and carry the disk: the own tool was lagged meanwhile.
         assert!(rb["lagged_ticks"].as_u64() > Some(0), "{site}: {rb}");
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// The paper's task under `coupled` on real stations (tool tracks and states over
@@ -604,7 +586,7 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
 #[test]
 fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("coupled");
+    let out = TempDir::unmade("session-coupled");
     let v = run_json(session(
         &["scenarios/paper.toml", "--method", "coupled"],
         &out,
@@ -663,7 +645,6 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
             "{site} played the other's tool {playout} ticks late: {ph}"
         );
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
 
 /// Half the messages lost on receive (emulated), 150 ms: user 2's 20 Hz tracks carry 50 ticks
@@ -675,16 +656,17 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
 #[test]
 fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
     let _turn = ONE_AT_A_TIME.lock();
-    let out = out_dir("timewarp-loss");
+    let out = TempDir::unmade("session-timewarp-loss");
     std::fs::create_dir_all(&out).expect("out");
-    let base = std::fs::read_to_string(root().join("scenarios/paper.toml")).expect("paper.toml");
+    let base = ScenarioToml::paper();
     let lossy = base
-        .replace("delay_min_ms = 20.0", "delay_min_ms = 150.0")
-        .replace("delay_max_ms = 500.0", "delay_max_ms = 150.0")
-        .replace("loss = 0.0", "loss = 0.5");
+        .clone()
+        .set("network.delay_min_ms", 150.0)
+        .set("network.delay_max_ms", 150.0)
+        .set("network.loss", 0.5);
     assert_ne!(lossy, base);
     let scenario = out.join("lossy.toml");
-    std::fs::write(&scenario, lossy).expect("scenario");
+    lossy.write(&scenario);
     let v = run_json(session(
         &[scenario.to_str().expect("utf-8"), "--method", "timewarp"],
         &out.join("run"),
@@ -705,5 +687,4 @@ fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
         assert_eq!(rb["fallbacks"], 0, "{site}: every gap was repaired: {rb}");
         assert_eq!(rb["hash_mismatches"], 0, "{site}: {rb}");
     }
-    let _ = std::fs::remove_dir_all(&out);
 }
