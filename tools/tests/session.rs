@@ -513,7 +513,14 @@ fn an_interrupted_session_stops_its_stations_and_leaves_nothing() {
 
 /// The paper's task under `timewarp` on real stations (tool tracks over zenoh, rollbacks
 /// in the physics process): all six phases at both stations, rollbacks that happened, confirmed
-/// frontiers compared and never different.
+/// frontiers compared, and never different unless an input came too late to be undone.
+///
+/// Confirmed states are the same bits at every site by construction, except where a site never
+/// knew an input: a position that arrived after it left the history (a fallback). On a loaded
+/// machine a station can stall that long (one run beside four compilers: 2 fallbacks, 14
+/// mismatches), and then the copies differ until one adopts the other's state. So the test holds
+/// what the method promises whatever the machine's timing: no mismatch without a fallback, no
+/// adoption without a mismatch.
 #[test]
 fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states() {
     let _turn = ONE_AT_A_TIME.lock();
@@ -535,6 +542,31 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
         .as_object()
         .expect("stations");
     assert_eq!(stations.len(), 2);
+    let total = |key: &str| {
+        stations
+            .values()
+            .map(|st| st["live"]["physics"]["rollback"][key].as_u64().unwrap_or(0))
+            .sum::<u64>()
+    };
+    let (fallbacks, mismatches, adopted) = (
+        total("fallbacks"),
+        total("hash_mismatches"),
+        total("adopted_states"),
+    );
+    if fallbacks > 0 {
+        eprintln!(
+            "NOTE: {fallbacks} fallbacks (a station stalled past the horizon): {mismatches} hash \
+             mismatches, {adopted} states adopted"
+        );
+    }
+    assert!(
+        mismatches == 0 || fallbacks > 0,
+        "confirmed states differed ({mismatches} mismatches) though every input came in time"
+    );
+    assert!(
+        adopted == 0 || mismatches > 0,
+        "a state was adopted ({adopted}) though the confirmed states never differed"
+    );
     for (site, st) in stations {
         let rb = &st["live"]["physics"]["rollback"];
         assert!(
@@ -553,9 +585,11 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
             rb["hash_checks"].as_u64() > Some(100),
             "{site} compared confirmed frontiers: {rb}"
         );
-        assert_eq!(rb["hash_mismatches"], 0, "{site}: {rb}");
-        // Nothing diverged, so nothing was adopted (and the count is in the status).
-        assert_eq!(rb["adopted_states"], 0, "{site}: {rb}");
+        // The counts are in the status (their sums are checked above).
+        assert!(
+            rb["hash_mismatches"].is_u64() && rb["adopted_states"].is_u64(),
+            "{site}: {rb}"
+        );
         // What rolling back cost the user's feel is in the status too (its amount follows the
         // machine's timing, so only that it is there).
         assert!(
@@ -619,6 +653,31 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
         .as_object()
         .expect("stations");
     assert_eq!(stations.len(), 2);
+    let total = |key: &str| {
+        stations
+            .values()
+            .map(|st| st["live"]["physics"]["rollback"][key].as_u64().unwrap_or(0))
+            .sum::<u64>()
+    };
+    let (fallbacks, mismatches, adopted) = (
+        total("fallbacks"),
+        total("hash_mismatches"),
+        total("adopted_states"),
+    );
+    if fallbacks > 0 {
+        eprintln!(
+            "NOTE: {fallbacks} fallbacks (a station stalled past the horizon): {mismatches} hash \
+             mismatches, {adopted} states adopted"
+        );
+    }
+    assert!(
+        mismatches == 0 || fallbacks > 0,
+        "confirmed states differed ({mismatches} mismatches) though every input came in time"
+    );
+    assert!(
+        adopted == 0 || mismatches > 0,
+        "a state was adopted ({adopted}) though the confirmed states never differed"
+    );
     for (site, st) in stations {
         let ph = &st["live"]["physics"];
         let rb = &ph["rollback"];
@@ -675,6 +734,31 @@ fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
         .as_object()
         .expect("stations");
     assert_eq!(stations.len(), 2);
+    let total = |key: &str| {
+        stations
+            .values()
+            .map(|st| st["live"]["physics"]["rollback"][key].as_u64().unwrap_or(0))
+            .sum::<u64>()
+    };
+    let (fallbacks, mismatches, adopted) = (
+        total("fallbacks"),
+        total("hash_mismatches"),
+        total("adopted_states"),
+    );
+    if fallbacks > 0 {
+        eprintln!(
+            "NOTE: {fallbacks} fallbacks (a station stalled past the horizon): {mismatches} hash \
+             mismatches, {adopted} states adopted"
+        );
+    }
+    assert!(
+        mismatches == 0 || fallbacks > 0,
+        "confirmed states differed ({mismatches} mismatches) though every input came in time"
+    );
+    assert!(
+        adopted == 0 || mismatches > 0,
+        "a state was adopted ({adopted}) though the confirmed states never differed"
+    );
     for (site, st) in stations {
         let live = &st["live"];
         assert!(
