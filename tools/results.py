@@ -9,9 +9,14 @@ so a figure can be traced to its run and rerun with one line.
 
 usage:
   tools/results.py write NAME [--title T] -- COMMAND [ARG...]   run COMMAND, write docs/results/NAME.md
+  tools/results.py write-all [NAME...]                           write the pages docs/results/pages.txt lists
   tools/results.py rerun NAME [NAME...] | --all                  run the command a page names again
   tools/results.py list                                          each page with its command and commit
-  tools/results.py check                                         every page stamped and in SUMMARY.md
+  tools/results.py check                                         every listed page written from its listed
+                                                                 command, stamped, and in SUMMARY.md
+
+`docs/results/pages.txt` lists the book's pages, one a line: NAME, TITLE and COMMAND (a shell
+line, split as the shell would), separated by tabs.
 
 The command runs in the repository's root. A command that fails writes no page (the old one stays).
 """
@@ -76,7 +81,8 @@ def write(name, title, command):
         print(f"results {name}: `{shlex.join(command)}` exited {code}: no page written", file=sys.stderr)
         return code
     commit = git("rev-parse", "--short=10", "HEAD") or "unknown"
-    dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    # The pages themselves are not the run's code: writing them one after another leaves them changed.
+    dirty = bool(git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs/results"))
     stamp = {
         "name": name,
         "title": title,
@@ -107,6 +113,21 @@ def write(name, title, command):
     return 0
 
 
+def listed():
+    """The pages `pages.txt` lists: (name, title, command as argv)."""
+    path = os.path.join(PAGES, "pages.txt")
+    out = []
+    with open(path) as f:
+        for n, line in enumerate(f, 1):
+            if not line.strip() or line.startswith("#"):
+                continue
+            parts = line.rstrip("\n").split("\t")
+            if len(parts) != 3:
+                raise SystemExit(f"{path}:{n}: NAME, TITLE and COMMAND separated by tabs; found {len(parts)} fields")
+            out.append((parts[0], parts[1], shlex.split(parts[2])))
+    return out
+
+
 def pages():
     if not os.path.isdir(PAGES):
         return []
@@ -115,7 +136,7 @@ def pages():
 
 def main(argv):
     if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__)
+        sys.stdout.write(__doc__)
         return 0 if argv else 2
     verb, rest = argv[0], argv[1:]
     if verb == "write":
@@ -136,6 +157,17 @@ def main(argv):
             print(f"write: the name {name!r} must be letters, digits, '-' or '_'", file=sys.stderr)
             return 2
         return write(name, title, command)
+    if verb == "write-all":
+        todo = [p for p in listed() if not rest or p[0] in rest]
+        unknown = set(rest) - {p[0] for p in todo}
+        if unknown:
+            print(f"write-all: not in pages.txt: {sorted(unknown)}", file=sys.stderr)
+            return 2
+        for name, title, command in todo:
+            code = write(name, title, command)
+            if code:
+                return code
+        return 0
     if verb == "rerun":
         names = pages() if rest == ["--all"] else rest
         for name in names:
@@ -157,16 +189,23 @@ def main(argv):
         bad = []
         with open(os.path.join(ROOT, "docs", "SUMMARY.md")) as f:
             summary = f.read()
+        wanted = {name: (title, command) for name, title, command in listed()}
         for name in pages():
-            s = read_stamp(os.path.join(PAGES, f"{name}.md"))
+            if name not in wanted:
+                bad.append(f"docs/results/{name}.md: not in docs/results/pages.txt")
+        for name, (title, command) in wanted.items():
+            path = os.path.join(PAGES, f"{name}.md")
+            s = read_stamp(path) if os.path.exists(path) else None
             if not s or not s.get("command") or not s.get("commit"):
-                bad.append(f"docs/results/{name}.md: no stamp naming its command and commit")
+                bad.append(f"docs/results/{name}.md: not written, or no stamp naming its command and commit (tools/results.py write-all {name})")
+            elif s["command"] != command:
+                bad.append(f"docs/results/{name}.md: written by `{shlex.join(s['command'])}`, but pages.txt says `{shlex.join(command)}` (tools/results.py write-all {name})")
             if f"(results/{name}.md)" not in summary:
                 bad.append(f"docs/results/{name}.md: not in docs/SUMMARY.md")
         for b in bad:
             print(b, file=sys.stderr)
         if not bad:
-            print(f"results: {len(pages())} pages, each stamped with its command and commit")
+            print(f"results: {len(wanted)} pages, each written from its listed command and stamped with its commit")
         return 1 if bad else 0
     print(f"unknown verb {verb!r}; see --help", file=sys.stderr)
     return 2
