@@ -653,31 +653,6 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
         .as_object()
         .expect("stations");
     assert_eq!(stations.len(), 2);
-    let total = |key: &str| {
-        stations
-            .values()
-            .map(|st| st["live"]["physics"]["rollback"][key].as_u64().unwrap_or(0))
-            .sum::<u64>()
-    };
-    let (fallbacks, mismatches, adopted) = (
-        total("fallbacks"),
-        total("hash_mismatches"),
-        total("adopted_states"),
-    );
-    if fallbacks > 0 {
-        eprintln!(
-            "NOTE: {fallbacks} fallbacks (a station stalled past the horizon): {mismatches} hash \
-             mismatches, {adopted} states adopted"
-        );
-    }
-    assert!(
-        mismatches == 0 || fallbacks > 0,
-        "confirmed states differed ({mismatches} mismatches) though every input came in time"
-    );
-    assert!(
-        adopted == 0 || mismatches > 0,
-        "a state was adopted ({adopted}) though the confirmed states never differed"
-    );
     for (site, st) in stations {
         let ph = &st["live"]["physics"];
         let rb = &ph["rollback"];
@@ -734,31 +709,6 @@ fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
         .as_object()
         .expect("stations");
     assert_eq!(stations.len(), 2);
-    let total = |key: &str| {
-        stations
-            .values()
-            .map(|st| st["live"]["physics"]["rollback"][key].as_u64().unwrap_or(0))
-            .sum::<u64>()
-    };
-    let (fallbacks, mismatches, adopted) = (
-        total("fallbacks"),
-        total("hash_mismatches"),
-        total("adopted_states"),
-    );
-    if fallbacks > 0 {
-        eprintln!(
-            "NOTE: {fallbacks} fallbacks (a station stalled past the horizon): {mismatches} hash \
-             mismatches, {adopted} states adopted"
-        );
-    }
-    assert!(
-        mismatches == 0 || fallbacks > 0,
-        "confirmed states differed ({mismatches} mismatches) though every input came in time"
-    );
-    assert!(
-        adopted == 0 || mismatches > 0,
-        "a state was adopted ({adopted}) though the confirmed states never differed"
-    );
     for (site, st) in stations {
         let live = &st["live"];
         assert!(
