@@ -47,6 +47,7 @@ pub use outcome::{
 };
 pub use recorded::run_from_recordings;
 pub use report::print as print_report;
+pub use stations::station_run;
 
 /// What `session run` was asked.
 #[derive(Debug, Clone)]

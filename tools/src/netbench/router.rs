@@ -158,15 +158,7 @@ fn through_router(
         let cfg = dir.join(format!("{}.toml", s.name));
         std::fs::write(&cfg, c.to_toml()?)?;
         let log = std::fs::File::create(dir.join(format!("{}.log", s.name)))?;
-        let child = Command::new(&bin.program)
-            .args(&bin.prefix)
-            .args(["run", "--config"])
-            .arg(&cfg)
-            .arg("--parent")
-            .arg(std::process::id().to_string())
-            .stdin(Stdio::null())
-            .stdout(log.try_clone()?)
-            .stderr(log)
+        let child = crate::session::station_run(bin, &cfg, log)?
             .spawn()
             .with_context(|| format!("starting station {}", s.name))?;
         stations.push(Reaped(child, "station"));

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_transport::network;
 use coop_transport::recording::{self, Recording};
@@ -156,10 +156,7 @@ pub fn run_attached(
     method: MethodName,
     session: &str,
 ) -> anyhow::Result<MethodOutcome> {
-    let mut sc = sc.clone();
-    sc.method = method;
-    let dir = a.out.join(method.as_str());
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let (sc, dir) = super::launch::method_run(a, sc, method)?;
     let z = at.open()?;
     let (present, _presence) = super::watch_presence(&z, session)?;
     // From here on the launcher answers its clock: the stations measure their offset to it while

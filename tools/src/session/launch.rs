@@ -17,6 +17,22 @@ use super::outcome::{outcome, LiveStatus, MethodOutcome, Recorded, SessionOverru
 use super::stations::{self, Station};
 use super::{lock, unix_ns_of, watch_presence, RunArgs};
 
+/// The scenario under `method`, and the directory its run writes to (made).
+///
+/// # Errors
+/// The directory cannot be made.
+pub(super) fn method_run(
+    a: &RunArgs,
+    sc: &Scenario,
+    method: MethodName,
+) -> anyhow::Result<(Scenario, std::path::PathBuf)> {
+    let mut sc = sc.clone();
+    sc.method = method;
+    let dir = a.out.join(method.as_str());
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok((sc, dir))
+}
+
 /// Runs one session of `method` and gathers its figures.
 ///
 /// # Errors
@@ -27,10 +43,7 @@ pub fn run_method(
     method: MethodName,
     session: &str,
 ) -> anyhow::Result<MethodOutcome> {
-    let mut sc = sc.clone();
-    sc.method = method;
-    let dir = a.out.join(method.as_str());
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let (sc, dir) = method_run(a, sc, method)?;
     // Absolute: the station configs name their recordings, and a relative path in a config is
     // relative to the config's own directory.
     let dir = std::fs::canonicalize(&dir).with_context(|| format!("finding {}", dir.display()))?;

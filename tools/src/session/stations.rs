@@ -22,6 +22,28 @@ pub(crate) struct Station {
     config: PathBuf,
 }
 
+/// `station run --config <config>` as a launcher starts it: its output to `log`, dying with the
+/// launcher (`--parent`).
+///
+/// # Errors
+/// The log's handle cannot be duplicated.
+pub fn station_run(
+    bin: &StationBin,
+    config: &std::path::Path,
+    log: std::fs::File,
+) -> std::io::Result<Command> {
+    let mut c = Command::new(&bin.program);
+    c.args(&bin.prefix)
+        .args(["run", "--config"])
+        .arg(config)
+        .arg("--parent")
+        .arg(std::process::id().to_string())
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log);
+    Ok(c)
+}
+
 impl Station {
     /// The last lines of its log, for an error that names it.
     pub fn log_tail(&self) -> String {
@@ -34,15 +56,7 @@ impl Station {
     pub fn spawn(&mut self, bin: &StationBin) -> anyhow::Result<()> {
         let log = std::fs::File::create(&self.log)
             .with_context(|| format!("creating {}", self.log.display()))?;
-        let child = Command::new(&bin.program)
-            .args(&bin.prefix)
-            .args(["run", "--config"])
-            .arg(&self.config)
-            .arg("--parent")
-            .arg(std::process::id().to_string())
-            .stdin(Stdio::null())
-            .stdout(log.try_clone()?)
-            .stderr(log)
+        let child = station_run(bin, &self.config, log)?
             .spawn()
             .with_context(|| {
                 format!("starting {} for site {}", bin.program.display(), self.site)

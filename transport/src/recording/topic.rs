@@ -57,21 +57,6 @@ impl Topic {
     /// A session file's channels, in order.
     pub(super) const SESSION_FILE: [Topic; 3] = [Topic::Object, Topic::Tool, Topic::Divergence];
 
-    /// Every JSON channel.
-    const ALL: [Topic; 11] = [
-        Topic::Session,
-        Topic::Object,
-        Topic::Tool,
-        Topic::Adoption,
-        Topic::Remote,
-        Topic::Presence,
-        Topic::Clock,
-        Topic::Status,
-        Topic::Published,
-        Topic::Peer,
-        Topic::Divergence,
-    ];
-
     /// The channel's topic.
     pub(super) fn name(self) -> &'static str {
         match self {
@@ -89,9 +74,13 @@ impl Topic {
         }
     }
 
-    /// The JSON channel whose topic is `name`, if there is one.
+    /// The JSON channel whose topic is `name`, if there is one (a station's, or a session
+    /// file's own `/divergence`).
     pub(super) fn named(name: &str) -> Option<Topic> {
-        Topic::ALL.into_iter().find(|t| t.name() == name)
+        Topic::STATION
+            .into_iter()
+            .chain([Topic::Divergence])
+            .find(|t| t.name() == name)
     }
 
     /// The `jsonschema` of the channel's messages.
