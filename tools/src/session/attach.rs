@@ -158,15 +158,9 @@ pub fn run_attached(
 ) -> anyhow::Result<MethodOutcome> {
     let (sc, dir) = super::launch::method_run(a, sc, method)?;
     let z = at.open()?;
-    let (present, _presence) = super::watch_presence(&z, session)?;
     // From here on the launcher answers its clock: the stations measure their offset to it while
     // the others come.
-    let epoch = network::EpochAnnouncer::declare(&z, session)?;
-    let _live = a
-        .live
-        .as_ref()
-        .map(|l| l.follow(&z, session, &sc))
-        .transpose()?;
+    let held = super::launch::Held::declare(a, &z, session, &sc)?;
     if a.progress {
         eprintln!(
             "session {session}: waiting for {} ({} {})",
@@ -179,9 +173,9 @@ pub fn run_attached(
             at.connect.join(", ")
         );
     }
-    wait_present(a, at, &sc, session, &present)?;
+    wait_present(a, at, &sc, session, &held.present)?;
     let t0 = coop_rt::timer::monotonic_ns() + LEAD.as_nanos() as u64;
-    epoch.announce(t0)?;
+    held.epoch.announce(t0)?;
     if a.progress {
         eprintln!(
             "session {session}: every site present; time 0 announced ({} s ahead, in the launcher's clock); running {} for {} s",

@@ -17,6 +17,45 @@ use super::outcome::{outcome, LiveStatus, MethodOutcome, Recorded, SessionOverru
 use super::stations::{self, Station};
 use super::{lock, unix_ns_of, watch_presence, RunArgs};
 
+/// What a launcher holds while a method's session runs (started here or attached): who is present,
+/// the epoch it answers and announces, and the live view it feeds.
+// NB: fields drop in declaration order: the live view first, the presence subscriber last.
+pub(super) struct Held {
+    _live: Option<coop_transport::live_view::Following>,
+    /// Time 0's queryable, answered from here on (the stations measure their offset to it).
+    pub epoch: network::EpochAnnouncer,
+    _presence: zenoh::pubsub::Subscriber<()>,
+    /// The sites whose presence is seen.
+    pub present: Arc<Mutex<std::collections::BTreeSet<String>>>,
+}
+
+impl Held {
+    /// Declares them on the launcher's zenoh session `z`.
+    ///
+    /// # Errors
+    /// A declaration zenoh refuses; the live view cannot follow the session.
+    pub(super) fn declare(
+        a: &RunArgs,
+        z: &zenoh::Session,
+        session: &str,
+        sc: &Scenario,
+    ) -> anyhow::Result<Self> {
+        let (present, _presence) = watch_presence(z, session)?;
+        let epoch = network::EpochAnnouncer::declare(z, session)?;
+        let _live = a
+            .live
+            .as_ref()
+            .map(|l| l.follow(z, session, sc))
+            .transpose()?;
+        Ok(Self {
+            present,
+            epoch,
+            _presence,
+            _live,
+        })
+    }
+}
+
 /// The scenario under `method`, and the directory its run writes to (made).
 ///
 /// # Errors
@@ -64,13 +103,7 @@ pub fn run_method(
     let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
         .wait()
         .map_err(|e| anyhow::anyhow!("opening the launcher's zenoh session: {e}"))?;
-    let (present, _presence) = watch_presence(&z, session)?;
-    let epoch = network::EpochAnnouncer::declare(&z, session)?;
-    let _live = a
-        .live
-        .as_ref()
-        .map(|l| l.follow(&z, session, &sc))
-        .transpose()?;
+    let held = Held::declare(a, &z, session, &sc)?;
 
     for st in stations
         .iter_mut()
@@ -78,12 +111,12 @@ pub fn run_method(
     {
         st.spawn(&a.station_bin)?;
     }
-    wait_present(a, &mut stations, &present, &dir)?;
+    wait_present(a, &mut stations, &held.present, &dir)?;
     // Time 0 a little ahead, so every station has it before it matters.
     let t0 = coop_rt::timer::monotonic_ns() + 300_000_000;
     // Time 0 on the wall clock, for the session file's log times (next to the recordings').
     let t0_unix_ns = unix_ns_of(t0);
-    epoch.announce(t0)?;
+    held.epoch.announce(t0)?;
     let live = run_until_end(a, &sc, session, &mut stations, &late, t0, &dir)?;
     stations::stop_all(&mut stations)?;
     let _ = z.close().wait();
