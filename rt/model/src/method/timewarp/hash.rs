@@ -117,6 +117,7 @@ impl TimeWarp {
             self.tools[m..m + MAX_SITES].copy_from_slice(&s.contacts);
         }
         // (Its state changed, not only inputs: every object steps again.)
+        self.adopted_tick = t;
         self.rollback(world, copy, t, true);
         self.stats.adopted_states += 1;
         Some(before.adoption(world, copy, (self.now_tick - t) as f64 * self.dt))

@@ -21,7 +21,9 @@
 //! Ticks whose inputs are known from every site are *confirmed*: their state is the same bits at
 //! every site. Each report carries the sender's confirmed frontier and a hash of its state there;
 //! a receiver that has confirmed the same tick compares ([`RollbackStats::hash_checks`],
-//! [`RollbackStats::hash_mismatches`]), so a divergence of confirmed state is never silent.
+//! [`RollbackStats::hash_mismatches`]), so a divergence of confirmed state is never silent (never
+//! at a tick older than one it compared of that sender, as a repair's frontier is, nor before a
+//! state it adopted: that history differs for good, and the world since agrees).
 //!
 //! A divergence heals: confirmed states differ only where a site never knew an input (a link down
 //! for longer than the horizon: a fallback; a physics process that started after the session did,
@@ -167,6 +169,14 @@ pub struct TimeWarp {
     want_state: [bool; MAX_SITES],
     /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
+    /// Per site: the newest of its confirmed ticks compared here (-1: none since it was last
+    /// lost). A report naming an older one (a repair's, whose frontier is its window's end) is
+    /// not compared: it says nothing the newer tick did not, and after an adoption it names the
+    /// history the adopted state replaced.
+    compared: [i64; MAX_SITES],
+    /// The tick the newest adopted state was adopted at (`i64::MIN`: none): the history before
+    /// it no longer leads to the copy, and is not compared.
+    adopted_tick: i64,
     /// A world's state being received, object by object (all from one site, at one tick).
     incoming: Box<[Option<Snapshot>]>,
     /// The site `incoming` comes from: its start tick and number (the sites' order).
@@ -258,6 +268,8 @@ impl TimeWarp {
             losing: [0; MAX_SITES],
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
+            compared: [-1; MAX_SITES],
+            adopted_tick: i64::MIN,
             incoming: vec![None; MAX_OBJECTS].into_boxed_slice(),
             incoming_from: (0, 0),
             started_tick: 0,
@@ -780,9 +792,18 @@ impl Consistency for TimeWarp {
                 ));
             }
         }
-        // Confirmed state compared where both know it.
-        if r.confirmed_hash != 0 && r.confirmed_tick <= self.confirmed_tick() {
-            if let Some(h) = self.hash_at(r.confirmed_tick) {
+        // Confirmed state compared where both know it, never at a tick older than the newest
+        // compared (a repair's frontier, its window's end) nor before an adopted state: after an
+        // adoption that history still differs, for good, and was counted a mismatch (and asked
+        // for the state again) of a world that agrees.
+        let t = r.confirmed_tick;
+        if r.confirmed_hash != 0
+            && t <= self.confirmed_tick()
+            && t >= self.compared[from]
+            && t >= self.adopted_tick
+        {
+            if let Some(h) = self.hash_at(t) {
+                self.compared[from] = t;
                 self.stats.hash_checks += 1;
                 let differs = h != r.confirmed_hash;
                 self.stats.hash_mismatches += u64::from(differs);
@@ -821,6 +842,10 @@ impl Consistency for TimeWarp {
         ) {
             *asked = false;
             *want = false;
+        }
+        // (A site back from silence may have restarted, its frontier earlier than before.)
+        if let Some(c) = self.compared.get_mut(from) {
+            *c = -1;
         }
         // Nor is its delay known any more: no lag for it until it reports again.
         if let Some(d) = self.delay_ticks.get_mut(from) {
