@@ -76,16 +76,21 @@ def strip(text):
 def closing_line(lines, start):
     """The line (0-based) of the brace closing the first `{` at or after `start`, or None for a
     declaration without a body."""
-    depth, opened = 0, False
+    depth, opened, nest = 0, False, 0
     for k in range(start, len(lines)):
         for ch in lines[k]:
-            if ch == "{":
+            if ch in "([":
+                nest += 1
+            elif ch in ")]":
+                nest -= 1
+            elif ch == "{":
                 depth, opened = depth + 1, True
             elif ch == "}":
                 depth -= 1
                 if opened and depth == 0:
                     return k
-            elif ch == ";" and not opened:
+            elif ch == ";" and not opened and nest == 0:
+                # `;` ends a declaration only outside brackets: `[T; N]` in a signature does not.
                 return None
     return None
 
