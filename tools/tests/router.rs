@@ -551,10 +551,8 @@ fn both_receiving_and_adopting(
 fn certs(dir: &Path, session: &str) -> PathBuf {
     let certs = dir.join("certs");
     let made = Command::new(SESSION_BIN)
-        .args([
-            "certs",
-            concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/paper.toml"),
-        ])
+        .arg("certs")
+        .arg(coop_tests::scenario_path("paper.toml"))
         .arg("--out")
         .arg(&certs)
         .args([
@@ -864,11 +862,7 @@ fn a_tray_carried_through_the_router_heals_after_a_partition_during_the_carry() 
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("dir");
     let scenario = dir.join("tray.toml");
-    std::fs::copy(
-        concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/tray.toml"),
-        &scenario,
-    )
-    .expect("tray.toml");
+    std::fs::copy(coop_tests::scenario_path("tray.toml"), &scenario).expect("tray.toml");
     let session = format!("nt{pid}");
     let certs = certs(&dir, &session);
     let (mut router, _resolved) = router(&ns.names[0], &dir, &certs);

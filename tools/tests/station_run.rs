@@ -328,13 +328,9 @@ fn two_stations_see_each_other_over_tls() {
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-tls-{session}"));
     let made = Command::new(env!("CARGO_BIN_EXE_session"))
-        .args([
-            "certs",
-            concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/paper.toml"),
-            "--session",
-            &session,
-            "--out",
-        ])
+        .arg("certs")
+        .arg(coop_tests::scenario_path("paper.toml"))
+        .args(["--session", &session, "--out"])
         .arg(&dir)
         .output()
         .expect("session certs");
