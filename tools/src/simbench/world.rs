@@ -260,7 +260,7 @@ impl Heap {
     }
 }
 
-/// The world-step figures: a [`Heap`] of 1, 4 and 16 boxes, each with 2 and 8 tools; one step
+/// The world-step figures: a `Heap` of 1, 4 and 16 boxes, each with 2 and 8 tools; one step
 /// computes every tool's contact with every object (held over the step) and steps the objects
 /// together, every contact under `sc`'s environment law with rotational friction.
 pub fn world_step_figures(sc: &Scenario, quick: bool) -> Vec<WorldStepCost> {
