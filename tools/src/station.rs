@@ -290,7 +290,7 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
                 duration,
                 exe_prefix,
             };
-            run::run(&resolve(&a)?, &opts)
+            Ok(run::run(&resolve(&a)?, &opts)?)
         }
         Command::Router(RouterCommand::Run { config, duration_s }) => {
             let r = coop_actors::router::RouterConfig::load(&config)?;
@@ -319,13 +319,13 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             }
             Ok(())
         }
-        Command::Servo(a) => child::run_servo(&resolve(&a)?, a.parent),
-        Command::Physics(a) => child::run_physics(&resolve(&a)?, a.parent),
+        Command::Servo(a) => Ok(child::run_servo(&resolve(&a)?, a.parent)?),
+        Command::Physics(a) => Ok(child::run_physics(&resolve(&a)?, a.parent)?),
         Command::Network(a) => {
             // The network process's zenoh speaks on stderr when RUST_LOG asks: installed here, by
             // the binary, as a library must not install a process's log subscriber.
             coop_transport::log::zenoh_to_stderr();
-            child::run_network(&resolve(&a)?, a.parent)
+            Ok(child::run_network(&resolve(&a)?, a.parent)?)
         }
     })
 }

@@ -166,16 +166,9 @@ fn period(rate_hz: f64) -> Duration {
 
 /// Runs the servo process of the configured station until a cooperative stop leaves it limp.
 ///
-/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
-/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
-///
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
-pub fn run_servo<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
-    servo_process(cfg, parent).map_err(E::from)
-}
-
-fn servo_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
+pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
     let objects = Consumer::open(&names.object, &opts).map_err(opening("object"))?;
     let tools = Producer::open(&names.tool, &opts).map_err(opening("tool"))?;
@@ -244,16 +237,9 @@ fn servo_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
 
 /// Runs the physics process of the configured station until the run state asks it to stop.
 ///
-/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
-/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
-///
 /// # Errors
 /// The segments cannot be opened, or the scheduling request is impossible.
-pub fn run_physics<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
-    physics_process(cfg, parent).map_err(E::from)
-}
-
-fn physics_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
+pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
     let rings = PhysicsRings {
         tools: Consumer::open(&names.tool, &opts).map_err(opening("tool"))?,
@@ -352,16 +338,9 @@ fn physics_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
 
 /// Runs the network process of the configured station until the run state asks it to stop.
 ///
-/// Generic over the caller's error type (any that a [`ChildError`] converts into: itself, or
-/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
-///
 /// # Errors
 /// The segments cannot be opened, or the zenoh session cannot be set up.
-pub fn run_network<E: From<ChildError>>(cfg: &Resolved, parent: Option<u32>) -> Result<(), E> {
-    network_process(cfg, parent).map_err(E::from)
-}
-
-fn network_process(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
+pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> {
     let (names, opts, ctl) = attach(cfg, parent)?;
     let sc = &cfg.scenario;
     let net = &cfg.config.network;

@@ -103,17 +103,10 @@ pub struct RunOptions {
 /// Runs the station until a signal, the duration, or a servo or physics failure the policy gave up
 /// on (network failures never end it: it runs on degraded while the network is retried).
 ///
-/// Generic over the caller's error type (any that a [`RunError`] converts into: itself, or
-/// `anyhow::Error` in a binary's `main`), so a binary returns it as it is.
-///
 /// # Errors
 /// A live station of the same name, a listen port that is taken, segments that cannot be created,
 /// or a child the policy gave up on (the message names the child and the policy).
-pub fn run<E: From<RunError>>(cfg: &Resolved, opts: &RunOptions) -> Result<(), E> {
-    run_station(cfg, opts).map_err(E::from)
-}
-
-fn run_station(cfg: &Resolved, opts: &RunOptions) -> Result<(), RunError> {
+pub fn run(cfg: &Resolved, opts: &RunOptions) -> Result<(), RunError> {
     let session = &cfg.config.session;
     let prefix = SegmentName::station_prefix(session, &cfg.name)?;
     let removed = shm::remove_stale(&prefix)?;
