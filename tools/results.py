@@ -8,12 +8,11 @@ output as printed. A design page links to the results page instead of copying fi
 so a figure can be traced to its run and rerun with one line.
 
 usage:
-  tools/results.py write NAME [--title T] -- COMMAND [ARG...]   run COMMAND, write docs/results/NAME.md
-  tools/results.py write-all [NAME...]                           write the pages docs/results/pages.txt lists
-  tools/results.py rerun NAME [NAME...] | --all                  run the command a page names again
-  tools/results.py list                                          each page with its command and commit
-  tools/results.py check                                         every listed page written from its listed
-                                                                 command, stamped, and in SUMMARY.md
+  tools/results.py write [NAME...]   run each listed page's command (every page's when none is named)
+                                     and write docs/results/NAME.md from its output
+  tools/results.py list              each page with the commit and date it was written at
+  tools/results.py check             every listed page written from its listed command, stamped, and
+                                     in SUMMARY.md
 
 `docs/results/pages.txt` lists the book's pages, one a line: NAME, TITLE and COMMAND (a shell
 line, split as the shell would), separated by tabs.
@@ -103,7 +102,7 @@ def write(name, title, command):
         f"- commit: `{commit}`{' with uncommitted changes' if dirty else ''}\n"
         f"- machine: {stamp['machine']}\n"
         f"- date: {stamp['date']} ({stamp['seconds']} s)\n\n"
-        f"Rerun: `tools/results.py rerun {name}`. The output, as printed:\n\n"
+        "The output, as printed:\n\n"
         f"{fence}text\n{text}\n{fence}\n"
     )
     os.makedirs(PAGES, exist_ok=True)
@@ -140,43 +139,13 @@ def main(argv):
         return 0 if argv else 2
     verb, rest = argv[0], argv[1:]
     if verb == "write":
-        if "--" not in rest:
-            print("write: NAME [--title T] -- COMMAND...", file=sys.stderr)
-            return 2
-        head, command = rest[: rest.index("--")], rest[rest.index("--") + 1 :]
-        if not head or not command:
-            print("write: NAME [--title T] -- COMMAND...", file=sys.stderr)
-            return 2
-        name, title = head[0], head[0]
-        if len(head) == 3 and head[1] == "--title":
-            title = head[2]
-        elif len(head) != 1:
-            print(f"write: unexpected {head[1:]}", file=sys.stderr)
-            return 2
-        if not all(c.isalnum() or c in "-_" for c in name):
-            print(f"write: the name {name!r} must be letters, digits, '-' or '_'", file=sys.stderr)
-            return 2
-        return write(name, title, command)
-    if verb == "write-all":
         todo = [p for p in listed() if not rest or p[0] in rest]
         unknown = set(rest) - {p[0] for p in todo}
         if unknown:
-            print(f"write-all: not in pages.txt: {sorted(unknown)}", file=sys.stderr)
+            print(f"write: not in docs/results/pages.txt: {sorted(unknown)}", file=sys.stderr)
             return 2
         for name, title, command in todo:
             code = write(name, title, command)
-            if code:
-                return code
-        return 0
-    if verb == "rerun":
-        names = pages() if rest == ["--all"] else rest
-        for name in names:
-            path = os.path.join(PAGES, f"{name}.md")
-            stamp = read_stamp(path) if os.path.exists(path) else None
-            if stamp is None:
-                print(f"rerun: docs/results/{name}.md has no stamp", file=sys.stderr)
-                return 1
-            code = write(name, stamp["title"], stamp["command"])
             if code:
                 return code
         return 0
@@ -197,9 +166,9 @@ def main(argv):
             path = os.path.join(PAGES, f"{name}.md")
             s = read_stamp(path) if os.path.exists(path) else None
             if not s or not s.get("command") or not s.get("commit"):
-                bad.append(f"docs/results/{name}.md: not written, or no stamp naming its command and commit (tools/results.py write-all {name})")
+                bad.append(f"docs/results/{name}.md: not written, or no stamp naming its command and commit (tools/results.py write {name})")
             elif s["command"] != command:
-                bad.append(f"docs/results/{name}.md: written by `{shlex.join(s['command'])}`, but pages.txt says `{shlex.join(command)}` (tools/results.py write-all {name})")
+                bad.append(f"docs/results/{name}.md: written by `{shlex.join(s['command'])}`, but pages.txt says `{shlex.join(command)}` (tools/results.py write {name})")
             if f"(results/{name}.md)" not in summary:
                 bad.append(f"docs/results/{name}.md: not in docs/SUMMARY.md")
         for b in bad:
