@@ -352,7 +352,7 @@ impl Seen {
     }
 }
 
-type Rollback = coop_actors::station::status::RollbackStatus;
+type Rollback = coop_rt::shm::rollback::RollbackFigures;
 
 /// After one of two stations adopted the other's confirmed state: once each has made `settle`
 /// more comparisons (the tracks in flight that still name the old history), 40 more at each with

@@ -2,8 +2,8 @@
 //! objects' figures, each station's traffic, (attached) the session's time 0 in every clock, and
 //! each station's loops and rollback figures.
 
-use coop_actors::station::status::RollbackStatus;
 use coop_model::scenario::Scenario;
+use coop_rt::shm::rollback::RollbackFigures;
 
 use super::outcome::{LiveStatus, ObjectFigures, SessionRun};
 
@@ -120,7 +120,7 @@ const STATION_COLUMNS: [Column; 11] = [
     }),
 ];
 
-fn rollback(l: Option<&LiveStatus>) -> Option<RollbackStatus> {
+fn rollback(l: Option<&LiveStatus>) -> Option<RollbackFigures> {
     l.and_then(|l| l.status.physics.rollback)
 }
 

@@ -284,7 +284,7 @@ pub struct PhysicsStatus {
     /// In a world of several objects, per object (empty in a world of one).
     pub objects: Vec<ObjectStatus>,
     /// Rollback and tool-track figures, if the method exchanges tools (it stepped on the grid).
-    pub rollback: Option<RollbackStatus>,
+    pub rollback: Option<coop_rt::shm::rollback::RollbackFigures>,
 }
 
 /// One object of a world of several, as the station sees it.
@@ -297,12 +297,6 @@ pub struct ObjectStatus {
     /// Received states of it refused as implausible, or as another object than their key names.
     pub refused: u64,
 }
-
-// ---- physics/network: rollback and tool-track figures (timewarp on stations) ----
-
-/// A rolling-back method's figures (`ControlBlock::physics.rollback`), declared once with the
-/// shared block they are read from.
-pub use coop_rt::shm::rollback::RollbackFigures as RollbackStatus;
 
 /// The servo's figures.
 #[derive(Debug, Clone, Serialize)]
