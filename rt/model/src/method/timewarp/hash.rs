@@ -4,6 +4,12 @@ use super::*;
 use crate::contact::PairContactState;
 use crate::world::pair_index;
 
+/// After sending its confirmed state, a site sends it again to a site that still asks a round
+/// trip later and this much more, s: the time the asker takes to confirm the state's tick (the
+/// other sites' inputs up to it, a report period or so) and to say in its next report that it
+/// took it.
+pub const STATE_RESEND_SLACK_S: f64 = 0.1;
+
 impl TimeWarp {
     /// Object `k` of the kept state at the start of tick `t` (a simulated tick still kept), as
     /// a snapshot of the world whose hash there is `world_hash` ([`Self::hash_at`]).
@@ -32,30 +38,28 @@ impl TimeWarp {
         }
     }
 
-    /// Takes the object of the state `r` carries from site `from` (its confirmed state at a tick
-    /// this site has confirmed too); once every object of the world is in, all from that site at
-    /// that tick, and they hash to the world's hash, adopts them there and re-simulates to now.
-    /// `None` until then, or if what it carries is not that state. A world's first object begins
-    /// a new gathering, unless a site before the sender (in the sites' order) has one under way
-    /// whose tick is still kept: every earlier site that differs is asked, and the first one's
-    /// state is the one taken.
-    pub(super) fn resync(
-        &mut self,
-        world: &World,
-        copy: &mut WorldCopy,
-        from: usize,
-        r: &ToolReport,
-    ) -> Option<Adoption> {
+    /// Takes the object of the state `r` carries from site `from` (its confirmed state at its
+    /// frontier); once every object of the world is in, all from that site at that tick, checks
+    /// that they hash to the world's hash and hold no more spring energy than the users could
+    /// have put in, and keeps them until [`Self::adopt_gathered`] can adopt them. A world's first
+    /// object begins a new gathering, unless a site before the sender (in the sites' order) has
+    /// one under way whose tick is still kept (every earlier site that differs is asked, and the
+    /// first one's state is the one taken), or the sender's own is whole and waits for its tick
+    /// to be confirmed here (a newer one would wait longer: the sender's frontier runs ahead of
+    /// what this site has confirmed by the time it arrives).
+    pub(super) fn gather(&mut self, world: &World, from: usize, r: &ToolReport) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let snap = r.state?;
-        let n = copy.len();
+        let Some(snap) = r.state else {
+            return;
+        };
+        let n = world.bodies().len().min(self.incoming.len());
         if snap.objects != n || snap.object >= n {
-            return None;
+            return;
         }
         // A world of one travels whole, at the sender's frontier, under its hash.
         if n == 1 && (snap.tick != r.confirmed_tick || hash_state(&snap.state) != r.confirmed_hash)
         {
-            return None;
+            return;
         }
         let kept = |t: i64| t >= self.oldest_kept() && self.slots[self.idx(t)].tick == t;
         let under_way = self.incoming[..n]
@@ -64,31 +68,24 @@ impl TimeWarp {
             .next()
             .copied()
             .filter(|g| kept(g.tick));
+        let whole = self.incoming[..n].iter().all(Option::is_some);
         let order = (r.started_tick, from);
         if snap.object == 0 {
-            if under_way.is_some() && self.incoming_from < order {
-                return None;
+            if under_way.is_some()
+                && (self.incoming_from < order || (self.incoming_from == order && whole))
+            {
+                return;
             }
             self.incoming[..n].fill(None);
             self.incoming_from = order;
         } else if under_way.is_none_or(|g| {
             self.incoming_from.1 != from || g.tick != snap.tick || g.world_hash != snap.world_hash
         }) {
-            return None;
+            return;
         }
         self.incoming[snap.object] = Some(snap);
         if self.incoming[..n].iter().any(Option::is_none) {
-            return None;
-        }
-        let (t, i) = (snap.tick, self.idx(snap.tick));
-        // A kept slot is a simulated tick (the current one is not kept yet); a tick not confirmed
-        // here yet waits for the next report (the sender sends its objects again).
-        if self.slots[i].tick != t || t < self.oldest_kept() {
-            self.incoming[..n].fill(None);
-            return None;
-        }
-        if t > self.confirmed_tick() {
-            return None;
+            return;
         }
         let mut h = FNV_OFFSET;
         for s in self.incoming[..n].iter().flatten() {
@@ -99,6 +96,35 @@ impl TimeWarp {
         });
         if h != snap.world_hash || deep {
             self.incoming[..n].fill(None);
+        }
+    }
+
+    /// Adopts the whole state [`Self::gather`] took, at its tick, and re-simulates to now, once
+    /// this site has confirmed that tick too (before, an input of an earlier tick still to come
+    /// would roll back over it); `None` until then. Dropped once its tick leaves the history, or
+    /// when its site's state no longer differs from ours (no longer asked for).
+    pub(super) fn adopt_gathered(
+        &mut self,
+        world: &World,
+        copy: &mut WorldCopy,
+    ) -> Option<Adoption> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let n = copy.len().min(self.incoming.len());
+        if n == 0 || self.incoming[..n].iter().any(Option::is_none) {
+            return None;
+        }
+        let from = self.incoming_from.1;
+        let t = self.incoming[0].map_or(i64::MIN, |s| s.tick);
+        let i = self.idx(t);
+        // A kept slot is a simulated tick (the current one is not kept yet).
+        if !self.want_state.get(from).copied().unwrap_or(false)
+            || self.slots[i].tick != t
+            || t < self.oldest_kept()
+        {
+            self.incoming[..n].fill(None);
+            return None;
+        }
+        if t > self.confirmed_tick() {
             return None;
         }
         let before = Before::of(world, copy);
@@ -118,6 +144,7 @@ impl TimeWarp {
         }
         // (Its state changed, not only inputs: every object steps again.)
         self.adopted_tick = t;
+        self.want_state[from] = false;
         self.rollback(world, copy, t, true);
         self.stats.adopted_states += 1;
         Some(before.adoption(world, copy, (self.now_tick - t) as f64 * self.dt))

@@ -32,8 +32,9 @@
 //! rollback can repair them. A site whose confirmed state differs from that of a site *before* it
 //! asks that site for its state ([`ToolReport::need_state`]); that site sends its full confirmed
 //! state ([`Snapshot`]: bodies, momenta, every friction memory, the objects' sleep) with its
-//! reports while asked (a world of several one object per report, all at one tick), and the
-//! asking site adopts it at that tick, once it has all of it, and re-simulates to now
+//! report (a world of several one object per report, all at one tick), and again a round trip
+//! later while still asked ([`STATE_RESEND_SLACK_S`]), and the asking site adopts it at that
+//! tick, once it has all of it and has confirmed that tick too, and re-simulates to now
 //! ([`RollbackStats::adopted_states`]):
 //! the paper's adoption of a received state, at the confirmed frontier. Sites are ordered by the
 //! tick their physics process started at ([`ToolReport::started_tick`]: the newest yields), then
@@ -86,7 +87,7 @@ mod replay;
 mod window;
 
 pub use deadband::DeadbandSpec;
-pub use hash::{hash_state, hash_world};
+pub use hash::{hash_state, hash_world, STATE_RESEND_SLACK_S};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
 pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_LAG_TICKS};
 pub use predict::{EXTRAPOLATE_TICKS, REACH_TICKS, REACH_TIME_TICKS, REACH_VELOCITY_TICKS};
@@ -169,6 +170,8 @@ pub struct TimeWarp {
     want_state: [bool; MAX_SITES],
     /// Per site: it asks for our confirmed state.
     state_asked: [bool; MAX_SITES],
+    /// The tick the confirmed state was last sent at (`i64::MIN`: never).
+    state_sent: std::cell::Cell<i64>,
     /// Per site: the newest of its confirmed ticks compared here (-1: none since it was last
     /// lost). A report naming an older one (a repair's, whose frontier is its window's end) is
     /// not compared: it says nothing the newer tick did not, and after an adoption it names the
@@ -268,6 +271,7 @@ impl TimeWarp {
             losing: [0; MAX_SITES],
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
+            state_sent: std::cell::Cell::new(i64::MIN),
             compared: [-1; MAX_SITES],
             adopted_tick: i64::MIN,
             incoming: vec![None; MAX_OBJECTS].into_boxed_slice(),
@@ -556,7 +560,30 @@ impl TimeWarp {
         let first = sent.window_start(end, self.origin_tick);
         sent.sent(end);
         self.sent.set(sent);
-        (first, self.track_from(first, true))
+        let due = end
+            >= self
+                .state_sent
+                .get()
+                .saturating_add(self.state_resend_ticks());
+        let r = self.track_from(first, due);
+        if matches!(r, Report::Tools(ToolReport { state: Some(_), .. })) {
+            self.state_sent.set(end);
+        }
+        (first, r)
+    }
+
+    /// How long after sending the confirmed state this site sends it again to sites that still
+    /// ask, ticks: a round trip to the slowest of them ([`TimeWarp::delay_ticks`] each way, which
+    /// includes its report period) and [`STATE_RESEND_SLACK_S`] for it to confirm the state's
+    /// tick and say it took it. Sooner, the same state (or a newer one, which the asker would
+    /// have to confirm anew) crosses the one that is on its way; in every report, a world of
+    /// many objects' states would take most of the upload of a site asked for it.
+    fn state_resend_ticks(&self) -> i64 {
+        let one_way = (0..self.sites)
+            .filter(|&j| self.state_asked[j])
+            .map(|j| self.delay_ticks[j])
+            .fold(0.0, f64::max);
+        (2.0 * one_way + STATE_RESEND_SLACK_S / self.dt).ceil() as i64
     }
 
     /// A peer that lost more reports in a row than the newest window covers asked for the first
@@ -577,7 +604,7 @@ impl TimeWarp {
 
     /// A track of the own positions from tick `first` to now (at most [`WINDOW_TICKS`]), with
     /// the confirmed frontier and what this site asks for; `with_state`: and the confirmed state
-    /// while a site asks for it.
+    /// if a site asks for it.
     fn track_from(&self, first: i64, with_state: bool) -> Report {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let count = (self.now_tick - first).min(WINDOW_TICKS as i64);
@@ -814,18 +841,19 @@ impl Consistency for TimeWarp {
             }
         }
         // The state asked for (the first of its objects comes with a hash compared above, a world
-        // of several's others in reports of their own).
-        if self.want_state[from] && r.state.is_some() {
-            if let Some(a) = self.resync(world, copy, from, r) {
-                adoption = Some(adoption.map_or(a, |b| Adoption {
-                    jump: a.jump + b.jump,
-                    energy_j: a.energy_j + b.energy_j,
-                    work_j: a.work_j + b.work_j,
-                    age_s: a.age_s.max(b.age_s),
-                    clipped_j: 0.0,
-                }));
-                self.want_state[from] = false;
-            }
+        // of several's others in reports of their own), adopted once its tick is confirmed here:
+        // this report may have brought it, or the inputs it waited for.
+        if self.want_state[from] {
+            self.gather(world, from, r);
+        }
+        if let Some(a) = self.adopt_gathered(world, copy) {
+            adoption = Some(adoption.map_or(a, |b| Adoption {
+                jump: a.jump + b.jump,
+                energy_j: a.energy_j + b.energy_j,
+                work_j: a.work_j + b.work_j,
+                age_s: a.age_s.max(b.age_s),
+                clipped_j: 0.0,
+            }));
         }
         self.tally();
         adoption

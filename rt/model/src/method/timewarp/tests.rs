@@ -769,6 +769,8 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
     for (started_tick, adopter) in [([0, 0], 1), ([1, 0], 0)] {
         let mut asked = false;
         let mut mismatches_at = [0u64; 2];
+        // The ticks the asked site sent its state at.
+        let mut sent_at = Vec::new();
         // Site 1 → site 0 is down for 1.2 s, twice the history.
         let sites = two_sites(
             600,
@@ -779,6 +781,9 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
             |from, k| from == 1 && (1000..2200).contains(&k),
             |i, t, k, sites| {
                 asked |= i == adopter && t.need_state == 1 << (1 - adopter);
+                if i != adopter && t.state.is_some() {
+                    sent_at.push(k);
+                }
                 if k == 3000 {
                     mismatches_at[i] = sites[i].0.rollback_stats().hash_mismatches;
                 }
@@ -798,6 +803,14 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
         assert!(asked, "site {adopter} asked the other for its state: {why}");
         assert!(st[adopter].adopted_states > 0, "{why}");
         assert_eq!(st[1 - adopter].adopted_states, 0, "{why}");
+        // Sent while asked, but once a round trip (50 ticks each way, the asker's reports 20
+        // apart) and the slack, not in every report: the adoption stops the asking in between.
+        let resend = 100 + (STATE_RESEND_SLACK_S / 1e-3) as i64;
+        assert!(!sent_at.is_empty(), "{why}");
+        assert!(
+            sent_at.windows(2).all(|w| w[1] - w[0] >= resend),
+            "the state sent at ticks {sent_at:?}: {why}"
+        );
         assert_eq!(
             [st[0].hash_mismatches, st[1].hash_mismatches],
             mismatches_at,
@@ -868,6 +881,70 @@ fn a_state_deep_in_the_table_is_not_adopted() {
         b.rollback_stats()
     );
     assert_eq!(b.hash_at(r.confirmed_tick), Some(r.confirmed_hash));
+}
+
+/// A state asked for that arrives before the asker has confirmed its tick (the sender's
+/// frontier runs ahead of the asker's: it knew its own positions first) is kept, and adopted
+/// when the inputs that confirm its tick arrive, without being sent again.
+#[test]
+fn a_state_ahead_of_the_askers_frontier_is_adopted_once_confirmed() {
+    let (_, w) = paper_world();
+    let mut sites = two_sites(
+        600,
+        |_, _| {},
+        500,
+        |_, _| Vec3::new(0.2, 0.0, 0.01),
+        100,
+        |_, _| false,
+        |_, _, _, _| {},
+    );
+    let [(a, _), (b, cb)] = &mut sites;
+    // Site 0's positions to now, still on their way (100 ticks late).
+    let Report::Tools(track) = a.track_report() else {
+        panic!("a track");
+    };
+    // Site 0's state at site 1's frontier hashes differently: site 1 asks it for its state.
+    let mut differs = track;
+    differs.count = 0;
+    differs.first_tick = b.confirmed_tick();
+    differs.confirmed_tick = b.confirmed_tick();
+    differs.confirmed_hash = b.hash_at(b.confirmed_tick()).unwrap() ^ 1;
+    b.receive(&w, cb, 0, &Report::Tools(differs), 0.5);
+    assert!(b.rollback_stats().hash_mismatches > 0);
+    assert!(b.want_state[0], "site 1 asks site 0");
+    // The state comes at a tick site 1 has simulated but not confirmed (site 0's positions of
+    // the last ticks are still on their way): kept, not adopted.
+    let t = b.confirmed_tick() + 5;
+    assert!(t < b.now_tick, "{t}");
+    let state = BodyState::at_rest(Vec3::new(0.001, 0.0, 0.01));
+    let mut with_state = track;
+    with_state.first_tick = t;
+    with_state.count = 0;
+    with_state.confirmed_tick = t;
+    with_state.confirmed_hash = hash_state(&state);
+    with_state.state = Some(Snapshot::one(
+        t,
+        with_state.confirmed_hash,
+        state,
+        EnvContactState::default(),
+        [ToolContactState::default(); MAX_SITES],
+    ));
+    b.receive(&w, cb, 0, &Report::Tools(with_state), 0.5);
+    assert_eq!(b.rollback_stats().adopted_states, 0, "not yet confirmed");
+    // Site 0's positions up to now arrive (no state with them): site 1 confirms the tick and
+    // adopts the state it kept.
+    let mut positions = track;
+    positions.confirmed_hash = 0;
+    b.receive(&w, cb, 0, &Report::Tools(positions), 0.5);
+    assert!(b.confirmed_tick() > t, "{}", b.confirmed_tick());
+    assert_eq!(
+        b.rollback_stats().adopted_states,
+        1,
+        "{:?}",
+        b.rollback_stats()
+    );
+    assert_eq!(b.hash_at(t), Some(hash_state(&state)));
+    assert!(!b.want_state[0], "no longer asks");
 }
 
 #[test]
@@ -1131,7 +1208,7 @@ fn a_world_of_several_objects_is_resynchronized_object_by_object() {
 /// Site 2 differs from both sites before it (site 1's push of the row never reached it: both
 /// links to it were down): it asks both, and their worlds reach it only together and
 /// interleaved, object by object (site 0's first, site 1's first, site 0's second, ...; a state
-/// that would arrive alone is lost). The gathering from site 0, the first in the sites' order, is
+/// that would arrive alone waits for the other's). The gathering from site 0, the first in the sites' order, is
 /// not broken off by site 1's, and site 2 adopts it; then all three agree.
 #[test]
 fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
@@ -1153,6 +1230,7 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
     let lost = |_: usize, to: usize, k: i64| to == 2 && (1000..2200).contains(&k);
     // (due tick, from, to, place in its sender's burst, report)
     let mut in_flight: Vec<(i64, usize, usize, usize, Report)> = Vec::new();
+    let mut waiting = Vec::new();
     let mut interleaved = 0;
     for k in 0..5000i64 {
         let t = k as f64 * 1e-3;
@@ -1160,16 +1238,20 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
         in_flight.retain(|m| m.0 > k);
         // Each burst's first report, then each one's second, and so on.
         due.sort_by_key(|m| (m.3, m.1));
-        let states_from = |from: usize| {
-            due.iter()
-                .filter(|m| m.1 == from && m.2 == 2)
-                .filter(|m| matches!(&m.4, Report::Tools(r) if r.state.is_some()))
-                .count()
+        // A state that would reach site 2 alone waits for the other site's: the two arrive
+        // together. (Each site sends its state once a round trip while asked, and the two need
+        // not send at the same reports.)
+        let carries = |m: &(i64, usize, usize, usize, Report)| {
+            m.2 == 2 && matches!(&m.4, Report::Tools(r) if r.state.is_some())
         };
-        // A state that would reach site 2 alone is lost: only the two together arrive.
-        let both = states_from(0) > 1 && states_from(1) > 1;
-        interleaved += usize::from(both);
-        due.retain(|m| m.2 != 2 || both || !matches!(&m.4, Report::Tools(r) if r.state.is_some()));
+        waiting.extend(due.iter().filter(|m| carries(m)).cloned());
+        due.retain(|m| !carries(m));
+        let states_from = |from: usize| waiting.iter().filter(|m| m.1 == from).count();
+        if states_from(0) > 1 && states_from(1) > 1 {
+            interleaved += 1;
+            due.append(&mut waiting);
+            due.sort_by_key(|m| (m.3, m.1));
+        }
         for (_, from, to, _, r) in due {
             let (tw, copy) = &mut sites[to];
             tw.receive(&w, copy, from, &r, t);
