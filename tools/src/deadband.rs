@@ -2,19 +2,21 @@
 //! the users' feel. At each constant delay, `timewarp` runs twice on the same scenario and seed:
 //! every tick's position sent (the full-rate run, the baseline), and through the deadband. Per
 //! run: the share of the own ticks whose position was sent, the payload the busiest site puts,
-//! the phases passed, hash mismatches; and per site and sample, the displayed force's difference
-//! from the full-rate run's at the same time in just-noticeable steps (a JND: the deadband's
-//! Weber fraction of the full-rate force, at least its floor): the share of samples within one
+//! the phases passed, hash mismatches; and per site and servo tick, the displayed force's
+//! difference from the full-rate run's at the same tick in just-noticeable steps (a JND: 7 % of the
+//! full-rate force, at least 0.05 N, `perception::force_jnd_n`): the share of ticks within one
 //! JND and the 99th percentile. Two runs of a contact task part ways in time (a contact a tick
-//! earlier, a push a little weaker), and a difference sample by sample counts that too; so a
+//! earlier, a push a little weaker), and a difference tick by tick counts that too; so a
 //! third run is the baseline: a deadband of 1.5 quanta (0.015 mm) everywhere, the least change
-//! the wire can express, compared the same way.
+//! the wire can express, compared the same way; and a fourth the noise floor: the full-rate run
+//! again with the next seed (other draws of the force sensor's noise and of the delay's jitter),
+//! which says how far two runs of the task part with no codec at all.
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
-use coop_model::metrics;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
+use coop_model::{metrics, perception};
 
 use crate::sweep::{par_map, scenario_at};
 
@@ -33,7 +35,8 @@ pub struct Row {
     pub phases_total: usize,
     /// Hash mismatches (deadband run).
     pub hash_mismatches: u64,
-    /// Samples (every site's) whose displayed force is within one JND of the full-rate run's.
+    /// Servo ticks (every site's) whose displayed force is within one JND of the full-rate
+    /// run's.
     pub within_jnd: f64,
     /// The 99th percentile of the force difference, JND.
     pub p99_jnd: f64,
@@ -41,6 +44,10 @@ pub struct Row {
     pub baseline_within_jnd: f64,
     /// See `baseline_within_jnd`.
     pub baseline_p99_jnd: f64,
+    /// The same two figures for the full-rate run with the next seed (the noise floor).
+    pub reseeded_within_jnd: f64,
+    /// See `reseeded_within_jnd`.
+    pub reseeded_p99_jnd: f64,
 }
 
 /// The share of `e` (JND) within 1, and its 99th percentile.
@@ -52,13 +59,15 @@ fn within_and_p99(e: Vec<f64>) -> (f64, f64) {
     (within, crate::simbench::quantile(e, 0.99))
 }
 
-/// The displayed force's difference between `db` and `full`, sample by sample, in JND of `spec`.
-fn force_error_jnd(full: &RunResult, db: &RunResult, spec: &DeadbandSpec) -> Vec<f64> {
+/// The displayed force's difference between `db` and `full`, servo tick by servo tick (the two
+/// runs' sites tick at the same instants), in JND ([`perception::force_jnd_n`] of the full-rate
+/// run's force: the one just-noticeable difference every figure of the project counts in, not
+/// the deadband's own parameter).
+fn force_error_jnd(full: &RunResult, db: &RunResult) -> Vec<f64> {
     let mut out = Vec::new();
-    for (a, b) in full.sites.iter().zip(&db.sites) {
-        for (fa, fb) in a.f_desired.iter().zip(&b.f_desired) {
-            let jnd = (spec.weber_fraction * fa.norm()).max(spec.floor_n);
-            out.push((fb - fa).norm() / jnd);
+    for (a, b) in full.servo_forces.iter().zip(&db.servo_forces) {
+        for (fa, fb) in a.iter().zip(b) {
+            out.push((fb - fa).norm() / perception::force_jnd_n(fa.norm()));
         }
     }
     out
@@ -84,20 +93,22 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
             near_m: 0.0,
             free_space_m: q,
         };
-        jobs.push((d, full, db, least));
+        let reseeded = scenario_at(base, d, base.seed.wrapping_add(1))?;
+        jobs.push((d, full, db, least, reseeded));
     }
     let reference = sim::run(base, Mode::Reference, &mut |_| {});
-    let runs = par_map(&jobs, |(d, full, db, least)| {
+    let runs = par_map(&jobs, |(d, full, db, least, reseeded)| {
         let mode = Mode::Distributed(MethodName::Timewarp);
-        let a = sim::run_sized(full, mode, &mut |_| {}, &crate::sim::wire_bytes);
-        let b = sim::run_sized(db, mode, &mut |_| {}, &crate::sim::wire_bytes);
-        let c = sim::run(least, mode, &mut |_| {});
-        (*d, a, b, c)
+        let size = &crate::sim::wire_bytes;
+        let a = sim::run_keeping_servo_forces(full, mode, &mut |_| {}, size);
+        let b = sim::run_keeping_servo_forces(db, mode, &mut |_| {}, size);
+        let c = sim::run_keeping_servo_forces(least, mode, &mut |_| {}, &|_, _, _, _| 0);
+        let e = sim::run_keeping_servo_forces(reseeded, mode, &mut |_| {}, &|_, _, _, _| 0);
+        (*d, a, b, c, e)
     });
-    let spec = base.timewarp.deadband;
     Ok(runs
         .into_iter()
-        .map(|(delay_ms, a, b, c)| {
+        .map(|(delay_ms, a, b, c, e)| {
             let (ma, mb) = (
                 metrics::compute(base, &a, &reference),
                 metrics::compute(base, &b, &reference),
@@ -105,8 +116,9 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
             let (ticks, samples) = b.rollback.iter().flatten().fold((0, 0), |(t, s), r| {
                 (t + r.deadband_ticks, s + r.deadband_samples)
             });
-            let (within, p99) = within_and_p99(force_error_jnd(&a, &b, &spec));
-            let (base_within, base_p99) = within_and_p99(force_error_jnd(&a, &c, &spec));
+            let (within, p99) = within_and_p99(force_error_jnd(&a, &b));
+            let (base_within, base_p99) = within_and_p99(force_error_jnd(&a, &c));
+            let (seed_within, seed_p99) = within_and_p99(force_error_jnd(&a, &e));
             Row {
                 delay_ms,
                 sent_share: samples as f64 / ticks.max(1) as f64,
@@ -121,6 +133,8 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 p99_jnd: p99,
                 baseline_within_jnd: base_within,
                 baseline_p99_jnd: base_p99,
+                reseeded_within_jnd: seed_within,
+                reseeded_p99_jnd: seed_p99,
             }
         })
         .collect())
@@ -142,7 +156,7 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         sc.name, sc.seed, sc.duration_s, d.weber_fraction, d.floor_n, d.near_m, d.free_space_m
     );
     println!(
-        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}",
+        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
         "delay",
         "sent",
         "kbit/s full",
@@ -153,10 +167,12 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         "force",
         "force",
         "baseline",
-        "baseline"
+        "baseline",
+        "reseeded",
+        "reseeded"
     );
     println!(
-        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}",
+        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
         "ms",
         "of ticks",
         "",
@@ -167,11 +183,13 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         "<=1 JND",
         "p99 JND",
         "<=1 JND",
+        "p99 JND",
+        "<=1 JND",
         "p99 JND"
     );
     for r in &rows {
         println!(
-            "{:>8.0}{:>9.1}%{:>14.1}{:>14.1}{:>12}{:>12}{:>11}{:>11.2}%{:>10.2}{:>11.2}%{:>10.2}",
+            "{:>8.0}{:>9.1}%{:>14.1}{:>14.1}{:>12}{:>12}{:>11}{:>11.2}%{:>10.2}{:>11.2}%{:>10.2}{:>11.2}%{:>10.2}",
             r.delay_ms,
             100.0 * r.sent_share,
             r.kbit_s[0],
@@ -182,9 +200,11 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
             100.0 * r.within_jnd,
             r.p99_jnd,
             100.0 * r.baseline_within_jnd,
-            r.baseline_p99_jnd
+            r.baseline_p99_jnd,
+            100.0 * r.reseeded_within_jnd,
+            r.reseeded_p99_jnd
         );
     }
-    println!("# sent = own ticks whose position left the band and was sent (every site); kbit/s = payload the busiest site puts; force = each site's displayed force (F_h, every 1/sample_rate_hz) against the full-rate run's at the same time, in JND (the Weber fraction of the full-rate force, at least the floor); baseline = the same against a run through a band of 1.5 quanta (0.015 mm), the least change the wire can express");
+    println!("# sent = own ticks whose position left the band and was sent (every site); kbit/s = payload the busiest site puts; force = each site's displayed force (F_h, every servo tick) against the full-rate run's at the same tick, in JND (7 % of the full-rate force, at least 0.05 N); baseline = the same against a run through a band of 1.5 quanta (0.015 mm), the least change the wire can express; reseeded = the full-rate run with the next seed (other draws of sensor noise and jitter), against the full-rate run: how far two runs of the task part with no codec at all");
     Ok(())
 }

@@ -519,11 +519,13 @@ fn the_deadband_sends_a_tenth_of_the_positions_and_the_task_still_passes() {
     assert!(r.kbit_s[1] < r.kbit_s[0] && r.kbit_s[1] > 0.0, "{r:?}");
     assert_eq!(r.phases[1], r.phases_total, "{r:?}");
     assert_eq!(r.hash_mismatches, 0, "{r:?}");
-    for share in [r.within_jnd, r.baseline_within_jnd] {
+    for share in [r.within_jnd, r.baseline_within_jnd, r.reseeded_within_jnd] {
         assert!(share > 0.0 && share <= 1.0, "{r:?}");
     }
     assert!(
-        r.p99_jnd.is_finite() && r.baseline_p99_jnd.is_finite(),
+        [r.p99_jnd, r.baseline_p99_jnd, r.reseeded_p99_jnd]
+            .iter()
+            .all(|p| p.is_finite()),
         "{r:?}"
     );
 }

@@ -187,6 +187,9 @@ pub struct RunResult {
     pub rollback: Vec<Option<crate::method::RollbackStats>>,
     /// Per site: the displayed-force steps of every servo tick.
     pub force_steps: Vec<ForceSteps>,
+    /// Per site: the displayed force F_h of every servo tick, N (kept only by
+    /// [`run_keeping_servo_forces`]; empty otherwise).
+    pub servo_forces: Vec<Vec<Vec3>>,
 }
 
 impl RunResult {
@@ -202,6 +205,7 @@ impl RunResult {
             messages: (0, 0, 0),
             rollback: Vec::new(),
             force_steps: Vec::new(),
+            servo_forces: Vec::new(),
         }
     }
 }
@@ -239,6 +243,8 @@ struct Site {
     last_f_measured: Vec3,
     sensor_noise: f64,
     force_steps: ForceSteps,
+    /// Every servo tick's F_h, when kept.
+    servo_forces: Option<Vec<Vec3>>,
 }
 
 impl Site {
@@ -286,7 +292,31 @@ pub fn run_sized(
     progress: &mut dyn FnMut(f64),
     size: &Sizer,
 ) -> RunResult {
+    drive(Run::new(scenario, mode), scenario, progress, size)
+}
+
+/// [`run_sized`], keeping every servo tick's displayed force too ([`RunResult::servo_forces`]).
+pub fn run_keeping_servo_forces(
+    scenario: &Scenario,
+    mode: Mode,
+    progress: &mut dyn FnMut(f64),
+    size: &Sizer,
+) -> RunResult {
     let mut run = Run::new(scenario, mode);
+    for (s, spec) in run.sites.iter_mut().zip(&scenario.site) {
+        let ticks = (scenario.duration_s * spec.servo_rate_hz).ceil() as usize + 1;
+        s.servo_forces = Some(Vec::with_capacity(ticks));
+    }
+    drive(run, scenario, progress, size)
+}
+
+/// Steps `run` to the end of `scenario`.
+fn drive(
+    mut run: Run<'_>,
+    scenario: &Scenario,
+    progress: &mut dyn FnMut(f64),
+    size: &Sizer,
+) -> RunResult {
     let end_ns = (scenario.duration_s * 1e9).round() as u64;
     let mut next_progress = 0u64;
     loop {
@@ -362,6 +392,7 @@ impl<'a> Run<'a> {
                     last_f_measured: Vec3::zeros(),
                     sensor_noise: spec.sensor_noise_n,
                     force_steps: ForceSteps::default(),
+                    servo_forces: None,
                 }
             })
             .collect();
@@ -574,6 +605,9 @@ impl<'a> Run<'a> {
             self.result.adoptions[k].force_step_n = step_n;
         }
         s.force_steps.record(s.last_f_desired, out.f_desired);
+        if let Some(f) = &mut s.servo_forces {
+            f.push(out.f_desired);
+        }
         // The arm's own force loop (a recorded hand displays nothing).
         let (_, tau) = s.force_loop.step(
             out.f_desired,
@@ -700,6 +734,12 @@ impl<'a> Run<'a> {
                 display: *s.servo.display_stats(),
                 ..s.force_steps
             });
+        }
+        if sites.iter().any(|s| s.servo_forces.is_some()) {
+            result.servo_forces = sites
+                .into_iter()
+                .map(|s| s.servo_forces.unwrap_or_default())
+                .collect();
         }
         result
     }

@@ -34,10 +34,11 @@ pub struct DeadbandSpec {
     /// On (default off: every tick's position is sent).
     pub enabled: bool,
     /// Near or touching an object: the position change that changes the tool's contact force by
-    /// this fraction of it is the band (a Weber fraction, 0 to 1; default 0.1).
+    /// this fraction of it is the band (a Weber fraction, 0 to 1; default 0.07, the force JND
+    /// every figure counts in, `perception::FORCE_JND_FRACTION`: the band is one JND).
     pub weber_fraction: f64,
     /// ... never narrower than the change that makes this force, N (an absolute threshold, above
-    /// 0; default 0.05 N).
+    /// 0; default 0.05 N, `perception::FORCE_JND_FLOOR_N`).
     pub floor_n: f64,
     /// Within this of an object's bounding sphere the tool is near it, m (0 to 1; default 0.01).
     pub near_m: f64,
@@ -49,8 +50,8 @@ impl Default for DeadbandSpec {
     fn default() -> Self {
         Self {
             enabled: false,
-            weber_fraction: 0.1,
-            floor_n: 0.05,
+            weber_fraction: crate::perception::FORCE_JND_FRACTION,
+            floor_n: crate::perception::FORCE_JND_FLOOR_N,
             near_m: 0.01,
             free_space_m: 0.002,
         }
