@@ -172,6 +172,53 @@ fn held_positions_are_every_site_s_inputs() {
     assert_eq!(ca.first().state, cb.first().state);
 }
 
+/// A remote tool pressing into the disk at its newest known tick is extrapolated with its last
+/// step (for a few ticks) while every position is sent; through a deadband that last step is a
+/// held run's jump, a band in one tick, and the tool is held where it was last known.
+#[test]
+fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
+    let mut predicted = Vec::new();
+    for deadband in [false, true] {
+        let (mut tw, mut copy, w) = two_tools_on_a_disk();
+        if deadband {
+            tw.set_deadband(DeadbandSpec {
+                enabled: true,
+                ..DeadbandSpec::default()
+            });
+        }
+        for _ in 0..50 {
+            tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
+            tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
+        }
+        // Site 1's tool 0.1 mm into the disk's rim (x = 0.045 touches; too light a press to
+        // move the disk on the table), held, then a step of 0.05 mm further in at the newest
+        // tick.
+        let mut r = ToolReport {
+            first_tick: 0,
+            count: 50,
+            need: [-1; MAX_SITES],
+            ..ToolReport::NONE
+        };
+        for (k, p) in r.positions[..50].iter_mut().enumerate() {
+            let x = if k < 49 { 0.0449 } else { 0.04485 };
+            *p = quantize(Vec3::new(x, 0.0, 0.01));
+        }
+        tw.receive(&w, &mut copy, 1, &Report::Tools(r), 0.05);
+        assert!(
+            TimeWarp::touches(tw.tools_at(tw.idx(49)), 1),
+            "site 1's tool touches the disk at its newest tick"
+        );
+        predicted.push(tw.input(1, 55));
+    }
+    let last = quantize(Vec3::new(0.04485, 0.0, 0.01));
+    assert_eq!(
+        predicted[0],
+        ([last[0] - 6 * 5, last[1], last[2]], false),
+        "every tick sent: extrapolated with its last step, 6 ticks on"
+    );
+    assert_eq!(predicted[1], (last, false), "through a deadband: held");
+}
+
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
 /// depth up to 50 ticks, on every tick) always arrives at the same bits.
 #[test]
