@@ -219,6 +219,55 @@ fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
     assert_eq!(predicted[1], (last, false), "through a deadband: held");
 }
 
+/// A free remote tool is predicted on as a reaching hand. Through a deadband its held runs say
+/// nothing over the last few ticks (a run) or one jump of a band: its velocity is taken between
+/// its last two samples instead.
+#[test]
+fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_samples() {
+    let mut predicted = Vec::new();
+    let mut reaches = Vec::new();
+    for deadband in [false, true] {
+        let (mut tw, mut copy, w) = two_tools_on_a_disk();
+        if deadband {
+            tw.set_deadband(DeadbandSpec {
+                enabled: true,
+                ..DeadbandSpec::default()
+            });
+        }
+        for _ in 0..50 {
+            tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
+            tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
+        }
+        // Site 1's tool far from the disk, moving left at 0.1 m/s through a 2 mm band: sent
+        // at ticks 0 and 20, held in between.
+        let mut r = ToolReport {
+            first_tick: 0,
+            count: 40,
+            need: [-1; MAX_SITES],
+            ..ToolReport::NONE
+        };
+        for (k, p) in r.positions[..40].iter_mut().enumerate() {
+            let x = if k < 20 { 0.1 } else { 0.098 };
+            *p = quantize(Vec3::new(x, 0.0, 0.01));
+        }
+        tw.receive(&w, &mut copy, 1, &Report::Tools(r), 0.05);
+        predicted.push(tw.input(1, 49).0);
+        let last = r.positions[39];
+        // 200 quanta in 20 ticks: where it was 10 ticks before at that velocity.
+        reaches.push(tw.reach(last, Some([last[0] + 100, last[1], last[2]]), 10));
+    }
+    let last = quantize(Vec3::new(0.098, 0.0, 0.01));
+    assert_eq!(
+        predicted[0], last,
+        "every tick sent: a held run is a tool at rest"
+    );
+    assert_eq!(
+        predicted[1], reaches[1],
+        "through a deadband: on at 0.1 m/s"
+    );
+    assert!(predicted[1][0] < last[0] - 50, "{:?}", predicted[1]);
+}
+
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
 /// depth up to 50 ticks, on every tick) always arrives at the same bits.
 #[test]
