@@ -269,8 +269,54 @@ pub fn config(endpoints: &NetworkConfig) -> Result<zenoh::Config, NetworkError> 
     Ok(c)
 }
 
+/// The kernel's ephemeral port range, from which it picks the local port of every outgoing
+/// connection and of a bind to port 0 (Linux's default where it cannot be read).
+fn ephemeral_ports() -> (u16, u16) {
+    std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|s| {
+            let mut w = s.split_whitespace().map(|w| w.parse::<u16>().ok());
+            Some((w.next()??, w.next()??))
+        })
+        .filter(|(lo, hi)| lo <= hi)
+        .unwrap_or((32768, 60999))
+}
+
+/// The lowest port [`free_port`] picks from (below it, the registered services).
+const FIRST_PICKED_PORT: u16 = 10000;
+
+/// A TCP port on `ip` that is free now and outside the kernel's ephemeral range, tried at random
+/// (64 tries); `None` if none was free. A port the kernel picks for a bind to port 0 comes from
+/// the ephemeral range, and so does the local port of every outgoing connection: between the
+/// moment a launcher picks a station's port and the moment the station binds it, the stations'
+/// and the launcher's own connections to each other could take it ("Address already in use").
+/// Outside that range only another listener can.
+fn free_port(ip: std::net::IpAddr) -> Option<u16> {
+    use std::hash::{BuildHasher, Hasher};
+    let (lo, hi) = ephemeral_ports();
+    let below = u64::from(lo.saturating_sub(FIRST_PICKED_PORT));
+    let above = u64::from(u16::MAX - hi);
+    if below + above == 0 {
+        return None;
+    }
+    let random = std::collections::hash_map::RandomState::new();
+    (0..64u64).find_map(|i| {
+        let mut h = random.build_hasher();
+        h.write_u64(i);
+        let k = h.finish() % (below + above);
+        let port = if k < below {
+            u64::from(FIRST_PICKED_PORT) + k
+        } else {
+            u64::from(hi) + 1 + (k - below)
+        };
+        let port = u16::try_from(port).ok()?;
+        std::net::TcpListener::bind((ip, port)).ok().map(|_| port)
+    })
+}
+
 /// Replaces port 0 of `tcp/<ip>:0` locators with a port that is free now, so the station knows (and
-/// status shows) where it listens.
+/// status shows) where it listens: outside the kernel's ephemeral range where one is free there
+/// (see [`free_port`]), else the kernel's choice.
 pub fn concrete_listen(listen: &[String]) -> Vec<String> {
     listen
         .iter()
@@ -283,9 +329,12 @@ pub fn concrete_listen(listen: &[String]) -> Vec<String> {
                 None => (addr, String::new()),
             };
             match host.parse::<std::net::SocketAddr>() {
-                Ok(sa) if sa.port() == 0 => std::net::TcpListener::bind(sa)
-                    .and_then(|s| s.local_addr())
-                    .map_or_else(|_| l.clone(), |a| format!("tcp/{a}{tail}")),
+                Ok(sa) if sa.port() == 0 => match free_port(sa.ip()) {
+                    Some(port) => format!("tcp/{}{tail}", std::net::SocketAddr::new(sa.ip(), port)),
+                    None => std::net::TcpListener::bind(sa)
+                        .and_then(|s| s.local_addr())
+                        .map_or_else(|_| l.clone(), |a| format!("tcp/{a}{tail}")),
+                },
                 _ => l.clone(),
             }
         })
@@ -295,6 +344,35 @@ pub fn concrete_listen(listen: &[String]) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A station's port 0 becomes a port free now, outside the range outgoing connections take
+    /// their local ports from, and the same for every locator in a list (the suffix kept).
+    #[test]
+    fn port_zero_becomes_a_free_port_outside_the_ephemeral_range() {
+        let (lo, hi) = ephemeral_ports();
+        let got = concrete_listen(&[
+            "tcp/127.0.0.1:0".into(),
+            "tcp/127.0.0.1:0#iface=lo".into(),
+            "tcp/127.0.0.1:7447".into(),
+            "tls/127.0.0.1:0".into(),
+        ]);
+        let port = |l: &str| -> u16 {
+            let a = l.strip_prefix("tcp/").expect("tcp");
+            let a = a.split('#').next().expect("address");
+            a.parse::<std::net::SocketAddr>().expect("address").port()
+        };
+        for l in &got[..2] {
+            let p = port(l);
+            assert!(
+                p >= FIRST_PICKED_PORT && !(lo..=hi).contains(&p),
+                "{l}: outside {lo}-{hi}"
+            );
+            std::net::TcpListener::bind(("127.0.0.1", p)).expect("free");
+        }
+        assert!(got[1].ends_with("#iface=lo"), "{}", got[1]);
+        assert_eq!(got[2], "tcp/127.0.0.1:7447", "a given port is kept");
+        assert_eq!(got[3], "tls/127.0.0.1:0", "only tcp is resolved here");
+    }
 
     #[test]
     fn configurations_zenoh_accepts() {
