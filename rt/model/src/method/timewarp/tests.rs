@@ -172,44 +172,55 @@ fn held_positions_are_every_site_s_inputs() {
     assert_eq!(ca.first().state, cb.first().state);
 }
 
+/// [`two_tools_on_a_disk`]'s site 0, with or without a deadband, 50 ticks on (its own tool far
+/// left), after site 1's track of ticks `0..count` with positions `x(k)` (m, on the disk's
+/// axis) arrived: the method, its copy and the world.
+fn after_a_remote_track(
+    deadband: bool,
+    count: usize,
+    x: impl Fn(usize) -> f64,
+) -> (TimeWarp, WorldCopy, World) {
+    let (mut tw, mut copy, w) = two_tools_on_a_disk();
+    if deadband {
+        tw.set_deadband(DeadbandSpec {
+            enabled: true,
+            ..DeadbandSpec::default()
+        });
+    }
+    for _ in 0..50 {
+        tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
+        tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
+    }
+    let mut r = ToolReport {
+        first_tick: 0,
+        count,
+        need: [-1; MAX_SITES],
+        ..ToolReport::NONE
+    };
+    for (k, p) in r.positions[..count].iter_mut().enumerate() {
+        *p = quantize(Vec3::new(x(k), 0.0, 0.01));
+    }
+    tw.receive(&w, &mut copy, 1, &Report::Tools(r), 0.05);
+    (tw, copy, w)
+}
+
 /// A remote tool pressing into the disk at its newest known tick is extrapolated with its last
 /// step (for a few ticks) while every position is sent; through a deadband that last step is a
 /// held run's jump, a band in one tick, and the tool is held where it was last known.
 #[test]
 fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
-    let mut predicted = Vec::new();
-    for deadband in [false, true] {
-        let (mut tw, mut copy, w) = two_tools_on_a_disk();
-        if deadband {
-            tw.set_deadband(DeadbandSpec {
-                enabled: true,
-                ..DeadbandSpec::default()
-            });
-        }
-        for _ in 0..50 {
-            tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
-            tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
-        }
+    let predicted = [false, true].map(|deadband| {
         // Site 1's tool 0.1 mm into the disk's rim (x = 0.045 touches; too light a press to
         // move the disk on the table), held, then a step of 0.05 mm further in at the newest
         // tick.
-        let mut r = ToolReport {
-            first_tick: 0,
-            count: 50,
-            need: [-1; MAX_SITES],
-            ..ToolReport::NONE
-        };
-        for (k, p) in r.positions[..50].iter_mut().enumerate() {
-            let x = if k < 49 { 0.0449 } else { 0.04485 };
-            *p = quantize(Vec3::new(x, 0.0, 0.01));
-        }
-        tw.receive(&w, &mut copy, 1, &Report::Tools(r), 0.05);
+        let (tw, _, _) =
+            after_a_remote_track(deadband, 50, |k| if k < 49 { 0.0449 } else { 0.04485 });
         assert!(
             TimeWarp::touches(tw.tools_at(tw.idx(49)), 1),
             "site 1's tool touches the disk at its newest tick"
         );
-        predicted.push(tw.input(1, 55));
-    }
+        tw.input(1, 55)
+    });
     let last = quantize(Vec3::new(0.04485, 0.0, 0.01));
     assert_eq!(
         predicted[0],
@@ -224,48 +235,18 @@ fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
 /// its last two samples instead.
 #[test]
 fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_samples() {
-    let mut predicted = Vec::new();
-    let mut reaches = Vec::new();
-    for deadband in [false, true] {
-        let (mut tw, mut copy, w) = two_tools_on_a_disk();
-        if deadband {
-            tw.set_deadband(DeadbandSpec {
-                enabled: true,
-                ..DeadbandSpec::default()
-            });
-        }
-        for _ in 0..50 {
-            tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
-            tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
-        }
+    let last = quantize(Vec3::new(0.098, 0.0, 0.01));
+    let [(full, _), (band, reach)] = [false, true].map(|deadband| {
         // Site 1's tool far from the disk, moving left at 0.1 m/s through a 2 mm band: sent
         // at ticks 0 and 20, held in between.
-        let mut r = ToolReport {
-            first_tick: 0,
-            count: 40,
-            need: [-1; MAX_SITES],
-            ..ToolReport::NONE
-        };
-        for (k, p) in r.positions[..40].iter_mut().enumerate() {
-            let x = if k < 20 { 0.1 } else { 0.098 };
-            *p = quantize(Vec3::new(x, 0.0, 0.01));
-        }
-        tw.receive(&w, &mut copy, 1, &Report::Tools(r), 0.05);
-        predicted.push(tw.input(1, 49).0);
-        let last = r.positions[39];
+        let (tw, _, _) = after_a_remote_track(deadband, 40, |k| if k < 20 { 0.1 } else { 0.098 });
         // 200 quanta in 20 ticks: where it was 10 ticks before at that velocity.
-        reaches.push(tw.reach(last, Some([last[0] + 100, last[1], last[2]]), 10));
-    }
-    let last = quantize(Vec3::new(0.098, 0.0, 0.01));
-    assert_eq!(
-        predicted[0], last,
-        "every tick sent: a held run is a tool at rest"
-    );
-    assert_eq!(
-        predicted[1], reaches[1],
-        "through a deadband: on at 0.1 m/s"
-    );
-    assert!(predicted[1][0] < last[0] - 50, "{:?}", predicted[1]);
+        let reach = tw.reach(last, Some([last[0] + 100, last[1], last[2]]), 10);
+        (tw.input(1, 49).0, reach)
+    });
+    assert_eq!(full, last, "every tick sent: a held run is a tool at rest");
+    assert_eq!(band, reach, "through a deadband: on at 0.1 m/s");
+    assert!(band[0] < last[0] - 50, "{band:?}");
 }
 
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
@@ -927,20 +908,26 @@ fn confirmed_states_that_differ_after_a_fallback_are_resynchronized() {
     }
 }
 
+/// Two sites whose tools rest right of the disk for 500 ticks, reporting every 20 ticks with
+/// `delay` ticks of delay, nothing lost.
+fn two_sites_at_rest(delay: i64) -> [(TimeWarp, WorldCopy); 2] {
+    two_sites(
+        600,
+        |_, _| {},
+        500,
+        |_, _| Vec3::new(0.2, 0.0, 0.01),
+        delay,
+        |_, _| false,
+        |_, _, _, _| {},
+    )
+}
+
 /// A state that would put the disk deeper into the table than every user's force could is
 /// not adopted (it would be released as kinetic energy); one at rest on it is.
 #[test]
 fn a_state_deep_in_the_table_is_not_adopted() {
     let (_, w) = paper_world();
-    let mut sites = two_sites(
-        600,
-        |_, _| {},
-        500,
-        |_, _| Vec3::new(0.2, 0.0, 0.01),
-        10,
-        |_, _| false,
-        |_, _, _, _| {},
-    );
+    let mut sites = two_sites_at_rest(10);
     let [(a, _), (b, cb)] = &mut sites;
     b.set_max_spring_energy(0.05);
     let Report::Tools(mut r) = a.track_report() else {
@@ -985,15 +972,7 @@ fn a_state_deep_in_the_table_is_not_adopted() {
 #[test]
 fn a_state_ahead_of_the_askers_frontier_is_adopted_once_confirmed() {
     let (_, w) = paper_world();
-    let mut sites = two_sites(
-        600,
-        |_, _| {},
-        500,
-        |_, _| Vec3::new(0.2, 0.0, 0.01),
-        100,
-        |_, _| false,
-        |_, _, _, _| {},
-    );
+    let mut sites = two_sites_at_rest(100);
     let [(a, _), (b, cb)] = &mut sites;
     // Site 0's positions to now, still on their way (100 ticks late).
     let Report::Tools(track) = a.track_report() else {
