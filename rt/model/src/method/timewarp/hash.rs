@@ -101,8 +101,9 @@ impl TimeWarp {
 
     /// Adopts the whole state [`Self::gather`] took, at its tick, and re-simulates to now, once
     /// this site has confirmed that tick too (before, an input of an earlier tick still to come
-    /// would roll back over it); `None` until then. Dropped once its tick leaves the history, or
-    /// when its site's state no longer differs from ours (no longer asked for).
+    /// would roll back over it); `None` until then. Dropped once its tick leaves the history, is
+    /// older than a state adopted since, or when its site's state no longer differs from ours (no
+    /// longer asked for).
     pub(super) fn adopt_gathered(
         &mut self,
         world: &World,
@@ -117,9 +118,11 @@ impl TimeWarp {
         let t = self.incoming[0].map_or(i64::MIN, |s| s.tick);
         let i = self.idx(t);
         // A kept slot is a simulated tick (the current one is not kept yet).
+        // (Nor one older than a state adopted since: it would roll back over that.)
         if !self.want_state.get(from).copied().unwrap_or(false)
             || self.slots[i].tick != t
             || t < self.oldest_kept()
+            || t < self.adopted_tick
         {
             self.incoming[..n].fill(None);
             return None;

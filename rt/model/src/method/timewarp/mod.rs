@@ -575,16 +575,23 @@ impl TimeWarp {
     }
 
     /// How long after sending the confirmed state this site sends it again to sites that still
-    /// ask, ticks: a round trip to the slowest of them ([`TimeWarp::delay_ticks`] each way, which
-    /// includes its report period) and [`STATE_RESEND_SLACK_S`] for it to confirm the state's
-    /// tick and say it took it. Sooner, the same state (or a newer one, which the asker would
-    /// have to confirm anew) crosses the one that is on its way; in every report, a world of
-    /// many objects' states would take most of the upload of a site asked for it.
+    /// ask, ticks: a round trip to the slowest of them ([`TimeWarp::delay_ticks`] each way: how
+    /// late their newest positions arrive; where not measured, the largest measured of any site)
+    /// and [`STATE_RESEND_SLACK_S`] for it to confirm the state's tick and say, in its next
+    /// report, that it took it. Sooner, the same state (or a newer one, which the asker would
+    /// have to confirm anew) crosses the one on its way; in every report, a world of many
+    /// objects' states would take most of the upload of a site asked for it.
     fn state_resend_ticks(&self) -> i64 {
-        let one_way = (0..self.sites)
-            .filter(|&j| self.state_asked[j])
-            .map(|j| self.delay_ticks[j])
-            .fold(0.0, f64::max);
+        let slowest = |asking: bool| {
+            (0..self.sites)
+                .filter(|&j| j != self.me && (!asking || self.state_asked[j]))
+                .map(|j| self.delay_ticks[j])
+                .fold(0.0, f64::max)
+        };
+        let mut one_way = slowest(true);
+        if one_way == 0.0 {
+            one_way = slowest(false);
+        }
         (2.0 * one_way + STATE_RESEND_SLACK_S / self.dt).ceil() as i64
     }
 
@@ -688,10 +695,11 @@ impl Consistency for TimeWarp {
         self.advance_replay();
         self.want_lag(world, copy);
     }
-    /// One report for the whole world: the own tool's track and the confirmed world's hash; while
-    /// a site asks for the confirmed state, of a world of several objects, one more report per
-    /// object after the first, at the same tick (no positions, no hash: the state alone), so the
-    /// whole state travels at once and arrives while its tick is still kept.
+    /// One report for the whole world: the own tool's track and the confirmed world's hash; when
+    /// it carries the confirmed state (a site asks for it, and again a round trip later while it
+    /// still asks), of a world of several objects, one more report per object after the first,
+    /// at the same tick (no positions, no hash: the state alone), so the whole state travels at
+    /// once and arrives while its tick is still kept.
     fn report(&self, _copy: &WorldCopy, _own: &[ContactForce], _now_s: f64, out: Sink<'_>) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let (window, first) = self.newest_track();
@@ -743,7 +751,13 @@ impl Consistency for TimeWarp {
         let worst = (0..self.sites).map(|j| self.losing[j]).max().unwrap_or(0);
         sent.set_loss(worst);
         self.sent.set(sent);
-        self.state_asked[from] = r.need_state & (1 << self.me) != 0;
+        let asks = r.need_state & (1 << self.me) != 0;
+        if asks && !self.state_asked[from] {
+            // A site that starts asking gets the state with the next report, not a round trip
+            // after another site's.
+            self.state_sent.set(i64::MIN);
+        }
+        self.state_asked[from] = asks;
         let oldest = self.oldest_kept();
         for (k, &q) in r.positions[..r.count.min(WINDOW_TICKS)].iter().enumerate() {
             let t = r.first_tick + k as i64;
@@ -887,6 +901,7 @@ impl Consistency for TimeWarp {
         if let Some(d) = self.deadband {
             (st.deadband_ticks, st.deadband_samples) = (d.ticks, d.samples);
         }
+        st.redundancy_reports = self.sent.get().reports() as u64;
         Stats::Rollback(st)
     }
     fn grid_history_ticks(&self) -> Option<u64> {

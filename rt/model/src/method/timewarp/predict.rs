@@ -4,10 +4,11 @@
 use super::*;
 
 /// A remote tool that touched the object at its last known tick is extrapolated with its last
-/// velocity for at most this many ticks (held at once through a perceptual deadband), then held: the contact, not the hand's motion, decides
-/// where it goes next (the hand's force balance against the object cannot be predicted, and a tool
-/// predicted on into the object pushes it through the grasp: at 150 ms the copies then disagree by
-/// centimetres while both users hold the disk).
+/// velocity for at most this many ticks (held at once through a perceptual deadband), then held:
+/// the contact, not the hand's motion, decides where it goes next (the hand's force balance
+/// against the object cannot be predicted, and a tool predicted on into the object pushes it
+/// through the grasp: at 150 ms the copies then disagree by centimetres while both users hold the
+/// disk).
 pub const EXTRAPOLATE_TICKS: i64 = 20;
 
 /// A remote tool that was free at its last known tick is predicted as a reaching hand: on with its
@@ -26,9 +27,9 @@ pub const REACH_TIME_TICKS: i64 = 300;
 pub const REACH_TICKS: i64 = 1000;
 
 /// Through a perceptual deadband a free remote tool's velocity is that between its last two
-/// samples (the first ticks of its last two held runs), each looked for at most this many ticks
-/// back (a tool held longer is taken to rest: slower than a free-space band in this time, 31 mm/s
-/// at 2 mm and 1 kHz). Over the last [`REACH_VELOCITY_TICKS`] a held run says 0, or one jump of a
+/// samples (the first ticks of its last two held runs), each run looked for at most this many
+/// ticks back from its own end (a run longer than that is a tool at rest: slower than a
+/// free-space band in this time, 31 mm/s at 2 mm and 1 kHz). Over the last [`REACH_VELOCITY_TICKS`] a held run says 0, or one jump of a
 /// band: a reach predicted from it overshot or stopped, and at 100–200 ms the copies showed a
 /// push that was not the partner's (paper task, seeds 1–4 and 7: every servo tick's force within
 /// one JND of the full-rate run for 83–97 % of ticks, now 92–97 %).
@@ -102,16 +103,27 @@ impl TimeWarp {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (at most
         // 2 × SAMPLE_VELOCITY_TICKS lookups).
         let at = |t: i64| self.received_at(j, t);
-        let run_start = |q: Quantized, from: i64| {
-            let mut s = from;
-            while s > last - SAMPLE_VELOCITY_TICKS && at(s - 1) == Some(q) {
+        // The first tick of the run of `q` that ends at `end`, if it began at most
+        // SAMPLE_VELOCITY_TICKS before (else the tool is taken to rest).
+        let run_start = |q: Quantized, end: i64| {
+            let mut s = end;
+            while at(s - 1) == Some(q) {
+                if s <= end - SAMPLE_VELOCITY_TICKS {
+                    return None;
+                }
                 s -= 1;
             }
-            s
+            Some(s)
         };
-        let sample = run_start(p, last);
+        // At rest: where it is now.
+        let Some(sample) = run_start(p, last) else {
+            return Some(p);
+        };
         let before = at(sample - 1)?;
-        let ticks = (sample - run_start(before, sample - 1)).max(1);
+        let Some(previous) = run_start(before, sample - 1) else {
+            return Some(p);
+        };
+        let ticks = (sample - previous).max(1);
         Some(std::array::from_fn(|c| {
             let step = (i64::from(p[c]) - i64::from(before[c])) * REACH_VELOCITY_TICKS / ticks;
             (i64::from(p[c]) - step).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32

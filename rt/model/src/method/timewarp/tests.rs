@@ -172,9 +172,9 @@ fn held_positions_are_every_site_s_inputs() {
     assert_eq!(ca.first().state, cb.first().state);
 }
 
-/// [`two_tools_on_a_disk`]'s site 0, with or without a deadband, 50 ticks on (its own tool far
-/// left), after site 1's track of ticks `0..count` with positions `x(k)` (m, on the disk's
-/// axis) arrived: the method, its copy and the world.
+/// [`two_tools_on_a_disk`]'s site 0, with or without a deadband, `count + 10` ticks on (its own
+/// tool far left), after site 1's track of ticks `0..count` with positions `x(k)` (m, on the
+/// disk's axis) arrived: the method, its copy and the world.
 fn after_a_remote_track(
     deadband: bool,
     count: usize,
@@ -187,7 +187,7 @@ fn after_a_remote_track(
             ..DeadbandSpec::default()
         });
     }
-    for _ in 0..50 {
+    for _ in 0..count + 10 {
         tw.own_tool(Vec3::new(-0.2, 0.0, 0.01));
         tw.physics_step(&w, &mut copy, &[ContactForce::default()], 1e-3);
     }
@@ -232,21 +232,26 @@ fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
 
 /// A free remote tool is predicted on as a reaching hand. Through a deadband its held runs say
 /// nothing over the last few ticks (a run) or one jump of a band: its velocity is taken between
-/// its last two samples instead.
+/// its last two samples instead, each run looked for from its own end (the two together may be
+/// longer than that reach back), and a run longer than that is a tool at rest.
 #[test]
 fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_samples() {
     let last = quantize(Vec3::new(0.098, 0.0, 0.01));
     let [(full, _), (band, reach)] = [false, true].map(|deadband| {
-        // Site 1's tool far from the disk, moving left at 0.1 m/s through a 2 mm band: sent
-        // at ticks 0 and 20, held in between.
-        let (tw, _, _) = after_a_remote_track(deadband, 40, |k| if k < 20 { 0.1 } else { 0.098 });
-        // 200 quanta in 20 ticks: where it was 10 ticks before at that velocity.
-        let reach = tw.reach(last, Some([last[0] + 100, last[1], last[2]]), 10);
-        (tw.input(1, 49).0, reach)
+        // Site 1's tool far from the disk, moving left at 40 mm/s through a 2 mm band: sent at
+        // ticks 0, 50 and 100, held in between; known to tick 139.
+        let x = |k: usize| 0.102 - 0.002 * (k / 50) as f64;
+        let (tw, _, _) = after_a_remote_track(deadband, 140, x);
+        // 200 quanta in 50 ticks: where it was 10 ticks before at that velocity.
+        let reach = tw.reach(last, Some([last[0] + 40, last[1], last[2]]), 10);
+        (tw.input(1, 149).0, reach)
     });
     assert_eq!(full, last, "every tick sent: a held run is a tool at rest");
-    assert_eq!(band, reach, "through a deadband: on at 0.1 m/s");
-    assert!(band[0] < last[0] - 50, "{band:?}");
+    assert_eq!(band, reach, "through a deadband: on at 40 mm/s");
+    assert!(band[0] < last[0] - 20, "{band:?}");
+    // Sent at ticks 0 and 100 only: the run before the last is longer than the reach back.
+    let (tw, _, _) = after_a_remote_track(true, 140, |k| if k < 100 { 0.1 } else { 0.098 });
+    assert_eq!(tw.input(1, 149).0, last, "a tool this slow is at rest");
 }
 
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
@@ -920,6 +925,45 @@ fn two_sites_at_rest(delay: i64) -> [(TimeWarp, WorldCopy); 2] {
         |_, _| false,
         |_, _, _, _| {},
     )
+}
+
+/// The state asked for is lost on its way: the asked site sends it again a round trip (50 ticks
+/// each way) and the slack later, while still asked, and the asker adopts that one.
+#[test]
+fn a_lost_state_is_sent_again_a_round_trip_later() {
+    let first_state = std::cell::Cell::new(-1i64);
+    let mut sent_at = Vec::new();
+    // Site 1 → site 0 is down for 1.2 s, twice the history: site 0 misses part of site 1's
+    // sweep, and site 1 (the later) asks site 0 for its state.
+    let sites = two_sites(
+        600,
+        |_, _| {},
+        4000,
+        sweep_into_the_disk,
+        50,
+        |from, k| (from == 1 && (1000..2200).contains(&k)) || (from == 0 && k == first_state.get()),
+        |i, t, k, _| {
+            if i == 0 && t.state.is_some() {
+                sent_at.push(k);
+                if first_state.get() < 0 {
+                    first_state.set(k);
+                }
+            }
+        },
+    );
+    let [(a, ca), (b, cb)] = &sites;
+    let st = [a.rollback_stats(), b.rollback_stats()];
+    let resend = 100 + (STATE_RESEND_SLACK_S / 1e-3) as i64;
+    assert!(sent_at.len() >= 2, "sent again: {sent_at:?} {st:?}");
+    assert!(sent_at[1] - sent_at[0] >= resend, "{sent_at:?}");
+    assert!(
+        sent_at[1] - sent_at[0] <= resend + 40,
+        "a round trip later, at the next reports: {sent_at:?}"
+    );
+    assert!(st[1].adopted_states > 0, "{st:?}");
+    let t = a.confirmed_tick().min(b.confirmed_tick());
+    assert_eq!(a.hash_at(t), b.hash_at(t));
+    assert_eq!(ca.first().state, cb.first().state);
 }
 
 /// A state that would put the disk deeper into the table than every user's force could is
