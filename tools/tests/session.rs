@@ -686,7 +686,9 @@ fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
 /// User 1 asks for it and user 2 sends it again; the repair passes the wire's rules (it gives the
 /// sender's frontier at the repaired window's end), the gap is filled, and the confirmed states
 /// stay the same bits. Before, every repair was refused on the wire: 20 fallbacks at user 1, 67
-/// hash mismatches at user 2, the copies 14.5 mm apart at the end.
+/// hash mismatches at user 2, the copies 14.5 mm apart at the end. Both stations send through the
+/// perceptual deadband, so the held runs are what is lost and repaired; their status shows the
+/// redundancy the loss set and the share of positions sent.
 #[test]
 fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
     let _turn = ONE_AT_A_TIME.lock();
@@ -697,7 +699,8 @@ fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
         .clone()
         .set("network.delay_min_ms", 150.0)
         .set("network.delay_max_ms", 150.0)
-        .set("network.loss", 0.5);
+        .set("network.loss", 0.5)
+        .set_toml("timewarp", "{ deadband = { enabled = true } }");
     assert_ne!(lossy, base);
     let scenario = out.join("lossy.toml");
     lossy.write(&scenario);
@@ -720,5 +723,18 @@ fn timewarp_on_real_stations_repairs_gaps_of_lost_tracks() {
         assert!(rb["hash_checks"].as_u64() > Some(20), "{site}: {rb}");
         assert_eq!(rb["fallbacks"], 0, "{site}: every gap was repaired: {rb}");
         assert_eq!(rb["hash_mismatches"], 0, "{site}: {rb}");
+        // Half lost: the own tracks carry more than the last report again, and the status says so.
+        assert!(rb["redundancy"].as_u64() > Some(1), "{site}: {rb}");
+        // Through the deadband: most own positions held, the held runs carried and repaired
+        // like any others (the checks above).
+        let (ticks, sent) = (
+            rb["deadband_ticks"].as_u64(),
+            rb["deadband_samples"].as_u64(),
+        );
+        assert!(ticks > Some(10_000), "{site}: {rb}");
+        assert!(
+            sent.zip(ticks).is_some_and(|(s, t)| s > 0 && s * 5 < t),
+            "{site}: {rb}"
+        );
     }
 }

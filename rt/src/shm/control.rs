@@ -578,7 +578,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v19";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v20";
 }
 
 impl ControlBlock {

@@ -98,6 +98,13 @@ rollback_figures! {
     /// How late the other sites' tools are played now, ticks, the largest over them (`coupled`:
     /// its adaptive jitter buffer; rounded up; 0 under other methods).
     playout_ticks,
+    /// The reports each own track carries again now (`timewarp`: sized by the loss the receivers
+    /// measure and the gaps they ask for; 0 under other methods).
+    redundancy,
+    /// With a perceptual deadband (`[timewarp.deadband]`): the own ticks stepped...
+    deadband_ticks,
+    /// ... and the own positions sent (the others were held).
+    deadband_samples,
 }
 
 impl RollbackShared {
@@ -126,6 +133,9 @@ impl RollbackFigures {
         self.replays = st.replays;
         self.local_lag_ticks = st.local_lag_ticks;
         self.lagged_ticks = st.lagged_ticks;
+        self.redundancy = st.redundancy_reports;
+        self.deadband_ticks = st.deadband_ticks;
+        self.deadband_samples = st.deadband_samples;
     }
 }
 
@@ -156,6 +166,22 @@ impl std::fmt::Display for RollbackFigures {
         )?;
         if self.playout_ticks > 0 {
             write!(f, "; other tools played {} ticks late", self.playout_ticks)?;
+        }
+        if self.redundancy > 0 {
+            write!(
+                f,
+                "; own tracks carry the last {} reports again",
+                self.redundancy
+            )?;
+        }
+        if self.deadband_ticks > 0 {
+            write!(
+                f,
+                "; deadband: {} of {} own positions sent ({:.1} %)",
+                self.deadband_samples,
+                self.deadband_ticks,
+                100.0 * self.deadband_samples as f64 / self.deadband_ticks as f64
+            )?;
         }
         Ok(())
     }

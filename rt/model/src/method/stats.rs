@@ -80,6 +80,9 @@ pub struct RollbackStats {
     pub deadband_ticks: u64,
     /// ... and the own positions sent (that left the band; the others were held).
     pub deadband_samples: u64,
+    /// The reports each own track carries again now (`timewarp`: sized by the loss its receivers
+    /// measure and the gaps they ask for, `timewarp/window.rs`; 0 under other methods).
+    pub redundancy_reports: u64,
 }
 
 impl std::fmt::Display for RollbackStats {
