@@ -100,11 +100,17 @@ impl Drop for Station {
     }
 }
 
-/// Where the stations of one session listen: one loopback port per site, then the launcher's.
+/// Where the stations of one session listen: one loopback port per site, then the launcher's,
+/// all different (each is free when picked, and none is bound until its station starts).
 pub(crate) fn loopback_ports(sites: usize) -> Vec<String> {
-    (0..=sites)
-        .map(|_| network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0))
-        .collect()
+    let mut ports: Vec<String> = Vec::with_capacity(sites + 1);
+    while ports.len() <= sites {
+        let port = network::concrete_listen(&["tcp/127.0.0.1:0".into()]).remove(0);
+        if !ports.contains(&port) {
+            ports.push(port);
+        }
+    }
+    ports
 }
 
 /// Writes every site's station configuration into `dir` (absolute) and returns its stations, none
