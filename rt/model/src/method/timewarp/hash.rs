@@ -153,6 +153,27 @@ impl TimeWarp {
         Some(before.adoption(world, copy, (self.now_tick - t) as f64 * self.dt))
     }
 
+    /// How long after sending the confirmed state this site sends it again to sites that still
+    /// ask, ticks: a round trip to the slowest of them ([`TimeWarp::delay_ticks`] each way: how
+    /// late their newest positions arrive; where not measured, the largest measured of any site)
+    /// and [`STATE_RESEND_SLACK_S`] for it to confirm the state's tick and say, in its next
+    /// report, that it took it. Sooner, the same state (or a newer one, which the asker would
+    /// have to confirm anew) crosses the one on its way; in every report, a world of many
+    /// objects' states would take most of the upload of a site asked for it.
+    pub(super) fn state_resend_ticks(&self) -> i64 {
+        let slowest = |asking: bool| {
+            (0..self.sites)
+                .filter(|&j| j != self.me && (!asking || self.state_asked[j]))
+                .map(|j| self.delay_ticks[j])
+                .fold(0.0, f64::max)
+        };
+        let mut one_way = slowest(true);
+        if one_way == 0.0 {
+            one_way = slowest(false);
+        }
+        (2.0 * one_way + STATE_RESEND_SLACK_S / self.dt).ceil() as i64
+    }
+
     /// FNV-1a of the state at the start of tick `t`, if it is still kept.
     pub(super) fn hash_at(&self, t: i64) -> Option<u64> {
         let i = self.idx(t);

@@ -574,27 +574,6 @@ impl TimeWarp {
         (first, r)
     }
 
-    /// How long after sending the confirmed state this site sends it again to sites that still
-    /// ask, ticks: a round trip to the slowest of them ([`TimeWarp::delay_ticks`] each way: how
-    /// late their newest positions arrive; where not measured, the largest measured of any site)
-    /// and [`STATE_RESEND_SLACK_S`] for it to confirm the state's tick and say, in its next
-    /// report, that it took it. Sooner, the same state (or a newer one, which the asker would
-    /// have to confirm anew) crosses the one on its way; in every report, a world of many
-    /// objects' states would take most of the upload of a site asked for it.
-    fn state_resend_ticks(&self) -> i64 {
-        let slowest = |asking: bool| {
-            (0..self.sites)
-                .filter(|&j| j != self.me && (!asking || self.state_asked[j]))
-                .map(|j| self.delay_ticks[j])
-                .fold(0.0, f64::max)
-        };
-        let mut one_way = slowest(true);
-        if one_way == 0.0 {
-            one_way = slowest(false);
-        }
-        (2.0 * one_way + STATE_RESEND_SLACK_S / self.dt).ceil() as i64
-    }
-
     /// A peer that lost more reports in a row than the newest window covers asked for the first
     /// tick it lacks: a track from there ([`WINDOW_TICKS`] of them), sent besides the newest
     /// window in every report while it asks and the ticks are still kept, so the newest
