@@ -316,7 +316,7 @@ fn free_port(ip: std::net::IpAddr) -> Option<u16> {
 
 /// Replaces port 0 of `tcp/<ip>:0` locators with a port that is free now, so the station knows (and
 /// status shows) where it listens: outside the kernel's ephemeral range where one is free there
-/// (see [`free_port`]), else the kernel's choice.
+/// (`free_port` says why), else the kernel's choice.
 pub fn concrete_listen(listen: &[String]) -> Vec<String> {
     listen
         .iter()
