@@ -119,7 +119,7 @@ impl TimeWarp {
         let i = self.idx(t);
         // A kept slot is a simulated tick (the current one is not kept yet).
         // (Nor one older than a state adopted since: it would roll back over that.)
-        if !self.want_state.get(from).copied().unwrap_or(false)
+        if !self.want_state[from]
             || self.slots[i].tick != t
             || t < self.oldest_kept()
             || t < self.adopted_tick

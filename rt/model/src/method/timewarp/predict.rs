@@ -29,10 +29,11 @@ pub const REACH_TICKS: i64 = 1000;
 /// Through a perceptual deadband a free remote tool's velocity is that between its last two
 /// samples (the first ticks of its last two held runs), each run looked for at most this many
 /// ticks back from its own end (a run longer than that is a tool at rest: slower than a
-/// free-space band in this time, 31 mm/s at 2 mm and 1 kHz). Over the last [`REACH_VELOCITY_TICKS`] a held run says 0, or one jump of a
-/// band: a reach predicted from it overshot or stopped, and at 100–200 ms the copies showed a
-/// push that was not the partner's (paper task, seeds 1–4 and 7: every servo tick's force within
-/// one JND of the full-rate run for 83–97 % of ticks, now 92–97 %).
+/// free-space band in this time, 31 mm/s at 2 mm and 1 kHz). Over the last
+/// [`REACH_VELOCITY_TICKS`] a held run says 0, or one jump of a band: a reach predicted from it
+/// overshot or stopped, and at 100–200 ms the copies showed a push that was not the partner's
+/// (paper task, seeds 1–4 and 7: every servo tick's force within one JND of the full-rate run
+/// for 83–97 % of ticks, now 92–98 %).
 pub const SAMPLE_VELOCITY_TICKS: i64 = 64;
 
 impl TimeWarp {
