@@ -1,26 +1,55 @@
 //! `sim deadband`: what the perceptual deadband (`[timewarp.deadband]`) saves and what it costs
-//! the users' feel. At each constant delay, `timewarp` runs twice on the same scenario and seed:
-//! every tick's position sent (the full-rate run, the baseline), and through the deadband. Per
-//! run: the share of the own ticks whose position was sent, the payload the busiest site puts,
-//! the phases passed, hash mismatches; and per site and servo tick, the displayed force's
-//! difference from the full-rate run's at the same tick in just-noticeable steps (a JND: 7 % of the
-//! full-rate force, at least 0.05 N, `perception::force_jnd_n`): the share of ticks within one
-//! JND and the 99th percentile. Two runs of a contact task part ways in time (a contact a tick
-//! earlier, a push a little weaker), and a difference tick by tick counts that too; so a
-//! third run is the baseline: a deadband of 1.5 quanta (0.015 mm) everywhere, the least change
-//! the wire can express, compared the same way; and a fourth the noise floor: the full-rate run
-//! again with the next seed (other draws of the force sensor's noise and of the delay's jitter),
-//! which says how far two runs of the task part with no codec at all.
+//! the users' feel. At each constant delay, `timewarp` runs with every tick's position sent (the
+//! full-rate run, the baseline) and through the deadband. Per run: the share of the own ticks
+//! whose position was sent, the payload the busiest site puts, the phases passed, hash
+//! mismatches; and per site and servo tick, the displayed force's difference from the full-rate
+//! run's at the same tick in just-noticeable steps (a JND: 7 % of the full-rate force, at least
+//! 0.05 N, `perception::force_jnd_n`): the share of ticks within one JND and the 99th percentile.
+//! Two runs of a contact task part ways in time (a contact a tick earlier, a push a little
+//! weaker), and a difference tick by tick counts that too; so a third run is the baseline: a
+//! deadband of 1.5 quanta (0.015 mm) everywhere, the least change the wire can express, compared
+//! the same way; and a fourth the noise floor: the full-rate run again with the next seed (other
+//! draws of the force sensor's noise and of the delay's jitter), which shows how far two runs of
+//! the task part with no codec at all.
+//!
+//! The users' hands react to what they feel, so a force a little different moves the hand a
+//! little differently, and the runs part further. The four runs are therefore made twice: with
+//! the hands as the scenario has them, and with every site's tool replayed from the full-rate
+//! run's servo ticks (a recorded hand, `coop_model::replay`), the same in all four, so that only
+//! the world differs: what the codec itself changes in what the users feel.
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
+use coop_model::replay::Trajectory;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult};
 use coop_model::{metrics, perception};
 
 use crate::sweep::{par_map, scenario_at};
 
-/// One delay's pair of runs.
+/// The displayed force's difference from a run's, tick by tick: the share of servo ticks within
+/// one JND, and the 99th percentile, JND.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct ForceError {
+    /// Servo ticks (every site's) whose displayed force is within one JND of the other run's.
+    pub within_jnd: f64,
+    /// The 99th percentile of the difference, JND.
+    pub p99_jnd: f64,
+}
+
+/// Three runs against the full-rate run: through the deadband, through the least band the wire
+/// can express, and the full-rate run with the next seed.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct ForceErrors {
+    /// Through the deadband.
+    pub band: ForceError,
+    /// Through a band of 1.5 quanta (0.015 mm) everywhere: what any change of the inputs costs.
+    pub baseline: ForceError,
+    /// The full-rate run with the next seed: how far two runs part with no codec at all.
+    pub reseeded: ForceError,
+}
+
+/// One delay's runs.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Row {
     /// One-way delay, ms.
@@ -35,45 +64,80 @@ pub struct Row {
     pub phases_total: usize,
     /// Hash mismatches (deadband run).
     pub hash_mismatches: u64,
-    /// Servo ticks (every site's) whose displayed force is within one JND of the full-rate
-    /// run's.
-    pub within_jnd: f64,
-    /// The 99th percentile of the force difference, JND.
-    pub p99_jnd: f64,
-    /// The same two figures for the baseline (a band of 1.5 quanta).
-    pub baseline_within_jnd: f64,
-    /// See `baseline_within_jnd`.
-    pub baseline_p99_jnd: f64,
-    /// The same two figures for the full-rate run with the next seed (the noise floor).
-    pub reseeded_within_jnd: f64,
-    /// See `reseeded_within_jnd`.
-    pub reseeded_p99_jnd: f64,
+    /// The users' hands as the scenario has them, reacting to what they feel.
+    pub closed_loop: ForceErrors,
+    /// Every site's tool replayed from the full-rate run's servo ticks in every run (the full-rate
+    /// one too): the same hands, which do not react, so what differs is the world alone.
+    pub replayed: ForceErrors,
 }
 
 /// The share of `e` (JND) within 1, and its 99th percentile.
-fn within_and_p99(e: Vec<f64>) -> (f64, f64) {
+fn within_and_p99(e: Vec<f64>) -> ForceError {
     if e.is_empty() {
-        return (0.0, 0.0);
+        return ForceError {
+            within_jnd: 0.0,
+            p99_jnd: 0.0,
+        };
     }
     let within = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len() as f64;
-    (within, crate::simbench::quantile(e, 0.99))
+    ForceError {
+        within_jnd: within,
+        p99_jnd: crate::simbench::quantile(e, 0.99),
+    }
 }
 
 /// The displayed force's difference between `db` and `full`, servo tick by servo tick (the two
 /// runs' sites tick at the same instants), in JND ([`perception::force_jnd_n`] of the full-rate
 /// run's force: the one just-noticeable difference every figure of the project counts in, not
 /// the deadband's own parameter).
-fn force_error_jnd(full: &RunResult, db: &RunResult) -> Vec<f64> {
+fn force_error_jnd(full: &RunResult, db: &RunResult) -> ForceError {
     let mut out = Vec::new();
-    for (a, b) in full.servo_forces.iter().zip(&db.servo_forces) {
-        for (fa, fb) in a.iter().zip(b) {
+    for (a, b) in full.servo_ticks.iter().zip(&db.servo_ticks) {
+        for (ta, tb) in a.iter().zip(b) {
+            let (fa, fb) = (ta.f_desired, tb.f_desired);
             out.push((fb - fa).norm() / perception::force_jnd_n(fa.norm()));
         }
     }
-    out
+    within_and_p99(out)
 }
 
-/// Runs the pairs at each of `delays_ms` (the scenario's deadband settings, turned on).
+/// `sc` with every site's hand replayed from `run`'s servo ticks (its tool's position at each).
+fn with_hands_of(sc: &Scenario, run: &RunResult) -> anyhow::Result<Scenario> {
+    let mut sc = sc.clone();
+    for (i, (spec, ticks)) in sc.site.iter_mut().zip(&run.servo_ticks).enumerate() {
+        let t = Trajectory::new(ticks.iter().map(|k| (k.t_s, k.tool_pos)))
+            .map_err(|e| anyhow::anyhow!("site {i}'s servo ticks as a hand: {e}"))?;
+        spec.hand_trajectory = Some(t);
+    }
+    Ok(sc)
+}
+
+/// One delay's scenarios: full rate, through the deadband, through the least band, reseeded.
+type Quad = [Scenario; 4];
+
+/// The four runs of `q` (`size` counts the first two's bytes), keeping servo ticks.
+fn run_quad(q: &Quad) -> [RunResult; 4] {
+    let mode = Mode::Distributed(MethodName::Timewarp);
+    let size = &crate::sim::wire_bytes;
+    let none = &|_: usize, _: u64, _: [u64; 2], _: &coop_model::method::Report| 0;
+    [
+        sim::run_keeping_servo_ticks(&q[0], mode, &mut |_| {}, size),
+        sim::run_keeping_servo_ticks(&q[1], mode, &mut |_| {}, size),
+        sim::run_keeping_servo_ticks(&q[2], mode, &mut |_| {}, none),
+        sim::run_keeping_servo_ticks(&q[3], mode, &mut |_| {}, none),
+    ]
+}
+
+/// The last three of `r` against the first.
+fn errors(r: &[RunResult; 4]) -> ForceErrors {
+    ForceErrors {
+        band: force_error_jnd(&r[0], &r[1]),
+        baseline: force_error_jnd(&r[0], &r[2]),
+        reseeded: force_error_jnd(&r[0], &r[3]),
+    }
+}
+
+/// Runs the comparisons at each of `delays_ms` (the scenario's deadband settings, turned on).
 ///
 /// # Errors
 /// A delay makes the scenario invalid.
@@ -94,33 +158,34 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
             free_space_m: q,
         };
         let reseeded = scenario_at(base, d, base.seed.wrapping_add(1))?;
-        jobs.push((d, full, db, least, reseeded));
+        jobs.push((d, [full, db, least, reseeded]));
     }
     let reference = sim::run(base, Mode::Reference, &mut |_| {});
-    let runs = par_map(&jobs, |(d, full, db, least, reseeded)| {
-        let mode = Mode::Distributed(MethodName::Timewarp);
-        let size = &crate::sim::wire_bytes;
-        let a = sim::run_keeping_servo_forces(full, mode, &mut |_| {}, size);
-        let b = sim::run_keeping_servo_forces(db, mode, &mut |_| {}, size);
-        let c = sim::run_keeping_servo_forces(least, mode, &mut |_| {}, &|_, _, _, _| 0);
-        let e = sim::run_keeping_servo_forces(reseeded, mode, &mut |_| {}, &|_, _, _, _| 0);
-        (*d, a, b, c, e)
-    });
-    Ok(runs
-        .into_iter()
-        .map(|(delay_ms, a, b, c, e)| {
+    let closed = par_map(&jobs, |(_, q)| run_quad(q));
+    // The same four, every hand replayed from the full-rate run's.
+    let mut replays = Vec::with_capacity(jobs.len());
+    for ((_, q), r) in jobs.iter().zip(&closed) {
+        let mut hands: Vec<Scenario> = Vec::with_capacity(4);
+        for sc in q {
+            hands.push(with_hands_of(sc, &r[0])?);
+        }
+        let hands: Quad = hands.try_into().map_err(|_| anyhow::anyhow!("four runs"))?;
+        replays.push(hands);
+    }
+    let replayed = par_map(&replays, run_quad);
+    Ok(jobs
+        .iter()
+        .zip(closed.iter().zip(&replayed))
+        .map(|((delay_ms, _), (c, r))| {
             let (ma, mb) = (
-                metrics::compute(base, &a, &reference),
-                metrics::compute(base, &b, &reference),
+                metrics::compute(base, &c[0], &reference),
+                metrics::compute(base, &c[1], &reference),
             );
-            let (ticks, samples) = b.rollback.iter().flatten().fold((0, 0), |(t, s), r| {
+            let (ticks, samples) = c[1].rollback.iter().flatten().fold((0, 0), |(t, s), r| {
                 (t + r.deadband_ticks, s + r.deadband_samples)
             });
-            let (within, p99) = within_and_p99(force_error_jnd(&a, &b));
-            let (base_within, base_p99) = within_and_p99(force_error_jnd(&a, &c));
-            let (seed_within, seed_p99) = within_and_p99(force_error_jnd(&a, &e));
             Row {
-                delay_ms,
+                delay_ms: *delay_ms,
                 sent_share: samples as f64 / ticks.max(1) as f64,
                 kbit_s: [
                     crate::sim::busiest_sent_kbit_s(&ma, base.duration_s),
@@ -129,12 +194,8 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 phases: [ma.phases_passed, mb.phases_passed],
                 phases_total: mb.phases_total,
                 hash_mismatches: mb.hash_mismatches,
-                within_jnd: within,
-                p99_jnd: p99,
-                baseline_within_jnd: base_within,
-                baseline_p99_jnd: base_p99,
-                reseeded_within_jnd: seed_within,
-                reseeded_p99_jnd: seed_p99,
+                closed_loop: errors(c),
+                replayed: errors(r),
             }
         })
         .collect())
@@ -152,7 +213,7 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
     }
     let d = sc.timewarp.deadband;
     println!(
-        "# scenario {} (seed {}, {} s): timewarp, every tick's position sent vs a perceptual deadband (Weber {} of the contact force, floor {} N, near {} m, free space {} m)",
+        "# scenario {} (seed {}, {} s): timewarp, every tick's position sent vs a perceptual deadband (Weber {:.4} of the contact force, floor {:.4} N, near {} m, free space {} m)",
         sc.name, sc.seed, sc.duration_s, d.weber_fraction, d.floor_n, d.near_m, d.free_space_m
     );
     println!(
@@ -172,24 +233,12 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         "reseeded"
     );
     println!(
-        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
-        "ms",
-        "of ticks",
-        "",
-        "",
-        "full",
-        "band",
-        "mismatch",
-        "<=1 JND",
-        "p99 JND",
-        "<=1 JND",
-        "p99 JND",
-        "<=1 JND",
-        "p99 JND"
+        "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{}",
+        "ms", "of ticks", "", "", "full", "band", "mismatch", ERROR_UNITS
     );
     for r in &rows {
         println!(
-            "{:>8.0}{:>9.1}%{:>14.1}{:>14.1}{:>12}{:>12}{:>11}{:>11.2}%{:>10.2}{:>11.2}%{:>10.2}{:>11.2}%{:>10.2}",
+            "{:>8.0}{:>9.1}%{:>14.1}{:>14.1}{:>12}{:>12}{:>11}{}",
             r.delay_ms,
             100.0 * r.sent_share,
             r.kbit_s[0],
@@ -197,14 +246,30 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
             format!("{}/{}", r.phases[0], r.phases_total),
             format!("{}/{}", r.phases[1], r.phases_total),
             r.hash_mismatches,
-            100.0 * r.within_jnd,
-            r.p99_jnd,
-            100.0 * r.baseline_within_jnd,
-            r.baseline_p99_jnd,
-            100.0 * r.reseeded_within_jnd,
-            r.reseeded_p99_jnd
+            error_cells(&r.closed_loop)
         );
     }
     println!("# sent = own ticks whose position left the band and was sent (every site); kbit/s = payload the busiest site puts; force = each site's displayed force (F_h, every servo tick) against the full-rate run's at the same tick, in JND (7 % of the full-rate force, at least 0.05 N); baseline = the same against a run through a band of 1.5 quanta (0.015 mm), the least change the wire can express; reseeded = the full-rate run with the next seed (other draws of sensor noise and jitter), against the full-rate run: how far two runs of the task part with no codec at all");
+    println!("# the same hands: every run again (the full-rate one too) with each site's tool replayed from the full-rate run's servo ticks, so the hands do not react to what they feel and only the world differs");
+    println!(
+        "{:>8}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
+        "delay", "force", "force", "baseline", "baseline", "reseeded", "reseeded"
+    );
+    println!("{:>8}{}", "ms", ERROR_UNITS);
+    for r in &rows {
+        println!("{:>8.0}{}", r.delay_ms, error_cells(&r.replayed));
+    }
+    println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor)");
     Ok(())
+}
+
+/// The second header line of the three comparisons' columns.
+const ERROR_UNITS: &str = "     <=1 JND   p99 JND     <=1 JND   p99 JND     <=1 JND   p99 JND";
+
+/// The three comparisons' cells.
+fn error_cells(e: &ForceErrors) -> String {
+    [e.band, e.baseline, e.reseeded]
+        .iter()
+        .map(|x| format!("{:>11.2}%{:>10.2}", 100.0 * x.within_jnd, x.p99_jnd))
+        .collect()
 }

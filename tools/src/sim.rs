@@ -93,7 +93,9 @@ pub enum Command {
     },
     /// `timewarp` with every tick's position sent vs through the scenario's perceptual deadband
     /// (`[timewarp.deadband]`, turned on), at each constant delay: positions sent, kbit/s,
-    /// phases, hash mismatches, and the displayed force's difference in just-noticeable steps.
+    /// phases, hash mismatches, and the displayed force's difference in just-noticeable steps,
+    /// twice: with the hands reacting to what they feel, and with every site's tool replayed
+    /// from the full-rate run (only the world differs).
     Deadband {
         /// Scenario file (TOML).
         scenario: PathBuf,

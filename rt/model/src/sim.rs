@@ -187,9 +187,20 @@ pub struct RunResult {
     pub rollback: Vec<Option<crate::method::RollbackStats>>,
     /// Per site: the displayed-force steps of every servo tick.
     pub force_steps: Vec<ForceSteps>,
-    /// Per site: the displayed force F_h of every servo tick, N (kept only by
-    /// [`run_keeping_servo_forces`]; empty otherwise).
-    pub servo_forces: Vec<Vec<Vec3>>,
+    /// Per site: every servo tick's tool position and displayed force (kept only by
+    /// [`run_keeping_servo_ticks`]; empty otherwise).
+    pub servo_ticks: Vec<Vec<ServoTick>>,
+}
+
+/// One servo tick of a site, as kept by [`run_keeping_servo_ticks`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoTick {
+    /// When, s.
+    pub t_s: f64,
+    /// The tool's position, m.
+    pub tool_pos: Vec3,
+    /// The displayed force F_h, N.
+    pub f_desired: Vec3,
 }
 
 impl RunResult {
@@ -205,7 +216,7 @@ impl RunResult {
             messages: (0, 0, 0),
             rollback: Vec::new(),
             force_steps: Vec::new(),
-            servo_forces: Vec::new(),
+            servo_ticks: Vec::new(),
         }
     }
 }
@@ -243,8 +254,8 @@ struct Site {
     last_f_measured: Vec3,
     sensor_noise: f64,
     force_steps: ForceSteps,
-    /// Every servo tick's F_h, when kept.
-    servo_forces: Option<Vec<Vec3>>,
+    /// Every servo tick's tool position and F_h, when kept.
+    servo_ticks: Option<Vec<ServoTick>>,
 }
 
 impl Site {
@@ -295,8 +306,9 @@ pub fn run_sized(
     drive(Run::new(scenario, mode), scenario, progress, size)
 }
 
-/// [`run_sized`], keeping every servo tick's displayed force too ([`RunResult::servo_forces`]).
-pub fn run_keeping_servo_forces(
+/// [`run_sized`], keeping every servo tick's tool position and displayed force too
+/// ([`RunResult::servo_ticks`]).
+pub fn run_keeping_servo_ticks(
     scenario: &Scenario,
     mode: Mode,
     progress: &mut dyn FnMut(f64),
@@ -305,7 +317,7 @@ pub fn run_keeping_servo_forces(
     let mut run = Run::new(scenario, mode);
     for (s, spec) in run.sites.iter_mut().zip(&scenario.site) {
         let ticks = (scenario.duration_s * spec.servo_rate_hz).ceil() as usize + 1;
-        s.servo_forces = Some(Vec::with_capacity(ticks));
+        s.servo_ticks = Some(Vec::with_capacity(ticks));
     }
     drive(run, scenario, progress, size)
 }
@@ -392,7 +404,7 @@ impl<'a> Run<'a> {
                     last_f_measured: Vec3::zeros(),
                     sensor_noise: spec.sensor_noise_n,
                     force_steps: ForceSteps::default(),
-                    servo_forces: None,
+                    servo_ticks: None,
                 }
             })
             .collect();
@@ -605,8 +617,12 @@ impl<'a> Run<'a> {
             self.result.adoptions[k].force_step_n = step_n;
         }
         s.force_steps.record(s.last_f_desired, out.f_desired);
-        if let Some(f) = &mut s.servo_forces {
-            f.push(out.f_desired);
+        if let Some(k) = &mut s.servo_ticks {
+            k.push(ServoTick {
+                t_s: ns_to_s(t),
+                tool_pos,
+                f_desired: out.f_desired,
+            });
         }
         // The arm's own force loop (a recorded hand displays nothing).
         let (_, tau) = s.force_loop.step(
@@ -735,10 +751,10 @@ impl<'a> Run<'a> {
                 ..s.force_steps
             });
         }
-        if sites.iter().any(|s| s.servo_forces.is_some()) {
-            result.servo_forces = sites
+        if sites.iter().any(|s| s.servo_ticks.is_some()) {
+            result.servo_ticks = sites
                 .into_iter()
-                .map(|s| s.servo_forces.unwrap_or_default())
+                .map(|s| s.servo_ticks.unwrap_or_default())
                 .collect();
         }
         result

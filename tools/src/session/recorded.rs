@@ -65,7 +65,7 @@ pub fn run_from_recordings(
         messages,
         rollback: vec![None; recs.len()],
         force_steps: vec![ForceSteps::default(); recs.len()],
-        servo_forces: Vec::new(),
+        servo_ticks: Vec::new(),
     })
 }
 
