@@ -4,11 +4,11 @@
 use super::*;
 
 /// A remote tool that touched the object at its last known tick is extrapolated with its last
-/// velocity for at most this many ticks (held at once through a perceptual deadband), then held:
-/// the contact, not the hand's motion, decides where it goes next (the hand's force balance
-/// against the object cannot be predicted, and a tool predicted on into the object pushes it
-/// through the grasp: at 150 ms the copies then disagree by centimetres while both users hold the
-/// disk).
+/// velocity (through a perceptual deadband, that between its last two samples:
+/// [`SAMPLE_VELOCITY_TICKS`]) for at most this many ticks, then held: the contact, not the hand's
+/// motion, decides where it goes next (the hand's force balance against the object cannot be
+/// predicted, and a tool predicted on into the object pushes it through the grasp: at 150 ms the
+/// copies then disagree by centimetres while both users hold the disk).
 pub const EXTRAPOLATE_TICKS: i64 = 20;
 
 /// A remote tool that was free at its last known tick is predicted as a reaching hand: on with its
@@ -26,14 +26,16 @@ pub const REACH_TIME_TICKS: i64 = 300;
 /// How long a reach is predicted before the tool is held, ticks.
 pub const REACH_TICKS: i64 = 1000;
 
-/// Through a perceptual deadband a free remote tool's velocity is that between its last two
-/// samples (the first ticks of its last two held runs), each run looked for at most this many
-/// ticks back from its own end (a run longer than that is a tool at rest: slower than a
-/// free-space band in this time, 31 mm/s at 2 mm and 1 kHz). Over the last
-/// [`REACH_VELOCITY_TICKS`] a held run says 0, or one jump of a band: a reach predicted from it
-/// overshot or stopped, and at 100–200 ms the copies showed a push that was not the partner's
-/// (paper task, seeds 1–4 and 7: every servo tick's force within one JND of the full-rate run
-/// for 83–97 % of ticks, now 92–98 %).
+/// Through a perceptual deadband a remote tool's velocity is that between its last two samples
+/// (the first ticks of its last two held runs), each run looked for at most this many ticks back
+/// from its own end (a run longer than that is a tool at rest: slower than a free-space band in
+/// this time, 31 mm/s at 2 mm and 1 kHz). Over the last [`REACH_VELOCITY_TICKS`] a held run says
+/// 0, or one jump of a band: a free tool's reach predicted from it overshot or stopped, and at
+/// 100–200 ms the copies showed a push that was not the partner's (paper task, seeds 1–4 and 7:
+/// every servo tick's force within one JND of the full-rate run for 83–97 % of ticks, then
+/// 92–98 %); a tool in contact extrapolated with a band's jump was pushed up to 20 bands into the
+/// object, and held it lagged a partner pressing on (with every site's tool replayed from the
+/// full-rate run, within one JND at 200 ms: held 88.0–91.6 %, on at this velocity 90.6–95.3 %).
 pub const SAMPLE_VELOCITY_TICKS: i64 = 64;
 
 impl TimeWarp {
@@ -78,23 +80,22 @@ impl TimeWarp {
         }
         // Through a perceptual deadband (the scenario's: every site runs it) a tool's positions
         // are held runs, and the last step is a jump of a band in one tick, not a velocity:
-        // extrapolated, it pushed the predicted tool up to 20 bands into the object, and each
-        // site felt a force the hands never made. The tool is held instead (on the paper task,
-        // every servo tick's force within one JND of the full-rate run at 0 ms went from 88-98 %
-        // to 99.2-99.5 % of ticks over five seeds).
-        let v = match (self.deadband, at(last - 1)) {
-            (None, Some(p0)) => [p[0] - p0[0], p[1] - p0[1], p[2] - p0[2]],
-            _ => [0; 3],
+        // extrapolated, it pushed the predicted tool up to 20 bands into the object. The
+        // velocity is that between the tool's last two samples instead, as for a free tool.
+        let k = (t - last).clamp(0, EXTRAPOLATE_TICKS);
+        let on = |p0: Quantized, ticks: i64| -> Quantized {
+            std::array::from_fn(|c| {
+                let d = (i64::from(p[c]) - i64::from(p0[c])) * k / ticks;
+                (i64::from(p[c]) + d).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+            })
         };
-        let k = (t - last).clamp(0, EXTRAPOLATE_TICKS) as i32;
-        (
-            [
-                p[0].saturating_add(v[0].saturating_mul(k)),
-                p[1].saturating_add(v[1].saturating_mul(k)),
-                p[2].saturating_add(v[2].saturating_mul(k)),
-            ],
-            false,
-        )
+        let q = match self.deadband {
+            None => at(last - 1).map(|p0| on(p0, 1)),
+            Some(_) => self
+                .sampled_earlier(j, last, p)
+                .map(|p0| on(p0, REACH_VELOCITY_TICKS)),
+        };
+        (q.unwrap_or(p), false)
     }
 
     /// Where site `j`'s tool, last known at `p` at tick `last`, would have been

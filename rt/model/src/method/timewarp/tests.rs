@@ -204,30 +204,45 @@ fn after_a_remote_track(
     (tw, copy, w)
 }
 
-/// A remote tool pressing into the disk at its newest known tick is extrapolated with its last
-/// step (for a few ticks) while every position is sent; through a deadband that last step is a
-/// held run's jump, a band in one tick, and the tool is held where it was last known.
+/// A remote tool pressing into the disk at its newest known tick is extrapolated (for a few
+/// ticks) with its last step while every position is sent; through a deadband that last step is
+/// a held run's (nothing, or a band's jump in one tick), and the velocity is that between its last
+/// two samples instead.
 #[test]
-fn through_a_deadband_a_remote_tool_in_contact_is_held_not_extrapolated() {
+fn through_a_deadband_a_remote_tool_in_contact_goes_on_at_the_velocity_between_its_samples() {
+    // Site 1's tool 0.05 mm into the disk's rim (x = 0.045 touches) and pressing on by 0.02 mm
+    // every 10 ticks (too light a press to move the disk on the table): sent at ticks 0, 10, ...,
+    // 40, held in between; known to tick 49.
+    let x = |k: usize| 0.04495 - 0.00002 * (k / 10) as f64;
+    let last = quantize(Vec3::new(x(49), 0.0, 0.01));
     let predicted = [false, true].map(|deadband| {
-        // Site 1's tool 0.1 mm into the disk's rim (x = 0.045 touches; too light a press to
-        // move the disk on the table), held, then a step of 0.05 mm further in at the newest
-        // tick.
-        let (tw, _, _) =
-            after_a_remote_track(deadband, 50, |k| if k < 49 { 0.0449 } else { 0.04485 });
+        let (tw, _, _) = after_a_remote_track(deadband, 50, x);
         assert!(
             TimeWarp::touches(tw.tools_at(tw.idx(49)), 1),
             "site 1's tool touches the disk at its newest tick"
         );
-        tw.input(1, 55)
+        [59, 99].map(|t| tw.input(1, t))
     });
-    let last = quantize(Vec3::new(0.04485, 0.0, 0.01));
     assert_eq!(
         predicted[0],
-        ([last[0] - 6 * 5, last[1], last[2]], false),
-        "every tick sent: extrapolated with its last step, 6 ticks on"
+        [(last, false); 2],
+        "every tick sent: on with its last step, none"
     );
-    assert_eq!(predicted[1], (last, false), "through a deadband: held");
+    assert_eq!(
+        predicted[1],
+        [
+            ([last[0] - 2, last[1], last[2]], false),
+            ([last[0] - 4, last[1], last[2]], false)
+        ],
+        "through a deadband: on at 2 quanta per 10 ticks, for at most {EXTRAPOLATE_TICKS} ticks"
+    );
+    // Every tick sent and the last step one of 5 quanta: on with it.
+    let (tw, _, _) = after_a_remote_track(false, 50, |k| if k < 49 { 0.0449 } else { 0.04485 });
+    let last = quantize(Vec3::new(0.04485, 0.0, 0.01));
+    assert_eq!(
+        tw.input(1, 55),
+        ([last[0] - 6 * 5, last[1], last[2]], false)
+    );
 }
 
 /// A free remote tool is predicted on as a reaching hand. Through a deadband its held runs say
