@@ -52,6 +52,8 @@ pub struct ForceErrors {
 /// One delay's runs.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Row {
+    /// The scenario's seed.
+    pub seed: u64,
     /// One-way delay, ms.
     pub delay_ms: f64,
     /// Own ticks whose position was sent, over every site: full rate 1.
@@ -185,6 +187,7 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 (t + r.deadband_ticks, s + r.deadband_samples)
             });
             Row {
+                seed: base.seed,
                 delay_ms: *delay_ms,
                 sent_share: samples as f64 / ticks.max(1) as f64,
                 kbit_s: [
@@ -201,21 +204,44 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
         .collect())
 }
 
-/// Prints the table (or JSON) for `scenario` at `delays_ms`.
+/// Prints the tables (or JSON) for `sc` at `delays_ms`: with its own seed, or with each of seeds
+/// 1 to `seeds` and then the range of each figure over them.
 ///
 /// # Errors
 /// As [`rows`].
-pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> {
-    let rows = rows(sc, delays_ms).context("sim deadband")?;
+pub fn main(
+    sc: &Scenario,
+    delays_ms: &[f64],
+    seeds: Option<u64>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let seeds: Vec<u64> = seeds.map_or(vec![sc.seed], |n| (1..=n).collect());
+    let mut all = Vec::with_capacity(seeds.len());
+    for &seed in &seeds {
+        let sc = Scenario { seed, ..sc.clone() };
+        let rows = rows(&sc, delays_ms).with_context(|| format!("sim deadband, seed {seed}"))?;
+        all.push(rows);
+    }
     if json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        println!("{}", serde_json::to_string_pretty(&all.concat())?);
         return Ok(());
     }
     let d = sc.timewarp.deadband;
-    println!(
-        "# scenario {} (seed {}, {} s): timewarp, every tick's position sent vs a perceptual deadband (Weber {:.4} of the contact force, floor {:.4} N, near {} m, free space {} m)",
-        sc.name, sc.seed, sc.duration_s, d.weber_fraction, d.floor_n, d.near_m, d.free_space_m
-    );
+    for (rows, seed) in all.iter().zip(&seeds) {
+        println!(
+            "# scenario {} (seed {seed}, {} s): timewarp, every tick's position sent vs a perceptual deadband (Weber {:.4} of the contact force, floor {:.4} N, near {} m, free space {} m)",
+            sc.name, sc.duration_s, d.weber_fraction, d.floor_n, d.near_m, d.free_space_m
+        );
+        print_seed(rows);
+    }
+    if all.len() > 1 {
+        print_range(&all, &seeds);
+    }
+    Ok(())
+}
+
+/// One seed's two tables.
+fn print_seed(rows: &[Row]) {
     println!(
         "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
         "delay",
@@ -236,7 +262,7 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         "{:>8}{:>10}{:>14}{:>14}{:>12}{:>12}{:>11}{}",
         "ms", "of ticks", "", "", "full", "band", "mismatch", ERROR_UNITS
     );
-    for r in &rows {
+    for r in rows {
         println!(
             "{:>8.0}{:>9.1}%{:>14.1}{:>14.1}{:>12}{:>12}{:>11}{}",
             r.delay_ms,
@@ -256,11 +282,74 @@ pub fn main(sc: &Scenario, delays_ms: &[f64], json: bool) -> anyhow::Result<()> 
         "delay", "force", "force", "baseline", "baseline", "reseeded", "reseeded"
     );
     println!("{:>8}{}", "ms", ERROR_UNITS);
-    for r in &rows {
+    for r in rows {
         println!("{:>8.0}{}", r.delay_ms, error_cells(&r.replayed));
     }
     println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor)");
-    Ok(())
+}
+
+/// Each delay's figures over every seed, lowest to highest.
+fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
+    println!(
+        "# over seeds {}-{}: each figure's lowest and highest (force: share of servo ticks within one JND of the full-rate run)",
+        seeds[0],
+        seeds[seeds.len() - 1]
+    );
+    println!(
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "delay",
+        "sent",
+        "kbit/s band",
+        "phases",
+        "hash",
+        "force",
+        "reseeded",
+        "force",
+        "baseline",
+        "reseeded"
+    );
+    println!(
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "ms",
+        "of ticks",
+        "",
+        "band",
+        "mism.",
+        "reacting",
+        "reacting",
+        "replayed",
+        "replayed",
+        "replayed"
+    );
+    for (k, first) in all[0].iter().enumerate() {
+        let at: Vec<&Row> = all.iter().map(|rows| &rows[k]).collect();
+        let range = |f: &dyn Fn(&Row) -> f64, scale: f64, unit: &str| {
+            let (lo, hi) = at
+                .iter()
+                .map(|r| f(r) * scale)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                });
+            format!("{lo:.1}-{hi:.1}{unit}")
+        };
+        let pct = |f: &dyn Fn(&Row) -> f64| range(f, 100.0, " %");
+        let phases = at.iter().map(|r| r.phases[1]).min().unwrap_or(0);
+        let mismatches = at.iter().map(|r| r.hash_mismatches).max().unwrap_or(0);
+        println!(
+            "{:>8.0}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+            first.delay_ms,
+            pct(&|r| r.sent_share),
+            range(&|r| r.kbit_s[1], 1.0, ""),
+            format!("{phases}/{}", first.phases_total),
+            mismatches,
+            pct(&|r| r.closed_loop.band.within_jnd),
+            pct(&|r| r.closed_loop.reseeded.within_jnd),
+            pct(&|r| r.replayed.band.within_jnd),
+            pct(&|r| r.replayed.baseline.within_jnd),
+            pct(&|r| r.replayed.reseeded.within_jnd),
+        );
+    }
+    println!("# phases band = the fewest phases any seed's deadband run passed; hash mism. = the most hash mismatches of any");
 }
 
 /// The second header line of the three comparisons' columns.

@@ -102,7 +102,11 @@ pub enum Command {
         /// One-way delays, ms, comma-separated (constant; the scenario's jitter, none at 0).
         #[arg(long, value_delimiter = ',', value_parser = parse_delay, default_value = "0,100,200,300")]
         delays_ms: Vec<f64>,
-        /// Print JSON instead of a table.
+        /// Seeds 1 to N (overriding the scenario's), each seed's tables and then each figure's
+        /// range over them (default: the scenario's seed alone).
+        #[arg(long, value_parser = parse_seeds)]
+        seeds: Option<u64>,
+        /// Print JSON instead of a table (one row per seed and delay).
         #[arg(long)]
         json: bool,
     },
@@ -241,8 +245,9 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         Command::Deadband {
             scenario,
             delays_ms,
+            seeds,
             json,
-        } => crate::deadband::main(&scenario_file::load(&scenario)?, &delays_ms, json)?,
+        } => crate::deadband::main(&scenario_file::load(&scenario)?, &delays_ms, seeds, json)?,
         Command::Bench {
             scenario,
             json,
