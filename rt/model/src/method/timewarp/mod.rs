@@ -86,7 +86,7 @@ mod predict;
 mod replay;
 mod window;
 
-pub use deadband::{DeadbandSpec, JND_SHARE};
+pub use deadband::{DeadbandSpec, FLOOR_SHARE, JND_SHARE};
 pub use hash::{hash_state, hash_world, STATE_RESEND_SLACK_S};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
 pub use lag::{LOCAL_LAG_MAX_TICKS, LOCAL_LAG_NEAR_M, LOCAL_LAG_SHARE, MAX_LOCAL_LAG_TICKS};
