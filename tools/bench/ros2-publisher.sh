@@ -33,7 +33,7 @@ cleanup() {
   rm -rf "$work"
 }
 trap cleanup EXIT
-port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+port=$(python3 "$root/tools/bench/free_port.py")
 cat >"$work/router.toml" <<EOF
 name = "ros"
 listen = ["tcp/127.0.0.1:$port"]
