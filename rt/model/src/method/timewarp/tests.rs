@@ -1366,6 +1366,8 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
     let mut in_flight: Vec<(i64, usize, usize, usize, Report)> = Vec::new();
     let mut waiting = Vec::new();
     let mut interleaved = 0;
+    // The site each state site 2 adopted came from.
+    let mut adopted_from = Vec::new();
     for k in 0..5000i64 {
         let t = k as f64 * 1e-3;
         let mut due: Vec<_> = in_flight.iter().filter(|m| m.0 == k).cloned().collect();
@@ -1388,7 +1390,11 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
         }
         for (_, from, to, _, r) in due {
             let (tw, copy) = &mut sites[to];
+            let before = tw.rollback_stats().adopted_states;
             tw.receive(&w, copy, from, &r, t);
+            if tw.rollback_stats().adopted_states > before {
+                adopted_from.push(tw.incoming_from.1);
+            }
         }
         for (i, (tw, copy)) in sites.iter_mut().enumerate() {
             tw.own_tool(tool(i, k));
@@ -1413,6 +1419,10 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
         "both earlier sites' worlds reached site 2 interleaved"
     );
     assert!(st[2].adopted_states > 0, "{st:?}");
+    assert!(
+        !adopted_from.is_empty() && adopted_from.iter().all(|&i| i == 0),
+        "site 2 adopted site 0's states only: from {adopted_from:?}"
+    );
     assert_eq!(st[0].adopted_states + st[1].adopted_states, 0, "{st:?}");
     let t = sites
         .iter()
