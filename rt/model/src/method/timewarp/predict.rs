@@ -82,26 +82,32 @@ impl TimeWarp {
         // are held runs, and the last step is a jump of a band in one tick, not a velocity:
         // extrapolated, it pushed the predicted tool up to 20 bands into the object. The
         // velocity is that between the tool's last two samples instead, as for a free tool.
+        // (One division, of the whole distance: a slow press of a few quanta over tens of
+        // ticks keeps its velocity.)
         let k = (t - last).clamp(0, EXTRAPOLATE_TICKS);
-        let on = |p0: Quantized, ticks: i64| -> Quantized {
+        let step = match self.deadband {
+            None => at(last - 1).map(|p0| (p, p0, 1)),
+            Some(_) => self.sampled_step(j, last, p),
+        };
+        let q = step.map_or(p, |(a, b, ticks)| {
             std::array::from_fn(|c| {
-                let d = (i64::from(p[c]) - i64::from(p0[c])) * k / ticks;
+                let d = (i64::from(a[c]) - i64::from(b[c])) * k / ticks;
                 (i64::from(p[c]) + d).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
             })
-        };
-        let q = match self.deadband {
-            None => at(last - 1).map(|p0| on(p0, 1)),
-            Some(_) => self
-                .sampled_earlier(j, last, p)
-                .map(|p0| on(p0, REACH_VELOCITY_TICKS)),
-        };
-        (q.unwrap_or(p), false)
+        });
+        (q, false)
     }
 
-    /// Where site `j`'s tool, last known at `p` at tick `last`, would have been
-    /// [`REACH_VELOCITY_TICKS`] before at the velocity between its last two deadband samples
-    /// ([`SAMPLE_VELOCITY_TICKS`]); `None` where no earlier sample is known.
-    fn sampled_earlier(&self, j: usize, last: i64, p: Quantized) -> Option<Quantized> {
+    /// Site `j`'s last step between deadband samples, its tool last known at `p` at tick `last`:
+    /// `(to, from, ticks)`, the tool having gone from `from` to `to` in `ticks` ticks, at the
+    /// velocity between its last two samples ([`SAMPLE_VELOCITY_TICKS`]; at rest, no way in one
+    /// tick); `None` where no earlier sample is known.
+    fn sampled_step(
+        &self,
+        j: usize,
+        last: i64,
+        p: Quantized,
+    ) -> Option<(Quantized, Quantized, i64)> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls (at most
         // 2 × SAMPLE_VELOCITY_TICKS lookups).
         let at = |t: i64| self.received_at(j, t);
@@ -117,17 +123,25 @@ impl TimeWarp {
             }
             Some(s)
         };
-        // At rest: where it is now.
+        let at_rest = Some((p, p, 1));
         let Some(sample) = run_start(p, last) else {
-            return Some(p);
+            return at_rest;
         };
         let before = at(sample - 1)?;
         let Some(previous) = run_start(before, sample - 1) else {
-            return Some(p);
+            return at_rest;
         };
-        let ticks = (sample - previous).max(1);
+        Some((p, before, (sample - previous).max(1)))
+    }
+
+    /// Where site `j`'s tool, last known at `p` at tick `last`, would have been
+    /// [`REACH_VELOCITY_TICKS`] before at the velocity between its last two deadband samples
+    /// ([`Self::sampled_step`]); `None` where no earlier sample is known.
+    fn sampled_earlier(&self, j: usize, last: i64, p: Quantized) -> Option<Quantized> {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let (to, from, ticks) = self.sampled_step(j, last, p)?;
         Some(std::array::from_fn(|c| {
-            let step = (i64::from(p[c]) - i64::from(before[c])) * REACH_VELOCITY_TICKS / ticks;
+            let step = (i64::from(to[c]) - i64::from(from[c])) * REACH_VELOCITY_TICKS / ticks;
             (i64::from(p[c]) - step).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
         }))
     }

@@ -236,6 +236,12 @@ fn through_a_deadband_a_remote_tool_in_contact_goes_on_at_the_velocity_between_i
         ],
         "through a deadband: on at 2 quanta per 10 ticks, for at most {EXTRAPOLATE_TICKS} ticks"
     );
+    // A slower press, 3 quanta every 20 ticks (sent at ticks 0, 20 and 40): on by 3 quanta in 20
+    // ticks, not by a velocity rounded to whole quanta per 10 ticks first (2).
+    let x = |k: usize| 0.04495 - 0.00003 * (k / 20) as f64;
+    let (tw, _, _) = after_a_remote_track(true, 50, x);
+    let last = quantize(Vec3::new(x(49), 0.0, 0.01));
+    assert_eq!(tw.input(1, 69), ([last[0] - 3, last[1], last[2]], false));
     // Every tick sent and the last step one of 5 quanta: on with it.
     let (tw, _, _) = after_a_remote_track(false, 50, |k| if k < 49 { 0.0449 } else { 0.04485 });
     let last = quantize(Vec3::new(0.04485, 0.0, 0.01));
@@ -1392,7 +1398,7 @@ fn a_state_asked_of_two_earlier_sites_is_gathered_from_the_first() {
             let (tw, copy) = &mut sites[to];
             let before = tw.rollback_stats().adopted_states;
             tw.receive(&w, copy, from, &r, t);
-            if tw.rollback_stats().adopted_states > before {
+            if to == 2 && tw.rollback_stats().adopted_states > before {
                 adopted_from.push(tw.incoming_from.1);
             }
         }
