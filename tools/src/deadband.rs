@@ -16,7 +16,10 @@
 //! little differently, and the runs part further. The four runs are therefore made twice: with
 //! the hands as the scenario has them, and with every site's tool replayed from the full-rate
 //! run's servo ticks (a recorded hand, `coop_model::replay`), the same in all four, so that only
-//! the world differs: what the codec itself changes in what the users feel.
+//! the world differs: what the codec itself changes in what the users feel. (A replay is not the
+//! full-rate run again: between servo ticks, at the physics ticks, the hand moves on a straight
+//! line, and a recorded hand has no force sensor. The full-rate run replayed is the baseline the
+//! other three replayed are compared with.)
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
@@ -95,7 +98,9 @@ fn within_and_p99(e: Vec<f64>) -> ForceError {
 fn force_error_jnd(full: &RunResult, db: &RunResult) -> ForceError {
     let mut out = Vec::new();
     for (a, b) in full.servo_ticks.iter().zip(&db.servo_ticks) {
+        debug_assert_eq!(a.len(), b.len(), "the same servo ticks");
         for (ta, tb) in a.iter().zip(b) {
+            debug_assert_eq!(ta.t_s, tb.t_s, "the same servo ticks");
             let (fa, fb) = (ta.f_desired, tb.f_desired);
             out.push((fb - fa).norm() / perception::force_jnd_n(fa.norm()));
         }
@@ -103,15 +108,35 @@ fn force_error_jnd(full: &RunResult, db: &RunResult) -> ForceError {
     within_and_p99(out)
 }
 
-/// `sc` with every site's hand replayed from `run`'s servo ticks (its tool's position at each).
-fn with_hands_of(sc: &Scenario, run: &RunResult) -> anyhow::Result<Scenario> {
+/// Every site's hand replayed from `run`'s servo ticks (its tool's position at each; between
+/// them, as at the physics ticks between, the hand moves on a straight line).
+///
+/// # Errors
+/// `run` kept no servo ticks for a site of `sc` (the runs would not be replayed).
+fn hands_of(sc: &Scenario, run: &RunResult) -> anyhow::Result<Vec<Trajectory>> {
+    anyhow::ensure!(
+        run.servo_ticks.len() == sc.site.len() && run.servo_ticks.iter().all(|t| !t.is_empty()),
+        "the full-rate run kept servo ticks for {} of {} sites",
+        run.servo_ticks.iter().filter(|t| !t.is_empty()).count(),
+        sc.site.len()
+    );
+    run.servo_ticks
+        .iter()
+        .enumerate()
+        .map(|(i, ticks)| {
+            Trajectory::new(ticks.iter().map(|k| (k.t_s, k.tool_pos)))
+                .with_context(|| format!("site {i}'s servo ticks as a hand"))
+        })
+        .collect()
+}
+
+/// `sc` with its sites' hands replayed from `hands`.
+fn with_hands(sc: &Scenario, hands: &[Trajectory]) -> Scenario {
     let mut sc = sc.clone();
-    for (i, (spec, ticks)) in sc.site.iter_mut().zip(&run.servo_ticks).enumerate() {
-        let t = Trajectory::new(ticks.iter().map(|k| (k.t_s, k.tool_pos)))
-            .map_err(|e| anyhow::anyhow!("site {i}'s servo ticks as a hand: {e}"))?;
-        spec.hand_trajectory = Some(t);
+    for (spec, hand) in sc.site.iter_mut().zip(hands) {
+        spec.hand_trajectory = Some(hand.clone());
     }
-    Ok(sc)
+    sc
 }
 
 /// One delay's scenarios: full rate, through the deadband, through the least band, reseeded.
@@ -167,12 +192,8 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
     // The same four, every hand replayed from the full-rate run's.
     let mut replays = Vec::with_capacity(jobs.len());
     for ((_, q), r) in jobs.iter().zip(&closed) {
-        let mut hands: Vec<Scenario> = Vec::with_capacity(4);
-        for sc in q {
-            hands.push(with_hands_of(sc, &r[0])?);
-        }
-        let hands: Quad = hands.try_into().map_err(|_| anyhow::anyhow!("four runs"))?;
-        replays.push(hands);
+        let hands = hands_of(&q[0], &r[0])?;
+        replays.push(q.each_ref().map(|sc| with_hands(sc, &hands)));
     }
     let replayed = par_map(&replays, run_quad);
     Ok(jobs
@@ -296,25 +317,27 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         seeds[seeds.len() - 1]
     );
     println!(
-        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
         "delay",
         "sent",
         "kbit/s band",
         "phases",
         "hash",
         "force",
+        "baseline",
         "reseeded",
         "force",
         "baseline",
         "reseeded"
     );
     println!(
-        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
         "ms",
         "of ticks",
         "",
         "band",
         "mism.",
+        "reacting",
         "reacting",
         "reacting",
         "replayed",
@@ -336,13 +359,14 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         let phases = at.iter().map(|r| r.phases[1]).min().unwrap_or(0);
         let mismatches = at.iter().map(|r| r.hash_mismatches).max().unwrap_or(0);
         println!(
-            "{:>8.0}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}",
+            "{:>8.0}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
             first.delay_ms,
             pct(&|r| r.sent_share),
             range(&|r| r.kbit_s[1], 1.0, ""),
             format!("{phases}/{}", first.phases_total),
             mismatches,
             pct(&|r| r.closed_loop.band.within_jnd),
+            pct(&|r| r.closed_loop.baseline.within_jnd),
             pct(&|r| r.closed_loop.reseeded.within_jnd),
             pct(&|r| r.replayed.band.within_jnd),
             pct(&|r| r.replayed.baseline.within_jnd),
