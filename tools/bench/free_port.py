@@ -20,9 +20,11 @@ def ephemeral_range():
     try:
         with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
             lo, hi = (int(x) for x in f.read().split())
-            return lo, hi
     except (OSError, ValueError):
+        lo, hi = 0, -1
+    if not 1 <= lo <= hi <= 65535:
         return 32768, 60999  # Linux's default
+    return lo, hi
 
 
 def bindable(port):

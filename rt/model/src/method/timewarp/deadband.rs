@@ -49,19 +49,19 @@ pub struct DeadbandSpec {
 
 /// The share of a just-noticeable difference each tool's band takes by default: 1/√2. An object
 /// held between two tools moves with both their held positions, and two independent errors of
-/// one JND each add to √2 JND; at 1/√2 each they add to one. On the paper task (seeds 1–4 and 7,
-/// every site's tool replayed from the full-rate run, so only the world differs) the share of
-/// servo ticks whose displayed force is within one JND of the full-rate run's went from
-/// 98.1–99.9 % to 98.8–99.9 % at 0 ms and from 97.0–98.9 % to 98.6–99.3 % at 100 ms, with
-/// 6.3–8.2 % of positions sent instead of 5.4–6.7 % (the floor at 1/√2 of its own too, then).
+/// one JND each add to √2 JND; at 1/√2 each they add to one. On the paper task (seeds 1–8, every
+/// site's tool replayed from the full-rate run, so only the world differs; the floor at
+/// [`FLOOR_SHARE`]) the mean share of servo ticks whose displayed force is within one JND of the
+/// full-rate run's at 0 / 100 / 200 / 300 ms is 99.7 / 98.5 / 95.8 / 91.7 %, against
+/// 99.6 / 98.3 / 93.0 / 90.3 % with a band of one JND, with at most 9.0 % of positions sent
+/// instead of 8.0 %.
 pub const JND_SHARE: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// The share of the JND's absolute floor the band's floor is by default: 1/2. A light touch's
 /// force is much of it the stuck tangential force, which a held position moves as much as the
 /// normal one (the paper task's tangential stiffness is its normal one): the two directions take
-/// another 1/√2. At 1/√2 alone, seeds 3 and 6 of the paper task at 0 ms had 98.8 and 97.4 % of
-/// servo ticks within one JND (hands replayed); at 1/2, 99.5 and 99.8 %, with at most 9.0 % of
-/// positions sent over seeds 1–8 at 0–300 ms (was 8.2 %).
+/// another 1/√2. With the floor at 1/√2 alone, seeds 3 and 6 of the paper task at 0 ms had 98.82
+/// and 97.43 % of servo ticks within one JND (hands replayed); at 1/2, 99.54 and 99.85 %.
 pub const FLOOR_SHARE: f64 = 0.5;
 
 impl Default for DeadbandSpec {
