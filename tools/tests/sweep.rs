@@ -507,6 +507,46 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
     }
 }
 
+/// `sim deadband --seeds N` runs each seed in turn: JSON rows name their seed, the table prints
+/// each seed's and then the range over them; 0 seeds is refused with the rule. At 0 ms, with the
+/// hands replayed, nothing drawn from the seed is left (no jitter, and a recorded hand has no
+/// force sensor): the next seed's run shows the same forces to the bit, so the replay compares
+/// the world alone.
+#[test]
+fn sim_deadband_runs_each_seed_and_a_replay_leaves_nothing_to_the_seed() {
+    let run = |args: &[&str]| {
+        Command::new(SIM)
+            .args(["deadband", "scenarios/paper.toml", "--delays-ms", "0"])
+            .args(args)
+            .current_dir(repo())
+            .output()
+            .expect("run sim")
+    };
+    let o = run(&["--seeds", "2", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    let rows = rows.as_array().expect("rows");
+    let seeds: Vec<u64> = rows.iter().filter_map(|r| r["seed"].as_u64()).collect();
+    assert_eq!(seeds, [1, 2], "{rows:?}");
+    for r in rows {
+        let reseeded = &r["replayed"]["reseeded"];
+        assert_eq!(reseeded["within_jnd"].as_f64(), Some(1.0), "{r}");
+        assert_eq!(reseeded["p99_jnd"].as_f64(), Some(0.0), "{r}");
+        // ... while the deadband does change what is felt.
+        assert!(r["replayed"]["band"]["p99_jnd"].as_f64() > Some(0.0), "{r}");
+    }
+    let o = run(&["--seeds", "2"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for needle in ["(seed 1, ", "(seed 2, ", "# over seeds 1-2"] {
+        assert!(out.contains(needle), "no {needle:?} in:\n{out}");
+    }
+    let o = run(&["--seeds", "0"]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("at least 1"), "{err}");
+}
+
 /// `sim deadband` on the paper task at 100 ms: through the perceptual deadband the sites send
 /// fewer than a tenth of their ticks' positions and fewer bytes, every phase still passes, and
 /// the confirmed states agree; the force figures are shares and percentiles of something measured.
