@@ -71,10 +71,12 @@ impl TimeWarp {
         let at_last = &self.slots[self.idx(last)];
         let free = at_last.tick == last && !Self::touches(self.tools_at(self.idx(last)), j);
         if free {
-            let earlier = if self.deadband.is_some() {
-                self.sampled_earlier(j, last, p)
-            } else {
-                at(last - REACH_VELOCITY_TICKS)
+            // Where it was REACH_VELOCITY_TICKS before, at that velocity.
+            let earlier = match self.deadband {
+                None => at(last - REACH_VELOCITY_TICKS),
+                Some(_) => self
+                    .sampled_step(j, last, p)
+                    .map(|s| along(p, s, -REACH_VELOCITY_TICKS)),
             };
             return (self.reach(p, earlier, t - last), false);
         }
@@ -82,20 +84,12 @@ impl TimeWarp {
         // are held runs, and the last step is a jump of a band in one tick, not a velocity:
         // extrapolated, it pushed the predicted tool up to 20 bands into the object. The
         // velocity is that between the tool's last two samples instead, as for a free tool.
-        // (One division, of the whole distance: a slow press of a few quanta over tens of
-        // ticks keeps its velocity.)
-        let k = (t - last).clamp(0, EXTRAPOLATE_TICKS);
         let step = match self.deadband {
             None => at(last - 1).map(|p0| (p, p0, 1)),
             Some(_) => self.sampled_step(j, last, p),
         };
-        let q = step.map_or(p, |(a, b, ticks)| {
-            std::array::from_fn(|c| {
-                let d = (i64::from(a[c]) - i64::from(b[c])) * k / ticks;
-                (i64::from(p[c]) + d).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
-            })
-        });
-        (q, false)
+        let k = (t - last).clamp(0, EXTRAPOLATE_TICKS);
+        (step.map_or(p, |s| along(p, s, k)), false)
     }
 
     /// Site `j`'s last step between deadband samples, its tool last known at `p` at tick `last`:
@@ -134,18 +128,6 @@ impl TimeWarp {
         Some((p, before, (sample - previous).max(1)))
     }
 
-    /// Where site `j`'s tool, last known at `p` at tick `last`, would have been
-    /// [`REACH_VELOCITY_TICKS`] before at the velocity between its last two deadband samples
-    /// ([`Self::sampled_step`]); `None` where no earlier sample is known.
-    fn sampled_earlier(&self, j: usize, last: i64, p: Quantized) -> Option<Quantized> {
-        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let (to, from, ticks) = self.sampled_step(j, last, p)?;
-        Some(std::array::from_fn(|c| {
-            let step = (i64::from(to[c]) - i64::from(from[c])) * REACH_VELOCITY_TICKS / ticks;
-            (i64::from(p[c]) - step).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
-        }))
-    }
-
     /// A free remote tool `h` ticks after it was last known at `p` (and at `earlier`,
     /// [`REACH_VELOCITY_TICKS`] before): see [`REACH_TIME_TICKS`]. Held where nothing earlier is
     /// known.
@@ -169,4 +151,15 @@ impl TimeWarp {
         };
         [q(0), q(1), q(2)]
     }
+}
+
+/// `p` moved on `k` ticks (back, for a negative `k`) at the velocity of `step`, `(to, from,
+/// ticks)`: one division of the whole distance, so a slow step of a few quanta over tens of ticks
+/// keeps its velocity.
+fn along(p: Quantized, (to, from, ticks): (Quantized, Quantized, i64), k: i64) -> Quantized {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    std::array::from_fn(|c| {
+        let d = (i64::from(to[c]) - i64::from(from[c])) * k / ticks;
+        (i64::from(p[c]) + d).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+    })
 }
