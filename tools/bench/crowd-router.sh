@@ -27,7 +27,7 @@ if [ "$sites" != 8 ]; then
   scenario="$work/crowd$sites.toml"
 fi
 session="crowd-router-$$"
-port=$(python3 "$root/tools/bench/free_port.py")
+port=$("$target/release/session" free-port)
 "$target/release/session" certs "$scenario" --out "$work/certs" --session "$session" \
   --router r1 --host r1=127.0.0.1 >/dev/null
 cat >"$work/r1.toml" <<EOF

@@ -33,7 +33,7 @@ cleanup() {
   rm -rf "$work"
 }
 trap cleanup EXIT
-port=$(python3 "$root/tools/bench/free_port.py")
+port=$("$target/release/session" free-port)
 cat >"$work/router.toml" <<EOF
 name = "ros"
 listen = ["tcp/127.0.0.1:$port"]

@@ -92,6 +92,10 @@ enum Command {
         #[arg(long)]
         station_bin: Option<PathBuf>,
     },
+    /// Print a TCP port on 127.0.0.1 that is free now, outside the kernel's ephemeral range, as
+    /// this launcher picks its stations' ports: for a script that starts a router. (A port the
+    /// kernel picks for a bind to port 0 is one any outgoing connection may take first.)
+    FreePort,
     /// The benchmark's echo process.
     #[command(hide = true)]
     BenchPong {
@@ -242,6 +246,13 @@ fn main() -> std::process::ExitCode {
             quick,
             station_bin,
         } => coop_tools::netbench::router::run(json, quick, &station_bin_or_default(station_bin)?),
+        Command::FreePort => {
+            let l = coop_transport::network::concrete_listen(&["tcp/127.0.0.1:0".into()]);
+            let port = l[0].rsplit(':').next().unwrap_or_default();
+            anyhow::ensure!(port != "0", "no free port on 127.0.0.1");
+            println!("{port}");
+            Ok(())
+        }
         Command::BenchPong { listen, via_router } => {
             coop_tools::netbench::pong(&listen, via_router)
         }
