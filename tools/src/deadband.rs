@@ -20,12 +20,17 @@
 //! full-rate run again: between servo ticks, at the physics ticks, the hand moves on a straight
 //! line, and a recorded hand has no force sensor. The full-rate run replayed is the baseline the
 //! other three replayed are compared with.)
+//!
+//! Of the deadband run's ticks beyond one JND with the hands replayed, it counts those at which
+//! both runs' tools touch with normal forces within one JND of each other (the normal force's
+//! elastic part, the contact stiffness × the penetration): there the tangential part made the
+//! difference, the force a stuck contact holds, which depends on where it stuck.
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
 use coop_model::replay::Trajectory;
 use coop_model::scenario::{MethodName, Scenario};
-use coop_model::sim::{self, Mode, RunResult};
+use coop_model::sim::{self, Mode, RunResult, ServoTick};
 use coop_model::{metrics, perception};
 
 use crate::sweep::{par_map, scenario_at};
@@ -38,6 +43,11 @@ pub struct ForceError {
     pub within_jnd: f64,
     /// The 99th percentile of the difference, JND.
     pub p99_jnd: f64,
+    /// Of the ticks beyond one JND, the share at which the tool touches in both runs with normal
+    /// forces (the elastic part: the contact stiffness × the penetration) within one JND of each
+    /// other: the tangential part made the difference, the stuck friction force, which depends on
+    /// where the contact stuck (0 with none beyond).
+    pub normal_agrees: f64,
 }
 
 /// Three runs against the full-rate run: through the deadband, through the least band the wire
@@ -76,36 +86,54 @@ pub struct Row {
     pub replayed: ForceErrors,
 }
 
-/// The share of `e` (JND) within 1, and its 99th percentile.
-fn within_and_p99(e: Vec<f64>) -> ForceError {
+/// The share of `e` (JND) within 1 and its 99th percentile, with `normal_agrees` of the `beyond`
+/// ticks beyond 1.
+fn within_and_p99(e: Vec<f64>, (beyond, normal_agrees): (usize, usize)) -> ForceError {
     if e.is_empty() {
         return ForceError {
             within_jnd: 0.0,
             p99_jnd: 0.0,
+            normal_agrees: 0.0,
         };
     }
     let within = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len() as f64;
     ForceError {
         within_jnd: within,
         p99_jnd: crate::simbench::quantile(e, 0.99),
+        normal_agrees: normal_agrees as f64 / beyond.max(1) as f64,
     }
+}
+
+/// How far `b`'s displayed force is from `a`'s, JND of `a`'s, and whether both tools touch with
+/// normal forces (`stiffness` × the penetration, N/m × m) within that JND of each other.
+fn tick_error(a: &ServoTick, b: &ServoTick, stiffness: f64) -> (f64, bool) {
+    let jnd = perception::force_jnd_n(a.f_desired.norm());
+    let touch = a.depth_m > 0.0 && b.depth_m > 0.0;
+    (
+        (b.f_desired - a.f_desired).norm() / jnd,
+        touch && stiffness * (a.depth_m - b.depth_m).abs() <= jnd,
+    )
 }
 
 /// The displayed force's difference between `db` and `full`, servo tick by servo tick (the two
 /// runs' sites tick at the same instants), in JND ([`perception::force_jnd_n`] of the full-rate
 /// run's force: the one just-noticeable difference every figure of the project counts in, not
 /// the deadband's own parameter).
-fn force_error_jnd(full: &RunResult, db: &RunResult) -> ForceError {
-    let mut out = Vec::new();
+fn force_error_jnd(full: &RunResult, db: &RunResult, stiffness: f64) -> ForceError {
+    let (mut out, mut beyond, mut normal_agrees) = (Vec::new(), 0, 0);
     for (a, b) in full.servo_ticks.iter().zip(&db.servo_ticks) {
         debug_assert_eq!(a.len(), b.len(), "the same servo ticks");
         for (ta, tb) in a.iter().zip(b) {
             debug_assert_eq!(ta.t_s, tb.t_s, "the same servo ticks");
-            let (fa, fb) = (ta.f_desired, tb.f_desired);
-            out.push((fb - fa).norm() / perception::force_jnd_n(fa.norm()));
+            let (e, normal) = tick_error(ta, tb, stiffness);
+            if e > 1.0 {
+                beyond += 1;
+                normal_agrees += usize::from(normal);
+            }
+            out.push(e);
         }
     }
-    within_and_p99(out)
+    within_and_p99(out, (beyond, normal_agrees))
 }
 
 /// Every site's hand replayed from `run`'s servo ticks (its tool's position at each; between
@@ -155,12 +183,12 @@ fn run_quad(q: &Quad) -> [RunResult; 4] {
     ]
 }
 
-/// The last three of `r` against the first.
-fn errors(r: &[RunResult; 4]) -> ForceErrors {
+/// The last three of `r` against the first (`stiffness`: the tool contact's, N/m).
+fn errors(r: &[RunResult; 4], stiffness: f64) -> ForceErrors {
     ForceErrors {
-        band: force_error_jnd(&r[0], &r[1]),
-        baseline: force_error_jnd(&r[0], &r[2]),
-        reseeded: force_error_jnd(&r[0], &r[3]),
+        band: force_error_jnd(&r[0], &r[1], stiffness),
+        baseline: force_error_jnd(&r[0], &r[2], stiffness),
+        reseeded: force_error_jnd(&r[0], &r[3], stiffness),
     }
 }
 
@@ -218,8 +246,8 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 phases: [ma.phases_passed, mb.phases_passed],
                 phases_total: mb.phases_total,
                 hash_mismatches: mb.hash_mismatches,
-                closed_loop: errors(c),
-                replayed: errors(r),
+                closed_loop: errors(c, base.contact.stiffness_n_per_m),
+                replayed: errors(r, base.contact.stiffness_n_per_m),
             }
         })
         .collect())
@@ -299,14 +327,19 @@ fn print_seed(rows: &[Row]) {
     println!("# sent = own ticks whose position left the band and was sent (every site); kbit/s = payload the busiest site puts; force = each site's displayed force (F_h, every servo tick) against the full-rate run's at the same tick, in JND (7 % of the full-rate force, at least 0.05 N); baseline = the same against a run through a band of 1.5 quanta (0.015 mm), the least change the wire can express; reseeded = the full-rate run with the next seed (other draws of sensor noise and jitter), against the full-rate run: how far two runs of the task part with no codec at all");
     println!("# the same hands: every run again (the full-rate one too) with each site's tool replayed from the full-rate run's servo ticks, so the hands do not react to what they feel and only the world differs");
     println!(
-        "{:>8}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
-        "delay", "force", "force", "baseline", "baseline", "reseeded", "reseeded"
+        "{:>8}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}{:>16}",
+        "delay", "force", "force", "baseline", "baseline", "reseeded", "reseeded", "force > 1 JND"
     );
-    println!("{:>8}{}", "ms", ERROR_UNITS);
+    println!("{:>8}{}{:>16}", "ms", ERROR_UNITS, "normal agrees");
     for r in rows {
-        println!("{:>8.0}{}", r.delay_ms, error_cells(&r.replayed));
+        println!(
+            "{:>8.0}{}{:>15.0}%",
+            r.delay_ms,
+            error_cells(&r.replayed),
+            100.0 * r.replayed.band.normal_agrees
+        );
     }
-    println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor)");
+    println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor); normal agrees = of the deadband run's ticks beyond one JND, those at which both runs' tools touch with normal forces (stiffness x penetration) within one JND: the stuck friction force made the difference");
 }
 
 /// Each delay's figures over every seed, lowest to highest.
@@ -317,7 +350,7 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         seeds[seeds.len() - 1]
     );
     println!(
-        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}{:>16}",
         "delay",
         "sent",
         "kbit/s band",
@@ -328,10 +361,11 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         "reseeded",
         "force",
         "baseline",
-        "reseeded"
+        "reseeded",
+        "force > 1 JND"
     );
     println!(
-        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
+        "{:>8}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}{:>16}",
         "ms",
         "of ticks",
         "",
@@ -342,7 +376,8 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         "reacting",
         "replayed",
         "replayed",
-        "replayed"
+        "replayed",
+        "normal agrees"
     );
     for (k, first) in all[0].iter().enumerate() {
         let at: Vec<&Row> = all.iter().map(|rows| &rows[k]).collect();
@@ -359,7 +394,7 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
         let phases = at.iter().map(|r| r.phases[1]).min().unwrap_or(0);
         let mismatches = at.iter().map(|r| r.hash_mismatches).max().unwrap_or(0);
         println!(
-            "{:>8.0}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}",
+            "{:>8.0}{:>14}{:>14}{:>9}{:>7}{:>17}{:>17}{:>17}{:>17}{:>17}{:>17}{:>16}",
             first.delay_ms,
             pct(&|r| r.sent_share),
             range(&|r| r.kbit_s[1], 1.0, ""),
@@ -371,9 +406,10 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
             pct(&|r| r.replayed.band.within_jnd),
             pct(&|r| r.replayed.baseline.within_jnd),
             pct(&|r| r.replayed.reseeded.within_jnd),
+            range(&|r| r.replayed.band.normal_agrees, 100.0, " %"),
         );
     }
-    println!("# phases band = the fewest phases any seed's deadband run passed; hash mism. = the most hash mismatches of any");
+    println!("# phases band = the fewest phases any seed's deadband run passed; hash mism. = the most hash mismatches of any; normal agrees = of the deadband run's ticks beyond one JND with the hands replayed, those at which both runs' tools touch with normal forces within one JND (the stuck friction force made the difference)");
 }
 
 /// The second header line of the three comparisons' columns.
@@ -385,4 +421,35 @@ fn error_cells(e: &ForceErrors) -> String {
         .iter()
         .map(|x| format!("{:>11.2}%{:>10.2}", 100.0 * x.within_jnd, x.p99_jnd))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use coop_model::body::Vec3;
+
+    fn tick(f: [f64; 3], depth_m: f64) -> ServoTick {
+        ServoTick {
+            t_s: 0.0,
+            tool_pos: Vec3::zeros(),
+            f_desired: Vec3::from(f),
+            depth_m,
+        }
+    }
+
+    #[test]
+    fn a_difference_is_the_friction_s_when_the_normal_forces_agree() {
+        let k = 800.0;
+        // 3 N pressed 3.75 mm deep: one JND is 0.21 N.
+        let a = tick([-3.0, 0.0, 0.0], 3.75e-3);
+        // The same press, 0.4 N more stuck tangential force: 2 JND, the normal's.
+        let (e, normal) = tick_error(&a, &tick([-3.0, 0.4, 0.0], 3.75e-3), k);
+        assert!(e > 1.9 && e < 2.0 && normal, "{e} {normal}");
+        // 0.5 mm deeper: 0.4 N more normal force, beyond a JND of it.
+        let (e, normal) = tick_error(&a, &tick([-3.4, 0.0, 0.0], 4.25e-3), k);
+        assert!(e > 1.0 && !normal, "{e} {normal}");
+        // A tool that touches nothing in one run agrees with no normal force.
+        let (_, normal) = tick_error(&tick([0.0; 3], 0.0), &tick([0.0; 3], 0.0), k);
+        assert!(!normal);
+    }
 }

@@ -568,4 +568,8 @@ fn the_deadband_sends_a_tenth_of_the_positions_and_the_task_still_passes() {
     // With the hands replayed, the only thing that differs between the full-rate run and a
     // run through the deadband is the world: a band that moved nothing would show 100 %.
     assert!(r.replayed.band.within_jnd < 1.0, "{r:?}");
+    // Of the ticks beyond one JND some are the stuck friction force alone (the normal forces
+    // agree), and some are not (a contact a tick earlier or later).
+    let agrees = r.replayed.band.normal_agrees;
+    assert!(agrees > 0.0 && agrees < 1.0, "{r:?}");
 }

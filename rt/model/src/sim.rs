@@ -201,6 +201,10 @@ pub struct ServoTick {
     pub tool_pos: Vec3,
     /// The displayed force F_h, N.
     pub f_desired: Vec3,
+    /// The tool's deepest penetration into an object, m (0: it touches none). Times the contact
+    /// stiffness it is the normal force's elastic part; the rest of F_h is the normal damping and
+    /// friction.
+    pub depth_m: f64,
 }
 
 impl RunResult {
@@ -622,6 +626,13 @@ impl<'a> Run<'a> {
                 t_s: ns_to_s(t),
                 tool_pos,
                 f_desired: out.f_desired,
+                depth_m: out.contacts[..objects].iter().fold(0.0, |d, c| {
+                    if c.touching {
+                        d.max(c.depth)
+                    } else {
+                        d
+                    }
+                }),
             });
         }
         // The arm's own force loop (a recorded hand displays nothing).
