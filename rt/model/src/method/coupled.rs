@@ -22,7 +22,9 @@
 //!   0.25 s/s) instead of 0.56 s late throughout, and held 0.6 % (user 1's tool at user 2's site,
 //!   90 Hz reports) and 3.3 % (user 2's at user 1's, 20 Hz) of the ticks, on the delay's rises;
 //!   the co-contact divergence is 13–16 mm on seeds 1–9 instead of 16–30. The reports are
-//!   [`crate::method::track::ToolReport`]s, the same tool trajectory `timewarp` sends.
+//!   [`crate::method::track::ToolReport`]s, the same tool trajectory `timewarp` sends, with the
+//!   same window: the ticks since the last report and as many reports' again as the loss the
+//!   receivers measure needs ([`super::window`]); a longer loss is held, as a late position is.
 //! - **Pull towards the site that touched first.** Played late, the remote tools make the copies
 //!   drift apart. The site whose user's current contact began first (ties: the lower index) leads;
 //!   the others pull their copy towards its reported state (dead-reckoned to now): on each of its
@@ -54,6 +56,7 @@ use super::track::{
     position, quantize, CoupledReport, Quantized, Received, ToolReport, MAX_TOOL_SPEED_M_PER_S,
     UNKNOWN, WINDOW_TICKS,
 };
+use super::window::{LossMeter, Redundancy};
 
 /// Time constant of the pull towards the leading site's copy, s: long against the contact's
 /// oscillation (a 0.1 kg disk on the 800 N/m tool spring rings at ~14 ms), short against a task
@@ -108,6 +111,13 @@ pub struct Coupled {
     received: Box<[[Received; MAX_SITES]]>,
     /// Own positions of the last ticks (tick `t` at `t % WINDOW_TICKS`).
     own_hist: Box<[Quantized]>,
+    /// Which own ticks a track carries: the new ones and the last reports' again, as many as the
+    /// loss the receivers measure needs (`super::window`).
+    sent: std::cell::Cell<Redundancy>,
+    /// Per site: the share of its tracks this site loses.
+    lost: [LossMeter; MAX_SITES],
+    /// Per site: the share of this site's tracks it said it loses (255ths).
+    losing: [u8; MAX_SITES],
     own: Quantized,
     /// Per site: the position played at the last tick.
     played: [Quantized; MAX_SITES],
@@ -163,6 +173,9 @@ impl Coupled {
             origin_tick: 0,
             received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
             own_hist: vec![[0; 3]; WINDOW_TICKS].into_boxed_slice(),
+            sent: std::cell::Cell::new(Redundancy::START),
+            lost: [LossMeter::default(); MAX_SITES],
+            losing: [0; MAX_SITES],
             own: [0; 3],
             played: [UNKNOWN; MAX_SITES],
             contacts: [[ToolContactState::default(); MAX_SITES]; MAX_OBJECTS],
@@ -261,6 +274,16 @@ impl Coupled {
         if count == 0 {
             return;
         }
+        self.lost[from].arrived(tools.seq);
+        self.losing[from] = tools.loss[self.me];
+        let worst = (0..self.sites)
+            .filter(|&j| j != self.me)
+            .map(|j| self.losing[j])
+            .max()
+            .unwrap_or(0);
+        let mut sent = self.sent.get();
+        sent.set_loss(worst);
+        self.sent.set(sent);
         let end = tools.first_tick + count as i64;
         // What can still be played: from the largest playout back to a window ahead (older or
         // newer positions would only alias the slots of ones waiting to be played).
@@ -444,11 +467,16 @@ impl Consistency for Coupled {
     /// The tool track, with one state per object this site leads or its user touches (in a world
     /// of one object, that object always); the track alone when there is none.
     fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64, out: Sink<'_>) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let end = self.now_tick;
-        let first = (end - WINDOW_TICKS as i64).max(self.origin_tick);
+        let mut sent = self.sent.get();
+        let first = sent.window_start(end, self.origin_tick);
+        sent.sent(end);
+        self.sent.set(sent);
         let mut tools = ToolReport {
             first_tick: first,
             count: (end - first) as usize,
+            loss: std::array::from_fn(|j| self.lost[j].share()),
             ..ToolReport::NONE
         };
         for (k, t) in (first..end).enumerate() {
@@ -619,6 +647,63 @@ mod tests {
             e(&on_surface)
         );
         assert!(e(&copy.first().state) > before, "pulled up towards it");
+    }
+
+    /// A track carries the ticks since the last report and the last report's again (at no loss),
+    /// and as many reports' again as the loss its receivers say needs (0.3: seven); the site
+    /// measures the share of a partner's tracks it loses and says it in its own (every third
+    /// lost: a third).
+    #[test]
+    fn a_track_carries_what_the_loss_its_receivers_measure_needs() {
+        let sc = Scenario::default();
+        let world = sc.world();
+        let mut copy = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
+        let mut radii = [0.0; MAX_SITES];
+        radii[..2].fill(0.005);
+        let mut c = Coupled::new(0, 2, 1e-3, sc.contact, radii, 600);
+        let mut windows = Vec::new();
+        let mut seq = 0;
+        for t in 1..=2000_i64 {
+            c.own_tool(Vec3::new(-0.2, 1e-5 * t as f64, 0.01));
+            c.physics_step(&world, &mut copy, &[ContactForce::default()], 1e-3);
+            if t % 10 != 0 {
+                continue;
+            }
+            let mut out = None;
+            c.report(&copy, &[], t as f64 * 1e-3, &mut |r| out = Some(r));
+            let Some(Report::Coupled(r)) = out else {
+                panic!("a coupled report at tick {t}");
+            };
+            windows.push((t, r.tools.first_tick, r.tools.count, r.tools.loss[1]));
+            // Site 1's track: numbered, every third lost; from tick 1000 on it says it loses
+            // 0.3 of this site's tracks.
+            seq += 1;
+            if seq % 3 != 0 {
+                let Report::Tools(mut tr) = track(t - 10, t - 1, |_| [0, 0, 1000]) else {
+                    unreachable!()
+                };
+                tr.seq = seq;
+                tr.loss[0] = if t >= 1000 { 77 } else { 0 };
+                c.receive(&world, &mut copy, 1, &Report::Tools(tr), t as f64 * 1e-3);
+            }
+        }
+        // Each window ends with the last tick stepped (ticks 0 to t - 1 by the t-th report).
+        for &(t, first, count, _) in &windows {
+            assert_eq!(first + count as i64, t, "at tick {t}");
+        }
+        let at = |t: i64| {
+            windows
+                .iter()
+                .find(|w| w.0 == t)
+                .copied()
+                .expect("a report")
+        };
+        // No loss said: this report's 10 ticks and the last one's.
+        assert_eq!(at(900).2, 20);
+        // 0.3 said: the last 7 reports' again besides.
+        assert_eq!(at(1500).2, 80);
+        let said = f64::from(at(2000).3) / 255.0;
+        assert!((said - 1.0 / 3.0).abs() < 0.05, "{said}");
     }
 
     /// Site 0 of two, 1 kHz, playing at most 600 ticks late, receives site 1's tool (far from the

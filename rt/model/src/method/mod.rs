@@ -20,7 +20,8 @@
 //!
 //! Layout: one file per method; beside them what they share, each depending only on the ones
 //! above it in this list: [`copy`] (a site's copy and the integration step), [`track`] (the tool
-//! tracks `timewarp` and `coupled` send), [`report`] (what sites send), [`stats`] (what methods count), [`tank`] (the energy
+//! tracks `timewarp` and `coupled` send), [`window`] (which own ticks a track carries, and a
+//! receiver's measure of the tracks it loses), [`report`] (what sites send), [`stats`] (what methods count), [`tank`] (the energy
 //! bounds), [`reckon`] (dead reckoning), [`consistency`] (the trait). A method's file imports
 //! from those, never from this module or another method.
 
@@ -35,6 +36,7 @@ pub mod stats;
 pub mod tank;
 pub mod timewarp;
 pub mod track;
+pub mod window;
 
 pub use crate::world::MAX_SITES;
 pub use consistency::{Consistency, Sink, LOST_FADE_S};

@@ -84,8 +84,11 @@ mod islands;
 mod lag;
 mod predict;
 mod replay;
-mod window;
 
+use super::window::{LossMeter, Redundancy};
+pub use super::window::{
+    GAP_CHANCE, LOSS_FILTER_SHARE, MAX_REDUNDANCY, MIN_REDUNDANCY, REDUNDANCY_DECAY_REPORTS,
+};
 pub use deadband::{DeadbandSpec, FLOOR_SHARE, JND_SHARE};
 pub use hash::{hash_state, hash_world, STATE_RESEND_SLACK_S};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
@@ -95,10 +98,6 @@ pub use predict::{
 };
 pub use replay::{
     REPLAY_LEAD_TICKS, REPLAY_MIN_TICKS, REPLAY_REACH_M, REPLAY_SLOW_TICKS, REPLAY_SPEED,
-};
-use window::{LossMeter, Redundancy};
-pub use window::{
-    GAP_CHANCE, LOSS_FILTER_SHARE, MAX_REDUNDANCY, MIN_REDUNDANCY, REDUNDANCY_DECAY_REPORTS,
 };
 
 use crate::body::{BodyState, Vec3};

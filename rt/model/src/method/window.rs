@@ -1,22 +1,25 @@
-//! Which own ticks a track carries: the new ones, and the last few reports' again.
+//! Which own ticks a track carries: the new ones, and the last few reports' again (`timewarp`
+//! and `coupled` alike).
 //!
 //! A track used to carry the last [`WINDOW_TICKS`] ticks every time, so that a few lost tracks
 //! lost nothing: at 1 kHz physics and 90 Hz reports that sends every tick 23 times. Now a track
 //! carries the ticks since the previous report and those of the [`Redundancy::reports`] reports
-//! before it (a tick goes out `reports + 1` times). A loss longer than that leaves a gap the
-//! receiver holds later ticks around: it asks for it ([`ToolReport::need`]) and gets it in a
-//! repair, a round trip later at best, and the confirmed frontier waits for it: a repair must
-//! stay the exception. So the redundancy follows the loss the receivers measure (each track says
-//! what share of each site's tracks its sender found lost, RTCP's receiver report in one byte):
-//! at the worst receiver's loss `p`, as many reports as make a gap (`reports + 1` tracks lost in
-//! a row) rarer than [`GAP_CHANCE`] per track, from [`MIN_REDUNDANCY`] to [`MAX_REDUNDANCY`] (at
-//! `p` = 0.3, all 7). Each new gap asked for besides adds one report (a loss the measurement has
-//! not caught up with), shed after [`REDUNDANCY_DECAY_REPORTS`] reports without one. The
-//! confirmed states do not depend on it: every tick's position arrives once, however it travels.
+//! before it (a tick goes out `reports + 1` times). A loss longer than that leaves a gap. A
+//! `timewarp` receiver holds later ticks around it: it asks for it ([`ToolReport::need`]) and gets
+//! it in a repair, a round trip later at best, and the confirmed frontier waits for it: a repair
+//! must stay the exception. A `coupled` receiver plays the tool on from the last position it had
+//! (its jitter buffer holds it). So the redundancy follows the loss the receivers measure (each
+//! track says what share of each site's tracks its sender found lost, RTCP's receiver report in
+//! one byte): at the worst receiver's loss `p`, as many reports as make a gap (`reports + 1`
+//! tracks lost in a row) rarer than [`GAP_CHANCE`] per track, from [`MIN_REDUNDANCY`] to
+//! [`MAX_REDUNDANCY`] (at `p` = 0.3, all 7). Each new gap asked for besides adds one report (a
+//! loss the measurement has not caught up with), shed after [`REDUNDANCY_DECAY_REPORTS`] reports
+//! without one. `timewarp`'s confirmed states do not depend on it: every tick's position arrives
+//! once, however it travels.
 //!
-//! [`ToolReport::need`]: super::ToolReport::need
+//! [`ToolReport::need`]: super::track::ToolReport::need
 
-use super::WINDOW_TICKS;
+use super::track::WINDOW_TICKS;
 
 /// The fewest reports a track sends again (a single lost track then never makes a gap).
 pub const MIN_REDUNDANCY: usize = 1;
