@@ -71,14 +71,13 @@ impl TimeWarp {
         let at_last = &self.slots[self.idx(last)];
         let free = at_last.tick == last && !Self::touches(self.tools_at(self.idx(last)), j);
         if free {
-            // Where it was REACH_VELOCITY_TICKS before, at that velocity.
-            let earlier = match self.deadband {
-                None => at(last - REACH_VELOCITY_TICKS),
-                Some(_) => self
-                    .sampled_step(j, last, p)
-                    .map(|s| along(p, s, -REACH_VELOCITY_TICKS)),
+            // Its mean velocity over the last REACH_VELOCITY_TICKS; through a deadband, that
+            // between its last two samples.
+            let step = match self.deadband {
+                None => at(last - REACH_VELOCITY_TICKS).map(|p0| (p, p0, REACH_VELOCITY_TICKS)),
+                Some(_) => self.sampled_step(j, last, p),
             };
-            return (self.reach(p, earlier, t - last), false);
+            return (self.reach(p, step, t - last), false);
         }
         // Through a perceptual deadband (the scenario's: every site runs it) a tool's positions
         // are held runs, and the last step is a jump of a band in one tick, not a velocity:
@@ -128,19 +127,23 @@ impl TimeWarp {
         Some((p, before, (sample - previous).max(1)))
     }
 
-    /// A free remote tool `h` ticks after it was last known at `p` (and at `earlier`,
-    /// [`REACH_VELOCITY_TICKS`] before): see [`REACH_TIME_TICKS`]. Held where nothing earlier is
-    /// known.
-    pub(super) fn reach(&self, p: Quantized, earlier: Option<Quantized>, h: i64) -> Quantized {
-        let Some(p0) = earlier else {
+    /// A free remote tool `h` ticks after it was last known at `p`, at the velocity of `step`,
+    /// `(to, from, ticks)` (see [`along`]): see [`REACH_TIME_TICKS`]. Held where nothing earlier
+    /// is known.
+    pub(super) fn reach(
+        &self,
+        p: Quantized,
+        step: Option<(Quantized, Quantized, i64)>,
+        h: i64,
+    ) -> Quantized {
+        let Some((to, from, ticks)) = step else {
             return p;
         };
         let h = h.clamp(0, REACH_TICKS) as f64;
         let tau = REACH_TIME_TICKS as f64;
-        // Quanta per tick.
-        let v: [f64; 3] = std::array::from_fn(|k| {
-            f64::from(p[k].saturating_sub(p0[k])) / REACH_VELOCITY_TICKS as f64
-        });
+        // Quanta per tick: one division of the whole distance.
+        let v: [f64; 3] =
+            std::array::from_fn(|k| f64::from(to[k].saturating_sub(from[k])) / ticks.max(1) as f64);
         let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         let max = MAX_TOOL_SPEED_M_PER_S * self.dt / QUANTUM_M;
         let scale = if speed > max { max / speed } else { 1.0 };

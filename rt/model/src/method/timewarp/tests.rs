@@ -263,8 +263,12 @@ fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_sam
         // ticks 0, 50 and 100, held in between; known to tick 139.
         let x = |k: usize| 0.102 - 0.002 * (k / 50) as f64;
         let (tw, _, _) = after_a_remote_track(deadband, 140, x);
-        // 200 quanta in 50 ticks: where it was 10 ticks before at that velocity.
-        let reach = tw.reach(last, Some([last[0] + 40, last[1], last[2]]), 10);
+        // 200 quanta in 50 ticks.
+        let reach = tw.reach(
+            last,
+            Some((last, [last[0] + 200, last[1], last[2]], 50)),
+            10,
+        );
         (tw.input(1, 149).0, reach)
     });
     assert_eq!(full, last, "every tick sent: a held run is a tool at rest");
@@ -273,6 +277,15 @@ fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_sam
     // Sent at ticks 0 and 100 only: the run before the last is longer than the reach back.
     let (tw, _, _) = after_a_remote_track(true, 140, |k| if k < 100 { 0.1 } else { 0.098 });
     assert_eq!(tw.input(1, 149).0, last, "a tool this slow is at rest");
+    // Sent every 30 ticks (known to tick 139, last sent at 120): 200 quanta in 30 ticks, one
+    // division; through a position 10 ticks back, rounded to whole quanta, it was 66 in 10.
+    let (tw, _, _) = after_a_remote_track(true, 140, |k| 0.102 - 0.002 * (k / 30) as f64);
+    let (h, tau) = (REACH_TICKS as f64, REACH_TIME_TICKS as f64);
+    let gone = |v: f64| (v * h * tau / (h + tau)).round() as i32;
+    let far = tw.input(1, 139 + REACH_TICKS).0;
+    let at_120 = quantize(Vec3::new(0.094, 0.0, 0.01));
+    assert_eq!(far[0] - at_120[0], gone(-200.0 / 30.0), "{far:?}");
+    assert_ne!(gone(-200.0 / 30.0), gone(-6.6));
 }
 
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
