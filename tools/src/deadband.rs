@@ -22,9 +22,10 @@
 //! other three replayed are compared with.)
 //!
 //! Of the deadband run's ticks beyond one JND with the hands replayed, it counts those at which
-//! both runs' tools touch with normal forces within one JND of each other (the normal force's
-//! elastic part, the contact stiffness × the penetration): there the tangential part made the
-//! difference, the force a stuck contact holds, which depends on where it stuck.
+//! both runs' tools press equally deep: the normal force's elastic part (the contact stiffness ×
+//! the deepest penetration) within one JND of the full-rate run's. There the rest made the
+//! difference: mostly the tangential force a stuck contact holds, which depends on where it
+//! stuck (and the normal damping, and what the display's stages do to the force).
 
 use anyhow::Context;
 use coop_model::method::timewarp::DeadbandSpec;
@@ -43,10 +44,10 @@ pub struct ForceError {
     pub within_jnd: f64,
     /// The 99th percentile of the difference, JND.
     pub p99_jnd: f64,
-    /// Of the ticks beyond one JND, the share at which the tool touches in both runs with normal
-    /// forces (the elastic part: the contact stiffness × the penetration) within one JND of each
-    /// other: the tangential part made the difference, the stuck friction force, which depends on
-    /// where the contact stuck (0 with none beyond).
+    /// Of the ticks beyond one JND, the share at which the tool touches in both runs and presses
+    /// equally deep (the normal force's elastic part, the contact stiffness × the deepest
+    /// penetration, within one JND of the other run's): the rest made the difference, mostly the
+    /// stuck friction force, which depends on where the contact stuck (0 with none beyond).
     pub normal_agrees: f64,
 }
 
@@ -105,13 +106,14 @@ fn within_and_p99(e: Vec<f64>, (beyond, normal_agrees): (usize, usize)) -> Force
 }
 
 /// How far `b`'s displayed force is from `a`'s, JND of `a`'s, and whether both tools touch with
-/// normal forces (`stiffness` × the penetration, N/m × m) within that JND of each other.
+/// the normal force's elastic part (`stiffness` × the penetration, N/m × m) within one JND of
+/// `a`'s.
 fn tick_error(a: &ServoTick, b: &ServoTick, stiffness: f64) -> (f64, bool) {
-    let jnd = perception::force_jnd_n(a.f_desired.norm());
+    let (na, nb) = (stiffness * a.depth_m, stiffness * b.depth_m);
     let touch = a.depth_m > 0.0 && b.depth_m > 0.0;
     (
-        (b.f_desired - a.f_desired).norm() / jnd,
-        touch && stiffness * (a.depth_m - b.depth_m).abs() <= jnd,
+        (b.f_desired - a.f_desired).norm() / perception::force_jnd_n(a.f_desired.norm()),
+        touch && (na - nb).abs() <= perception::force_jnd_n(na),
     )
 }
 
@@ -339,7 +341,7 @@ fn print_seed(rows: &[Row]) {
             100.0 * r.replayed.band.normal_agrees
         );
     }
-    println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor); normal agrees = of the deadband run's ticks beyond one JND, those at which both runs' tools touch with normal forces (stiffness x penetration) within one JND: the stuck friction force made the difference");
+    println!("# reseeded here: the next seed's draws of the delay's jitter alone (a replayed hand has no force sensor); normal agrees = of the deadband run's ticks beyond one JND, those at which both runs' tools press equally deep (stiffness x penetration within one JND of the full-rate run's): the rest, mostly the stuck friction force, made the difference");
 }
 
 /// Each delay's figures over every seed, lowest to highest.
@@ -409,7 +411,7 @@ fn print_range(all: &[Vec<Row>], seeds: &[u64]) {
             range(&|r| r.replayed.band.normal_agrees, 100.0, " %"),
         );
     }
-    println!("# phases band = the fewest phases any seed's deadband run passed; hash mism. = the most hash mismatches of any; normal agrees = of the deadband run's ticks beyond one JND with the hands replayed, those at which both runs' tools touch with normal forces within one JND (the stuck friction force made the difference)");
+    println!("# phases band = the fewest phases any seed's deadband run passed; hash mism. = the most hash mismatches of any; normal agrees = of the deadband run's ticks beyond one JND with the hands replayed, those at which both runs' tools press equally deep (the rest, mostly the stuck friction force, made the difference)");
 }
 
 /// The second header line of the three comparisons' columns.
@@ -442,14 +444,18 @@ mod tests {
         let k = 800.0;
         // 3 N pressed 3.75 mm deep: one JND is 0.21 N.
         let a = tick([-3.0, 0.0, 0.0], 3.75e-3);
-        // The same press, 0.4 N more stuck tangential force: 2 JND, the normal's.
+        // Pressed as deep, 0.4 N more stuck tangential force: 1.9 JND, and the press agrees.
         let (e, normal) = tick_error(&a, &tick([-3.0, 0.4, 0.0], 3.75e-3), k);
         assert!(e > 1.9 && e < 2.0 && normal, "{e} {normal}");
         // 0.5 mm deeper: 0.4 N more normal force, beyond a JND of it.
         let (e, normal) = tick_error(&a, &tick([-3.4, 0.0, 0.0], 4.25e-3), k);
         assert!(e > 1.0 && !normal, "{e} {normal}");
-        // A tool that touches nothing in one run agrees with no normal force.
-        let (_, normal) = tick_error(&tick([0.0; 3], 0.0), &tick([0.0; 3], 0.0), k);
-        assert!(!normal);
+        // 0.1 mm deeper (0.08 N, within the normal force's JND) with 0.3 N more along the
+        // surface: agrees.
+        let (e, normal) = tick_error(&a, &tick([-3.08, 0.3, 0.0], 3.85e-3), k);
+        assert!(e > 1.0 && normal, "{e} {normal}");
+        // The same force error with the tool touching nothing in one run: no press to agree.
+        let (e, normal) = tick_error(&a, &tick([-3.0, 0.4, 0.0], 0.0), k);
+        assert!(e > 1.0 && !normal, "{e} {normal}");
     }
 }

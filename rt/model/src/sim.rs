@@ -201,9 +201,9 @@ pub struct ServoTick {
     pub tool_pos: Vec3,
     /// The displayed force F_h, N.
     pub f_desired: Vec3,
-    /// The tool's deepest penetration into an object, m (0: it touches none). Times the contact
-    /// stiffness it is the normal force's elastic part; the rest of F_h is the normal damping and
-    /// friction.
+    /// The tool's deepest penetration into an object as the copy has it, m (0: it touches none).
+    /// Times the contact stiffness it is the normal force's elastic part; the rest of the contact
+    /// force is the normal damping and friction (and F_h is that after the display's stages).
     pub depth_m: f64,
 }
 

@@ -351,6 +351,12 @@ impl Consistency for Coupled {
     fn own_tool(&mut self, tool_pos: Vec3) {
         self.own = quantize(tool_pos);
     }
+    fn peer_lost(&mut self, from: usize, _now_s: f64) {
+        // Its tracks skipped while it was silent are not a loss rate: measured afresh.
+        if let Some(m) = self.lost.get_mut(from) {
+            *m = LossMeter::default();
+        }
+    }
     fn remote_force(&self) -> Vec3 {
         self.remote_force
     }
@@ -704,6 +710,19 @@ mod tests {
         assert_eq!(at(1500).2, 80);
         let said = f64::from(at(2000).3) / 255.0;
         assert!((said - 1.0 / 3.0).abs() < 0.05, "{said}");
+        // Site 1 fell silent for 1000 of its tracks and is back: those are not a loss rate.
+        c.peer_lost(1, 2.0);
+        let Report::Tools(mut tr) = track(2000, 2009, |_| [0, 0, 1000]) else {
+            unreachable!()
+        };
+        tr.seq = seq + 1000;
+        c.receive(&world, &mut copy, 1, &Report::Tools(tr), 2.0);
+        let mut out = None;
+        c.report(&copy, &[], 2.0, &mut |r| out = Some(r));
+        let Some(Report::Coupled(r)) = out else {
+            panic!("a coupled report");
+        };
+        assert_eq!(r.tools.loss[1], 0);
     }
 
     /// Site 0 of two, 1 kHz, playing at most 600 ticks late, receives site 1's tool (far from the

@@ -81,7 +81,8 @@ pub struct RollbackStats {
     /// ... and the own positions sent (that left the band; the others were held).
     pub deadband_samples: u64,
     /// The reports each own track carries again now (`timewarp`: sized by the loss its receivers
-    /// measure and the gaps they ask for, `timewarp/window.rs`; 0 under other methods).
+    /// measure and the gaps they ask for, `method/window.rs`; 0 under other methods: `coupled`
+    /// sizes its tracks the same way but reports its playout, not this).
     pub redundancy_reports: u64,
 }
 
