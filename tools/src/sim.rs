@@ -96,7 +96,7 @@ pub enum Command {
     /// phases, hash mismatches, and the displayed force's difference in just-noticeable steps,
     /// twice: with the hands reacting to what they feel, and with every site's tool replayed
     /// from the full-rate run (only the world differs), and of the ticks beyond one JND those
-    /// whose normal forces agree (the stuck friction force differs).
+    /// whose tools pressed as deep (mostly the stuck friction force differs).
     Deadband {
         /// Scenario file (TOML).
         scenario: PathBuf,
