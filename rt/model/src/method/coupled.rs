@@ -56,7 +56,7 @@ use super::track::{
     position, quantize, CoupledReport, Quantized, Received, ToolReport, MAX_TOOL_SPEED_M_PER_S,
     UNKNOWN, WINDOW_TICKS,
 };
-use super::window::{LossMeter, Redundancy};
+use super::window::Tracks;
 
 /// Time constant of the pull towards the leading site's copy, s: long against the contact's
 /// oscillation (a 0.1 kg disk on the 800 N/m tool spring rings at ~14 ms), short against a task
@@ -111,13 +111,9 @@ pub struct Coupled {
     received: Box<[[Received; MAX_SITES]]>,
     /// Own positions of the last ticks (tick `t` at `t % WINDOW_TICKS`).
     own_hist: Box<[Quantized]>,
-    /// Which own ticks a track carries: the new ones and the last reports' again, as many as the
-    /// loss the receivers measure needs (`super::window`).
-    sent: std::cell::Cell<Redundancy>,
-    /// Per site: the share of its tracks this site loses.
-    lost: [LossMeter; MAX_SITES],
-    /// Per site: the share of this site's tracks it said it loses (255ths).
-    losing: [u8; MAX_SITES],
+    /// Which own ticks a track carries (the new ones and the last reports' again, as many as the
+    /// loss the receivers measure needs), and the loss both ways ([`Tracks`]).
+    tracks: Tracks,
     own: Quantized,
     /// Per site: the position played at the last tick.
     played: [Quantized; MAX_SITES],
@@ -173,9 +169,7 @@ impl Coupled {
             origin_tick: 0,
             received: vec![[None; MAX_SITES]; len].into_boxed_slice(),
             own_hist: vec![[0; 3]; WINDOW_TICKS].into_boxed_slice(),
-            sent: std::cell::Cell::new(Redundancy::START),
-            lost: [LossMeter::default(); MAX_SITES],
-            losing: [0; MAX_SITES],
+            tracks: Tracks::new(),
             own: [0; 3],
             played: [UNKNOWN; MAX_SITES],
             contacts: [[ToolContactState::default(); MAX_SITES]; MAX_OBJECTS],
@@ -274,16 +268,7 @@ impl Coupled {
         if count == 0 {
             return;
         }
-        self.lost[from].arrived(tools.seq);
-        self.losing[from] = tools.loss[self.me];
-        let worst = (0..self.sites)
-            .filter(|&j| j != self.me)
-            .map(|j| self.losing[j])
-            .max()
-            .unwrap_or(0);
-        let mut sent = self.sent.get();
-        sent.set_loss(worst);
-        self.sent.set(sent);
+        self.tracks.heard(from, tools.seq, tools.loss[self.me]);
         let end = tools.first_tick + count as i64;
         // What can still be played: from the largest playout back to a window ahead (older or
         // newer positions would only alias the slots of ones waiting to be played).
@@ -352,10 +337,7 @@ impl Consistency for Coupled {
         self.own = quantize(tool_pos);
     }
     fn peer_lost(&mut self, from: usize, _now_s: f64) {
-        // Its tracks skipped while it was silent are not a loss rate: measured afresh.
-        if let Some(m) = self.lost.get_mut(from) {
-            *m = LossMeter::default();
-        }
+        self.tracks.peer_lost(from);
     }
     fn remote_force(&self) -> Vec3 {
         self.remote_force
@@ -475,14 +457,11 @@ impl Consistency for Coupled {
     fn report(&self, copy: &WorldCopy, _own: &[ContactForce], now_s: f64, out: Sink<'_>) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
         let end = self.now_tick;
-        let mut sent = self.sent.get();
-        let first = sent.window_start(end, self.origin_tick);
-        sent.sent(end);
-        self.sent.set(sent);
+        let first = self.tracks.next_window(end, self.origin_tick);
         let mut tools = ToolReport {
             first_tick: first,
             count: (end - first) as usize,
-            loss: std::array::from_fn(|j| self.lost[j].share()),
+            loss: self.tracks.shares(),
             ..ToolReport::NONE
         };
         for (k, t) in (first..end).enumerate() {

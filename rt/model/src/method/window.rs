@@ -19,7 +19,10 @@
 //!
 //! [`ToolReport::need`]: super::track::ToolReport::need
 
+use std::cell::Cell;
+
 use super::track::WINDOW_TICKS;
+use crate::world::MAX_SITES;
 
 /// The fewest reports a track sends again (a single lost track then never makes a gap).
 pub const MIN_REDUNDANCY: usize = 1;
@@ -105,6 +108,82 @@ impl Redundancy {
     pub fn gap_asked(&mut self) {
         self.reports = (self.reports + 1).min(MAX_REDUNDANCY);
         self.quiet = 0;
+    }
+}
+
+/// A site's own tracks and the loss both ways, as `timewarp` and `coupled` keep them: the window
+/// of the own ticks a track carries ([`Redundancy`], sized for the worst loss the receivers say),
+/// each partner's tracks this site loses ([`LossMeter`]), and the share of this site's tracks
+/// each partner says it loses.
+#[derive(Debug, Clone)]
+pub struct Tracks {
+    /// (A cell: a report is made from a method's shared view, and counts its window as sent.)
+    sent: Cell<Redundancy>,
+    lost: [LossMeter; MAX_SITES],
+    losing: [u8; MAX_SITES],
+}
+
+impl Tracks {
+    /// Nothing sent or heard yet.
+    pub fn new() -> Self {
+        Self {
+            sent: Cell::new(Redundancy::START),
+            lost: [LossMeter::default(); MAX_SITES],
+            losing: [0; MAX_SITES],
+        }
+    }
+
+    /// A track numbered `seq` arrived from site `from`, which says it loses `share` (255ths) of
+    /// this site's: that site's loss measured, and the window sized for the worst receiver.
+    pub fn heard(&mut self, from: usize, seq: u64, share: u8) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let (Some(m), Some(l)) = (self.lost.get_mut(from), self.losing.get_mut(from)) else {
+            return;
+        };
+        m.arrived(seq);
+        *l = share;
+        let worst = self.losing.iter().copied().max().unwrap_or(0);
+        self.sent.get_mut().set_loss(worst);
+    }
+
+    /// A receiver asked for a gap it had not asked for before ([`Redundancy::gap_asked`]).
+    pub fn gap_asked(&mut self) {
+        self.sent.get_mut().gap_asked();
+    }
+
+    /// The first tick of the next track's window of the newest ticks, up to `end` and from
+    /// `floor` on ([`Redundancy::window_start`]), counted as sent.
+    pub fn next_window(&self, end: i64, floor: i64) -> i64 {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let mut sent = self.sent.get();
+        let first = sent.window_start(end, floor);
+        sent.sent(end);
+        self.sent.set(sent);
+        first
+    }
+
+    /// Per site, the share of its tracks this site loses, 255ths (a track's `loss`).
+    pub fn shares(&self) -> [u8; MAX_SITES] {
+        std::array::from_fn(|j| self.lost[j].share())
+    }
+
+    /// How many reports before the newest a track sends again now.
+    pub fn reports(&self) -> usize {
+        self.sent.get().reports()
+    }
+
+    /// Site `from` fell silent: the tracks it skipped meanwhile are not a loss rate, so its loss
+    /// is measured afresh.
+    pub fn peer_lost(&mut self, from: usize) {
+        if let Some(m) = self.lost.get_mut(from) {
+            *m = LossMeter::default();
+        }
+    }
+}
+
+impl Default for Tracks {
+    fn default() -> Self {
+        Self::new()
     }
 }
 

@@ -85,7 +85,7 @@ mod lag;
 mod predict;
 mod replay;
 
-use super::window::{LossMeter, Redundancy};
+use super::window::Tracks;
 pub use super::window::{
     GAP_CHANCE, LOSS_FILTER_SHARE, MAX_REDUNDANCY, MIN_REDUNDANCY, REDUNDANCY_DECAY_REPORTS,
 };
@@ -160,12 +160,9 @@ pub struct TimeWarp {
     asked: [i64; MAX_SITES],
     /// Per site: the gap its frontier waits at was given up (counted once).
     given_up: [bool; MAX_SITES],
-    /// What the own tracks sent and how much of it they send again ([`Redundancy`]).
-    sent: std::cell::Cell<Redundancy>,
-    /// Per site: the share of its reports this site loses.
-    lost: [LossMeter; MAX_SITES],
-    /// Per site: the share of this site's reports it says it loses, in 255ths.
-    losing: [u8; MAX_SITES],
+    /// What the own tracks sent and how much of it they send again, and the loss both ways
+    /// ([`Tracks`]).
+    tracks: Tracks,
     /// Per site before this one: its confirmed state differed from ours at the last comparison,
     /// and we ask it for that state.
     want_state: [bool; MAX_SITES],
@@ -267,9 +264,7 @@ impl TimeWarp {
             newest: [-1; MAX_SITES],
             asked: [-1; MAX_SITES],
             given_up: [false; MAX_SITES],
-            sent: std::cell::Cell::new(Redundancy::START),
-            lost: [LossMeter::default(); MAX_SITES],
-            losing: [0; MAX_SITES],
+            tracks: Tracks::new(),
             want_state: [false; MAX_SITES],
             state_asked: [false; MAX_SITES],
             state_sent: std::cell::Cell::new(i64::MIN),
@@ -557,10 +552,7 @@ impl TimeWarp {
         // Ticks up to end - 1 are simulated, with the own positions. (Nothing before the tick
         // this site's history starts at: it was not here.)
         let end = self.now_tick;
-        let mut sent = self.sent.get();
-        let first = sent.window_start(end, self.origin_tick);
-        sent.sent(end);
-        self.sent.set(sent);
+        let first = self.tracks.next_window(end, self.origin_tick);
         let due = end
             >= self
                 .state_sent
@@ -615,7 +607,7 @@ impl TimeWarp {
             need_state: 0,
             started_tick: self.started_tick,
             state: None,
-            loss: std::array::from_fn(|j| self.lost[j].share()),
+            loss: self.tracks.shares(),
             seq: 0,
         };
         for (j, &want) in self.want_state.iter().enumerate() {
@@ -719,16 +711,11 @@ impl Consistency for TimeWarp {
             return None;
         }
         let need = r.need[self.me];
-        let mut sent = self.sent.get();
         if need >= 0 && need != self.asked[from] {
-            sent.gap_asked();
+            self.tracks.gap_asked();
         }
         self.asked[from] = need;
-        self.lost[from].arrived(r.seq);
-        self.losing[from] = r.loss[self.me];
-        let worst = (0..self.sites).map(|j| self.losing[j]).max().unwrap_or(0);
-        sent.set_loss(worst);
-        self.sent.set(sent);
+        self.tracks.heard(from, r.seq, r.loss[self.me]);
         let asks = r.need_state & (1 << self.me) != 0;
         if asks && !self.state_asked[from] {
             // A site that starts asking gets the state with the next report, not a round trip
@@ -853,10 +840,7 @@ impl Consistency for TimeWarp {
         adoption
     }
     fn peer_lost(&mut self, from: usize, _now_s: f64) {
-        // Its reports skipped while it was silent are not a loss rate: measured afresh.
-        if let Some(m) = self.lost.get_mut(from) {
-            *m = LossMeter::default();
-        }
+        self.tracks.peer_lost(from);
         // A silent site neither asks for our state nor sends its own: ask again once it is back.
         if let (Some(asked), Some(want)) = (
             self.state_asked.get_mut(from),
@@ -879,7 +863,7 @@ impl Consistency for TimeWarp {
         if let Some(d) = self.deadband {
             (st.deadband_ticks, st.deadband_samples) = (d.ticks, d.samples);
         }
-        st.redundancy_reports = self.sent.get().reports() as u64;
+        st.redundancy_reports = self.tracks.reports() as u64;
         Stats::Rollback(st)
     }
     fn grid_history_ticks(&self) -> Option<u64> {

@@ -846,7 +846,7 @@ fn at_thirty_percent_loss_short_tracks_lose_nothing() {
         asked > 0 && repairs > 0,
         "gaps asked for {asked}, repaired {repairs}"
     );
-    let grown = a.sent.get().reports().max(b.sent.get().reports());
+    let grown = a.tracks.reports().max(b.tracks.reports());
     assert!(
         grown > MIN_REDUNDANCY,
         "the redundancy grew with the gaps: {grown}"
@@ -854,7 +854,7 @@ fn at_thirty_percent_loss_short_tracks_lose_nothing() {
     // Every report is 20 ticks: a track carries as many reports' as the measured loss needs
     // (at 0.3, 8: 160 ticks), not the window.
     let reports = (0..2)
-        .map(|i| sites[i].0.sent.get().reports())
+        .map(|i| sites[i].0.tracks.reports())
         .collect::<Vec<_>>();
     assert_eq!(reports, [MAX_REDUNDANCY; 2], "sized for the loss");
     counts.sort_unstable();
