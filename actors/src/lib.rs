@@ -21,6 +21,7 @@ pub mod router;
 pub mod scenario_file;
 pub mod station;
 pub mod supervisor;
+pub mod trajectory_file;
 
 /// What the unit tests share.
 #[cfg(test)]

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use coop_model::scenario::{Scenario, ScenarioError};
 
-use crate::station::device::TrajectoryFileError;
+use crate::trajectory_file::TrajectoryFileError;
 
 /// A scenario file that cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -90,7 +90,7 @@ pub fn parse_at(text: &str, base: Option<&Path>) -> Result<Scenario, ParseError>
                 Some(b) if p.is_relative() => b.join(p),
                 _ => p.to_path_buf(),
             };
-            let t = crate::station::device::load_trajectory(&full).map_err(|error| {
+            let t = crate::trajectory_file::load_trajectory(&full).map_err(|error| {
                 ParseError::HandReplay {
                     site: i,
                     file: file.clone(),

@@ -19,7 +19,8 @@
 //! `clock_nanosleep` (`rt/tests/alloc_free.rs` and `rt/tests/loops.rs` check the allocation part).
 //! Everything else (create, open, claim, `is_abandoned`, scheduling) is setup and may.
 //!
-//! `unsafe` lives only in [`shm`], [`sched`] (H2), [`msg`] (each ring message's `unsafe impl
+//! `unsafe` lives only in [`shm`], [`pod`] (the plain-data contract a ring's messages sign, a leaf
+//! both [`msg`] and [`shm`] import), [`sched`] (H2), [`msg`] (each ring message's `unsafe impl
 //! ShmPod`) and `device::dhd` (calls into the DHD SDK, a C library loaded at run time: nothing else
 //! can reach it); every block says why it is sound.
 #![deny(unsafe_code)]
@@ -31,6 +32,7 @@ pub mod device;
 pub mod msg;
 #[cfg(not(loom))]
 pub mod physics;
+pub mod pod;
 pub mod process;
 #[cfg(not(loom))]
 pub mod run;

@@ -184,7 +184,10 @@ fn body_state(pos: [f64; 3], rot: [f64; 4], vel: [f64; 3], ang_mom: [f64; 3]) ->
     }
     Some(BodyState {
         pos: v3(pos),
-        rot: UnitQuaternion::new_normalize(q),
+        // The sender's bits, not renormalized: a receiver takes the state as it was sent (a
+        // second normalization of a unit quaternion moves its last bits, so a state relayed
+        // twice, or compared with the sender's, would differ).
+        rot: UnitQuaternion::new_unchecked(q),
         vel: v3(vel),
         ang_mom: v3(ang_mom),
     })
@@ -251,12 +254,16 @@ pod_message! {
         /// Time of the newest tool sample this state was computed with, ns (0: none yet): the servo
         /// measures the servo → physics → servo round trip from it.
         pub tool_t_ns: u64,
+        /// The sender's time of the newest remote report or track physics took before computing
+        /// this state, on this machine's clock (the network corrected it), ns (0: none yet): the
+        /// servo measures from it how long a partner's report took to reach the displayed force.
+        pub remote_t_ns: u64,
     }
 }
-const _: () = assert!(core::mem::size_of::<ObjectSample>() == 144);
-// SAFETY: repr(C), only u64 and f64 fields (144 bytes, no padding); every bit pattern is valid.
+const _: () = assert!(core::mem::size_of::<ObjectSample>() == 152);
+// SAFETY: repr(C), only u64 and f64 fields (152 bytes, no padding); every bit pattern is valid.
 unsafe impl ShmPod for ObjectSample {
-    const TYPE_NAME: &'static str = "coop.ObjectSample.v3";
+    const TYPE_NAME: &'static str = "coop.ObjectSample.v4";
 }
 pod_message! {
     /// What a site reports to the others (physics → network), and what arrives from them (network →
@@ -451,12 +458,13 @@ mod tests {
             4,
         );
         s.vel[1] = f64::NAN;
+        s.remote_t_ns = 7;
         let w = s.to_words();
-        assert_eq!(w.len(), 18);
+        assert_eq!(w.len(), 19);
         assert_eq!(
-            (w[0], w[1], w[2], w[16], w[17]),
-            (5, 6, 3, 2, 4),
-            "t_ns, seq, object … adoptions, tool_t_ns"
+            (w[0], w[1], w[2], w[16], w[17], w[18]),
+            (5, 6, 3, 2, 4, 7),
+            "t_ns, seq, object … adoptions, tool_t_ns, remote_t_ns"
         );
         assert_eq!(w[5], 0.01f64.to_bits(), "pos[2]");
         let back = ObjectSample::from_words(&w);

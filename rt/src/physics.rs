@@ -3,31 +3,31 @@
 //! user's force only (Eq. 10), publish the state to the servo every step and a report to the network at
 //! the report rate. The periodic timer and scheduling around it belong to the station's physics
 //! process.
+//!
+//! The method itself is stepped by [`coop_model::drive::SiteDrive`], as the simulator steps it:
+//! this loop only moves what the rings carry in and out of it, and decides (from the clock) how
+//! many ticks are due.
 
-use coop_model::contact::ContactForce;
-use coop_model::method::{Consistency, ObjectCopy, WorldCopy};
+use coop_model::drive::{Put, Refused, SiteDrive, ToolAt};
+use coop_model::method::{Consistency, WorldCopy};
 use coop_model::world::{World, MAX_OBJECTS};
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::method::Report;
 
 use crate::msg::{ObjectSample, SiteReport, ToolSample, ToolTrack, TraceRecord};
-use crate::shm::control::{ControlBlock, Ring};
+use crate::shm::control::{record_counted, ControlBlock, Ring};
 use crate::shm::{Consumer, Producer};
 
 /// Everything one physics loop owns.
 #[derive(Debug)]
 pub struct PhysicsLoop {
     site: usize,
-    method: Box<dyn Consistency>,
+    /// The method, the copy and the own contact, stepped as the simulator steps them.
+    drive: SiteDrive,
     world: World,
-    copy: WorldCopy,
-    /// The copy before the step or report being taken (restored if it made the copy non-finite).
-    before: WorldCopy,
     /// The world's objects (fixed at start: the rings' capacities are sized for them).
     n: usize,
-    /// The own user's contact on each object, from the newest tool sample.
-    own: [ContactForce; MAX_OBJECTS],
     own_t_ns: u64,
     tool: ToolSample,
     tools: Consumer<ToolSample>,
@@ -41,18 +41,13 @@ pub struct PhysicsLoop {
     trace_period_ns: u64,
     next_trace_ns: u64,
     period_ns: u64,
-    report_period_ns: u64,
-    next_report_ns: u64,
     seq: u64,
-    report_seq: u64,
     adoptions: u64,
     adoptions_by_object: [u64; MAX_OBJECTS],
     /// Reports refused as malformed (non-finite, unknown site, unknown kind).
     pub rejected: u64,
     /// Remote reports taken from the ring (valid or not).
     pub received: u64,
-    /// Adoptions or steps that would have made the copy non-finite (the copy kept its state).
-    pub nonfinite_kept: u64,
     /// Object samples dropped because the ring to the servo was full (one per object).
     pub object_drops: u64,
     /// Reports dropped because the ring to the network was full.
@@ -62,6 +57,8 @@ pub struct PhysicsLoop {
     /// Tool tracks (methods that exchange tools): received, refused as malformed, dropped because
     /// the ring to the network was full.
     pub tracks: TrackCounters,
+    /// The pipeline's waits since the last publication.
+    waits: Waits,
 }
 
 /// What a physics loop did with tool tracks.
@@ -80,6 +77,36 @@ pub struct TrackCounters {
     pub caught_up_ticks: u64,
 }
 
+/// The pipeline's waits measured since they were last published, ns: the own tool sample's age
+/// when taken, and each partner's report or track's age when taken (at most [`MAX_WAITS`] a
+/// period; more in one period are counted in none). Fixed size: measured inside the step.
+#[derive(Debug, Clone, Copy, Default)]
+struct Waits {
+    tool: Option<u64>,
+    remote: [u64; MAX_WAITS],
+    remote_len: usize,
+    /// The sender's time of the newest remote report or track taken, this machine's clock, ns.
+    newest_remote_ns: u64,
+}
+
+/// Partner reports' waits kept per physics period until published.
+const MAX_WAITS: usize = 16;
+
+impl Waits {
+    /// A partner's report or track of (corrected) time `t_ns` taken at `now_ns`.
+    fn remote_taken(&mut self, t_ns: u64, now_ns: u64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if t_ns == 0 || t_ns > now_ns {
+            return;
+        }
+        self.newest_remote_ns = self.newest_remote_ns.max(t_ns);
+        if let Some(w) = self.remote.get_mut(self.remote_len) {
+            *w = now_ns - t_ns;
+            self.remote_len += 1;
+        }
+    }
+}
+
 /// Most extra ticks one physics period steps to catch up with the session's grid (a longer
 /// stall is made up over the following periods).
 pub const MAX_CATCH_UP_TICKS: u64 = 8;
@@ -88,14 +115,8 @@ pub const MAX_CATCH_UP_TICKS: u64 = 8;
 /// at `origin_ns + k × period`, the same at every site once each knows the session's time 0.
 #[derive(Debug, Clone, Copy, Default)]
 struct Ticks {
-    /// Whether the method steps on the grid (it takes tool tracks).
-    on_grid: bool,
     /// Time 0 of the grid (the session's), once known.
     origin_ns: Option<u64>,
-    /// Ticks stepped so far (the next tick to step).
-    done: u64,
-    /// Tool tracks sent.
-    seq: u64,
     /// Join the grid where the session is at the first step (if that is at least this tick),
     /// from these states of the world's objects (`None`: the copy given), not at tick 0.
     join: Option<(u64, Option<[BodyState; MAX_OBJECTS]>)>,
@@ -138,8 +159,8 @@ pub struct PhysicsRings {
 }
 
 impl PhysicsLoop {
-    /// A physics loop for `site` with `method`, starting from `copy`. A method that exchanges
-    /// tools (`timewarp`, `coupled`) steps on the session's tick grid: it holds the copy until
+    /// A physics loop for `site` with `method`, starting from `copy`. A method that steps on the
+    /// session's tick grid (it says so: [`Consistency::grid_history_ticks`]) holds the copy until
     /// [`PhysicsLoop::set_tick_origin`] gives the grid's time 0.
     pub fn new(
         site: usize,
@@ -149,15 +170,20 @@ impl PhysicsLoop {
         rings: PhysicsRings,
         timing: PhysicsTiming,
     ) -> Self {
-        let method_name = method.name();
-        Self {
+        let drive = SiteDrive::new(
             site,
             method,
-            n: copy.len().clamp(1, MAX_OBJECTS),
-            world,
-            before: copy.clone(),
             copy,
-            own: [ContactForce::default(); MAX_OBJECTS],
+            timing.report_period_ns,
+            timing.start_ns,
+            timing.report_seq,
+        );
+        Self {
+            site,
+            n: drive.objects(),
+            ticks: Ticks::default(),
+            drive,
+            world,
             own_t_ns: 0,
             tool: ToolSample::default(),
             tools: rings.tools,
@@ -165,28 +191,21 @@ impl PhysicsLoop {
             objects: rings.objects,
             reports: rings.reports,
             trace: rings.trace,
-            ticks: Ticks {
-                on_grid: matches!(method_name, "timewarp" | "coupled"),
-                ..Ticks::default()
-            },
             trace_period_ns: timing.trace_period_ns.max(1),
             next_trace_ns: timing.start_ns,
             period_ns: timing.period_ns,
-            report_period_ns: timing.report_period_ns,
-            next_report_ns: timing.start_ns,
             seq: 0,
-            report_seq: timing.report_seq,
             adoptions: 0,
             adoptions_by_object: [0; MAX_OBJECTS],
             rejected: 0,
             received: 0,
-            nonfinite_kept: 0,
             object_drops: 0,
             report_drops: 0,
             trace_drops: 0,
             tracks: TrackCounters::default(),
             tracks_out: rings.tracks_out,
             tracks_in: rings.tracks_in,
+            waits: Waits::default(),
         }
     }
 
@@ -205,26 +224,31 @@ impl PhysicsLoop {
     /// 75 s to catch up, showing the user the session's past). Before the first step; nothing
     /// off the grid.
     pub fn join_late(&mut self, after: u64, states: Option<[BodyState; MAX_OBJECTS]>) {
-        if self.ticks.on_grid && self.ticks.done == 0 {
+        if self.drive.on_grid() && self.drive.ticks() == 0 {
             self.ticks.join = Some((after, states));
         }
     }
 
     /// Ticks of the session's grid stepped so far (methods that step on it).
     pub fn ticks(&self) -> u64 {
-        self.ticks.done
+        self.drive.ticks()
     }
 
     /// What the method did so far (rollbacks, jitter-buffer playout).
     pub fn method_stats(&self) -> coop_model::method::Stats {
-        self.method.stats()
+        self.drive.stats()
+    }
+
+    /// Adoptions or steps that would have made the copy non-finite (the copy kept its state).
+    pub fn nonfinite_kept(&self) -> u64 {
+        self.drive.nonfinite_kept
     }
 
     /// How many ticks to step at `now_ns`: one per physics period on the grid (up to
     /// [`MAX_CATCH_UP_TICKS`] more when late, the rest skipped and counted), none before the
     /// grid's time 0 is known or reached; one for a method off the grid.
     fn ticks_due(&mut self, now_ns: u64) -> u64 {
-        if !self.ticks.on_grid {
+        if !self.drive.on_grid() {
             return 1;
         }
         let Some(origin) = self.ticks.origin_ns.filter(|&o| now_ns >= o) else {
@@ -235,18 +259,11 @@ impl PhysicsLoop {
         if let Some((after, state)) = self.ticks.join.take() {
             if due > after {
                 // Joining late: the copy is the state at the start of the current tick.
-                self.ticks.done = due - 1;
-                self.ticks.joined = self.ticks.done;
-                if let Some(states) = state {
-                    for (o, s) in self.copy.objects_mut().iter_mut().zip(states) {
-                        *o = ObjectCopy::new(s);
-                    }
-                }
-                self.method
-                    .start_at_tick(i64::try_from(self.ticks.done).unwrap_or(i64::MAX));
+                self.ticks.joined = due - 1;
+                self.drive.start_at_tick(due - 1, state.as_ref());
             }
         }
-        let behind = due.saturating_sub(self.ticks.done);
+        let behind = due.saturating_sub(self.drive.ticks());
         if behind > 1 {
             // Late (an overrun, a stall): catch up at most MAX_CATCH_UP_TICKS extra per period,
             // never skip one (the method counts its steps: a skipped tick would shift this
@@ -260,13 +277,13 @@ impl PhysicsLoop {
     /// One step at `now_ns`.
     pub fn step(&mut self, now_ns: u64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
-        let now_s = now_ns as f64 * 1e-9;
         if let Ok(n) = self.tools.pop_newest() {
             // A malformed sample leaves the last good contacts in place.
             if let Some(c) = n.value.contacts() {
-                self.own = c;
+                self.drive.set_own(&c);
                 self.own_t_ns = n.value.t_ns;
                 self.tool = n.value;
+                self.waits.tool = now_ns.checked_sub(n.value.t_ns);
             }
         }
         while let Ok(r) = self.remote.pop() {
@@ -275,54 +292,47 @@ impl PhysicsLoop {
             // already refused bad reports; this guards the model against any other ring writer.
             if r.kind == SiteReport::KIND_LOST {
                 match usize::try_from(r.site) {
-                    Ok(from) if from != self.site => self.method.peer_lost(from, now_s),
+                    Ok(from) if from != self.site => self.drive.peer_lost(from, now_ns),
                     _ => self.rejected += 1,
                 }
                 continue;
             }
             match r.report() {
-                Some((from, msg)) if from != self.site => self.take(from, &msg, now_ns, now_s),
-                _ => self.rejected += 1,
+                Some((from, msg)) => {
+                    if self.take(from, &msg, now_ns).is_err() {
+                        self.rejected += 1;
+                    } else {
+                        self.waits.remote_taken(r.t_ns, now_ns);
+                    }
+                }
+                None => self.rejected += 1,
             }
         }
         self.receive_tracks(now_ns);
         let steps = self.ticks_due(now_ns);
+        // The tool as last sampled (the same sample over catch-up ticks: one sample a tick, so a
+        // local lag counts ticks).
+        let tool = ToolAt {
+            pos: Vec3::from(self.tool.tool_pos),
+            vel: Vec3::from(self.tool.tool_vel),
+            t_ns: self.tool.t_ns,
+        };
         for _ in 0..steps {
-            if self.ticks.on_grid {
-                // The tool as measured at this tick (held over catch-up ticks: one sample a tick,
-                // so a local lag counts ticks).
-                self.method.own_tool(Vec3::from(self.tool.tool_pos));
-            }
-            self.copy.set_time(now_s - self.period_ns as f64 * 1e-9);
-            self.before.copy_from(&self.copy);
-            self.method.physics_step(
-                &self.world,
-                &mut self.copy,
-                &self.own[..self.n],
-                self.period_ns as f64 * 1e-9,
-            );
-            if !sane(&self.world, &self.copy) {
-                self.copy.copy_from(&self.before);
-                self.nonfinite_kept += 1;
-            }
-            self.ticks.done += u64::from(self.ticks.on_grid);
+            self.drive.tick(&self.world, &tool, now_ns, self.period_ns);
         }
-        self.copy.set_time(now_s);
         self.seq += 1;
         for k in 0..self.n {
-            if self
-                .objects
-                .push(ObjectSample::new(
-                    now_ns,
-                    self.seq,
-                    k,
-                    // What the user is shown: the copy, or a missed contact replayed (timewarp).
-                    &self.method.shown(&self.copy, k),
-                    self.adoptions,
-                    self.own_t_ns,
-                ))
-                .is_err()
-            {
+            let mut sample = ObjectSample::new(
+                now_ns,
+                self.seq,
+                k,
+                // What the user is shown: the copy, or a missed contact replayed (timewarp).
+                &self.drive.shown(k),
+                self.adoptions,
+                self.own_t_ns,
+            );
+            sample.remote_t_ns = self.waits.newest_remote_ns;
+            if self.objects.push(sample).is_err() {
                 self.object_drops += 1;
             }
         }
@@ -333,113 +343,78 @@ impl PhysicsLoop {
                 self.push_trace(rec);
             }
         }
-        if now_ns >= self.next_report_ns {
-            self.next_report_ns = self
-                .next_report_ns
-                .max(now_ns.saturating_sub(self.report_period_ns))
-                + self.report_period_ns;
-            let (site, done) = (self.site, self.ticks.done);
-            let (ticks_seq, tracks_out, track_drops) = (
-                &mut self.ticks.seq,
-                &mut self.tracks_out,
-                &mut self.tracks.drops,
-            );
-            let (report_seq, reports, report_drops) = (
-                &mut self.report_seq,
-                &mut self.reports,
-                &mut self.report_drops,
-            );
-            let mut send = |report: Report| {
-                let tools = match &report {
-                    Report::Tools(r) => Some(r),
-                    Report::Coupled(c) if c.tools.count > 0 => Some(&c.tools),
-                    _ => None,
-                };
-                if let Some(r) = tools {
-                    // Tools go out as a track (its own ring and sequence), and only once the
-                    // grid has begun (before, there is nothing of this site's to say).
-                    if done > 0 {
-                        *ticks_seq += 1;
-                        let t = ToolTrack::new(site, *ticks_seq, now_ns, r);
-                        let pushed = tracks_out.as_mut().map(|p| p.push(t).is_ok());
-                        if pushed != Some(true) {
-                            *track_drops += 1;
-                        }
-                    }
+        let site = self.site;
+        let (tracks_out, track_drops) = (&mut self.tracks_out, &mut self.tracks.drops);
+        let (reports, report_drops) = (&mut self.reports, &mut self.report_drops);
+        self.drive.report(now_ns, &mut |put| match put {
+            // Tools go out as a track: its own ring and sequence.
+            Put::Track(r) => {
+                let t = ToolTrack::new(site, r.seq, now_ns, &r);
+                if tracks_out.as_mut().map(|p| p.push(t).is_ok()) != Some(true) {
+                    *track_drops += 1;
                 }
-                // `coupled` sends its state besides its track.
-                if !matches!(report, Report::Tools(_)) {
-                    *report_seq += 1;
-                    if reports
-                        .push(SiteReport::new(site, *report_seq, &report))
-                        .is_err()
-                    {
-                        *report_drops += 1;
-                    }
+            }
+            Put::Report { seq, report } => {
+                if reports.push(SiteReport::new(site, seq, &report)).is_err() {
+                    *report_drops += 1;
                 }
-            };
-            self.method
-                .report(&self.copy, &self.own[..self.n], now_s, &mut send);
-        }
+            }
+        });
     }
 
     /// Hands every received tool track to the method (it rolls back where a received position
     /// differs from what it predicted), through the one validating conversion.
     fn receive_tracks(&mut self, now_ns: u64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        let now_s = now_ns as f64 * 1e-9;
         while let Some(Ok(t)) = self.tracks_in.as_mut().map(Consumer::pop) {
             self.tracks.received += 1;
             match t.report() {
-                Some((from, msg)) if from != self.site => self.take(from, &msg, now_ns, now_s),
-                _ => self.tracks.rejected += 1,
+                Some((from, msg)) => {
+                    if self.take(from, &msg, now_ns).is_err() {
+                        self.tracks.rejected += 1;
+                    } else {
+                        self.waits.remote_taken(t.t_ns, now_ns);
+                    }
+                }
+                None => self.tracks.rejected += 1,
             }
         }
     }
 
-    /// Hands a valid report (a state or a tool track) from site `from` to the method. Whatever
-    /// arrived, the copy never becomes NaN or infinite: such a result is undone and counted. A
-    /// jump (an adoption, or a rollback that moved the copy) is counted and traced.
-    fn take(&mut self, from: usize, msg: &Report, now_ns: u64, now_s: f64) {
+    /// Hands a valid report (a state or a tool track) from site `from` to the method, through
+    /// the drive (which undoes and counts a result that is not finite). A jump (an adoption, or
+    /// a rollback that moved the copy) is counted and traced.
+    fn take(&mut self, from: usize, msg: &Report, now_ns: u64) -> Result<(), Refused> {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        self.before.copy_from(&self.copy);
-        let adopted = self
-            .method
-            .receive(&self.world, &mut self.copy, from, msg, now_s);
-        if !sane(&self.world, &self.copy) {
-            self.copy.copy_from(&self.before);
-            self.nonfinite_kept += 1;
-            return;
-        }
-        if let Some(a) = adopted {
-            self.adoptions += 1;
-            match *msg {
-                Report::State { object, .. } | Report::Force { object, .. } => {
-                    self.adoptions_by_object[object.min(MAX_OBJECTS - 1)] += 1;
-                }
-                Report::Coupled(ref c) => {
-                    self.adoptions_by_object[c.object.min(MAX_OBJECTS - 1)] += 1
-                }
-                // A confirmed world, adopted whole.
-                Report::Tools(_) => {
-                    for n in &mut self.adoptions_by_object[..self.n] {
-                        *n += 1;
-                    }
+        let Some(a) = self.drive.receive(&self.world, from, msg, now_ns)? else {
+            return Ok(());
+        };
+        self.adoptions += 1;
+        match *msg {
+            Report::State { object, .. } | Report::Force { object, .. } => {
+                self.adoptions_by_object[object.min(MAX_OBJECTS - 1)] += 1;
+            }
+            Report::Coupled(ref c) => self.adoptions_by_object[c.object.min(MAX_OBJECTS - 1)] += 1,
+            // A confirmed world, adopted whole.
+            Report::Tools(_) => {
+                for n in &mut self.adoptions_by_object[..self.n] {
+                    *n += 1;
                 }
             }
-            let mut rec = self.record(TraceRecord::ADOPTION, now_ns, 0);
-            rec.from = from as u64;
-            rec.jump_m = a.jump.norm();
-            rec.age_s = a.age_s;
-            self.push_trace(rec);
         }
+        let mut rec = self.record(TraceRecord::ADOPTION, now_ns, 0);
+        rec.from = from as u64;
+        rec.jump_m = a.jump.norm();
+        rec.age_s = a.age_s;
+        self.push_trace(rec);
+        Ok(())
     }
 
     fn record(&self, kind: u64, now_ns: u64, k: usize) -> TraceRecord {
         // The others' force (naive) is on the first object's record: the method sums it over
         // the world.
         let remote = if k == 0 {
-            self.method.remote_force()
+            self.drive.remote_force()
         } else {
             Vec3::zeros()
         };
@@ -447,9 +422,9 @@ impl PhysicsLoop {
             kind,
             now_ns,
             k,
-            &self.copy.objects()[k].state,
+            &self.drive.copy().objects()[k].state,
             &self.tool,
-            self.own[k].force + remote,
+            self.drive.own()[k].force + remote,
         );
         r.adoptions = self.adoptions;
         r
@@ -464,9 +439,16 @@ impl PhysicsLoop {
     }
 
     /// Publishes this loop's counters in the control block's physics group (the one writer).
-    pub fn publish_counters(&self, ctl: &ControlBlock) {
+    pub fn publish_counters(&mut self, ctl: &ControlBlock) {
         // REAL-TIME: relaxed stores only.
         let p = &ctl.physics;
+        if let Some(w) = self.waits.tool.take() {
+            record_counted(&p.tool_wait, &p.tool_wait_count, w);
+        }
+        for &w in &self.waits.remote[..self.waits.remote_len] {
+            record_counted(&p.remote_wait, &p.remote_wait_count, w);
+        }
+        self.waits.remote_len = 0;
         p.received
             .store(self.received, crate::sync::Ordering::Relaxed);
         p.rejected
@@ -479,17 +461,17 @@ impl PhysicsLoop {
             a.store(v, crate::sync::Ordering::Relaxed);
         }
         p.nonfinite_kept
-            .store(self.nonfinite_kept, crate::sync::Ordering::Relaxed);
+            .store(self.drive.nonfinite_kept, crate::sync::Ordering::Relaxed);
         p.drops.set(Ring::Object, self.object_drops);
         p.drops.set(Ring::Report, self.report_drops);
         p.drops.set(Ring::Trace, self.trace_drops);
-        let stats = self.method.stats();
+        let stats = self.drive.stats();
         let mut r = crate::shm::rollback::RollbackFigures {
             tracks_received: self.tracks.received,
             tracks_rejected: self.tracks.rejected,
             track_drops: self.tracks.drops,
             late_periods: self.tracks.late_periods,
-            ticks: self.ticks.done,
+            ticks: self.drive.ticks(),
             joined_tick: self.ticks.joined,
             playout_ticks: stats.playout_ticks().map_or(0, |p| p.ceil() as u64),
             ..Default::default()
@@ -502,7 +484,7 @@ impl PhysicsLoop {
 
     /// The last report sequence number used.
     pub fn report_seq(&self) -> u64 {
-        self.report_seq
+        self.drive.report_seq()
     }
     /// Object `k`'s state in the copy now, as a sample (what a restarted physics resumes from:
     /// the copy, not what the user is shown).
@@ -511,7 +493,7 @@ impl PhysicsLoop {
             now_ns,
             self.seq,
             k,
-            &self.copy.objects()[k].state,
+            &self.drive.copy().objects()[k].state,
             self.adoptions,
             self.own_t_ns,
         )
@@ -524,23 +506,12 @@ impl PhysicsLoop {
 
     /// The copy this site believes.
     pub fn copy(&self) -> &WorldCopy {
-        &self.copy
+        self.drive.copy()
     }
     /// Adoptions so far.
     pub fn adoptions(&self) -> u64 {
         self.adoptions
     }
-}
-
-/// A copy physics may keep: every number finite, its energy too (a finite state can still hold
-/// an angular momentum whose next rotation step is NaN).
-fn sane(world: &World, copy: &WorldCopy) -> bool {
-    copy.objects().iter().zip(world.bodies()).all(|(o, b)| {
-        o.state.is_finite()
-            && o.state
-                .mechanical_energy(&b.mass, world.gravity)
-                .is_finite()
-    })
 }
 
 /// The first point of the grid `last + k * period` (k ≥ 1) after `now`.

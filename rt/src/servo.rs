@@ -13,7 +13,7 @@ use coop_model::world::{World, MAX_OBJECTS};
 use crate::device::safety::{Guarded, Trip};
 use crate::device::{CartesianDevice, Placement};
 use crate::msg::{ObjectSample, ToolSample};
-use crate::shm::control::{ControlBlock, Ring, RunState};
+use crate::shm::control::{record_counted, ControlBlock, Ring, RunState};
 use crate::shm::{Consumer, Producer};
 
 /// What one servo tick did.
@@ -63,6 +63,8 @@ pub struct ServoLoop<D: CartesianDevice> {
     stale_state_ns: Option<u64>,
     stale_limp_recorded: bool,
     last_roundtrip_tool_ns: u64,
+    /// The newest partner report's time the displayed states were computed with, ns.
+    last_remote_ns: u64,
 }
 
 impl<D: CartesianDevice> ServoLoop<D> {
@@ -96,6 +98,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
             stale_state_ns: None,
             stale_limp_recorded: false,
             last_roundtrip_tool_ns: 0,
+            last_remote_ns: 0,
         }
     }
 
@@ -119,17 +122,18 @@ impl<D: CartesianDevice> ServoLoop<D> {
     pub fn step(&mut self, now_ns: u64, control: Option<&ControlBlock>) -> ServoTick {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls but clock_nanosleep (outside).
         let mut adopted = false;
+        // The newest state's time and its newest partner report's, for the pipeline's figures.
+        let (mut newest_state_ns, mut newest_remote_ns) = (None, self.last_remote_ns);
         // Every object's newest state (physics sends each of them every step).
         while let Ok(n) = self.objects.pop() {
+            newest_state_ns = newest_state_ns.max(Some(n.t_ns));
+            newest_remote_ns = newest_remote_ns.max(n.remote_t_ns);
             // The round trip of the tool sample this state was computed with, once per tool sample.
             if n.tool_t_ns > self.last_roundtrip_tool_ns && n.tool_t_ns <= now_ns {
                 self.last_roundtrip_tool_ns = n.tool_t_ns;
                 if let Some(c) = control {
-                    let count = c.servo.roundtrip_count.load(crate::sync::Ordering::Relaxed);
-                    c.servo.roundtrip.record(now_ns - n.tool_t_ns, count == 0);
-                    c.servo
-                        .roundtrip_count
-                        .store(count + 1, crate::sync::Ordering::Relaxed);
+                    let sv = &c.servo;
+                    record_counted(&sv.roundtrip, &sv.roundtrip_count, now_ns - n.tool_t_ns);
                 }
             }
             if let (Some(state), Some(k)) = (n.state(), n.object()) {
@@ -144,6 +148,17 @@ impl<D: CartesianDevice> ServoLoop<D> {
                 }
             }
         }
+        if let Some(c) = control {
+            let sv = &c.servo;
+            if let Some(w) = newest_state_ns.and_then(|t| now_ns.checked_sub(t)) {
+                record_counted(&sv.state_wait, &sv.state_wait_count, w);
+            }
+            if newest_remote_ns > self.last_remote_ns && newest_remote_ns <= now_ns {
+                let w = now_ns - newest_remote_ns;
+                record_counted(&sv.remote_display, &sv.remote_display_count, w);
+            }
+        }
+        self.last_remote_ns = newest_remote_ns;
         if let Ok(s) = self.device.sample(now_ns) {
             self.last_tool = (
                 self.placement.position_to_world(s.position_m),

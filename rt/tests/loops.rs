@@ -529,7 +529,7 @@ fn an_adoption_that_would_make_the_copy_non_finite_keeps_the_copy() {
     for k in 101..=200u64 {
         r.physics.step(k * MS);
     }
-    assert_eq!(r.physics.nonfinite_kept, 1);
+    assert_eq!(r.physics.nonfinite_kept(), 1);
     assert_eq!(r.physics.adoptions(), 0);
     let after = r.physics.copy().first().state;
     assert!(

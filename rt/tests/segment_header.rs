@@ -5,10 +5,11 @@ use std::mem::offset_of;
 use std::os::unix::fs::FileExt;
 use std::time::Duration;
 
+use coop_rt::pod::fnv1a64;
 use coop_rt::shm::header::{HEADER_LEN, LAYOUT_VERSION, MAGIC};
 use coop_rt::shm::{
-    pod::fnv1a64, Consumer, OpenError, RingOpenError, RingOpenOptions, RingSegment, SegmentHeader,
-    SegmentName, SeqMsg,
+    Consumer, OpenError, RingOpenError, RingOpenOptions, RingSegment, SegmentHeader, SegmentName,
+    SeqMsg,
 };
 
 fn name(what: &str) -> SegmentName {

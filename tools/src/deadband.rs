@@ -2,7 +2,21 @@
 //! the users' feel. At each constant delay, `timewarp` runs with every tick's position sent (the
 //! full-rate run, the baseline) and through the deadband. Per run: the share of the own ticks
 //! whose position was sent, the payload the busiest site puts, the phases passed, hash
-//! mismatches; and per site and servo tick, the displayed force's difference from the full-rate
+//! mismatches.
+//!
+//! The codec's own measure, and its goal, is taken inside the deadband run, as the codec
+//! literature measures a codec (its decoded signal against its own source): at every physics
+//! tick, each site's tool's contact force is rendered twice from the same world state, at the
+//! position every site decodes and steps with (the held one) and at the one the hand measured;
+//! the share of contact ticks within one JND of the source's force, the 99th percentile, and the
+//! distance from the measured position to the decoded one per tool
+//! (`coop_model::method::timewarp::CodecError`). Goal: [`CODEC_GOAL`] of the contact ticks at
+//! every delay from 0 to 300 ms.
+//!
+//! The run-vs-run figures that follow compare two runs, and show the friction model's chaos more
+//! than the codec: a stuck contact keeps any perturbation for the rest of a grasp, so a second
+//! full-rate run with only the jitter's draws changed parts as far. Per site and servo tick, the
+//! displayed force's difference from the full-rate
 //! run's at the same tick in just-noticeable steps (a JND: 7 % of the full-rate force, at least
 //! 0.05 N, `perception::force_jnd_n`): the share of ticks within one JND and the 99th percentile.
 //! Two runs of a contact task part ways in time (a contact a tick earlier, a push a little
@@ -28,7 +42,7 @@
 //! stuck (and the normal damping, and what the display's stages do to the force).
 
 use anyhow::Context;
-use coop_model::method::timewarp::DeadbandSpec;
+use coop_model::method::timewarp::{CodecError, DeadbandSpec};
 use coop_model::replay::Trajectory;
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{self, Mode, RunResult, ServoTick};
@@ -63,6 +77,58 @@ pub struct ForceErrors {
     pub reseeded: ForceError,
 }
 
+/// The codec's own measure in the deadband run (hands reacting): each site's own tool's contact
+/// force rendered from the same world state at the held (decoded) and at the measured (source)
+/// position, every physics tick ([`coop_model::method::timewarp::CodecError`]).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Codec {
+    /// Every site's ticks in which its tool touched an object, the share within one JND.
+    pub contact_within_jnd: f64,
+    /// Their 99th percentile, JND (the histogram's bin edge: at most 12.5 % high).
+    pub contact_p99_jnd: f64,
+    /// Every tick, out of contact too (where both forces are zero), the share within one JND.
+    pub within_jnd: f64,
+    /// Per site's tool: the share of its contact ticks within one JND...
+    pub tool_contact_within_jnd: Vec<f64>,
+    /// ... and the distance from the measured position to the decoded one, mm: p99, max.
+    pub tool_position_mm: Vec<[f64; 2]>,
+}
+
+impl Codec {
+    /// From the deadband run's per-site figures.
+    fn of(run: &RunResult) -> Self {
+        let per_site: Vec<CodecError> = run
+            .rollback
+            .iter()
+            .map(|r| r.map(|r| r.deadband_error).unwrap_or_default())
+            .collect();
+        let mut all = CodecError::default();
+        for e in &per_site {
+            all.merge(e);
+        }
+        Self {
+            contact_within_jnd: all.contact_within_jnd_share().unwrap_or(1.0),
+            contact_p99_jnd: all.contact_p99_jnd().unwrap_or(0.0),
+            within_jnd: all.within_jnd_share().unwrap_or(1.0),
+            tool_contact_within_jnd: per_site
+                .iter()
+                .map(|e| e.contact_within_jnd_share().unwrap_or(1.0))
+                .collect(),
+            tool_position_mm: per_site
+                .iter()
+                .map(|e| {
+                    let (p99, max) = e.position_p99_max_m().unwrap_or((0.0, 0.0));
+                    [1e3 * p99, 1e3 * max]
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The codec's goal: at least this share of the contact ticks within one JND of the source's
+/// force, at every delay from 0 to 300 ms.
+pub const CODEC_GOAL: f64 = 0.99;
+
 /// One delay's runs.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Row {
@@ -80,6 +146,8 @@ pub struct Row {
     pub phases_total: usize,
     /// Hash mismatches (deadband run).
     pub hash_mismatches: u64,
+    /// The codec's own measure: the decoded input against its source, in the deadband run.
+    pub codec: Codec,
     /// The users' hands as the scenario has them, reacting to what they feel.
     pub closed_loop: ForceErrors,
     /// Every site's tool replayed from the full-rate run's servo ticks in every run (the full-rate
@@ -172,17 +240,12 @@ fn with_hands(sc: &Scenario, hands: &[Trajectory]) -> Scenario {
 /// One delay's scenarios: full rate, through the deadband, through the least band, reseeded.
 type Quad = [Scenario; 4];
 
-/// The four runs of `q` (`size` counts the first two's bytes), keeping servo ticks.
+/// The four runs of `q`, each through the stations' wire, keeping servo ticks.
 fn run_quad(q: &Quad) -> [RunResult; 4] {
     let mode = Mode::Distributed(MethodName::Timewarp);
-    let size = &crate::sim::wire_bytes;
-    let none = &|_: usize, _: u64, _: [u64; 2], _: &coop_model::method::Report| 0;
-    [
-        sim::run_keeping_servo_ticks(&q[0], mode, &mut |_| {}, size),
-        sim::run_keeping_servo_ticks(&q[1], mode, &mut |_| {}, size),
-        sim::run_keeping_servo_ticks(&q[2], mode, &mut |_| {}, none),
-        sim::run_keeping_servo_ticks(&q[3], mode, &mut |_| {}, none),
-    ]
+    let wire = &coop_transport::wire::StationWire;
+    q.each_ref()
+        .map(|sc| sim::run_keeping_servo_ticks(sc, mode, &mut |_| {}, wire))
 }
 
 /// The last three of `r` against the first (`stiffness`: the tool contact's, N/m).
@@ -242,12 +305,13 @@ pub fn rows(base: &Scenario, delays_ms: &[f64]) -> anyhow::Result<Vec<Row>> {
                 delay_ms: *delay_ms,
                 sent_share: samples as f64 / ticks.max(1) as f64,
                 kbit_s: [
-                    crate::sim::busiest_sent_kbit_s(&ma, base.duration_s),
-                    crate::sim::busiest_sent_kbit_s(&mb, base.duration_s),
+                    crate::figures::busiest_sent_kbit_s(&ma, base.duration_s),
+                    crate::figures::busiest_sent_kbit_s(&mb, base.duration_s),
                 ],
                 phases: [ma.phases_passed, mb.phases_passed],
                 phases_total: mb.phases_total,
                 hash_mismatches: mb.hash_mismatches,
+                codec: Codec::of(&c[1]),
                 closed_loop: errors(c, base.contact.stiffness_n_per_m),
                 replayed: errors(r, base.contact.stiffness_n_per_m),
             }
@@ -284,11 +348,95 @@ pub fn main(
             sc.name, sc.duration_s, d.weber_fraction, d.floor_n, d.near_m, d.free_space_m
         );
         print_seed(rows);
+        print_codec(rows);
     }
     if all.len() > 1 {
         print_range(&all, &seeds);
     }
+    print_codec_goal(&all);
     Ok(())
+}
+
+/// One seed's codec table: the decoded input against its source.
+fn print_codec(rows: &[Row]) {
+    println!("# the codec's own measure, deadband run (hands reacting): every physics tick, each site's tool's contact force rendered from the same world state at the position decoded (held) and at the one measured (the source)");
+    println!(
+        "{:>8}{:>12}{:>10}{:>12}   {:<28}per tool: position decoded-measured",
+        "delay", "contact", "contact", "all ticks", "per tool: contact"
+    );
+    println!(
+        "{:>8}{:>12}{:>10}{:>12}   {:<28}p99/max mm",
+        "ms", "<=1 JND", "p99 JND", "<=1 JND", "<=1 JND"
+    );
+    for r in rows {
+        let c = &r.codec;
+        let tools: Vec<String> = c
+            .tool_contact_within_jnd
+            .iter()
+            .map(|x| format!("{:.2}%", 100.0 * x))
+            .collect();
+        let pos: Vec<String> = c
+            .tool_position_mm
+            .iter()
+            .map(|[p99, max]| format!("{p99:.3}/{max:.3}"))
+            .collect();
+        println!(
+            "{:>8.0}{:>11.2}%{:>10.2}{:>11.2}%   {:<28}{}",
+            r.delay_ms,
+            100.0 * c.contact_within_jnd,
+            c.contact_p99_jnd,
+            100.0 * c.within_jnd,
+            tools.join(" "),
+            pos.join(" ")
+        );
+    }
+    println!("# contact = ticks in which the tool touched an object in either rendering (out of contact both forces are zero: all ticks counts those too); JND of the source's force (7 %, at least 0.05 N); p99 at most 12.5 % high (a histogram bin's edge); the run-vs-run columns above compare two runs, which the friction model's stick points part for the rest of a grasp after any perturbation (its chaos), not the codec's error");
+}
+
+/// Each delay's codec figure over every seed, and whether the goal holds.
+fn print_codec_goal(all: &[Vec<Row>]) {
+    let Some(first) = all.first() else {
+        return;
+    };
+    println!(
+        "# the codec's goal: at least {:.0} % of every site's contact ticks within one JND of the source's force, at every delay",
+        100.0 * CODEC_GOAL
+    );
+    println!(
+        "{:>8}{:>18}{:>14}{:>20}{:>8}",
+        "delay", "contact <=1 JND", "p99 JND", "position max mm", "goal"
+    );
+    println!(
+        "{:>8}{:>18}{:>14}{:>20}",
+        "ms", "lowest", "highest", "highest"
+    );
+    let mut met = true;
+    for (k, row) in first.iter().enumerate() {
+        let at = all.iter().map(|rows| &rows[k].codec);
+        let lowest = at.clone().map(|c| c.contact_within_jnd).fold(1.0, f64::min);
+        let p99 = at.clone().map(|c| c.contact_p99_jnd).fold(0.0, f64::max);
+        let pos = at
+            .flat_map(|c| c.tool_position_mm.iter().map(|p| p[1]))
+            .fold(0.0, f64::max);
+        let ok = lowest >= CODEC_GOAL;
+        met &= ok;
+        println!(
+            "{:>8.0}{:>17.2}%{:>14.2}{:>20.3}{:>8}",
+            row.delay_ms,
+            100.0 * lowest,
+            p99,
+            pos,
+            if ok { "met" } else { "MISSED" }
+        );
+    }
+    println!(
+        "# goal {}",
+        if met {
+            "met at every delay"
+        } else {
+            "MISSED at a delay above"
+        }
+    );
 }
 
 /// One seed's two tables.

@@ -255,7 +255,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let mut rtt = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)?;
     let mut ros2_fig = Figures::new()?;
     let mut ros2_rtt = Histogram::<u64>::new_with_bounds(1, 10_000_000_000, 3)?;
-    let ros2_cfg = coop_transport::ros2::device::Ros2DeviceConfig {
+    let ros2_cfg = coop_transport::ros2_device::Ros2DeviceConfig {
         pose_topic: ros2_driver::POSE_TOPIC.into(),
         wrench_topic: ros2_driver::WRENCH_TOPIC.into(),
         connect: vec![driver.locator.clone()],
@@ -279,7 +279,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         );
         haply.close(monotonic_ns());
 
-        let dev = coop_transport::ros2::device::Ros2Device::open(&ros2_cfg)
+        let dev = coop_transport::ros2_device::Ros2Device::open(&ros2_cfg)
             .context("opening the ROS 2 backend on the stand-in driver")?;
         let mut ros2 = Guarded::new(dev, SafetyLimits::default(), monotonic_ns());
         driver.recording.store(1, coop_rt::sync::Ordering::Relaxed);

@@ -6,7 +6,8 @@
 //! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
 //! - [`sweep`]: `sim sweep`, every method × delay × seed on one scenario.
-//! - [`session`]: a multi-site session of real stations, recorded and measured.
+//! - [`session`]: a multi-site session of real stations, recorded and measured; [`session_cli`]
+//!   its command line.
 //! - [`certs`]: a session's CA, certificates and access control (`session certs`).
 //! - [`fuzz`]: hostile input at volume (wire, scenario, station config), judged by oracles.
 //!
@@ -36,12 +37,14 @@ pub mod certs;
 pub mod cli;
 pub mod deadband;
 pub mod devbench;
+pub mod figures;
 pub mod fuzz;
 pub mod latency;
 pub mod netbench;
 pub mod plots;
 pub mod ringbench;
 pub mod session;
+pub mod session_cli;
 pub mod sim;
 pub mod simbench;
 pub mod station;

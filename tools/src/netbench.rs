@@ -11,6 +11,13 @@
 //!   process (`session bench-pong`) echoes it; one way = round trip / 2. Paced at 1 kHz like the
 //!   states.
 //!
+//! - **The pipeline, hop by hop**: each station's own measures in the same session
+//!   (`coop_actors::station::status::HOPS`): its tool sample's age when physics takes it, its
+//!   reports' wait from physics to the zenoh put, a partner's report's age on reaching its physics
+//!   ring, its physics and its displayed force, and the age of each state the servo shows. A tool
+//!   sample at A reaches B's displayed force in A's first hop plus B's last; the goal is that
+//!   sum's p99 within [`PIPELINE_GOAL_P99_US`].
+//!
 //! `session bench-router` ([`router`]) sets the same station path through one zenoh router next to
 //! peer to peer and to the bare ping-pong through that router.
 
@@ -19,6 +26,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
+use coop_actors::station::status::{Hop, HOPS};
 use coop_model::scenario::MethodName;
 use coop_transport::network::{self, NetworkConfig};
 use coop_transport::recording;
@@ -111,12 +119,16 @@ pub(crate) fn bench_scenario(
     Ok((sc, o, dir))
 }
 
-/// The station path: a two-station session, latencies from the receivers' recordings.
+/// Each station's pipeline hops at the session's end ([`coop_actors::station::status::Hop`]).
+type Pipelines = std::collections::BTreeMap<String, Vec<Hop>>;
+
+/// The station path: a two-station session, latencies from the receivers' recordings, and each
+/// station's pipeline hops as its loops measured them.
 fn stations(
     root: &Path,
     station_bin: &crate::session::StationBin,
-) -> anyhow::Result<Histogram<u64>> {
-    let (sc, _, dir) = bench_session(root, "zero-delay", false, station_bin)?;
+) -> anyhow::Result<(Histogram<u64>, Pipelines)> {
+    let (sc, o, dir) = bench_session(root, "zero-delay", false, station_bin)?;
     let paths: Vec<PathBuf> = sc
         .site
         .iter()
@@ -124,7 +136,68 @@ fn stations(
         .collect();
     let h = latencies(&paths);
     let _ = std::fs::remove_dir_all(&dir);
-    h
+    let pipelines = o
+        .stations
+        .iter()
+        .map(|(site, st)| {
+            let hops = st.live.as_ref().map(|l| l.status.pipeline.clone());
+            (site.clone(), hops.unwrap_or_default())
+        })
+        .collect();
+    Ok((h?, pipelines))
+}
+
+/// The pipeline's own latency a tool sample adds on its way to the partner's displayed force,
+/// p99, µs: at most the sum of its two measured parts' (own servo -> physics at the sender, and
+/// partner physics -> displayed force at the receiver); the goal.
+pub const PIPELINE_GOAL_P99_US: u64 = 3_000;
+
+/// Each station's hops, then per direction the sample-to-force figures and the goal.
+fn print_pipelines(pipelines: &Pipelines) {
+    println!("\n# the pipeline's own latency on loopback, no emulation, hop by hop as each station's loops measured it (one clock; a partner's times corrected by its measured offset)");
+    println!(
+        "{:<10}{:<42}{:>10}{:>10}{:>10}{:>10}",
+        "station", "hop", "p50 us", "p99 us", "max us", "samples"
+    );
+    for (site, hops) in pipelines {
+        for h in hops {
+            println!(
+                "{:<10}{:<42}{:>10}{:>10}{:>10}{:>10}",
+                site, h.hop, h.p50_us, h.p99_us, h.max_us, h.count
+            );
+        }
+    }
+    let hop = |site: &str, name: &str| {
+        pipelines
+            .get(site)
+            .and_then(|h| h.iter().find(|h| h.hop == name))
+    };
+    let mut met = true;
+    for (from, to) in pipelines.keys().flat_map(|a| {
+        pipelines
+            .keys()
+            .filter(move |b| *b != a)
+            .map(move |b| (a.as_str(), b.as_str()))
+    }) {
+        let (Some(first), Some(rest)) = (hop(from, HOPS[0]), hop(to, HOPS[5])) else {
+            println!("# {from} -> {to}: not measured");
+            met = false;
+            continue;
+        };
+        let p99 = first.p99_us + rest.p99_us;
+        met &= p99 <= PIPELINE_GOAL_P99_US;
+        println!(
+            "# {from}'s tool sample -> {to}'s displayed force: p50 about {} us, p99 at most {} us (the sum of the parts' p99), max at most {} us",
+            first.p50_us + rest.p50_us,
+            p99,
+            first.max_us + rest.max_us
+        );
+    }
+    println!(
+        "# goal: p99 added by the pipeline <= {} us in each direction: {}",
+        PIPELINE_GOAL_P99_US,
+        if met { "met" } else { "NOT met" }
+    );
 }
 
 /// Each state handed to physics in the recordings at `paths`: receive time minus send time, on
@@ -335,7 +408,8 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
     if !root.join("scenarios/zero-delay.toml").exists() {
         bail!("run from the repository root (scenarios/zero-delay.toml not found)");
     }
-    let st = figures(&stations(&root, station_bin)?);
+    let (st, pipelines) = stations(&root, station_bin)?;
+    let st = figures(&st);
     let bare = figures(&bare_zenoh(st.samples.clamp(1000, 20_000), None)?);
     let ratio = |a: f64, b: f64| a / b.max(1e-9);
     let (r50, r99) = (ratio(st.p50_us, bare.p50_us), ratio(st.p99_us, bare.p99_us));
@@ -345,7 +419,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
             "{}",
             serde_json::to_string_pretty(&serde_json::json!({
                 "stations": st, "bare_zenoh": bare, "ratio_p50": r50, "ratio_p99": r99,
-                "four_stations": four,
+                "pipeline": pipelines, "four_stations": four,
             }))?
         );
         return Ok(());
@@ -373,6 +447,7 @@ pub fn run(json: bool, station_bin: &crate::session::StationBin) -> anyhow::Resu
             "NOT met"
         }
     );
+    print_pipelines(&pipelines);
     println!(
         "\n# four stations (scenarios/four-users.toml, {} s, emulated network) vs the standalone latency tool on the servo CPU, same duration, after it",
         four["duration_s"]

@@ -93,7 +93,10 @@ pub enum Command {
     },
     /// `timewarp` with every tick's position sent vs through the scenario's perceptual deadband
     /// (`[timewarp.deadband]`, turned on), at each constant delay: positions sent, kbit/s,
-    /// phases, hash mismatches, and the displayed force's difference in just-noticeable steps,
+    /// phases, hash mismatches; the codec's own measure (each tool's contact force from the same
+    /// world state at the decoded and at the measured position: share of contact ticks within one
+    /// JND, goal 99 %, and the position error per tool); and, run against run (the friction
+    /// model's chaos more than the codec's), the displayed force's difference in JND,
     /// twice: with the hands reacting to what they feel, and with every site's tool replayed
     /// from the full-rate run (only the world differs), and of the ticks beyond one JND those
     /// whose tools pressed as deep (mostly the stuck friction force differs).
@@ -170,7 +173,12 @@ pub fn run_mode(scenario: &Scenario, mode: Mode) -> RunResult {
             b.set_position((f * 1000.0) as u64);
         }
     };
-    let r = sim::run_sized(scenario, mode, &mut progress, &wire_bytes);
+    let r = sim::run_wired(
+        scenario,
+        mode,
+        &mut progress,
+        &coop_transport::wire::StationWire,
+    );
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -287,41 +295,6 @@ fn compare_json(sc: &Scenario, all: &[Metrics]) -> serde_json::Value {
     serde_json::json!({ "scenario": sc.name, "seed": sc.seed, "duration_s": sc.duration_s, "methods": all })
 }
 
-/// Payload kbit/s of `bytes` over `duration_s`.
-pub fn sent_kbit_s(bytes: u64, duration_s: f64) -> f64 {
-    bytes as f64 * 8e-3 / duration_s.max(1e-9)
-}
-
-/// The payload the busiest site of `m` puts, kbit/s over `duration_s`.
-pub fn busiest_sent_kbit_s(m: &coop_model::metrics::Metrics, duration_s: f64) -> f64 {
-    m.sites
-        .iter()
-        .map(|s| sent_kbit_s(s.sent_bytes, duration_s))
-        .fold(0.0, f64::max)
-}
-
-/// The bytes a station puts for `msg` ([`sim::Sizer`]): each message encoded as the wire
-/// encodes it, with the simulator's time as the sender's (a station's CLOCK_MONOTONIC is larger:
-/// its varint a byte or two longer).
-pub fn wire_bytes(site: usize, t_ns: u64, puts: [u64; 2], msg: &coop_model::method::Report) -> u64 {
-    use coop_model::method::Report;
-    use coop_rt::msg::{SiteReport, ToolTrack};
-    use coop_transport::wire;
-    let tools = match msg {
-        Report::Tools(r) => Some(r),
-        Report::Coupled(c) if c.tools.count > 0 => Some(&c.tools),
-        _ => None,
-    };
-    let track = tools.map_or(0, |r| {
-        wire::encode_track(&ToolTrack::new(site, puts[1] + 1, t_ns, r)).len()
-    });
-    let state = match msg {
-        Report::Tools(_) => 0,
-        _ => wire::encode(&SiteReport::new(site, puts[0] + 1, msg)).len(),
-    };
-    (track + state) as u64
-}
-
 /// Prints the comparison table.
 pub fn print_table(sc: &Scenario, all: &[Metrics]) {
     println!(
@@ -402,8 +375,14 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             cell(worst(&|s| s.energy_from_others_j) * 1e3, 11, 2),
             cell(worst(&|s| s.others_work_j) * 1e3, 11, 2),
             m.sites.iter().map(|s| s.adoptions).sum::<usize>(),
-            m.bounded_corrections,
-            match busiest_sent_kbit_s(m, sc.duration_s) {
+            // Counted where the bound's work is known (the simulator); a station's recording does
+            // not carry it, and 0 would read as "never scaled back".
+            if m.bounded_energy_j.is_nan() {
+                "-".to_owned()
+            } else {
+                m.bounded_corrections.to_string()
+            },
+            match crate::figures::busiest_sent_kbit_s(m, sc.duration_s) {
                 0.0 => format!("{:>9}", "-"),
                 k => format!("{k:>9.0}"),
             },

@@ -83,14 +83,14 @@ pub struct Row {
     pub replays: u64,
     /// The largest local lag of any site's own tool, ms (`timewarp`).
     pub local_lag_max_ms: f64,
-    /// Payload the busiest site puts, kbit/s ([`crate::sim::sent_kbit_s`]).
+    /// Payload the busiest site puts, kbit/s ([`crate::figures::sent_kbit_s`]).
     pub sent_kbit_s: f64,
 }
 
 impl Row {
     fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64) -> Self {
         Self {
-            sent_kbit_s: crate::sim::busiest_sent_kbit_s(m, duration_s),
+            sent_kbit_s: crate::figures::busiest_sent_kbit_s(m, duration_s),
             method: m.method.clone(),
             delay_ms,
             seed,
@@ -235,11 +235,11 @@ pub fn sweep(
         },
     );
     Ok(par_map(&jobs, |(m, d, seed, sc)| {
-        let r = sim::run_sized(
+        let r = sim::run_wired(
             sc,
             Mode::Distributed(*m),
             &mut |_| {},
-            &crate::sim::wire_bytes,
+            &coop_transport::wire::StationWire,
         );
         let reference = &refs[(*seed - 1) as usize].1;
         Row::new(

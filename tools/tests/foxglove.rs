@@ -667,8 +667,8 @@ fn live_url(
 }
 
 /// A world of several objects in `sim run --out`'s `session.mcap`: read by the foreign reader,
-/// every site has a frame and an entity for every object (`object/<site>` for the first,
-/// `object/<name>/<site>` for each other), and so has the reference copy, one frame per sample,
+/// every site has a frame and an entity for every object (`object/<name>/<site>`, the first's
+/// too), and so has the reference copy, one frame per sample,
 /// each entity in a declared frame, in the object's real size; and an `/object` message per
 /// object per sample, named.
 #[test]
@@ -684,8 +684,14 @@ fn a_simulated_world_of_several_objects_has_a_frame_and_an_entity_per_object_per
     let target = &scenario.objects[1];
     let (d, h) = (2.0 * target.radius_m, 2.0 * target.half_height_m);
     let sites = scenario.site.iter().map(|s| s.name.as_str());
+    let first = scenario.object_name(0);
     for s in sites.chain(["reference"]) {
-        for frame in [format!("object/{s}"), format!("object/target/{s}")] {
+        assert!(
+            !frames.contains_key(&format!("world>object/{s}")),
+            "no unnamed object frame in a world of several: {:?}",
+            frames.keys().collect::<Vec<_>>()
+        );
+        for frame in [format!("object/{first}/{s}"), format!("object/target/{s}")] {
             assert_eq!(
                 frames[&format!("world>{frame}")].as_u64(),
                 Some(samples),
@@ -747,13 +753,19 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
     let sites: Vec<&str> = scenario.site.iter().map(|s| s.name.as_str()).collect();
     let others: Vec<String> = sites
         .iter()
-        .map(|s| format!("object/{second}/{s}"))
+        .flat_map(|s| {
+            [
+                format!("object/{first}/{s}"),
+                format!("object/{second}/{s}"),
+            ]
+        })
         .collect();
     let client = Command::new("python3")
         .arg(repo().join("tools/tests/fixtures/foxglove_live.py"))
         .args([url.as_str(), "60"])
         .args(&sites)
         .env("WANT_TF", others.join(","))
+        .env("FIRST_OBJECT", first)
         .output()
         .expect("python3 runs");
     let session = child.wait_with_output().expect("session ends");
@@ -786,7 +798,10 @@ fn a_stack_on_stations_shows_a_frame_and_an_entity_per_object_per_site_live_and_
         let r = foxglove_summary(&parts);
         assert_eq!(r["errors"], serde_json::json!([]), "{site}");
         let frames = r["frames"].as_object().expect("frames");
-        for frame in [format!("object/{site}"), format!("object/{second}/{site}")] {
+        for frame in [
+            format!("object/{first}/{site}"),
+            format!("object/{second}/{site}"),
+        ] {
             assert!(
                 frames[&format!("world>{frame}")].as_u64() > Some(1000),
                 "{site}: {frame} in {:?}",

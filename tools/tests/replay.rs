@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 
 use coop_actors::scenario_file;
-use coop_actors::station::device::load_trajectory;
+use coop_actors::trajectory_file::load_trajectory;
 use coop_model::body::Vec3;
 use coop_model::replay::Trajectory;
 use coop_model::scenario::MethodName;

@@ -209,10 +209,36 @@ fn four_stations_run_to_the_end_and_report_their_overruns() {
             "{site}: overruns reported: {}",
             st["live"]
         );
+        // Whether it was overloaded is timing too; that it says so, against its ticks, is not.
+        assert!(
+            during["overloaded"].is_boolean() && during["physics_ticks"].as_u64() > Some(0),
+            "{site}: overload judged against the session's physics ticks: {during}"
+        );
         eprintln!(
             "{site}: overruns during the session: servo {}, physics {}",
             during["servo"], during["physics"]
         );
+        // The pipeline's hops, each measured (the station-to-ring one only without emulation,
+        // which this session has), in order of size within each.
+        let hops = st["live"]["pipeline"].as_array().expect("pipeline hops");
+        for name in coop_actors::station::status::HOPS {
+            let hop = hops.iter().find(|h| h["hop"] == name);
+            if name == "partner physics -> our physics ring" {
+                assert!(hop.is_none(), "{site}: {name} is not taken under emulation");
+                continue;
+            }
+            let h = hop.unwrap_or_else(|| panic!("{site}: hop {name} measured: {hops:?}"));
+            let (n, p50, p99, max) = (
+                h["count"].as_u64(),
+                h["p50_us"].as_u64(),
+                h["p99_us"].as_u64(),
+                h["max_us"].as_u64(),
+            );
+            assert!(
+                n > Some(100) && p50 <= p99 && p99 <= max,
+                "{site}: hop {name}: {h}"
+            );
+        }
     }
     // The copies end together. (Not "after contacts": whether every user's tool has let go of the
     // disk by the end is the paper method's outcome under real timing; one run on a loaded

@@ -92,11 +92,11 @@ fn same_seed_gives_byte_identical_outputs() {
     }
 }
 
-/// The paper's experiment: naive diverges beyond the disk's radius and stays apart; the paper's
-/// method brings the copies together once contacts end (under 1 mm). (Naive's copies part by
-/// 55 mm and end 41 mm apart; before its received forces were stopped as soon as they had done
-/// what their users gave, they could push a copy on for a delay beyond that, and parted by
-/// 253 mm.)
+/// The paper's experiment: naive diverges beyond the disk's radius, stays apart by a large part
+/// of it, and the cooperative phases (grasp, squeeze, carry) cannot be done at either site, as in
+/// the paper's Figs. 9-10; the paper's method brings the copies together once contacts end (under
+/// 1 mm). (Before its received forces were stopped as soon as they had done what their users
+/// gave, naive could push a copy on for a delay beyond that, and parted by 253 mm.)
 #[test]
 fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
     let sc = load_scenario("paper.toml");
@@ -118,15 +118,31 @@ fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
         naive.divergence_max_m
     );
     assert!(
-        naive.divergence_after_contact_m > radius,
+        naive.divergence_after_contact_m > 0.5 * radius,
         "naive after contact {}",
         naive.divergence_after_contact_m
     );
     assert!(
-        naive.divergence_final_m > radius,
+        naive.divergence_final_m > 0.5 * radius,
         "naive final {}",
         naive.divergence_final_m
     );
+    for s in &naive.sites {
+        let failed: Vec<&str> = s
+            .phases
+            .iter()
+            .filter(|(_, ok)| !ok)
+            .map(|(p, _)| p.as_str())
+            .collect();
+        for p in ["grasp", "squeeze", "carry"] {
+            assert!(
+                failed.contains(&p),
+                "naive at {}: {p} should fail: {:?}",
+                s.name,
+                s.phases
+            );
+        }
+    }
     assert!(
         paper.divergence_after_contact_m < 1e-3,
         "paper after contact {}",
@@ -147,22 +163,42 @@ fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
     );
 }
 
-/// Zero delay and equal 1 kHz rates: both methods match the reference run within 1 mm.
+/// Zero delay and equal 1 kHz rates: the paper's method matches the reference run within 1 mm
+/// rms.
+/// Naive does not, even here: as on a station, a site reports the contact its physics last
+/// took, which the others apply a physics tick later than their own (one millisecond), and
+/// Eq. 8 summed that way loses the carry. (The simulator used to report the contact of the
+/// servo tick at the same instant, before physics had seen it, and naive matched.)
 #[test]
-fn zero_delay_both_methods_match_the_reference() {
+fn zero_delay_paper_matches_the_reference_and_naive_does_not() {
     let sc = load_scenario("zero-delay.toml");
     let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
-    // The two state-exchanging methods (`MethodName::ALL` also holds timewarp and coupled: they
-    // predict or play the partner's tool late, and the sweep tests judge them).
-    for method in [MethodName::Naive, MethodName::Paper] {
+    let naive = metrics::compute(
+        &sc,
+        &sim::run(&sc, Mode::Distributed(MethodName::Naive), &mut |_| {}),
+        &reference,
+    );
+    assert!(
+        naive
+            .sites
+            .iter()
+            .any(|s| s.error_vs_reference_max_m > 0.01),
+        "naive, one tick apart, departs from the reference: {:?}",
+        naive.sites
+    );
+    // (`MethodName::ALL` also holds timewarp and coupled: they predict or play the partner's
+    // tool late, and the sweep tests judge them.)
+    for method in [MethodName::Paper] {
         let m = metrics::compute(
             &sc,
             &sim::run(&sc, Mode::Distributed(method), &mut |_| {}),
             &reference,
         );
+        // Within 1 mm rms, 2 mm at worst: each site adopts the other's state a physics tick
+        // after it was made, as a station does.
         for s in &m.sites {
             assert!(
-                s.error_vs_reference_max_m < 1e-3,
+                s.error_vs_reference_rms_m < 1e-3 && s.error_vs_reference_max_m < 2e-3,
                 "{}: {} off the reference by {} m",
                 m.method,
                 s.name,

@@ -472,13 +472,16 @@ fn timewarp_carries_the_tray_at_300_ms_on_fingertip_pads() {
 /// tools' friction alone (`scenarios/three-lift.toml`, the hard case: 18 of seeds 1–24 do every
 /// phase, seed 1 among them). At a constant 200 ms `timewarp` does every phase at every site, with
 /// its own tool lagged by about half the delay while a partner's is near the object; without it
-/// (`[timewarp] local_lag_share = 0`, the method as it was before the lag) every run misses phases.
+/// (`[timewarp] local_lag_share = 0`, the method as it was before the lag) the grasp and the
+/// squeeze held by friction miss phases. (The balanced lift did too while the simulator stepped
+/// each tool with its exact position at the tick; with the servo's last sample carried to the
+/// tick, as a station does, it does every phase without the lag as well.)
 #[test]
 fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
-    for (file, seed) in [
-        ("three-grasp.toml", 3),
-        ("three-lift-balanced.toml", 1),
-        ("three-lift.toml", 1),
+    for (file, seed, misses_without_lag) in [
+        ("three-grasp.toml", 3, true),
+        ("three-lift-balanced.toml", 1, false),
+        ("three-lift.toml", 1, true),
     ] {
         let (_, m) = scenario_run(file, MethodName::Timewarp, 200.0, seed);
         assert_eq!(m.phases_passed, m.phases_total, "{file}: {m:?}");
@@ -500,7 +503,7 @@ fn timewarp_carries_the_disk_with_three_users_at_200_ms() {
         let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
         let m = metrics::compute(&sc, &r, &reference);
         assert!(
-            m.phases_passed < m.phases_total,
+            !misses_without_lag || m.phases_passed < m.phases_total,
             "{file} without the lag: {m:?}"
         );
         assert_eq!(m.local_lag_max_ms, 0.0);

@@ -10,9 +10,9 @@
 //! What it allows, everything else being denied (`default_permission = "deny"`):
 //!
 //! - site X, coming in: put only its own state, tool and live-view keys; declare (and answer) only its own
-//!   `current/X` and `clock/X` queryables; declare only its own presence token; subscribe to the
-//!   session's states, tools and epoch, query its current states, clocks and epoch, and watch its
-//!   presence tokens;
+//!   `current/X`, `clock/X` and `figures/X` queryables; declare only its own presence token;
+//!   subscribe to the session's states, tools and epoch, query its current states, clocks,
+//!   figures and epoch, and watch its presence tokens;
 //! - the launcher, coming in: the same watching, put, declare and answer the epoch, and declare
 //!   and answer its own clock, `clock/launcher` (nobody else may do either: stations translate the
 //!   epoch, which is in the launcher's clock, with their offset to that clock);
@@ -72,10 +72,15 @@ fn ros2_site_keys(d: u32, session: &str, site: &str) -> (Vec<String>, Vec<String
         format!("{d}/rosout/**"),
     ];
     let answers = vec![format!("{d}/rosout/*/*/@adv/**"), format!("{d}/rosout/**")];
-    let tokens = vec![format!(
-        "@ros2_lv/{d}/*/*/*/*/%/{}/**",
-        crate::ros2::graph::mangle(&ns)
-    )];
+    // Its node's graph tokens, and the `/rosout` cache's `@adv` token (zenoh-ext's advanced
+    // publisher detection, which rmw_zenoh's transient-local subscribers watch).
+    let tokens = vec![
+        format!(
+            "@ros2_lv/{d}/*/*/*/*/%/{}/**",
+            crate::ros2::graph::mangle(&ns)
+        ),
+        format!("{d}/rosout/*/*/@adv/pub/**"),
+    ];
     (puts, answers, tokens)
 }
 
@@ -139,6 +144,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &[
                 keys::all_object_current(s),
                 keys::all_clocks(s),
+                keys::all_figures(s),
                 keys::epoch(s),
             ],
         ),
@@ -194,7 +200,11 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             &own("answers"),
             "ingress",
             &["declare_queryable", "reply"],
-            &[keys::currents_of(s, site), keys::clock(s, site)],
+            &[
+                keys::currents_of(s, site),
+                keys::clock(s, site),
+                keys::figures(s, site),
+            ],
         ));
         rules.push(rule(
             &own("presence"),
@@ -325,7 +335,11 @@ mod tests {
         );
         assert_eq!(
             rule("site-user2-answers")["key_exprs"],
-            json!(["coop/s1/obj/*/current/user2", "coop/s1/clock/user2"])
+            json!([
+                "coop/s1/obj/*/current/user2",
+                "coop/s1/clock/user2",
+                "coop/s1/figures/user2"
+            ])
         );
         let policy = |id: &str| entry(&acl, "policies", id).clone();
         let p2 = policy("site-user2");
@@ -387,7 +401,10 @@ mod tests {
         );
         assert_eq!(
             rule("site-user2-ros2-tokens")["key_exprs"],
-            json!(["@ros2_lv/3/*/*/*/*/%/%coop%s1_timewarp%user2/**"])
+            json!([
+                "@ros2_lv/3/*/*/*/*/%/%coop%s1_timewarp%user2/**",
+                "3/rosout/*/*/@adv/pub/**"
+            ])
         );
         let view = rule("ros2-view");
         assert!(!view["messages"].to_string().contains("\"put\""), "{view}");

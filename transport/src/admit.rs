@@ -365,7 +365,22 @@ impl Inbound {
         now_ns: u64,
         offsets: &[Option<i64>],
     ) -> Result<Admitted, Refusal> {
-        let mut r = decode(bytes)?;
+        self.check_decoded(key_site, key_object, decode(bytes)?, now_ns, offsets)
+    }
+
+    /// [`Inbound::check`] for a report already decoded (by [`crate::wire::decode`], once: a
+    /// receiver that holds a report until its sender's clock offset is known holds it decoded).
+    ///
+    /// # Errors
+    /// As [`Inbound::check`], but for the decoding.
+    pub fn check_decoded(
+        &mut self,
+        key_site: &str,
+        key_object: u64,
+        mut r: SiteReport,
+        now_ns: u64,
+        offsets: &[Option<i64>],
+    ) -> Result<Admitted, Refusal> {
         let site = self
             .index_of(key_site)
             .filter(|&i| i as u64 == r.site)
@@ -519,7 +534,20 @@ impl Inbound {
         now_ns: u64,
         offsets: &[Option<i64>],
     ) -> Result<AdmittedTrack, Refusal> {
-        let mut t = decode_track(bytes)?;
+        self.check_track_decoded(key_site, decode_track(bytes)?, now_ns, offsets)
+    }
+
+    /// [`Inbound::check_track`] for a track already decoded ([`crate::wire::decode_track`]).
+    ///
+    /// # Errors
+    /// As [`Inbound::check_track`], but for the decoding.
+    pub fn check_track_decoded(
+        &mut self,
+        key_site: &str,
+        mut t: ToolTrack,
+        now_ns: u64,
+        offsets: &[Option<i64>],
+    ) -> Result<AdmittedTrack, Refusal> {
         let site = self
             .index_of(key_site)
             .filter(|&i| i as u64 == t.site)

@@ -90,6 +90,16 @@ pub fn clock(session: &str, site: &str) -> String {
     format!("coop/{session}/clock/{site}")
 }
 
+/// The queryable a site answers with its run's figures (`network::figures`).
+pub fn figures(session: &str, site: &str) -> String {
+    format!("coop/{session}/figures/{site}")
+}
+
+/// Every site's figures queryable.
+pub fn all_figures(session: &str) -> String {
+    format!("coop/{session}/figures/*")
+}
+
 /// The session's time 0, put and answered by the launcher.
 pub fn epoch(session: &str) -> String {
     format!("coop/{session}/epoch")

@@ -8,6 +8,8 @@
 //! - [`router`]: a zenoh router enforcing it, for sessions across machines, and its status.
 //! - [`recording`]: the station's MCAP recording, written and read, and a run's session file.
 //! - [`live_view`]: a site or a whole session served live to Foxglove (`foxglove.websocket.v1`).
+//! - [`ros2`]: `rmw_zenoh`'s messages and graph conventions; [`ros2_device`]: a ROS 2 haptic
+//!   driver as a station's device.
 //! - [`network`]: the station's network process — reports from physics out to the session, the
 //!   other stations' reports in to physics, through the station's shared-memory rings.
 //!
@@ -24,5 +26,6 @@ pub mod log;
 pub mod network;
 pub mod recording;
 pub mod ros2;
+pub mod ros2_device;
 pub mod router;
 pub mod wire;

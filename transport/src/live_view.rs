@@ -37,9 +37,12 @@ use tungstenite::Message;
 use zenoh::Wait;
 
 use crate::keys;
-use crate::network::LIVE_EVERY_NS;
 use crate::recording::scene::{arrow, encode, timestamp};
 use crate::recording::{LiveSample, SampleMsg, Scene};
+
+/// The shortest time between two live samples a station puts (about 60 Hz: a viewer's frame
+/// rate), ns.
+pub const LIVE_EVERY_NS: u64 = 16_666_667;
 
 /// The WebSocket subprotocol spoken.
 pub const SUBPROTOCOL: &str = "foxglove.websocket.v1";

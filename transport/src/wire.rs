@@ -28,7 +28,10 @@
 //! tracks are told apart by their key. [`TRACK_PINNED`] ties the track's layout to the doc as
 //! [`PINNED`] does the state's.
 
+mod carry;
 pub(crate) mod compact;
+
+pub use carry::StationWire;
 
 use compact::{
     field_word, max_words_len, put_varint, put_words, take_words, unzigzag, zigzag, Reader,
@@ -264,7 +267,7 @@ mod tests {
     use super::*;
     use compact::{put_varint, zigzag};
     use coop_rt::msg::layout_text;
-    use coop_rt::shm::pod::fnv1a64;
+    use coop_rt::pod::fnv1a64;
 
     /// The site report section of `docs/wire.md`: its heading, its text, and its field table as
     /// (name, kind, words).

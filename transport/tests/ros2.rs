@@ -239,9 +239,26 @@ fn the_attachment_is_sequence_time_and_gid() {
     assert_eq!(a.encode().to_vec(), golden);
     assert_eq!(Attachment::decode(&golden), Some(a));
     assert_eq!(Attachment::decode(&golden[..32]), None);
-    // Different endpoints of one session get different GIDs.
-    let zid = [7u8; 16];
-    assert_ne!(graph::gid(zid, 1), graph::gid(zid, 2));
+    // A GID is rmw_zenoh's hash of the endpoint's token (pinned in `graph`'s own tests): two
+    // endpoints of one node get two.
+    let node = Node {
+        domain: 0,
+        zid: "8b20917a2e7e4d5b9a2f1f4e6d5c3b2a".into(),
+        id: 0,
+        namespace: "/coop/s1/user1".into(),
+        name: "station".into(),
+    };
+    let token = |entity| {
+        node.endpoint_token(
+            entity,
+            Kind::Publisher,
+            "/coop/s1/user1/tool",
+            &graph::POSE_STAMPED,
+            Qos::STREAM,
+        )
+    };
+    assert_ne!(graph::gid(&token(1)), graph::gid(&token(2)));
+    assert_eq!(graph::gid(&token(1)), graph::gid(&token(1)));
 }
 
 #[test]

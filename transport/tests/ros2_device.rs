@@ -15,8 +15,8 @@ use coop_rt::timer::monotonic_ns;
 use coop_tests::wait_until;
 use coop_transport::network::{concrete_listen, config, NetworkConfig};
 use coop_transport::ros2::cdr::{Header, PoseStamped, WrenchStamped};
-use coop_transport::ros2::device::{Ros2Device, Ros2DeviceConfig};
 use coop_transport::ros2::graph::{self, Attachment};
+use coop_transport::ros2_device::{Ros2Device, Ros2DeviceConfig};
 use zenoh::Wait;
 
 const LIMIT: Duration = Duration::from_secs(30);

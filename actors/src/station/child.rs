@@ -9,7 +9,7 @@
 use std::time::Duration;
 
 use coop_model::method::{Consistency, ObjectCopy};
-use coop_model::scenario::{MethodName, Scenario};
+use coop_model::scenario::Scenario;
 use coop_model::servo::Servo;
 use coop_rt::device::safety::{clamp_contact, Guarded};
 use coop_rt::device::CartesianDevice;
@@ -251,14 +251,15 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         tracks_in: None,
     };
     let (sc, i) = (&cfg.scenario, cfg.site);
+    let (method, join_after) = physics_method(sc, i);
     let mut rings = rings;
-    if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
+    // A method on the session's tick grid exchanges tool tracks (it says so: `join_after`).
+    if join_after.is_some() {
         rings.tracks_out =
             Some(Producer::open(&names.track_out, &opts).map_err(opening("track-out"))?);
         rings.tracks_in =
             Some(Consumer::open(&names.track_in, &opts).map_err(opening("track-in"))?);
     }
-    let (method, join_after) = physics_method(sc, i);
     let step = period(sc.site[i].physics_rate_hz);
     let timing = PhysicsTiming {
         period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
@@ -349,13 +350,14 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         sites: sc.site.iter().map(|s| s.name.clone()).collect(),
         site_index: cfg.site,
         scenario: sc.name.clone(),
+        scenario_hash: coop_transport::network::figures::scenario_hash(sc),
         method: sc.method.as_str().to_owned(),
         endpoints: net.clone(),
         control: &ctl,
         reports: Consumer::open(&names.report, &opts).map_err(opening("report"))?,
         remote: Producer::open(&names.remote, &opts).map_err(opening("remote"))?,
         trace: Consumer::open(&names.trace, &opts).map_err(opening("trace"))?,
-        tracks: if matches!(sc.method, MethodName::Timewarp | MethodName::Coupled) {
+        tracks: if sc.steps_on_grid(sc.method) {
             Some((
                 Consumer::open(&names.track_out, &opts).map_err(opening("track-out"))?,
                 Producer::open(&names.track_in, &opts).map_err(opening("track-in"))?,
@@ -422,6 +424,7 @@ pub(crate) fn physics_method(sc: &Scenario, i: usize) -> (Box<dyn Consistency>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use coop_model::scenario::MethodName;
     use coop_model::sim::{site_method, Mode};
 
     /// A station's physics process and the simulator run the same method: the same type with the

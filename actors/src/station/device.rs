@@ -28,7 +28,7 @@
 //! [device.dhd]            # device = "dhd": `coop_rt::device::dhd::DhdConfig`
 //! library = "/opt/forcedimension/lib/libdhd.so"
 //!
-//! [device.ros2]           # device = "ros2": `coop_transport::ros2::device::Ros2DeviceConfig`
+//! [device.ros2]           # device = "ros2": `coop_transport::ros2_device::Ros2DeviceConfig`
 //! pose_topic = "/haptic/pose"                # the driver's PoseStamped
 //! wrench_topic = "/haptic/wrench_command"    # our WrenchStamped back
 //! connect = ["tcp/127.0.0.1:7447"]           # the ROS 2 graph's router (rmw_zenohd)
@@ -44,28 +44,12 @@ use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
 use coop_rt::device::replay::Replay;
 use coop_rt::device::safety::SafetyLimits;
 use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
-use coop_transport::ros2::device::{Ros2Device, Ros2DeviceConfig};
+use coop_transport::ros2_device::{Ros2Device, Ros2DeviceConfig};
 use nalgebra::UnitQuaternion;
 use serde::{Deserialize, Serialize};
 
-use crate::station::config::Problem;
-
-/// Why a recorded hand did not load (the caller names the file).
-#[derive(Debug, thiserror::Error)]
-pub enum TrajectoryFileError {
-    /// The CSV file cannot be read.
-    #[error("cannot be read")]
-    Read(#[source] std::io::Error),
-    /// The samples do not make a trajectory.
-    #[error(transparent)]
-    Trajectory(#[from] coop_model::replay::TrajectoryError),
-    /// The MCAP recording cannot be read.
-    #[error(transparent)]
-    Recording(#[from] coop_transport::recording::RecordingError),
-    /// The recording's session never started.
-    #[error("the recording has no /session message: its session never started, so its samples have no time 0")]
-    NoSession,
-}
+use super::error::Problem;
+use crate::trajectory_file::load_trajectory;
 
 /// Why the configured device did not open in the servo process.
 #[derive(Debug, thiserror::Error)]
@@ -82,7 +66,7 @@ pub enum DeviceOpenError {
     Dhd(#[from] coop_rt::device::dhd::DhdError),
     /// The device's ROS 2 driver.
     #[error(transparent)]
-    Ros2(#[from] coop_transport::ros2::device::Ros2OpenError),
+    Ros2(#[from] coop_transport::ros2_device::Ros2OpenError),
 }
 
 /// `device = "…"`.
@@ -211,7 +195,7 @@ pub struct DeviceSpec {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dhd: Option<toml::Table>,
     /// The ROS 2 backend's table (`device = "ros2"`), read as
-    /// [`coop_transport::ros2::device::Ros2DeviceConfig`].
+    /// [`coop_transport::ros2_device::Ros2DeviceConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ros2: Option<toml::Table>,
 }
@@ -436,44 +420,6 @@ impl SafetySpec {
     }
 }
 
-/// A recorded hand from `path`: a CSV `t_s,x,y,z` (by its `.csv` extension), else a station's MCAP
-/// recording, whose `/tool` positions are timed from its session's start (its epoch).
-///
-/// # Errors
-/// The file cannot be read or parsed, has no samples, or a recording without a session start.
-pub fn load_trajectory(path: &Path) -> Result<Trajectory, TrajectoryFileError> {
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
-    {
-        let text = std::fs::read_to_string(path).map_err(TrajectoryFileError::Read)?;
-        return Ok(Trajectory::parse_csv(&text)?);
-    }
-    let rec = coop_transport::recording::read(path)?;
-    let Some(session) = &rec.session else {
-        return Err(TrajectoryFileError::NoSession);
-    };
-    let epoch = session.epoch_ns;
-    let mut last: Option<u64> = None;
-    let samples: Vec<(f64, Vec3)> = rec
-        .samples
-        .iter()
-        .filter(|s| {
-            // One sample per time (a restarted physics may repeat the last one).
-            let keep = last.is_none_or(|l| s.t_ns > l);
-            if keep {
-                last = Some(s.t_ns);
-            }
-            keep
-        })
-        .map(|s| {
-            let t = (s.t_ns as f64 - epoch as f64) * 1e-9;
-            (t, Vec3::from(s.tool_pos))
-        })
-        .collect();
-    Ok(Trajectory::new(samples)?)
-}
-
 /// Opens the configured backend for station site `site` at `now_ns` (the servo process).
 ///
 /// # Errors
@@ -586,7 +532,7 @@ pub fn probe_all(
             }
             Backend::Haply => coop_rt::device::haply::probe(&setup.haply),
             Backend::Dhd => coop_rt::device::dhd::probe(&setup.dhd),
-            Backend::Ros2 => coop_transport::ros2::device::probe(&setup.ros2),
+            Backend::Ros2 => coop_transport::ros2_device::probe(&setup.ros2),
         })
         .collect()
 }

@@ -15,5 +15,6 @@
 pub mod child;
 pub mod config;
 pub mod device;
+mod error;
 pub mod run;
 pub mod status;

@@ -15,6 +15,7 @@ pub mod contact;
 pub mod controller;
 pub mod device;
 pub mod display;
+pub mod drive;
 pub mod histogram;
 pub mod link;
 pub mod method;

@@ -8,17 +8,34 @@
 //!
 //! **Virtual time** is an integer count of nanoseconds, so event order never depends on float
 //! rounding. At each instant events run in a fixed order — deliveries (by send order), then per site
-//! in index order: physics, servo, report — and plants are integrated up to the instant in sub-steps
+//! in index order: physics, servo — and plants are integrated up to the instant in sub-steps
 //! of at most [`PLANT_STEP_NS`]. Same scenario and seed ⇒ the same floating-point operations in the
 //! same order ⇒ byte-identical traces.
+//!
+//! **As a station runs it.** A site's method is stepped by the same [`SiteDrive`] a station's
+//! physics loop steps it with: what arrived is handed over at the next physics tick (site reports,
+//! then tool tracks, each in arrival order, as a station's two rings hold them), the tick takes
+//! the own tool as the servo last sampled it, and the site reports at the first tick at or after
+//! its report time. What a site puts goes through a [`Wire`] (the stations' codec in the `sim`
+//! tool; [`Direct`] in the model's tests), each message (a state, a track) taking its own chance
+//! on each link.
 //!
 //! **Reference run** ([`Mode::Reference`]): the same sites, devices and scripts, but one shared object
 //! with every user's contact summed at once (Eq. 8 without delay), integrated at the fastest site's
 //! physics rate: the "truth" the methods are measured against.
 
+mod probe;
+mod wire;
+
+pub use probe::ProbedTick;
+pub use wire::{Carried, Direct, Wire};
+
+use std::collections::VecDeque;
+
 use crate::body::{BodyState, Vec3};
 use crate::contact::ContactForce;
 use crate::device::{Plant, ScaraForceLoop};
+use crate::drive::{ns_to_s, Put, SiteDrive, ToolAt};
 use crate::link::DueQueue;
 use crate::method::{integrate, Consistency, EnergyAccount, Report, WorldCopy};
 use crate::rng::Rng;
@@ -76,8 +93,7 @@ pub struct SiteTrace {
     /// The messages this site put, as a station puts them: site reports (states, forces) and
     /// tool tracks (a `coupled` report with its tools is one of each).
     pub puts: [u64; 2],
-    /// Their bytes, as the [`Sizer`] the run was given counts them (0 with none: the wire's
-    /// encoding is `coop_transport::wire`'s, a crate above this one).
+    /// Their bytes, as the [`Wire`] the run was given put them (0 with [`Direct`]).
     pub sent_bytes: u64,
 }
 
@@ -190,6 +206,8 @@ pub struct RunResult {
     /// Per site: every servo tick's tool position and displayed force (kept only by
     /// [`run_keeping_servo_ticks`]; empty otherwise).
     pub servo_ticks: Vec<Vec<ServoTick>>,
+    /// Puts a receiver's decoding refused ([`Carried::Refused`]).
+    pub refused: u64,
 }
 
 /// One servo tick of a site, as kept by [`run_keeping_servo_ticks`].
@@ -221,6 +239,7 @@ impl RunResult {
             rollback: Vec::new(),
             force_steps: Vec::new(),
             servo_ticks: Vec::new(),
+            refused: 0,
         }
     }
 }
@@ -233,6 +252,18 @@ struct InFlight {
     msg: Report,
 }
 
+/// Messages a probed site took at a tick: (sender, report), in arrival order.
+type Received = Vec<(usize, Report)>;
+
+/// What arrived at a site since its last physics tick, as a station's two rings hold it.
+#[derive(Debug, Default)]
+struct Inbox {
+    /// Site reports: (sender, report), in arrival order.
+    states: VecDeque<(usize, Report)>,
+    /// Tool tracks, in arrival order.
+    tracks: VecDeque<(usize, Report)>,
+}
+
 struct Site {
     plant: Plant,
     plant_ns: u64,
@@ -242,17 +273,19 @@ struct Site {
     /// A recorded hand driving the tool by position, instead of the plant.
     replay: Option<crate::replay::Trajectory>,
     tau: Vec3,
-    /// The own tool's contact with each object.
+    /// The own tool's contact with each object, from the last servo tick.
     own: [ContactForce; MAX_OBJECTS],
-    copy: WorldCopy,
-    method: Box<dyn Consistency>,
+    /// The own tool at the last servo tick (what a station's physics is given).
+    sampled_tool: ToolAt,
+    /// The method and the site's copy, stepped as a station's physics loop steps them.
+    drive: SiteDrive,
+    /// What arrived since the last physics tick.
+    inbox: Inbox,
     noise: Rng,
     period_servo: u64,
     period_physics: u64,
-    period_report: u64,
     next_servo: u64,
     next_physics: u64,
-    next_report: u64,
     pending_adoptions: Vec<usize>,
     last_f_desired: Vec3,
     last_f_measured: Vec3,
@@ -272,12 +305,9 @@ impl Site {
     }
 }
 
-fn period_ns(rate_hz: f64) -> u64 {
+/// A rate's period in the simulator's whole nanoseconds (at least 1).
+pub fn period_ns(rate_hz: f64) -> u64 {
     ((1e9 / rate_hz).round() as u64).max(1)
-}
-
-fn ns_to_s(ns: u64) -> f64 {
-    ns as f64 * 1e-9
 }
 
 /// Site `i`'s method in `mode`, built by [`Scenario::method`] as a station's is (the reference
@@ -289,41 +319,53 @@ pub fn site_method(scenario: &Scenario, mode: Mode, i: usize) -> Box<dyn Consist
     }
 }
 
-/// Runs `scenario` in `mode`. `progress(fraction)` is called about a hundred times.
+/// Runs `scenario` in `mode`, its puts handed over [`Direct`]ly. `progress(fraction)` is called
+/// about a hundred times.
 ///
 /// The scenario must be valid ([`Scenario::validate`]).
 pub fn run(scenario: &Scenario, mode: Mode, progress: &mut dyn FnMut(f64)) -> RunResult {
-    run_sized(scenario, mode, progress, &|_, _, _, _| 0)
+    run_wired(scenario, mode, progress, &Direct)
 }
 
-/// The bytes a station would put for `msg` from `site` at `t_ns`, its puts so far being `puts`
-/// (site reports, tool tracks: the next sequence numbers are one more).
-pub type Sizer = dyn Fn(usize, u64, [u64; 2], &Report) -> u64;
-
-/// [`run`], counting each put's bytes with `size` ([`SiteTrace::sent_bytes`]).
-pub fn run_sized(
+/// [`run`], every put carried by `wire` ([`SiteTrace::sent_bytes`] is what it put).
+pub fn run_wired(
     scenario: &Scenario,
     mode: Mode,
     progress: &mut dyn FnMut(f64),
-    size: &Sizer,
+    wire: &dyn Wire,
 ) -> RunResult {
-    drive(Run::new(scenario, mode), scenario, progress, size)
+    drive(Run::new(scenario, mode), scenario, progress, wire)
 }
 
-/// [`run_sized`], keeping every servo tick's tool position and displayed force too
+/// [`run_wired`], keeping every servo tick's tool position and displayed force too
 /// ([`RunResult::servo_ticks`]).
 pub fn run_keeping_servo_ticks(
     scenario: &Scenario,
     mode: Mode,
     progress: &mut dyn FnMut(f64),
-    size: &Sizer,
+    wire: &dyn Wire,
 ) -> RunResult {
     let mut run = Run::new(scenario, mode);
     for (s, spec) in run.sites.iter_mut().zip(&scenario.site) {
         let ticks = (scenario.duration_s * spec.servo_rate_hz).ceil() as usize + 1;
         s.servo_ticks = Some(Vec::with_capacity(ticks));
     }
-    drive(run, scenario, progress, size)
+    drive(run, scenario, progress, wire)
+}
+
+/// [`run_wired`] in a distributed mode, recording every physics tick of site `site`: what its
+/// method was given and what it put ([`ProbedTick`]), to replay through a station's loop.
+pub fn run_probing_site(
+    scenario: &Scenario,
+    mode: Mode,
+    site: usize,
+    wire: &dyn Wire,
+) -> (RunResult, Vec<ProbedTick>) {
+    let mut run = Run::new(scenario, mode);
+    run.probe = Some((site, Vec::new()));
+    drive_to_end(&mut run, scenario, &mut |_| {}, wire);
+    let probed = run.probe.take().map(|p| p.1).unwrap_or_default();
+    (run.finish(), probed)
 }
 
 /// Steps `run` to the end of `scenario`.
@@ -331,8 +373,19 @@ fn drive(
     mut run: Run<'_>,
     scenario: &Scenario,
     progress: &mut dyn FnMut(f64),
-    size: &Sizer,
+    wire: &dyn Wire,
 ) -> RunResult {
+    drive_to_end(&mut run, scenario, progress, wire);
+    run.finish()
+}
+
+/// Steps `run` through every event of `scenario`.
+fn drive_to_end(
+    run: &mut Run<'_>,
+    scenario: &Scenario,
+    progress: &mut dyn FnMut(f64),
+    wire: &dyn Wire,
+) {
     let end_ns = (scenario.duration_s * 1e9).round() as u64;
     let mut next_progress = 0u64;
     loop {
@@ -344,10 +397,9 @@ fn drive(
             progress(t as f64 / end_ns.max(1) as f64);
             next_progress = t + end_ns / 100 + 1;
         }
-        run.step(t, size);
+        run.step(t, wire);
     }
     progress(1.0);
-    run.finish()
 }
 
 /// A run under way: every site, the virtual network between them, and what is recorded so far.
@@ -371,6 +423,8 @@ struct Run<'a> {
     result: RunResult,
     /// The world's mechanical energy at the start, J.
     e0: f64,
+    /// The site whose physics ticks are recorded, and the record ([`run_probing_site`]).
+    probe: Option<(usize, Vec<ProbedTick>)>,
 }
 
 impl<'a> Run<'a> {
@@ -385,7 +439,7 @@ impl<'a> Run<'a> {
                 let script = scenario.script(i);
                 let arm = scenario.arm(i);
                 let p0 = script[0].target;
-                Site {
+                let mut site = Site {
                     plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
                     plant_ns: 0,
                     script,
@@ -394,22 +448,31 @@ impl<'a> Run<'a> {
                     replay: spec.hand_trajectory.clone(),
                     tau: Vec3::zeros(),
                     own: [ContactForce::default(); MAX_OBJECTS],
-                    copy: start.clone(),
-                    method: site_method(scenario, mode, i),
+                    sampled_tool: ToolAt::default(),
+                    drive: SiteDrive::new(
+                        i,
+                        site_method(scenario, mode, i),
+                        start.clone(),
+                        period_ns(spec.report_rate_hz),
+                        0,
+                        0,
+                    ),
+                    inbox: Inbox::default(),
                     noise: Rng::derive(scenario.seed, 1000 + i as u64),
                     period_servo: period_ns(spec.servo_rate_hz),
                     period_physics: period_ns(spec.physics_rate_hz),
-                    period_report: period_ns(spec.report_rate_hz),
                     next_servo: 0,
                     next_physics: 0,
-                    next_report: 0,
                     pending_adoptions: Vec::new(),
                     last_f_desired: Vec3::zeros(),
                     last_f_measured: Vec3::zeros(),
                     sensor_noise: spec.sensor_noise_n,
                     force_steps: ForceSteps::default(),
                     servo_ticks: None,
-                }
+                };
+                // Before the servo's first sample, the tool where the hand starts.
+                site.sampled_tool.pos = site.tool_pos(0);
+                site
             })
             .collect();
         let n = sites.len();
@@ -450,6 +513,7 @@ impl<'a> Run<'a> {
             next_sample: 0,
             result,
             e0,
+            probe: None,
         }
     }
 
@@ -458,9 +522,6 @@ impl<'a> Run<'a> {
         let mut t = self.next_sample;
         for s in &self.sites {
             t = t.min(s.next_servo).min(s.next_physics);
-            if !self.reference {
-                t = t.min(s.next_report);
-            }
         }
         if self.reference {
             t = t.min(self.next_ref);
@@ -472,19 +533,17 @@ impl<'a> Run<'a> {
     }
 
     /// Everything due at `t`, in the fixed order: plants up to now, deliveries, the reference's
-    /// shared step, then per site in index order physics, servo, report; then the sample.
-    fn step(&mut self, t: u64, size: &Sizer) {
+    /// shared step, then per site in index order physics (with its reports), servo; then the
+    /// sample.
+    fn step(&mut self, t: u64, wire: &dyn Wire) {
         self.plants_to(t);
         self.deliver(t);
         if self.reference && self.next_ref == t {
             self.reference_step(t);
         }
         for i in 0..self.sites.len() {
-            self.physics(i, t);
+            self.physics(i, t, wire);
             self.servo(i, t);
-            if !self.reference && self.sites[i].next_report == t {
-                self.report(i, t, size);
-            }
         }
         if self.next_sample == t {
             self.sample(t);
@@ -505,21 +564,38 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// Deliveries.
+    /// Deliveries: into each receiver's inbox, taken at its next physics tick.
     fn deliver(&mut self, t: u64) {
         // Nothing is due before `t` (it is the earliest event), so due means due now.
         while let Some(m) = self.in_flight.pop_due(t) {
             self.messages.1 += 1;
-            let s = &mut self.sites[m.to];
-            if let Some(a) = s
-                .method
-                .receive(&self.world, &mut s.copy, m.from, &m.msg, ns_to_s(t))
-            {
+            let inbox = &mut self.sites[m.to].inbox;
+            match m.msg {
+                Report::Tools(_) => inbox.tracks.push_back((m.from, m.msg)),
+                _ => inbox.states.push_back((m.from, m.msg)),
+            }
+        }
+    }
+
+    /// Hands site `i`'s inbox to its method at its physics tick `t`: site reports, then tracks.
+    fn take_inbox(&mut self, i: usize, t: u64) -> (Received, Received) {
+        let probing = matches!(self.probe, Some((p, _)) if p == i);
+        let s = &mut self.sites[i];
+        let mut taken = (Vec::new(), Vec::new());
+        let Inbox { states, tracks } = &mut s.inbox;
+        for (queue, kept) in [(states, &mut taken.0), (tracks, &mut taken.1)] {
+            while let Some((from, msg)) = queue.pop_front() {
+                if probing {
+                    kept.push((from, msg));
+                }
+                let Ok(Some(a)) = s.drive.receive(&self.world, from, &msg, t) else {
+                    continue;
+                };
                 s.pending_adoptions.push(self.result.adoptions.len());
                 self.result.adoptions.push(AdoptionEvent {
                     t_s: ns_to_s(t),
-                    site: m.to,
-                    from: m.from,
+                    site: i,
+                    from,
                     jump_m: a.jump.norm(),
                     age_s: a.age_s,
                     force_step_n: 0.0,
@@ -529,6 +605,7 @@ impl<'a> Run<'a> {
                 });
             }
         }
+        taken
     }
 
     /// The reference's one shared copy, every user's contact summed at once.
@@ -554,18 +631,71 @@ impl<'a> Run<'a> {
         self.next_ref += self.ref_period;
     }
 
-    /// Site `i`'s physics step, if due.
-    fn physics(&mut self, i: usize, t: u64) {
+    /// Site `i`'s physics tick, if due: what arrived, the step, and the reports due.
+    fn physics(&mut self, i: usize, t: u64, wire: &dyn Wire) {
+        if self.sites[i].next_physics != t {
+            return;
+        }
+        let period = self.sites[i].period_physics;
+        self.sites[i].next_physics += period;
+        if self.reference {
+            return;
+        }
+        let (states, tracks) = self.take_inbox(i, t);
+        let n = self.sites.len();
         let s = &mut self.sites[i];
-        if s.next_physics == t {
-            if !self.reference {
-                s.method.own_tool(s.tool_pos(t));
-                let dt = ns_to_s(s.period_physics);
-                s.method
-                    .physics_step(&self.world, &mut s.copy, &s.own[..self.objects], dt);
-                s.copy.set_time(ns_to_s(t));
+        s.drive.tick(&self.world, &s.sampled_tool, t, period);
+        let mut puts = Vec::new();
+        let (links, in_flight, messages, net) = (
+            &mut self.links,
+            &mut self.in_flight,
+            &mut self.messages,
+            self.net,
+        );
+        let trace = &mut self.result.sites[i];
+        let refused = &mut self.result.refused;
+        let probing = matches!(self.probe, Some((p, _)) if p == i);
+        s.drive.report(t, &mut |put| {
+            if probing {
+                puts.push(put);
             }
-            s.next_physics += s.period_physics;
+            trace.puts[usize::from(matches!(put, Put::Track(_)))] += 1;
+            let msg = match wire.carry(i, t, &put) {
+                Carried::Taken { report, bytes } => {
+                    trace.sent_bytes += bytes;
+                    report
+                }
+                Carried::Refused { bytes } => {
+                    trace.sent_bytes += bytes;
+                    *refused += 1;
+                    messages.0 += (n - 1) as u64;
+                    messages.2 += (n - 1) as u64;
+                    return;
+                }
+            };
+            // Each message takes its own chance on each link.
+            for to in (0..n).filter(|&to| to != i) {
+                messages.0 += 1;
+                let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
+                    messages.2 += 1;
+                    continue;
+                };
+                in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
+            }
+        });
+        if let Some((_, probed)) = self.probe.as_mut().filter(|(p, _)| *p == i) {
+            let mut own = [ContactForce::default(); MAX_OBJECTS];
+            own[..s.drive.objects()].copy_from_slice(s.drive.own());
+            probed.push(ProbedTick {
+                t_ns: t,
+                period_ns: period,
+                tool: s.sampled_tool,
+                own,
+                states,
+                tracks,
+                copy: s.drive.copy().clone(),
+                puts,
+            });
         }
     }
 
@@ -586,12 +716,16 @@ impl<'a> Run<'a> {
         let copy = if self.reference {
             &self.shared
         } else {
-            &s.copy
+            s.drive.copy()
         };
         // What the user is shown: the copy, or a missed contact replayed (timewarp).
         let mut shown = [BodyState::at_rest(Vec3::zeros()); MAX_OBJECTS];
         for (k, o) in shown.iter_mut().enumerate().take(objects) {
-            *o = s.method.shown(copy, k);
+            *o = if self.reference {
+                copy.objects()[k].state
+            } else {
+                s.drive.shown(k)
+            };
         }
         let (tool_pos, tool_vel) = match &s.replay {
             Some(r) => r.at(ns_to_s(t)),
@@ -645,49 +779,16 @@ impl<'a> Run<'a> {
         );
         s.tau = tau;
         s.own = out.contacts;
+        // What a station's servo puts in its tool sample for physics.
+        s.drive.set_own(&out.contacts);
+        s.sampled_tool = ToolAt {
+            pos: tool_pos,
+            vel: tool_vel,
+            t_ns: t,
+        };
         s.last_f_desired = out.f_desired;
         s.last_f_measured = f_measured;
         s.next_servo += s.period_servo;
-    }
-
-    /// Site `i`'s reports (it is due), each sent on every link to the others.
-    fn report(&mut self, i: usize, t: u64, size: &Sizer) {
-        let n = self.sites.len();
-        let s = &mut self.sites[i];
-        let (links, in_flight, messages) =
-            (&mut self.links, &mut self.in_flight, &mut self.messages);
-        let net = self.net;
-        // Each report takes its own chance on each link (a world's objects may travel in
-        // several).
-        let trace = &mut self.result.sites[i];
-        let (puts, bytes) = (&mut trace.puts, &mut trace.sent_bytes);
-        let mut send = |mut msg: Report| {
-            *bytes += size(i, t, *puts, &msg);
-            // Numbered as a station's network numbers its tracks.
-            match &mut msg {
-                Report::State { .. } | Report::Force { .. } => puts[0] += 1,
-                Report::Tools(r) => {
-                    puts[1] += 1;
-                    r.seq = puts[1];
-                }
-                Report::Coupled(c) => {
-                    puts[0] += 1;
-                    puts[1] += u64::from(c.tools.count > 0);
-                    c.tools.seq = puts[1];
-                }
-            }
-            for to in (0..n).filter(|&to| to != i) {
-                messages.0 += 1;
-                let Some(delay_ns) = net.transmit(&mut links[i * n + to], ns_to_s(t)) else {
-                    messages.2 += 1;
-                    continue;
-                };
-                in_flight.push(t + delay_ns, InFlight { from: i, to, msg });
-            }
-        };
-        s.method
-            .report(&s.copy, &s.own[..self.objects], ns_to_s(t), &mut send);
-        s.next_report += s.period_report;
     }
 
     /// A row of every site's trace.
@@ -697,7 +798,11 @@ impl<'a> Run<'a> {
         let sites = &self.sites;
         self.result.t.push(ns_to_s(t));
         for (i, s) in sites.iter().enumerate() {
-            let copy = if reference { &self.shared } else { &s.copy };
+            let copy = if reference {
+                &self.shared
+            } else {
+                s.drive.copy()
+            };
             let tr = &mut self.result.sites[i];
             let first = &copy.first().state;
             tr.obj_pos.push(first.pos);
@@ -724,7 +829,7 @@ impl<'a> Run<'a> {
             let on_object = if reference {
                 sites.iter().map(own).sum()
             } else {
-                own(s) + s.method.remote_force()
+                own(s) + s.drive.remote_force()
             };
             tr.f_on_object.push(on_object);
         }
@@ -745,7 +850,7 @@ impl<'a> Run<'a> {
         messages.1 = messages.1.min(messages.0);
         result.messages = messages;
         for s in &sites {
-            let copy = if reference { &shared } else { &s.copy };
+            let copy = if reference { &shared } else { s.drive.copy() };
             result.energy.push(
                 copy.objects()
                     .iter()
@@ -756,7 +861,7 @@ impl<'a> Run<'a> {
             result
                 .mech_energy
                 .push((e0, copy.mechanical_energy(&world)));
-            result.rollback.push(s.method.stats().rollback().copied());
+            result.rollback.push(s.drive.stats().rollback().copied());
             result.force_steps.push(ForceSteps {
                 display: *s.servo.display_stats(),
                 ..s.force_steps

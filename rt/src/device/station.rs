@@ -16,7 +16,7 @@ pub enum Backend {
     /// Force Dimension (and Novint Falcon) through the DHD SDK.
     Dhd,
     /// Any device whose ROS 2 driver publishes its end effector's pose (a bridge over zenoh,
-    /// `coop_transport::ros2::device`).
+    /// `coop_transport::ros2_device`).
     Ros2,
 }
 

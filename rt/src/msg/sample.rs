@@ -93,6 +93,7 @@ impl ObjectSample {
             ang_mom,
             adoptions,
             tool_t_ns,
+            remote_t_ns: 0,
         }
     }
     /// The state, or `None` if not finite or not a unit quaternion.

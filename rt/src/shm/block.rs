@@ -5,8 +5,8 @@ use std::marker::PhantomData;
 use std::time::Duration;
 
 use super::header::{OpenError, SegmentKind};
-use super::pod::TypeIdentity;
 use super::segment::{CreateError, RawSegment, SegmentName};
+use crate::pod::TypeIdentity;
 use crate::process::ProcessToken;
 
 /// Marks a struct that processes share by reference in a segment.
@@ -25,7 +25,7 @@ pub unsafe trait ShmShared: Sync + Send + 'static {
 fn identity<B: ShmShared>() -> TypeIdentity {
     TypeIdentity {
         name: B::TYPE_NAME,
-        name_hash: super::pod::fnv1a64(B::TYPE_NAME.as_bytes()),
+        name_hash: crate::pod::fnv1a64(B::TYPE_NAME.as_bytes()),
         size: core::mem::size_of::<B>() as u64,
         align: core::mem::align_of::<B>() as u64,
     }

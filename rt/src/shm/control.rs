@@ -425,6 +425,17 @@ pub struct ServoShared {
     pub roundtrip_count: AtomicU64,
     /// Their histogram.
     pub roundtrip: SharedHistogram,
+    /// Object states read: how long each waited in the ring after physics computed it, ns (the
+    /// pipeline's last hop, physics → servo; once per physics step).
+    pub state_wait: SharedHistogram,
+    /// Count of `state_wait` samples.
+    pub state_wait_count: AtomicU64,
+    /// Partners' reports reaching the displayed force: from the partner's physics tick (its
+    /// report's time, on this machine's clock) to the servo tick that first reads a state
+    /// computed with it, ns (once per report or track that changed the newest).
+    pub remote_display: SharedHistogram,
+    /// Count of `remote_display` samples.
+    pub remote_display_count: AtomicU64,
     /// What the display stages did (`coop_model::display`).
     pub display: DisplayShared,
 }
@@ -467,6 +478,16 @@ pub struct PhysicsShared {
     pub rejected: AtomicU64,
     /// States adopted.
     pub adoptions: AtomicU64,
+    /// The own tool sample's age when physics took it (the pipeline's first hop, servo →
+    /// physics), ns.
+    pub tool_wait: SharedHistogram,
+    /// Count of `tool_wait` samples.
+    pub tool_wait_count: AtomicU64,
+    /// A partner's report or track's age when physics took it: from the partner's physics tick
+    /// (on this machine's clock) through its network, zenoh and ours to this physics, ns.
+    pub remote_wait: SharedHistogram,
+    /// Count of `remote_wait` samples.
+    pub remote_wait_count: AtomicU64,
     /// The world's objects (physics writes it at start).
     pub objects: AtomicU64,
     /// States adopted, by object (a world's adopted at once counts for each of its objects).
@@ -543,6 +564,11 @@ pub struct NetworkShared {
     pub latency: SharedHistogram,
     /// Count of `latency` samples.
     pub latency_count: AtomicU64,
+    /// The own reports and tracks: from physics' tick (their time) to their put on zenoh, ns
+    /// (the pipeline's hop physics → network).
+    pub publish_wait: SharedHistogram,
+    /// Count of `publish_wait` samples.
+    pub publish_wait_count: AtomicU64,
     /// Bytes of `locators` in use (written last, Release).
     pub locators_len: AtomicU64,
     /// The zenoh locators it listens on and its zenoh id, as text.
@@ -578,7 +604,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v20";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v21";
 }
 
 impl ControlBlock {
@@ -737,4 +763,12 @@ impl Resume {
                 .unwrap_or_else(|| BodyState::at_rest(coop_model::body::Vec3::zeros()))
         })
     }
+}
+
+/// Records `ns` in `h`, counting it in `count` (the first sample sets the minimum). Single writer.
+pub fn record_counted(h: &SharedHistogram, count: &AtomicU64, ns: u64) {
+    // REAL-TIME: relaxed loads and stores only.
+    let n = count.load(Ordering::Relaxed);
+    h.record(ns, n == 0);
+    count.store(n + 1, Ordering::Relaxed);
 }

@@ -8,7 +8,7 @@
 use crate::process::{self, Liveness};
 use crate::sync::AtomicU64;
 
-use super::pod::TypeIdentity;
+use crate::pod::TypeIdentity;
 
 /// `b"COOPSHM\x01"` read as a little-endian u64: identifies a coop-haptics segment.
 pub const MAGIC: u64 = u64::from_le_bytes(*b"COOPSHM\x01");

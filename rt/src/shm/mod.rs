@@ -10,7 +10,6 @@ pub mod block;
 pub mod control;
 pub mod header;
 pub mod name;
-pub mod pod;
 pub mod ring;
 #[cfg(not(loom))]
 pub mod rollback;
@@ -21,11 +20,11 @@ pub mod station;
 #[cfg(not(loom))]
 pub mod stats;
 
+pub use crate::pod::{SeqMsg, ShmPod, TypeIdentity};
 #[cfg(not(loom))]
 pub use block::{BlockSegment, ShmShared};
 pub use header::{OpenError, SegmentHeader, SegmentKind};
 pub use name::{NameError, SegmentName, PREFIX, SHM_DIR};
-pub use pod::{SeqMsg, ShmPod, TypeIdentity};
 pub use ring::{
     Consumer, Newest, PopError, Producer, PushError, RingCorruption, RingOpenError, Side,
 };

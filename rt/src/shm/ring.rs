@@ -21,7 +21,7 @@
 
 use core::marker::PhantomData;
 
-use super::pod::ShmPod;
+use crate::pod::ShmPod;
 use crate::process::ProcessToken;
 use crate::sync::{AtomicU64, CachePadded, Ordering, SlotCell};
 

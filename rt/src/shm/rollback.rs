@@ -22,7 +22,7 @@ macro_rules! rollback_figures {
         /// The figures of [`RollbackShared`], read at one moment (each figure relaxed: two may be
         /// a step apart).
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-        #[cfg_attr(feature = "serde", derive(serde::Serialize))]
+        #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
         pub struct RollbackFigures {
             $($(#[$doc])* pub $name: u64,)*
         }

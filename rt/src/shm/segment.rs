@@ -16,7 +16,7 @@ use shared_memory::{Shmem, ShmemConf, ShmemError};
 use super::header::{
     HeaderFields, OpenError, SegmentHeader, SegmentKind, HEADER_LEN, LAYOUT_VERSION, MAGIC, READY,
 };
-use super::pod::TypeIdentity;
+use crate::pod::TypeIdentity;
 use crate::process::ProcessToken;
 use crate::sync::Ordering;
 

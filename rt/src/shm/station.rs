@@ -72,12 +72,12 @@ impl Names {
         Ok(Self {
             control: n("ctl")?,
             tool: n("tool")?,
-            object: n("obj")?,
-            report: n("rep")?,
-            remote: n("rem")?,
-            trace: n("trc")?,
-            track_out: n("tko")?,
-            track_in: n("tki")?,
+            object: n("objects")?,
+            report: n("reports-out")?,
+            remote: n("reports-in")?,
+            trace: n("trace")?,
+            track_out: n("tracks-out")?,
+            track_in: n("tracks-in")?,
         })
     }
 }

@@ -174,6 +174,7 @@ pub fn run_attached(
         );
     }
     wait_present(a, at, &sc, session, &held.present)?;
+    check_stations(&z, &sc, session)?;
     let t0 = coop_rt::timer::monotonic_ns() + LEAD.as_nanos() as u64;
     held.epoch.announce(t0)?;
     if a.progress {
@@ -184,16 +185,16 @@ pub fn run_attached(
             sc.duration_s
         );
     }
+    // At the end, before they stop, the stations' figures (their control blocks are on their
+    // own machines): asked through zenoh.
+    let finish = t0 + (sc.duration_s * 1e9) as u64;
+    wait_until(finish, a)?;
+    let figures = coop_transport::network::figures::ask(&z, session, Duration::from_secs(1));
     // The stations stop by themselves after the end; wait for that, then for their recordings.
-    let end = t0
-        + (sc.duration_s * 1e9) as u64
-        + coop_actors::station::run::SESSION_END_GRACE.as_nanos() as u64;
-    while coop_rt::timer::monotonic_ns() < end {
-        if a.stop.is_raised() {
-            bail!("interrupted: the stations stop by themselves at the scenario's end");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(
+        finish + coop_actors::station::run::SESSION_END_GRACE.as_nanos() as u64,
+        a,
+    )?;
     let recordings = collect(&sc, at, session, method, &a.stop)?;
     let _ = z.close().wait();
     let sites: Vec<(String, PathBuf)> = sc
@@ -211,12 +212,98 @@ pub fn run_attached(
         recordings: &recordings,
         epochs: &epochs,
     };
-    // Their statuses are on their own machines: no live figures.
+    // Their statuses are on their own machines: their figures came through zenoh.
     let live = BTreeMap::new();
     let mut o =
         super::outcome::outcome(&sc, session, super::unix_ns_of(t0), &dir, &recorded, live)?;
     o.launcher_epoch_ns = t0;
+    for s in &sc.site {
+        if let (Some(st), Some(f)) = (o.stations.get_mut(&s.name), figures.get(&s.name)) {
+            let ticks = (sc.duration_s * s.physics_rate_hz).round() as u64;
+            st.figures = Some(super::outcome::StationRow::of_figures(f, ticks));
+        }
+    }
     Ok(o)
+}
+
+/// Waits until `t_ns` (this machine's monotonic clock).
+///
+/// # Errors
+/// Interrupted first (the stations stop by themselves at the scenario's end).
+fn wait_until(t_ns: u64, a: &RunArgs) -> anyhow::Result<()> {
+    while coop_rt::timer::monotonic_ns() < t_ns {
+        if a.stop.is_raised() {
+            bail!("interrupted: the stations stop by themselves at the scenario's end");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
+}
+
+/// How long the launcher asks the present stations what they run before it gives up on one.
+const ASK_RUNS: Duration = Duration::from_secs(3);
+
+/// Before time 0: every station runs the launcher's scenario (by its fingerprint) and method, and
+/// one that does not emulate the scenario's network is said (its delays are the real network's,
+/// not the scenario's the simulator rows assume). Nothing is announced if one refuses.
+///
+/// # Errors
+/// A station that does not say what it runs within [`ASK_RUNS`], or runs another scenario or
+/// method (named, with both values).
+fn check_stations(z: &zenoh::Session, sc: &Scenario, session: &str) -> anyhow::Result<()> {
+    let want = coop_transport::network::figures::scenario_hash(sc);
+    let deadline = std::time::Instant::now() + ASK_RUNS;
+    let mut figures = BTreeMap::new();
+    while figures.len() < sc.site.len() && std::time::Instant::now() < deadline {
+        figures.extend(coop_transport::network::figures::ask(
+            z,
+            session,
+            Duration::from_millis(500),
+        ));
+    }
+    for s in &sc.site {
+        let Some(f) = figures.get(&s.name) else {
+            bail!(
+                "station {} is present but did not say what it runs within {} s (a station of an older version?); nothing was started",
+                s.name,
+                ASK_RUNS.as_secs()
+            );
+        };
+        let r = &f.runs;
+        if r.method != sc.method.as_str() {
+            bail!(
+                "station {} runs method {}, the launcher was given {}: start the stations with --method {} (or their config's method), or give the launcher --method {}; nothing was started",
+                s.name,
+                r.method,
+                sc.method.as_str(),
+                sc.method.as_str(),
+                r.method
+            );
+        }
+        if r.scenario_hash != want {
+            bail!(
+                "station {} runs another scenario ({:?}, fingerprint {:016x}) than the launcher's ({:?}, {:016x}): give both the same scenario file; nothing was started",
+                s.name,
+                r.scenario,
+                r.scenario_hash,
+                sc.name,
+                want
+            );
+        }
+        let delayed =
+            sc.network.delay_max_ms > 0.0 || sc.network.jitter_ms > 0.0 || sc.network.loss > 0.0;
+        if !r.emulated && delayed {
+            eprintln!(
+                "warning: station {} does not emulate the scenario's network (network.emulate = false): its delays are the real network's, while the simulator rows assume the scenario's ({}-{} ms, jitter {} ms, loss {}); compare the -real rows with the -sim rows with that in mind",
+                s.name,
+                sc.network.delay_min_ms,
+                sc.network.delay_max_ms,
+                sc.network.jitter_ms,
+                sc.network.loss
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Waits until every site's presence is seen (`present`), within the start timeout.

@@ -289,9 +289,17 @@ fn live_statuses(
         if let Ok(mut status) = coop_actors::station::status::read(session, &st.site, &sites) {
             status.name_objects(sc);
             let start = at_start.get(&st.site).copied().unwrap_or([0, 0]);
-            let overruns_during_session = at_end.map(|e| SessionOverruns {
-                servo: e[0].saturating_sub(start[0]),
-                physics: e[1].saturating_sub(start[1]),
+            let ticks = sc
+                .site
+                .iter()
+                .find(|s| s.name == st.site)
+                .map_or(0, |s| (sc.duration_s * s.physics_rate_hz).round() as u64);
+            let overruns_during_session = at_end.map(|e| {
+                SessionOverruns::new(
+                    e[0].saturating_sub(start[0]),
+                    e[1].saturating_sub(start[1]),
+                    ticks,
+                )
             });
             out.insert(
                 st.site.clone(),

@@ -10,6 +10,7 @@ use coop_actors::station::status::StationStatus;
 use coop_model::metrics::{self, Metrics};
 use coop_model::scenario::{MethodName, Scenario};
 use coop_model::sim::{Mode, RunResult};
+use coop_rt::shm::rollback::RollbackFigures;
 use coop_transport::recording::{self, Recording, StatusMsg};
 use serde::Serialize;
 
@@ -104,6 +105,9 @@ pub struct StationReport {
     pub final_status: Option<StatusMsg>,
     /// Its status read just before the session's end (`None`: not read, or not on this machine).
     pub live: Option<LiveStatus>,
+    /// The stations table's figures: from `live`, or asked of the station through zenoh when its
+    /// control block is on another machine (`session run --attach`); `None`: neither answered.
+    pub figures: Option<StationRow>,
     /// The session's time 0 in this station's clock.
     pub epoch_ns: u64,
     /// When its network joined the session (its own presence seen).
@@ -141,6 +145,7 @@ impl StationReport {
             recording: record.display().to_string(),
             recording_parts: rec.files.len(),
             final_status: rec.status,
+            figures: live.as_ref().map(StationRow::of_live),
             live,
             epoch_ns,
             joined_s: rec
@@ -164,6 +169,49 @@ impl StationReport {
     }
 }
 
+/// One station's row of the stations table, wherever it came from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StationRow {
+    /// Deadlines missed during the session, and whether it was overloaded.
+    pub overruns: Option<SessionOverruns>,
+    /// Physics' compute time per cycle, 99th percentile, µs.
+    pub physics_compute_p99_us: u64,
+    /// Rollback figures, for a method that rolls back.
+    pub rollback: Option<RollbackFigures>,
+    /// `status` (its control block, read here) or `zenoh` (asked of its network process).
+    pub source: &'static str,
+}
+
+impl StationRow {
+    /// From a status read here.
+    pub fn of_live(l: &LiveStatus) -> Self {
+        Self {
+            overruns: l.overruns_during_session,
+            physics_compute_p99_us: l.status.loops.physics.compute_us.p99,
+            rollback: l.status.physics.rollback,
+            source: "status",
+        }
+    }
+
+    /// From what the station answered on its figures key, in a session of `physics_ticks` ticks
+    /// at its physics rate.
+    pub fn of_figures(
+        f: &coop_transport::network::figures::StationFigures,
+        physics_ticks: u64,
+    ) -> Self {
+        Self {
+            overruns: Some(SessionOverruns::new(
+                f.servo_overruns,
+                f.physics_overruns,
+                physics_ticks,
+            )),
+            physics_compute_p99_us: f.physics_compute_p99_us,
+            rollback: f.rollback,
+            source: "zenoh",
+        }
+    }
+}
+
 /// A station's status read just before the session's end, with its overruns during the session.
 #[derive(Debug, Clone, Serialize)]
 pub struct LiveStatus {
@@ -183,6 +231,32 @@ pub struct SessionOverruns {
     pub servo: u64,
     /// Physics'.
     pub physics: u64,
+    /// Physics ticks the session held at the site's rate (its duration × the physics rate).
+    pub physics_ticks: u64,
+    /// More than `OVERLOAD_SHARE` (1 %) of those ticks overran: the station could not keep up, and
+    /// its figures say more about the machine than about the method.
+    pub overloaded: bool,
+}
+
+/// The share of a session's physics ticks a station may overrun before its run is marked
+/// overloaded.
+pub const OVERLOAD_SHARE: f64 = 0.01;
+
+impl SessionOverruns {
+    /// `servo` and `physics` overruns in a session of `physics_ticks` physics ticks.
+    pub fn new(servo: u64, physics: u64, physics_ticks: u64) -> Self {
+        Self {
+            servo,
+            physics,
+            physics_ticks,
+            overloaded: physics as f64 > OVERLOAD_SHARE * physics_ticks as f64,
+        }
+    }
+
+    /// The share of the physics ticks that overran.
+    pub fn physics_share(&self) -> f64 {
+        self.physics as f64 / self.physics_ticks.max(1) as f64
+    }
 }
 
 /// One object's figures in a session: the simulator's and the stations'.
@@ -440,6 +514,7 @@ mod tests {
             "recording_parts": 0,
             "final": rec.status,
             "live": null,
+            "figures": null,
             "epoch_ns": 1_000_000_000u64,
             "joined_s": null,
             "first_sample_s": 2.0,

@@ -66,6 +66,7 @@ pub fn run_from_recordings(
         rollback: vec![None; recs.len()],
         force_steps: vec![ForceSteps::default(); recs.len()],
         servo_ticks: Vec::new(),
+        refused: 0,
     })
 }
 

@@ -5,7 +5,7 @@
 use coop_model::scenario::Scenario;
 use coop_rt::shm::rollback::RollbackFigures;
 
-use super::outcome::{LiveStatus, ObjectFigures, SessionRun};
+use super::outcome::{ObjectFigures, SessionOverruns, SessionRun, StationRow, OVERLOAD_SHARE};
 
 /// Prints the report of `run` of `sc` (`attached`: the stations were not started here, so their
 /// clocks differ from the launcher's).
@@ -17,10 +17,32 @@ pub fn print(sc: &Scenario, run: &SessionRun, attached: bool) {
         print_epochs(run);
     }
     print_station_loops(run);
+    print_overloads(run);
     println!(
         "# *-sim: the simulator; *-real: the stations (adopt step, E others, others did: simulator only)\n# recordings, logs, metrics.json and plots in {}/<method>/",
         run.out
     );
+}
+
+/// Per method, a line for each station that overran more than `OVERLOAD_SHARE` (1 %) of its physics
+/// ticks: its `-real` row measures an overloaded machine, not only the method.
+fn print_overloads(run: &SessionRun) {
+    for (m, r) in &run.methods {
+        for (site, st) in &r.stations {
+            let Some(o) = st.figures.and_then(|r| r.overruns) else {
+                continue;
+            };
+            if o.overloaded {
+                println!(
+                    "# OVERLOADED: {m}-real at {site}: physics overran {} of {} ticks ({:.1} %, more than {:.0} %); its figures say more about the machine than about the method",
+                    o.physics,
+                    o.physics_ticks,
+                    100.0 * o.physics_share(),
+                    100.0 * OVERLOAD_SHARE
+                );
+            }
+        }
+    }
 }
 
 /// Per method and object, the simulator's figures and the stations'.
@@ -82,20 +104,24 @@ fn print_epochs(run: &SessionRun) {
 }
 
 /// A column of the `# stations:` rows: its heading, its width, and its figure from a station's
-/// live status (`-`: not read, or a method that does not roll back).
-type Column = (&'static str, usize, fn(Option<&LiveStatus>) -> String);
+/// row (`-`: neither read nor answered, or a method that does not roll back).
+type Column = (&'static str, usize, fn(Option<&StationRow>) -> String);
 
 /// The `# stations:` rows' columns after the method and the site: physics overruns during the
 /// session and compute p99 (methods side by side, so timewarp's cost shows beside paper's), and a
 /// rolling-back method's rollbacks, depth, fallbacks, hash checks and mismatches, confirmed states
 /// adopted, contact unfelt and phantom, missed contacts replayed, and ticks the own tool was
 /// lagged. The one list of them: heading and figure side by side.
-const STATION_COLUMNS: [Column; 11] = [
+const STATION_COLUMNS: [Column; 12] = [
     ("physics overruns", 16, |l| {
-        dash(l.and_then(|l| l.overruns_during_session).map(|o| o.physics))
+        dash(l.and_then(|l| l.overruns).map(|o| o.physics))
+    }),
+    ("load", 10, |l| {
+        l.and_then(|l| l.overruns)
+            .map_or_else(|| "-".to_owned(), |o| load(&o))
     }),
     ("compute p99 us", 14, |l| {
-        dash(l.map(|l| l.status.loops.physics.compute_us.p99))
+        dash(l.map(|l| l.physics_compute_p99_us))
     }),
     ("rollbacks", 9, |l| dash(rollback(l).map(|r| r.rollbacks))),
     ("depth max/p99 ticks", 19, |l| {
@@ -120,8 +146,17 @@ const STATION_COLUMNS: [Column; 11] = [
     }),
 ];
 
-fn rollback(l: Option<&LiveStatus>) -> Option<RollbackFigures> {
-    l.and_then(|l| l.status.physics.rollback)
+/// `overloaded` when more than `OVERLOAD_SHARE` (1 %) of the physics ticks overran, else `ok`.
+fn load(o: &SessionOverruns) -> String {
+    if o.overloaded {
+        "OVERLOADED".to_owned()
+    } else {
+        "ok".to_owned()
+    }
+}
+
+fn rollback(l: Option<&StationRow>) -> Option<RollbackFigures> {
+    l.and_then(|l| l.rollback)
 }
 
 fn dash(x: Option<u64>) -> String {
@@ -147,8 +182,8 @@ fn print_station_loops(run: &SessionRun) {
     println!("{}", station_line("method", "site", headings));
     for (m, r) in &run.methods {
         for (site, st) in &r.stations {
-            let live = st.live.as_ref();
-            let cells = STATION_COLUMNS.iter().map(|(_, w, f)| (*w, f(live)));
+            let row = st.figures.as_ref();
+            let cells = STATION_COLUMNS.iter().map(|(_, w, f)| (*w, f(row)));
             println!("{}", station_line(m, site, cells));
         }
     }

@@ -230,12 +230,16 @@ impl<'a> Sampler<'a> {
     }
 
     /// The clock thread: every present peer whose offset is unknown or due is sampled, until
-    /// `stop`.
+    /// `stop`; and a peer not present whose offset is unknown, every [`CLOCK_EVERY`]. Its
+    /// liveliness token's return may never reach us (a token deleted while a link was down and
+    /// declared again before the routes were back), and every track it sends is held until its
+    /// offset is known: presence alone must not decide that it never will be.
     pub(super) fn run(&self, stop: &AtomicU64) {
         while stop.load(Ordering::Relaxed) == 0 {
             let present = self.ctl.network.peers_present.load(Ordering::Relaxed);
             for j in 0..self.sites.len() {
-                if j == self.me || present & (1 << j) == 0 {
+                let here = present & (1 << j) != 0;
+                if j == self.me || (!here && self.known(j)) {
                     continue;
                 }
                 let due = {
@@ -245,10 +249,21 @@ impl<'a> Sampler<'a> {
                         // It left and came back (its run may have another clock): start over.
                         *p = Peer::default();
                     }
-                    p.count == 0 || monotonic_ns() >= p.due_ns
+                    let now = monotonic_ns();
+                    if here {
+                        p.count == 0 || now >= p.due_ns
+                    } else {
+                        now >= p.due_ns
+                    }
                 };
                 if due {
                     self.sample(j);
+                    if !here && !self.known(j) {
+                        // Asked again at the slow pace: a site that never joined costs one
+                        // query a period, answered at once by nobody.
+                        lock(&self.peers)[j].due_ns =
+                            monotonic_ns() + CLOCK_EVERY.as_nanos() as u64;
+                    }
                 }
             }
             std::thread::sleep(LOOK_EVERY);

@@ -6,8 +6,6 @@ use coop_model::link::DueQueue;
 use coop_model::rng::Rng;
 use coop_model::scenario::LinkSpec;
 
-use super::receive::Delivery;
-
 /// The receive-side emulation of a link.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Emulation {
@@ -36,7 +34,7 @@ impl Emulation {
 /// The emulated links into this site, and the states (or, as `T`, tool tracks: their own links
 /// with the same law and seed) they still hold.
 #[derive(Debug)]
-pub(super) struct Emulator<T = Delivery> {
+pub(super) struct Emulator<T> {
     link: LinkSpec,
     /// One generator per sending site.
     rngs: Vec<Rng>,
@@ -100,7 +98,7 @@ mod tests {
             },
             seed: 1,
         };
-        let mut em: Emulator = Emulator::new(&e, 2, 1);
+        let mut em: Emulator<u8> = Emulator::new(&e, 2, 1);
         assert_eq!(em.arrival(0, 1_000, Some(1_000)), Some(50_001_000));
     }
 }

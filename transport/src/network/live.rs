@@ -15,10 +15,8 @@ use zenoh::{Session, Wait};
 
 use super::NetworkError;
 use crate::keys;
+use crate::live_view::LIVE_EVERY_NS;
 use crate::recording::LiveSample;
-
-/// The shortest time between two live samples (about 60 Hz: a viewer's frame rate), ns.
-pub const LIVE_EVERY_NS: u64 = 16_666_667;
 
 /// The live publisher and the newest sample not yet put.
 pub(super) struct Live {

@@ -47,27 +47,29 @@ pub mod config;
 pub mod emulate;
 pub mod epoch;
 mod error;
+pub mod figures;
 mod live;
 mod presence;
 pub mod publish;
 mod receive;
 mod record;
+mod ros2_publish;
 
+pub use crate::live_view::LIVE_EVERY_NS;
 pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
 pub use config::{concrete_listen, config, Locator, Mode, NetworkConfig, Tls, TRANSPORTS};
 pub use emulate::Emulation;
 pub use epoch::{EpochAnnouncer, EPOCH_HOLD_LIMIT};
 pub use error::NetworkError;
-pub use live::LIVE_EVERY_NS;
 pub use publish::{next_wake, GIVE_UP_NS, POLL, PUBLISH_LAG_NS, RETRY_NS, STALE_REPORT_NS};
 
 use crate::ros2::cdr::Log;
-use crate::ros2::publish::Ros2Publisher;
 use live::Live;
 use presence::Presence;
 use publish::{Publish, TrackPublish};
 use receive::Receiver;
 use record::{Events, Recording};
+use ros2_publish::Ros2Publisher;
 
 /// What the network process needs.
 #[derive(Debug)]
@@ -80,6 +82,8 @@ pub struct NetworkArgs<'a> {
     pub site_index: usize,
     /// Scenario name (for the recording).
     pub scenario: String,
+    /// Its fingerprint ([`figures::scenario_hash`]), for a launcher attaching to the station.
+    pub scenario_hash: u64,
     /// Method name (for the recording).
     pub method: String,
     /// NetworkConfig.
@@ -223,6 +227,12 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         None => None,
     };
     let receiver = Mutex::new(rx);
+    let runs = figures::StationRuns {
+        scenario: a.scenario.clone(),
+        scenario_hash: a.scenario_hash,
+        method: a.method.clone(),
+        emulated: a.emulation.is_some(),
+    };
     let names = (a.scenario, a.method);
     let live = Live::declare(&session, ctx.session_name, &site)?;
     let ros2 = match &a.ros2 {
@@ -253,6 +263,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             view,
             ros2,
             names,
+            runs,
         },
     )?;
     drop(publish);
@@ -294,6 +305,8 @@ struct Loop {
     ros2: Option<Ros2Publisher>,
     /// Scenario and method names, for the recording's session message.
     names: (String, String),
+    /// What the station runs, for a launcher attaching to it.
+    runs: figures::StationRuns,
 }
 
 /// Declares the rest, starts the threads and runs the loop; the threads end with it.
@@ -311,6 +324,8 @@ fn serve(
     let clocks = &clock::Sampler::new(session, name, ctx.sites, ctx.me, ctx.ctl);
     let epoch = &epoch::EpochListener::declare(session, name, site)?;
     std::thread::scope(|scope| {
+        // Answered before the presence shows: a launcher that sees it may ask at once.
+        let mut figures = figures::Figures::declare(session, name, site, lp.runs.clone())?;
         let mut presence = Presence::declare(session, name, site)?;
         ctx.ctl
             .network
@@ -341,6 +356,7 @@ fn serve(
         loop {
             let now = lp.turn(ctx, publish, receiver, &mut presence, clocks);
             clock_answers.count(&ctx.ctl.network.traffic);
+            figures.turn(ctx.ctl, now);
             epoch.poll(ctx.ctl, clocks.launcher_offset());
             if !session_recorded {
                 session_recorded = lp.record_session(ctx, now);
@@ -394,12 +410,12 @@ impl Loop {
         clocks: &clock::Sampler<'_>,
     ) -> u64 {
         let traffic = &ctx.ctl.network.traffic;
-        for m in publish.newest(&mut self.reports, traffic) {
+        for m in publish.newest(&mut self.reports, &ctx.ctl.network) {
             self.recording.write(|w| w.published(&m));
         }
         publish.count_replies(traffic);
         if let Some((p, ring)) = &mut self.tracks {
-            p.all(ring, traffic);
+            p.all(ring, &ctx.ctl.network);
         }
         let now = monotonic_ns();
         let (log, peers) = {

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use coop_rt::msg::{SiteReport, ToolTrack};
-use coop_rt::shm::control::{Traffic, WireKind};
+use coop_rt::shm::control::{record_counted, NetworkShared, Traffic, WireKind};
 use coop_rt::shm::Consumer;
 use coop_rt::timer::monotonic_ns;
 use zenoh::pubsub::Publisher;
@@ -150,13 +150,15 @@ impl Publish {
         traffic.sent_bytes.count(WireKind::State, bytes);
     }
 
-    /// Publishes the newest fresh report of each object in `reports` (counted in `traffic`);
-    /// what was put, for the recording.
+    /// Publishes the newest fresh report of each object in `reports` (counted in `net`'s
+    /// traffic, its wait from physics' tick to the put in `net.publish_wait`); what was put, for
+    /// the recording.
     pub(super) fn newest(
         &mut self,
         reports: &mut Consumer<SiteReport>,
-        traffic: &Traffic,
+        net: &NetworkShared,
     ) -> Vec<PublishedMsg> {
+        let traffic = &net.traffic;
         // Only the newest report of each object: states replace each other, and a backlog
         // (physics ran before this process was up, or while it restarted) is stale by
         // definition.
@@ -182,10 +184,16 @@ impl Publish {
             }
             let bytes = wire::encode(&r);
             if self.publishers[k].put(bytes.clone()).wait().is_ok() {
+                let now = monotonic_ns();
                 traffic.sent(WireKind::State, bytes.len());
+                record_counted(
+                    &net.publish_wait,
+                    &net.publish_wait_count,
+                    now.saturating_sub(r.t_ns),
+                );
                 self.published += 1;
                 put.push(PublishedMsg {
-                    t_ns: monotonic_ns(),
+                    t_ns: now,
                     seq: r.seq,
                     state_ns: r.t_ns,
                 });
@@ -227,8 +235,10 @@ impl TrackPublish {
         })
     }
 
-    /// Publishes every fresh track waiting in `tracks`, in order; counted in `traffic`.
-    pub(super) fn all(&mut self, tracks: &mut Consumer<ToolTrack>, traffic: &Traffic) {
+    /// Publishes every fresh track waiting in `tracks`, in order; counted in `net`'s traffic,
+    /// its wait from physics' tick to the put in `net.publish_wait`.
+    pub(super) fn all(&mut self, tracks: &mut Consumer<ToolTrack>, net: &NetworkShared) {
+        let traffic = &net.traffic;
         while let Ok(t) = tracks.pop() {
             if monotonic_ns().saturating_sub(t.t_ns) > STALE_REPORT_NS {
                 self.stale_skipped += 1;
@@ -238,6 +248,8 @@ impl TrackPublish {
             let len = bytes.len();
             if self.publisher.put(bytes).wait().is_ok() {
                 traffic.sent(WireKind::Track, len);
+                let wait = monotonic_ns().saturating_sub(t.t_ns);
+                record_counted(&net.publish_wait, &net.publish_wait_count, wait);
                 self.published += 1;
             }
         }

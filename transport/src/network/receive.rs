@@ -11,7 +11,9 @@ use std::time::Duration;
 
 use coop_model::world::MAX_OBJECTS;
 use coop_rt::msg::{SiteReport, ToolTrack};
-use coop_rt::shm::control::{ControlBlock, CounterKey, Ring, WireKind, REFUSED_REASONS};
+use coop_rt::shm::control::{
+    record_counted, ControlBlock, CounterKey, Ring, WireKind, REFUSED_REASONS,
+};
 use coop_rt::shm::Producer;
 use coop_rt::sync::{AtomicU64, Ordering};
 use coop_rt::timer::monotonic_ns;
@@ -24,8 +26,8 @@ use super::clock::Sampler;
 use super::emulate::{Emulation, Emulator};
 use super::{lock, NetworkError};
 use crate::admit::{self, Bounds, Refusal};
-use crate::keys;
 use crate::recording::{PeerMsg, RemoteMsg};
+use crate::{keys, wire};
 
 /// A checked state on its way to physics (now, or when the emulated link delivers it).
 #[derive(Debug, Clone, Copy)]
@@ -45,7 +47,7 @@ pub(super) struct Receiver<'a> {
     control: &'a ControlBlock,
     pub(super) inbound: admit::Inbound,
     remote: Producer<SiteReport>,
-    emulator: Option<Emulator>,
+    emulator: Option<Emulator<Delivery>>,
     pub(super) received: u64,
     pub(super) join_states: u64,
     pub(super) refused: [u64; REFUSED_REASONS],
@@ -80,15 +82,15 @@ pub(super) struct TrackIn {
     emulator: Option<Emulator<ToolTrack>>,
     /// Per site: its newest tracks that arrived before its clock offset was known (a burst may
     /// carry a world's objects, one a track: up to [`MAX_OBJECTS`] kept).
-    waiting: Vec<Vec<Vec<u8>>>,
+    waiting: Vec<Vec<ToolTrack>>,
     /// Tracks handed to physics.
     pub(super) received: u64,
 }
 
-/// A message held until its sender's clock offset is known.
+/// A message held until its sender's clock offset is known: decoded once, checked when it can be.
 struct Waiting {
     key: String,
-    bytes: Vec<u8>,
+    report: SiteReport,
     zenoh_ts: Option<String>,
     join: bool,
 }
@@ -140,8 +142,16 @@ impl<'a> Receiver<'a> {
         });
     }
 
-    /// A tool track on `key`.
+    /// A tool track on `key`, decoded once here.
     pub(super) fn on_track(&mut self, key: &str, bytes: &[u8]) {
+        match wire::decode_track(bytes) {
+            Ok(t) => self.on_decoded_track(key, t),
+            Err(e) => self.refuse(key, &Refusal::from(e)),
+        }
+    }
+
+    /// A decoded tool track on `key`: checked, held for its sender's clock offset, or handed on.
+    fn on_decoded_track(&mut self, key: &str, track: ToolTrack) {
         let now = monotonic_ns();
         let offsets = self.offsets();
         let epoch = self.control.epoch();
@@ -150,7 +160,7 @@ impl<'a> Receiver<'a> {
         };
         let a = match self
             .inbound
-            .check_track(keys::site_of(key), bytes, now, &offsets)
+            .check_track_decoded(keys::site_of(key), track, now, &offsets)
         {
             Ok(a) => a,
             Err(Refusal::NoOffset { site }) => {
@@ -159,7 +169,7 @@ impl<'a> Receiver<'a> {
                 if w.len() == MAX_OBJECTS {
                     w.remove(0);
                 }
-                w.push(bytes.to_vec());
+                w.push(track);
                 return;
             }
             Err(e) => return self.refuse(key, &e),
@@ -195,7 +205,7 @@ impl<'a> Receiver<'a> {
         let Some(tr) = self.tracks.as_mut() else {
             return;
         };
-        let mut retry: Vec<(usize, Vec<u8>)> = Vec::new();
+        let mut retry: Vec<(usize, ToolTrack)> = Vec::new();
         for (j, known) in offsets.iter().enumerate() {
             if let (Some(_), Some(w)) = (known, tr.waiting.get_mut(j)) {
                 retry.extend(w.drain(..).map(|b| (j, b)));
@@ -205,9 +215,9 @@ impl<'a> Receiver<'a> {
         while let Some(t) = tr.emulator.as_mut().and_then(|e| e.pop_due(now)) {
             due.push(t);
         }
-        for (j, b) in retry {
+        for (j, t) in retry {
             let key = keys::tool("", 0, &self.sites[j]);
-            self.on_track(&key, &b);
+            self.on_decoded_track(&key, t);
         }
         for t in due {
             self.hand_over_track(t, now);
@@ -238,7 +248,7 @@ impl<'a> Receiver<'a> {
             if known.is_some() {
                 for k in 0..MAX_OBJECTS {
                     if let Some(w) = self.waiting[j * MAX_OBJECTS + k].take() {
-                        self.on_bytes(&w.key, &w.bytes, w.zenoh_ts, w.join);
+                        self.on_report(&w.key, w.report, w.zenoh_ts, w.join);
                     }
                 }
             }
@@ -354,7 +364,8 @@ impl<'a> Receiver<'a> {
         self.control.network.clock_rtt_ns[j].store(0, Ordering::Relaxed);
     }
 
-    /// A message on `key`; `join`: a late joiner's catch-up state (not a message on a link).
+    /// A message on `key`, decoded once here; `join`: a late joiner's catch-up state (not a
+    /// message on a link).
     pub(super) fn on_bytes(
         &mut self,
         key: &str,
@@ -362,34 +373,43 @@ impl<'a> Receiver<'a> {
         zenoh_ts: Option<String>,
         join: bool,
     ) {
+        match wire::decode(bytes) {
+            Ok(r) => self.on_report(key, r, zenoh_ts, join),
+            Err(e) => self.refuse(key, &Refusal::from(e)),
+        }
+    }
+
+    /// A decoded report on `key`: checked, held for its sender's clock offset, or handed on.
+    fn on_report(&mut self, key: &str, report: SiteReport, zenoh_ts: Option<String>, join: bool) {
         let now = monotonic_ns();
         let offsets = self.offsets();
         // (A key naming no object of the largest world: refused as not the object it names.)
         let key_object = keys::object_of(key)
             .filter(|&k| k < MAX_OBJECTS as u64)
             .unwrap_or(u64::MAX);
-        let a = match self
-            .inbound
-            .check(keys::site_of(key), key_object, bytes, now, &offsets)
-        {
-            Ok(a) => a,
-            Err(Refusal::NoOffset { site }) => {
-                // Its time cannot be read yet: held (the newest of the site) until it can.
-                self.held += 1;
-                self.control
-                    .network
-                    .held_for_offset
-                    .store(self.held, Ordering::Relaxed);
-                self.waiting[site * MAX_OBJECTS + key_object as usize] = Some(Waiting {
-                    key: key.to_owned(),
-                    bytes: bytes.to_vec(),
-                    zenoh_ts,
-                    join,
-                });
-                return;
-            }
-            Err(e) => return self.refuse(key, &e),
-        };
+        let a =
+            match self
+                .inbound
+                .check_decoded(keys::site_of(key), key_object, report, now, &offsets)
+            {
+                Ok(a) => a,
+                Err(Refusal::NoOffset { site }) => {
+                    // Its time cannot be read yet: held (the newest of the site) until it can.
+                    self.held += 1;
+                    self.control
+                        .network
+                        .held_for_offset
+                        .store(self.held, Ordering::Relaxed);
+                    self.waiting[site * MAX_OBJECTS + key_object as usize] = Some(Waiting {
+                        key: key.to_owned(),
+                        report,
+                        zenoh_ts,
+                        join,
+                    });
+                    return;
+                }
+                Err(e) => return self.refuse(key, &e),
+            };
         let (from, r, offset) = (a.site, a.report, a.offset_ns);
         if from == self.me {
             return; // our own, echoed back
@@ -462,12 +482,8 @@ impl<'a> Receiver<'a> {
             .store(self.received, Ordering::Relaxed);
         let age = now.saturating_sub(d.report.t_ns);
         if !join && self.emulator.is_none() {
-            let count = self.control.network.latency_count.load(Ordering::Relaxed);
-            self.control.network.latency.record(age, count == 0);
-            self.control
-                .network
-                .latency_count
-                .store(count + 1, Ordering::Relaxed);
+            let net = &self.control.network;
+            record_counted(&net.latency, &net.latency_count, age);
         }
         self.log.push(RemoteMsg {
             t_ns: now,

@@ -71,7 +71,8 @@ pub struct Scene {
     pub tool_radius_m: f64,
     /// The environment's planes: normal into free space, offset along it, m.
     pub planes: Vec<([f64; 3], f64)>,
-    /// The world's other objects (the second on), by name: frames `object/<name>/<site>`.
+    /// The world's other objects (the second on), by name: frames `object/<name>/<site>` (the
+    /// first's too in a world of several: [`Scene::object_frame`]).
     pub others: Vec<(String, Body)>,
     /// The first object's name in a world of several (empty in a world of one, whose `/object`
     /// names none).
@@ -326,9 +327,14 @@ impl Scene {
             .collect()
     }
 
-    /// `object/<site>`.
+    /// The first object's frame: `object/<site>` in a world of one, `object/<name>/<site>` in a
+    /// world of several, as every other object's, so that no object's frame goes unnamed.
     pub fn object_frame(&self) -> String {
-        format!("object/{}", self.site)
+        if self.first_name.is_empty() {
+            format!("object/{}", self.site)
+        } else {
+            self.other_frame(&self.first_name)
+        }
     }
 
     /// `tool/<site>`.

@@ -4,15 +4,15 @@
 //!
 //! - [`cdr`]: the messages (`PoseStamped`, `WrenchStamped`, `TFMessage`, `Log`) in CDR;
 //! - [`graph`]: keys, liveliness tokens, QoS strings, attachments and type hashes (Jazzy);
-//! - [`publish`]: the station's publisher, in the network process (off the real-time path);
-//! - [`device`]: `device = "ros2"`, a bridge thread between a driver's topics and the servo.
+//! - `network::ros2_publish`: the station's publisher, in the network process (off the real-time
+//!   path);
+//! - [`crate::ros2_device`]: `device = "ros2"`, a bridge thread between a driver's topics and the
+//!   servo.
 //!
 //! `docs/ros2.md` says what a ROS 2 user sees and how to use it.
 
 pub mod cdr;
-pub mod device;
 pub mod graph;
-pub mod publish;
 
 use serde::{Deserialize, Serialize};
 

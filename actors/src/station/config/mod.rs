@@ -6,14 +6,14 @@
 //! - `schema`: the tables and fields of the file, with their defaults;
 //! - `resolve`: loading a file and resolving it into [`Resolved`], what the station runs;
 //! - `rules`: the checks, each naming the field, the value and the rule;
-//! - `error`: [`ConfigError`] (a file that cannot be read, or a [`Problem`] and its file).
+//! - `station::error`, beside this module (the device's setup names its problems too):
+//!   [`ConfigError`] (a file that cannot be read, or a [`Problem`] and its file).
 
-mod error;
 mod resolve;
 mod rules;
 mod schema;
 
-pub use error::{ConfigError, Problem};
+pub use super::error::{ConfigError, Problem};
 pub use resolve::Resolved;
 pub(crate) use rules::{readable, tls_files_readable};
 pub use schema::{LoopSpec, StartMode, StationConfig, SupervisorSpec};

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use coop_model::scenario::{MethodName, Scenario};
+use coop_model::scenario::Scenario;
 use coop_rt::shm::SegmentName;
 use coop_transport::network::{Locator, Mode, NetworkConfig, Tls};
 
@@ -20,7 +20,7 @@ pub(super) fn session(session: &str) -> Result<(), Problem> {
 
 /// Methods that step on one tick grid for the session need every site at the same physics rate.
 pub(super) fn one_tick_grid(scenario: &Scenario) -> Result<(), Problem> {
-    if !matches!(scenario.method, MethodName::Timewarp | MethodName::Coupled) {
+    if !scenario.steps_on_grid(scenario.method) {
         return Ok(());
     }
     let r0 = scenario.site[0].physics_rate_hz;

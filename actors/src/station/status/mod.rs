@@ -15,7 +15,10 @@ use coop_rt::stats::LoopSnapshot;
 use coop_rt::sync::Ordering;
 use serde::Serialize;
 
+mod pipeline;
 mod show;
+
+pub use pipeline::{Hop, HOPS};
 
 /// Everything `station status` shows.
 #[derive(Debug, Clone, Serialize)]
@@ -41,6 +44,8 @@ pub struct StationStatus {
     pub physics: PhysicsStatus,
     /// What the servo displays.
     pub servo: ServoStatus,
+    /// The pipeline's own latency, hop by hop (`pipeline.rs`).
+    pub pipeline: Vec<Hop>,
     /// The run state is `running`.
     pub running: bool,
 }
@@ -270,6 +275,25 @@ pub struct Latency {
     pub max: u64,
 }
 
+impl Latency {
+    /// The figures of `h` with its `count` samples (none before the first).
+    pub fn of(
+        h: &coop_rt::stats::SharedHistogram,
+        count: &coop_rt::sync::AtomicU64,
+    ) -> Option<Self> {
+        let count = count.load(Ordering::Relaxed);
+        (count > 0).then(|| {
+            let h = h.to_hdr();
+            Self {
+                count,
+                p50: h.value_at_quantile(0.5),
+                p99: h.value_at_quantile(0.99),
+                max: h.max(),
+            }
+        })
+    }
+}
+
 /// Physics' figures.
 #[derive(Debug, Clone, Serialize)]
 pub struct PhysicsStatus {
@@ -481,6 +505,21 @@ fn open(session: &str, station: &str) -> Result<(Names, BlockSegment<ControlBloc
     Ok((names, ctl))
 }
 
+/// A running station's rollback figures as its physics last published them (cheap: no window
+/// of loop rates, no ring opened; `None` for a method that does not roll back). For a caller
+/// that must act at a point of the session, which a full [`read`] (a 200 ms window and more)
+/// would reach late on a loaded machine.
+///
+/// # Errors
+/// No such station.
+pub fn rollback_figures(
+    session: &str,
+    station: &str,
+) -> Result<Option<coop_rt::shm::rollback::RollbackFigures>, StatusError> {
+    let (_, ctl) = open(session, station)?;
+    Ok(ctl.physics.rollback.figures())
+}
+
 /// The overrun counters of a running station's servo and physics loops (cheap: no snapshot).
 ///
 /// # Errors
@@ -584,6 +623,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> Result<StationSta
             }),
             display: DisplayStatus::of(&ctl.servo.display),
         },
+        pipeline: pipeline::hops(&ctl),
         running: run_state == RunState::Running,
     })
 }
@@ -644,16 +684,7 @@ impl NetworkStatus {
                 }
             })
             .collect();
-        let count = load(&n.latency_count);
-        let latency_us = (count > 0).then(|| {
-            let h = n.latency.to_hdr();
-            Latency {
-                count,
-                p50: h.value_at_quantile(0.5),
-                p99: h.value_at_quantile(0.99),
-                max: h.max(),
-            }
-        });
+        let latency_us = Latency::of(&n.latency, &n.latency_count);
         Self {
             locators: ctl.locators(),
             published: load(&n.published),

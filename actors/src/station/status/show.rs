@@ -17,7 +17,8 @@ impl fmt::Display for StationStatus {
         self.fmt_rings(f)?;
         self.fmt_network(f)?;
         self.fmt_physics(f)?;
-        self.fmt_servo(f)
+        self.fmt_servo(f)?;
+        super::pipeline::fmt_hops(&self.pipeline, f)
     }
 }
 

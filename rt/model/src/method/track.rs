@@ -24,6 +24,17 @@ pub(crate) type Received = Option<(i64, Quantized)>;
 /// the received one) must not kick the object through the contact's damping.
 pub const MAX_TOOL_SPEED_M_PER_S: f64 = 10.0;
 
+/// `v`, m/s, at most [`MAX_TOOL_SPEED_M_PER_S`] fast (its direction kept).
+pub fn limit_speed(v: Vec3) -> Vec3 {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    let speed = v.norm();
+    if speed > MAX_TOOL_SPEED_M_PER_S {
+        v * (MAX_TOOL_SPEED_M_PER_S / speed)
+    } else {
+        v
+    }
+}
+
 /// Quantizes a position (clamped to ±20 km, far outside any world).
 pub fn quantize(p: Vec3) -> Quantized {
     let q = |x: f64| (x / QUANTUM_M).round().clamp(-2e9, 2e9) as i32;

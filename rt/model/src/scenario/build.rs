@@ -118,6 +118,14 @@ impl Scenario {
         }
     }
 
+    /// Whether method `name` steps every site on the session's tick grid and exchanges tool
+    /// tracks: what the method itself says ([`Consistency::grid_history_ticks`]), asked of one
+    /// built here, so code that must know before it has a method (which rings to open, which
+    /// rules hold) never matches a method's name.
+    pub fn steps_on_grid(&self, name: MethodName) -> bool {
+        !self.site.is_empty() && self.method(0, name).grid_history_ticks().is_some()
+    }
+
     /// A site's copy of the world at the scenario's start, time 0.
     pub fn start_copy(&self) -> WorldCopy {
         WorldCopy::new(&self.start_states())

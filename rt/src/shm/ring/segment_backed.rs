@@ -5,9 +5,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use super::{payload_len, Consumer, Producer, RingOpenError, Shared, RELEASED};
+use crate::pod::{ShmPod, TypeIdentity};
 use crate::process::ProcessToken;
 use crate::shm::header::SegmentKind;
-use crate::shm::pod::{ShmPod, TypeIdentity};
 use crate::shm::segment::{CreateError, RawSegment, SegmentName, DEFAULT_READY_TIMEOUT};
 use crate::sync::Ordering;
 
@@ -204,8 +204,8 @@ impl<T: ShmPod> Consumer<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pod::SeqMsg;
     use crate::shm::header::OpenError;
-    use crate::shm::pod::SeqMsg;
     use crate::shm::ring::{PopError, PushError, RingCorruption, Side};
     use std::os::unix::fs::FileExt;
 

@@ -78,6 +78,7 @@
 //! integer, and the step uses only `+ − × ÷ sqrt` and `nalgebra`'s rotations (the same code on the
 //! same platform gives the same bits; see the crate docs on transcendental functions).
 
+mod before;
 mod deadband;
 mod hash;
 mod islands;
@@ -85,10 +86,13 @@ mod lag;
 mod predict;
 mod replay;
 
+pub use super::stats::CodecError;
 use super::window::Tracks;
 pub use super::window::{
     GAP_CHANCE, LOSS_FILTER_SHARE, MAX_REDUNDANCY, MIN_REDUNDANCY, REDUNDANCY_DECAY_REPORTS,
 };
+use before::Before;
+use deadband::Moved;
 pub use deadband::{DeadbandSpec, FLOOR_SHARE, JND_SHARE};
 pub use hash::{hash_state, hash_world, STATE_RESEND_SLACK_S};
 use lag::{DELAY_FILTER_SHARE, MEASURED_RING};
@@ -109,8 +113,8 @@ use super::copy::{integrate, integrate_some, WorldCopy};
 use super::report::{Adoption, Report};
 use super::stats::{RollbackStats, Stats};
 use super::track::{
-    position, quantize, Quantized, Received, Snapshot, ToolReport, MAX_TOOL_SPEED_M_PER_S,
-    QUANTUM_M, UNKNOWN, WINDOW_TICKS,
+    limit_speed, position, quantize, Quantized, Received, Snapshot, ToolReport,
+    MAX_TOOL_SPEED_M_PER_S, QUANTUM_M, UNKNOWN, WINDOW_TICKS,
 };
 
 /// One tick's record: the inputs used in it (the state at its start is kept beside it, in
@@ -125,6 +129,8 @@ struct Slot {
     felt: bool,
     /// ...and in its latest.
     touched: bool,
+    /// Per site: its tool's last motion (for its velocity through a deadband).
+    moved: [Moved; MAX_SITES],
 }
 
 /// The `timewarp` method of one site.
@@ -246,6 +252,7 @@ impl TimeWarp {
             known: [false; MAX_SITES],
             felt: false,
             touched: false,
+            moved: [Moved::rest(UNKNOWN, i64::MIN); MAX_SITES],
         };
         Self {
             me,
@@ -403,6 +410,7 @@ impl TimeWarp {
             known: [false; MAX_SITES],
             felt: false,
             touched: false,
+            moved: [Moved::rest(UNKNOWN, t); MAX_SITES],
         };
         let objects = copy.len().min(world.bodies().len());
         let sites = self.sites;
@@ -417,14 +425,13 @@ impl TimeWarp {
             slot.inputs[j] = q;
             slot.known[j] = known;
             let p = position(q);
-            let v = if prev.tick == t - 1 && prev.inputs[j] != UNKNOWN && q != UNKNOWN {
-                let v = (p - position(prev.inputs[j])) / self.dt;
-                let speed = v.norm();
-                if speed > MAX_TOOL_SPEED_M_PER_S {
-                    v * (MAX_TOOL_SPEED_M_PER_S / speed)
-                } else {
-                    v
-                }
+            let was = (prev.tick == t - 1 && prev.inputs[j] != UNKNOWN && q != UNKNOWN)
+                .then_some((prev.inputs[j], prev.moved[j]));
+            slot.moved[j] = Moved::next(was, q, t);
+            let v = if self.deadband.is_some() {
+                slot.moved[j].velocity(q, t, self.dt)
+            } else if was.is_some() {
+                limit_speed((p - position(prev.inputs[j])) / self.dt)
             } else {
                 Vec3::zeros()
             };
@@ -648,18 +655,48 @@ impl Consistency for TimeWarp {
         _dt: f64,
     ) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        if let Some(mut d) = self.deadband {
+        let (me, sites, t) = (self.me, self.sites, self.now_tick);
+        // (The last tick's slot, for the held tool's velocity: read only through a deadband.)
+        let prev = self.deadband.is_some().then(|| self.slots[self.idx(t - 1)]);
+        if let (Some(d), Some(prev)) = (self.deadband.as_mut(), prev) {
             let objects = copy.len().min(world.bodies().len());
-            let own = (0..objects).map(|k| self.users[k * self.sites + self.me]);
+            let own = (0..objects).map(|k| self.users[k * sites + me]);
+            let radius = self.radii[me];
             let width = d.width_m(
                 (world, copy),
                 &self.contact,
                 position(self.own),
-                self.radii[self.me],
+                radius,
                 own,
             );
-            self.own = d.filter(self.own, width);
-            self.deadband = Some(d);
+            let measured = self.own;
+            self.own = d.filter(measured, width);
+            // The velocity the step will give the held tool (as `tick` derives it).
+            let was = (prev.tick == t - 1 && prev.inputs[me] != UNKNOWN)
+                .then_some((prev.inputs[me], prev.moved[me]));
+            let held_velocity = Moved::next(was, self.own, t).velocity(self.own, t, self.dt);
+            // The own tool's contact from the tick's world state, its friction memory untouched.
+            let (contact, memory) = (&self.contact, &self.contacts);
+            d.measure((measured, self.own, held_velocity), self.dt, |p, v| {
+                world.bodies()[..objects].iter().enumerate().fold(
+                    (Vec3::zeros(), false),
+                    |(f, touched), (k, body)| {
+                        let mut m = memory[k * MAX_SITES + me];
+                        let state = &copy.objects()[k].state;
+                        let c = tool_contact(
+                            contact,
+                            &mut m,
+                            &body.shape,
+                            state,
+                            &body.mass,
+                            p,
+                            v,
+                            radius,
+                        );
+                        (f + c.force, touched || c.touching)
+                    },
+                )
+            });
         }
         self.tick(world, copy);
         self.advance_replay();
@@ -862,6 +899,7 @@ impl Consistency for TimeWarp {
         let mut st = self.stats;
         if let Some(d) = self.deadband {
             (st.deadband_ticks, st.deadband_samples) = (d.ticks, d.samples);
+            st.deadband_error = d.error;
         }
         st.redundancy_reports = self.tracks.reports() as u64;
         Stats::Rollback(st)
@@ -918,58 +956,6 @@ impl TimeWarp {
                     .all(|(x, y)| x.state == y.state && x.env == y.env)
         };
         same(copy, &before) && self.contacts == contacts
-    }
-}
-
-/// What an adoption (a rollback that moved the copy, a state adopted) is measured against: the
-/// copy before it, per object, without copying the world.
-pub(super) struct Before {
-    pos: [Vec3; MAX_OBJECTS],
-    energy_j: f64,
-    work_j: f64,
-}
-
-impl Before {
-    /// Every force's work so far, as the copy's account has it (restored with a snapshot and
-    /// re-accumulated by the re-simulation), J.
-    fn work(copy: &WorldCopy) -> f64 {
-        copy.objects()
-            .iter()
-            .map(|c| c.energy.own_j + c.energy.remote_j + c.energy.env_j + c.energy.objects_j)
-            .sum()
-    }
-
-    pub(super) fn of(world: &World, copy: &WorldCopy) -> Self {
-        let mut pos = [Vec3::zeros(); MAX_OBJECTS];
-        for (p, c) in pos.iter_mut().zip(copy.objects()) {
-            *p = c.state.pos;
-        }
-        Self {
-            pos,
-            energy_j: copy.mechanical_energy(world),
-            work_j: Self::work(copy),
-        }
-    }
-
-    /// The adoption that made `copy` of what it was, `age_s` back: its jump is the object's that
-    /// moved most (before − after).
-    pub(super) fn adoption(&self, world: &World, copy: &WorldCopy, age_s: f64) -> Adoption {
-        let jump = copy
-            .objects()
-            .iter()
-            .zip(&self.pos)
-            .map(|(c, p)| p - c.state.pos)
-            .fold(
-                Vec3::zeros(),
-                |a, b| if b.norm() > a.norm() { b } else { a },
-            );
-        Adoption {
-            jump,
-            energy_j: copy.mechanical_energy(world) - self.energy_j,
-            work_j: Self::work(copy) - self.work_j,
-            age_s,
-            clipped_j: 0.0,
-        }
     }
 }
 

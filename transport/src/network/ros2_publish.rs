@@ -11,11 +11,12 @@
 //! | `/tf` | `tf2_msgs/msg/TFMessage`: `world → tool/<site>`, `world → object/<site>` (`object/<name>/<site>`) | best effort |
 //! | `/rosout` | `rcl_interfaces/msg/Log`: the station's events | reliable, transient local |
 //!
-//! `<ns>` is [`super::namespace`], the node is `station` in it. Nothing here waits: puts are
+//! `<ns>` is [`crate::ros2::namespace`], the node is `station` in it. Nothing here waits: puts are
 //! dropped, not queued, under congestion, at background priority, and the streams' are skipped
 //! altogether while no one subscribes (a `/rosout` line is always put, and kept for late
 //! subscribers: the last 1000 of the last 10 s, `_max` of them if a query asks). Stamps are the
-//! samples' monotonic times translated to wall time.
+//! samples' monotonic times translated to wall time. Each publisher's GID is `rmw_zenoh`'s, the
+//! hash of its liveliness token ([`graph::gid`]).
 
 use std::sync::{Arc, Mutex};
 
@@ -26,13 +27,14 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::query::Queryable;
+use zenoh::time::{Timestamp, TimestampId, NTP64};
 use zenoh::{Session, Wait};
 
-use super::cdr::{self, Header, Log, PoseStamped, TransformStamped, WrenchStamped};
-use super::graph::{self, Attachment, Kind, MsgType, Node, Qos};
-use super::Ros2Config;
-use crate::network::NetworkError;
+use super::NetworkError;
 use crate::recording::Scene;
+use crate::ros2::cdr::{self, Header, Log, PoseStamped, TransformStamped, WrenchStamped};
+use crate::ros2::graph::{self, Attachment, Kind, MsgType, Node, Qos};
+use crate::ros2::Ros2Config;
 
 /// The encoding `rmw_zenoh` labels its samples with.
 pub const CDR_ENCODING: &str = "application/cdr";
@@ -40,8 +42,13 @@ pub const CDR_ENCODING: &str = "application/cdr";
 /// How many `/rosout` lines a late subscriber can still get (as `rcl` keeps: its depth).
 const ROSOUT_KEPT: usize = 1000;
 
-/// The `/rosout` lines kept for late subscribers: when each was put, its CDR bytes and attachment.
-type Kept = Arc<Mutex<std::collections::VecDeque<(std::time::Instant, Vec<u8>, Vec<u8>)>>>;
+/// A `/rosout` line kept for late subscribers: when it was put, its CDR bytes, its attachment and
+/// the zenoh timestamp it was put with (by which an `AdvancedSubscriber` orders the lines and
+/// drops the ones it already has).
+type KeptLine = (std::time::Instant, Vec<u8>, Vec<u8>, Timestamp);
+
+/// The `/rosout` lines kept for late subscribers.
+type Kept = Arc<Mutex<std::collections::VecDeque<KeptLine>>>;
 
 /// How long a `/rosout` line stays worth serving to a late subscriber (rcl's lifespan).
 const ROSOUT_LIFESPAN: std::time::Duration = std::time::Duration::from_secs(10);
@@ -74,15 +81,18 @@ impl Endpoint {
             .priority(Priority::Background)
             .wait()
             .map_err(NetworkError::declare("ROS 2 publisher"))?;
+        let token_key = node.endpoint_token(entity, Kind::Publisher, topic, ty, qos);
+        // rmw_zenoh's GID: the hash of the token's key, which every reader of the token can redo.
+        let gid = graph::gid(&token_key);
         let token = session
             .liveliness()
-            .declare_token(node.endpoint_token(entity, Kind::Publisher, topic, ty, qos))
+            .declare_token(token_key)
             .wait()
             .map_err(NetworkError::declare("ROS 2 publisher token"))?;
         Ok(Self {
             publisher,
             _token: token,
-            gid: graph::gid(session.zid().to_le_bytes(), entity),
+            gid,
             seq: 0,
         })
     }
@@ -110,17 +120,24 @@ impl Endpoint {
     /// Puts `bytes` with the next attachment; counts it.
     fn put(&mut self, bytes: Vec<u8>, wall_ns: i64, traffic: &Traffic) {
         let attachment = self.attachment(wall_ns);
-        self.put_with(bytes, attachment, traffic);
+        self.put_with(bytes, attachment, None, traffic);
     }
 
-    /// Puts `bytes` with `attachment`; counts it.
-    fn put_with(&mut self, bytes: Vec<u8>, attachment: Vec<u8>, traffic: &Traffic) {
+    /// Puts `bytes` with `attachment` (and `timestamp`, if any); counts it.
+    fn put_with(
+        &mut self,
+        bytes: Vec<u8>,
+        attachment: Vec<u8>,
+        timestamp: Option<Timestamp>,
+        traffic: &Traffic,
+    ) {
         let len = bytes.len();
         // A failed put loses one sample of a ROS view, nothing else.
         if self
             .publisher
             .put(bytes)
             .attachment(attachment)
+            .timestamp(timestamp)
             .wait()
             .is_ok()
         {
@@ -140,6 +157,11 @@ pub struct Ros2Publisher {
     /// The lines kept for late `/rosout` subscribers, with their attachments.
     kept: Kept,
     _cache: Queryable<()>,
+    /// The `/rosout` cache's `@adv` token, by which an `AdvancedSubscriber` finds it.
+    _cache_token: LivelinessToken,
+    /// The id in the `/rosout` lines' timestamps (this session's), and the last time given one.
+    stamp_id: TimestampId,
+    last_stamp: NTP64,
     frames: Frames,
     logger: String,
     period_ns: u64,
@@ -164,7 +186,7 @@ impl std::fmt::Debug for Ros2Publisher {
 
 /// The topic names of a site, relative to nothing: `(tool, force, objects)`.
 pub fn topics(session: &str, scene: &Scene) -> (String, String, Vec<String>) {
-    let ns = super::namespace(session, &scene.site);
+    let ns = crate::ros2::namespace(session, &scene.site);
     let objects = if scene.others.is_empty() {
         vec![format!("{ns}/object")]
     } else {
@@ -191,7 +213,7 @@ impl Ros2Publisher {
             domain: config.domain_id,
             zid: session.zid().to_string(),
             id: 0,
-            namespace: super::namespace(session_name, &scene.site),
+            namespace: crate::ros2::namespace(session_name, &scene.site),
             name: "station".into(),
         };
         let token = session
@@ -235,17 +257,10 @@ impl Ros2Publisher {
             &graph::TF_MESSAGE,
             Qos::STREAM,
         )?;
-        let rosout_entity = next();
-        let rosout = Endpoint::declare(
-            session,
-            &node,
-            rosout_entity,
-            "/rosout",
-            &graph::LOG,
-            Qos::ROSOUT,
-        )?;
+        let rosout =
+            Endpoint::declare(session, &node, next(), "/rosout", &graph::LOG, Qos::ROSOUT)?;
         let kept = Arc::new(Mutex::new(std::collections::VecDeque::new()));
-        let cache = declare_cache(session, &node, rosout_entity, kept.clone())?;
+        let (cache, cache_token) = declare_cache(session, &node, kept.clone())?;
         let mut frames = Frames {
             tool: scene.tool_frame(),
             objects: vec![scene.object_frame()],
@@ -262,6 +277,9 @@ impl Ros2Publisher {
             rosout,
             kept,
             _cache: cache,
+            _cache_token: cache_token,
+            stamp_id: session.zid().into(),
+            last_stamp: NTP64::default(),
             frames,
             logger: format!(
                 "coop.{}.{}",
@@ -301,9 +319,9 @@ impl Ros2Publisher {
             return;
         };
         self.last_ns = Some(now);
-        let offset = super::wall_minus_monotonic_ns();
-        let stamp = super::stamp(first.t_ns, offset);
-        let wall_ns = super::wall_ns(now, offset);
+        let offset = crate::ros2::wall_minus_monotonic_ns();
+        let stamp = crate::ros2::stamp(first.t_ns, offset);
+        let wall_ns = crate::ros2::wall_ns(now, offset);
         let header = Header {
             stamp,
             frame_id: crate::recording::scene::WORLD.into(),
@@ -356,26 +374,49 @@ impl Ros2Publisher {
 
     /// One line on `/rosout` (kept for late subscribers, whether anyone listens now or not).
     pub fn log(&mut self, level: u8, text: &str, traffic: &Traffic) {
-        let offset = super::wall_minus_monotonic_ns();
+        let offset = crate::ros2::wall_minus_monotonic_ns();
         let now = coop_rt::timer::monotonic_ns();
         let m = Log {
-            stamp: super::stamp(now, offset),
+            stamp: crate::ros2::stamp(now, offset),
             level,
             name: self.logger.clone(),
             msg: text.to_owned(),
             ..Log::default()
         };
         let bytes = m.encode();
-        // The line is kept with the attachment it is put with.
-        let attachment = self.rosout.attachment(super::wall_ns(now, offset));
+        // The line is kept with the attachment and the timestamp it is put with.
+        let attachment = self.rosout.attachment(crate::ros2::wall_ns(now, offset));
+        let timestamp = self.next_timestamp();
         {
             let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
             if kept.len() == ROSOUT_KEPT {
                 kept.pop_front();
             }
-            kept.push_back((std::time::Instant::now(), bytes.clone(), attachment.clone()));
+            kept.push_back((
+                std::time::Instant::now(),
+                bytes.clone(),
+                attachment.clone(),
+                timestamp,
+            ));
         }
-        self.rosout.put_with(bytes, attachment, traffic);
+        self.rosout
+            .put_with(bytes, attachment, Some(timestamp), traffic);
+    }
+
+    /// A zenoh timestamp for the next `/rosout` line: wall time, this session's id, strictly later
+    /// than the last (an `AdvancedSubscriber` takes two lines with one timestamp for one).
+    fn next_timestamp(&mut self) -> Timestamp {
+        let now = NTP64::from(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap_or_default(),
+        );
+        self.last_stamp = if now > self.last_stamp {
+            now
+        } else {
+            self.last_stamp + 1
+        };
+        Timestamp::new(self.last_stamp, self.stamp_id)
     }
 }
 
@@ -384,19 +425,23 @@ fn xyzw(r: [f64; 4]) -> [f64; 4] {
     [r[1], r[2], r[3], r[0]]
 }
 
-/// The transient-local cache of `/rosout` as `rmw_zenoh` serves it (zenoh's advanced
-/// publisher): a late subscriber asks `<key>/@adv/pub/<zid>/…` and gets the kept lines, on the
-/// topic's key.
+/// The transient-local cache of `/rosout` as `rmw_zenoh` serves it (zenoh-ext's
+/// `AdvancedPublisher` with a cache and publisher detection): a liveliness token and a queryable,
+/// both on [`graph::adv_key`]. An `AdvancedSubscriber` with history (`rmw_zenoh`'s transient-local
+/// subscriptions) asks `<key>/@adv/**?_max=<depth>` when it starts, and, for each `@adv/pub` token
+/// it sees, that token's key with the same `_max`, accepting replies on any key: both reach the
+/// queryable, which replies the newest `_max` kept lines, on the topic's key, each with its
+/// attachment and the timestamp it was put with (by which the subscriber drops the lines the
+/// other query, or the live topic, already gave it).
 fn declare_cache(
     session: &Session,
     node: &Node,
-    entity: u32,
     kept: Kept,
-) -> Result<Queryable<()>, NetworkError> {
+) -> Result<(Queryable<()>, LivelinessToken), NetworkError> {
     let key = graph::topic_key(node.domain, "/rosout", &graph::LOG);
-    let cache_key = format!("{key}/@adv/pub/{}/{entity}/**", node.zid);
-    session
-        .declare_queryable(cache_key)
+    let cache_key = graph::adv_key(&key, &node.zid);
+    let queryable = session
+        .declare_queryable(cache_key.clone())
         .callback(move |q| {
             // The newest `_max` lines (the subscriber's depth) younger than the lifespan.
             let max = q
@@ -404,26 +449,33 @@ fn declare_cache(
                 .get("_max")
                 .and_then(|m| m.parse::<usize>().ok())
                 .unwrap_or(ROSOUT_KEPT);
-            let lines: Vec<(Vec<u8>, Vec<u8>)> = {
+            let lines: Vec<(Vec<u8>, Vec<u8>, Timestamp)> = {
                 let kept = kept.lock().unwrap_or_else(|e| e.into_inner());
                 let young: Vec<_> = kept
                     .iter()
-                    .filter(|(t, _, _)| t.elapsed() < ROSOUT_LIFESPAN)
+                    .filter(|(t, _, _, _)| t.elapsed() < ROSOUT_LIFESPAN)
                     .collect();
                 young[young.len().saturating_sub(max)..]
                     .iter()
-                    .map(|(_, b, a)| (b.clone(), a.clone()))
+                    .map(|(_, b, a, ts)| (b.clone(), a.clone(), *ts))
                     .collect()
             };
-            for (bytes, attachment) in lines {
+            for (bytes, attachment, timestamp) in lines {
                 // A reply that cannot go is a line the late subscriber misses.
                 let _ = q
                     .reply(key.clone(), bytes)
                     .encoding(Encoding::from(CDR_ENCODING))
                     .attachment(attachment)
+                    .timestamp(timestamp)
                     .wait();
             }
         })
         .wait()
-        .map_err(NetworkError::declare("ROS 2 /rosout cache"))
+        .map_err(NetworkError::declare("ROS 2 /rosout cache"))?;
+    let token = session
+        .liveliness()
+        .declare_token(cache_key)
+        .wait()
+        .map_err(NetworkError::declare("ROS 2 /rosout cache token"))?;
+    Ok((queryable, token))
 }

@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::scenario_file;
-use crate::station::device::TrajectoryFileError;
+use crate::trajectory_file::TrajectoryFileError;
 
 /// A station's configuration that cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -31,7 +31,7 @@ pub enum ConfigError {
         #[source]
         problem: Problem,
     },
-    /// A problem in values that came from no file (as [`super::StationConfig::resolve`] is given
+    /// A problem in values that came from no file (as [`super::config::StationConfig::resolve`] is given
     /// them).
     #[error(transparent)]
     Invalid(#[from] Problem),

@@ -1,4 +1,5 @@
 //! What may cross a process boundary: plain old data, checked by the compiler (H5).
+#![allow(unsafe_code)] // `ShmPod` is unsafe to implement; the primitives' impls below say why each holds
 
 /// Marks a type that may be copied through shared memory between processes.
 ///

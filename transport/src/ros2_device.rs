@@ -43,10 +43,10 @@ use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Sample as ZSample;
 use zenoh::{Session, Wait};
 
-use super::cdr::{Header, PoseStamped, WrenchStamped};
-use super::graph::{self, Attachment, Kind, Node, Qos};
-use super::MAX_DOMAIN_ID;
 use crate::network::{Mode, NetworkConfig};
+use crate::ros2::cdr::{Header, PoseStamped, WrenchStamped};
+use crate::ros2::graph::{self, Attachment, Kind, Node, Qos};
+use crate::ros2::MAX_DOMAIN_ID;
 
 /// The station config's `[device.ros2]` table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -369,7 +369,7 @@ impl Ros2Device {
         let shared = Arc::new(Shared::default());
         shared.stats.poses.fetch_add(1, Ordering::Relaxed);
         let b = Bridge {
-            gid: graph::gid(session.zid().to_le_bytes(), 2),
+            gid: graph::gid(&wrench_token(&device_node(config, &session), config)),
             session,
             _tokens: tokens,
             poses,
@@ -536,11 +536,11 @@ impl Bridge {
             Command::Force(f) => [f.x, f.y, f.z],
             Command::Release => [0.0; 3],
         };
-        let offset = super::wall_minus_monotonic_ns();
+        let offset = crate::ros2::wall_minus_monotonic_ns();
         let now = monotonic_ns();
         let m = WrenchStamped {
             header: Header {
-                stamp: super::stamp(now, offset),
+                stamp: crate::ros2::stamp(now, offset),
                 frame_id: self.frame_id.clone(),
             },
             force,
@@ -552,7 +552,7 @@ impl Bridge {
         }
         let attachment = Attachment {
             seq: i64::try_from(seq).unwrap_or(i64::MAX),
-            source_ns: super::wall_ns(now, offset),
+            source_ns: crate::ros2::wall_ns(now, offset),
             gid: self.gid,
         };
         let (bytes, attachment) = (m.encode(), attachment.encode().to_vec());
@@ -581,6 +581,28 @@ type Joined = (
     (PoseStamped, Option<[u8; 16]>),
 );
 
+/// The bridge's node in the graph of `session`.
+fn device_node(config: &Ros2DeviceConfig, session: &Session) -> Node {
+    Node {
+        domain: config.domain_id,
+        zid: session.zid().to_string(),
+        id: 0,
+        namespace: "/".into(),
+        name: "coop_haptics_device".into(),
+    }
+}
+
+/// The liveliness token of the bridge's wrench publisher (its GID is this token's hash).
+fn wrench_token(node: &Node, config: &Ros2DeviceConfig) -> String {
+    node.endpoint_token(
+        2,
+        Kind::Publisher,
+        &config.wrench_topic,
+        &graph::WRENCH_STAMPED,
+        Qos::STREAM,
+    )
+}
+
 /// Joins the ROS 2 graph as a node with one subscription (the pose) and one publisher (the
 /// wrench), and waits for the driver's first pose.
 fn join(config: &Ros2DeviceConfig) -> Result<Joined, Ros2OpenError> {
@@ -594,13 +616,7 @@ fn join(config: &Ros2DeviceConfig) -> Result<Joined, Ros2OpenError> {
     let session = zenoh::open(crate::network::config(&net).map_err(|e| zerr(&e))?)
         .wait()
         .map_err(|e| zerr(&e))?;
-    let node = Node {
-        domain: config.domain_id,
-        zid: session.zid().to_string(),
-        id: 0,
-        namespace: "/".into(),
-        name: "coop_haptics_device".into(),
-    };
+    let node = device_node(config, &session);
     let mut tokens = Vec::new();
     for key in [
         node.token(),
@@ -611,13 +627,7 @@ fn join(config: &Ros2DeviceConfig) -> Result<Joined, Ros2OpenError> {
             &graph::POSE_STAMPED,
             Qos::STREAM,
         ),
-        node.endpoint_token(
-            2,
-            Kind::Publisher,
-            &config.wrench_topic,
-            &graph::WRENCH_STAMPED,
-            Qos::STREAM,
-        ),
+        wrench_token(&node, config),
     ] {
         tokens.push(
             session
