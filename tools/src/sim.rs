@@ -416,6 +416,49 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             }
         }
     }
+    print_tasks(all);
+}
+
+/// The live task per method and site: the outcome as the site showed it, when, and the
+/// participant's grip (a table only when the scenario has a `[task]` or a participant).
+pub fn print_tasks(all: &[Metrics]) {
+    if !all.iter().any(|m| m.sites.iter().any(|s| s.task.is_some())) {
+        return;
+    }
+    println!(
+        "{:<10}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
+        "task", "site", "outcome", "time s", "by", "grip N", "peak N", "margin", "slips", "steps"
+    );
+    let cell = |v: f64, prec: usize| {
+        if v.is_nan() {
+            "-".to_owned()
+        } else {
+            format!("{v:.prec$}")
+        }
+    };
+    for m in all {
+        for s in &m.sites {
+            let Some(t) = &s.task else { continue };
+            println!(
+                "{:<10}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
+                m.method,
+                s.name,
+                t.outcome,
+                cell(t.time_s, 2),
+                if t.failed_by.is_empty() {
+                    "-"
+                } else {
+                    &t.failed_by
+                },
+                cell(t.grip_mean_n, 2),
+                cell(t.grip_peak_n, 2),
+                cell(t.grip_margin, 2),
+                t.slips,
+                format!("{}/{}", t.steps.0, t.steps.1),
+            );
+        }
+    }
+    println!("# task: outcome as each site showed it; time = when the goal began to hold (done) or the failure; grip = the participant's mean felt normal force while gripping, margin = over what friction needed for the felt load")
 }
 
 /// Writes a run's trace, adoptions, metrics, session file (`session.mcap`) and plots into `dir`.

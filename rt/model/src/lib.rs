@@ -20,6 +20,7 @@ pub mod histogram;
 pub mod link;
 pub mod method;
 pub mod metrics;
+pub mod participant;
 pub mod perception;
 pub mod replay;
 pub mod rng;
@@ -28,6 +29,7 @@ pub mod scenario;
 pub mod servo;
 pub mod shape;
 pub mod sim;
+pub mod task;
 pub mod user;
 pub mod world;
 

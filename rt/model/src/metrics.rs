@@ -89,6 +89,9 @@ pub struct SiteMetrics {
     pub others_work_j: f64,
     /// (phase name, happened at this site).
     pub phases: Vec<(String, bool)>,
+    /// The live task's outcome at this site and its participant's grip (`None`: no `[task]`
+    /// and a scripted hand).
+    pub task: Option<crate::task::TaskFigures>,
     /// Largest displayed-force change from one servo tick to the next, N (NaN: not measured).
     pub max_force_step_n: f64,
     /// Servo ticks whose displayed-force change exceeded the JND ([`force_jnd_n`]).
@@ -452,6 +455,10 @@ fn site_metrics(
             .iter()
             .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
             .collect(),
+        task: run
+            .tasks
+            .get(i)
+            .and_then(|t| crate::task::TaskFigures::of(t, run.task)),
         max_force_step_n: if steps.servo_ticks == 0 {
             f64::NAN
         } else {

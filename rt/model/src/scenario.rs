@@ -125,6 +125,8 @@ pub struct Scenario {
     pub display: crate::display::DisplaySpec,
     /// The `timewarp` method's settings.
     pub timewarp: TimewarpSpec,
+    /// When each site's task is done or has failed, judged live on what the site shows.
+    pub task: crate::task::TaskSpec,
 }
 
 /// The `timewarp` method's settings (`[timewarp]`).
@@ -319,6 +321,11 @@ pub struct SiteSpec {
     /// no I/O).
     #[cfg_attr(feature = "serde", serde(skip))]
     pub hand_trajectory: Option<crate::replay::Trajectory>,
+    /// A simulated participant's task plan (`[[site.plan]]`): with one, the site's hand is a
+    /// participant acting on what the site shows, and `script` only places it at the start.
+    pub plan: Vec<crate::participant::StepSpec>,
+    /// The participant's parameters (the population's means; each seed draws a person).
+    pub participant: crate::participant::ParticipantSpec,
 }
 
 /// A script keyframe.
@@ -387,6 +394,7 @@ impl Default for Scenario {
             phase: Vec::new(),
             display: crate::display::DisplaySpec::default(),
             timewarp: TimewarpSpec::default(),
+            task: crate::task::TaskSpec::default(),
         }
     }
 }
@@ -470,6 +478,8 @@ impl Default for SiteSpec {
             script: Vec::new(),
             hand_replay: None,
             hand_trajectory: None,
+            plan: Vec::new(),
+            participant: crate::participant::ParticipantSpec::default(),
         }
     }
 }

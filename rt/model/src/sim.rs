@@ -24,6 +24,7 @@
 //! with every user's contact summed at once (Eq. 8 without delay), integrated at the fastest site's
 //! physics rate: the "truth" the methods are measured against.
 
+mod hand;
 mod probe;
 mod wire;
 
@@ -41,8 +42,9 @@ use crate::method::{integrate, Consistency, EnergyAccount, Report, WorldCopy};
 use crate::rng::Rng;
 use crate::scenario::{LinkSpec, MethodName, Scenario};
 use crate::servo::{Servo, ServoInput};
-use crate::user::{target_at, Keyframe};
 use crate::world::{World, MAX_OBJECTS, MAX_SITES};
+use hand::Hand;
+pub use hand::SiteTask;
 
 /// Largest plant integration step: 100 µs (the grip spring's period is ~20 ms).
 pub const PLANT_STEP_NS: u64 = 100_000;
@@ -208,6 +210,10 @@ pub struct RunResult {
     pub servo_ticks: Vec<Vec<ServoTick>>,
     /// Puts a receiver's decoding refused ([`Carried::Refused`]).
     pub refused: u64,
+    /// Each site's task and participant figures.
+    pub tasks: Vec<SiteTask>,
+    /// Whether the scenario has a `[task]` (else every outcome is `Running`).
+    pub task: bool,
 }
 
 /// One servo tick of a site, as kept by [`run_keeping_servo_ticks`].
@@ -240,6 +246,8 @@ impl RunResult {
             force_steps: Vec::new(),
             servo_ticks: Vec::new(),
             refused: 0,
+            tasks: Vec::new(),
+            task: false,
         }
     }
 }
@@ -267,7 +275,12 @@ struct Inbox {
 struct Site {
     plant: Plant,
     plant_ns: u64,
-    script: Vec<Keyframe>,
+    /// The script or the participant the hand follows.
+    hand: Hand,
+    /// The site's task, judged live on what it shows.
+    task: Option<crate::task::TaskJudge>,
+    /// Its participant's plan's length.
+    plan_len: usize,
     servo: Servo,
     force_loop: ScaraForceLoop,
     /// A recorded hand driving the tool by position, instead of the plant.
@@ -399,6 +412,11 @@ fn drive_to_end(
         }
         run.step(t, wire);
     }
+    for s in &mut run.sites {
+        if let Some(j) = &mut s.task {
+            j.finish(scenario.duration_s);
+        }
+    }
     progress(1.0);
 }
 
@@ -442,7 +460,12 @@ impl<'a> Run<'a> {
                 let mut site = Site {
                     plant: Plant::at(arm, scenario.hand(i), p0, spec.elbow),
                     plant_ns: 0,
-                    script,
+                    hand: match scenario.participant(i) {
+                        Some(p) => Hand::Person(Box::new(p)),
+                        None => Hand::Script(script),
+                    },
+                    task: scenario.task_judge().ok().flatten(),
+                    plan_len: spec.plan.len(),
                     servo: Servo::new(scenario.servo_params(i)),
                     force_loop: scenario.force_loop(i),
                     replay: spec.hand_trajectory.clone(),
@@ -557,7 +580,7 @@ impl<'a> Run<'a> {
             while s.replay.is_none() && s.plant_ns < t {
                 let step = (t - s.plant_ns).min(PLANT_STEP_NS);
                 let mid = ns_to_s(s.plant_ns + step);
-                let (target, target_vel) = target_at(&s.script, mid);
+                let (target, target_vel) = s.hand.target(mid);
                 s.plant.step(s.tau, target, target_vel, ns_to_s(step));
                 s.plant_ns += step;
             }
@@ -778,6 +801,13 @@ impl<'a> Run<'a> {
             ns_to_s(s.period_servo),
         );
         s.tau = tau;
+        let view = hand::view(
+            ns_to_s(t),
+            &shown[..objects],
+            &out.contacts[..objects],
+            tool_pos,
+        );
+        hand::tick(&mut s.hand, s.task.as_mut(), &view);
         s.own = out.contacts;
         // What a station's servo puts in its tool sample for physics.
         s.drive.set_own(&out.contacts);
@@ -866,6 +896,14 @@ impl<'a> Run<'a> {
                 display: *s.servo.display_stats(),
                 ..s.force_steps
             });
+            let plan_len = match &s.hand {
+                Hand::Person(_) => s.plan_len,
+                Hand::Script(_) => 0,
+            };
+            result
+                .tasks
+                .push(hand::figures(&s.hand, s.task.as_ref(), plan_len));
+            result.task |= s.task.is_some();
         }
         if sites.iter().any(|s| s.servo_ticks.is_some()) {
             result.servo_ticks = sites

@@ -67,6 +67,9 @@ pub fn run_from_recordings(
         force_steps: vec![ForceSteps::default(); recs.len()],
         servo_ticks: Vec::new(),
         refused: 0,
+        // The stations do not judge a task yet: their recordings carry no /task channel.
+        tasks: Vec::new(),
+        task: false,
     })
 }
 

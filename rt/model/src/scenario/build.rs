@@ -276,4 +276,49 @@ impl Scenario {
             })
             .collect()
     }
+
+    /// The objects' names, in the world's order.
+    pub fn object_names(&self) -> Vec<&str> {
+        (0..self.objects.len())
+            .map(|k| self.object_name(k))
+            .collect()
+    }
+
+    /// The task's live judge (`None`: the scenario has no `[task]`).
+    ///
+    /// # Errors
+    /// A `task.` field that breaks a rule (validation reports it first).
+    pub fn task_judge(
+        &self,
+    ) -> Result<Option<crate::task::TaskJudge>, crate::rules::ScenarioError> {
+        self.task.judge(&self.object_names(), self.duration_s)
+    }
+
+    /// Site `i`'s participant, a person drawn from the site's means with the scenario's seed
+    /// (`None`: the site follows its script). Valid scenarios only.
+    pub fn participant(&self, i: usize) -> Option<crate::participant::Participant> {
+        let s = &self.site[i];
+        if s.plan.is_empty() {
+            return None;
+        }
+        let names = self.object_names();
+        let plan = s
+            .plan
+            .iter()
+            .enumerate()
+            .filter_map(|(k, p)| p.resolve(&format!("site[{i}].plan[{k}]"), &names).ok())
+            .collect();
+        let shapes: Vec<_> = self.world().bodies().iter().map(|b| b.shape).collect();
+        Some(crate::participant::Participant::new(
+            &s.participant,
+            plan,
+            crate::participant::Surroundings {
+                shapes: &shapes,
+                tool_radius_m: s.tool_radius_m,
+                friction: self.contact.friction_static,
+            },
+            Vec3::from(s.script[0].target_m),
+            crate::rng::Rng::derive(self.seed, 2000 + i as u64),
+        ))
+    }
 }

@@ -104,7 +104,8 @@ impl Scenario {
         self.validate_start()?;
         self.validate_horizon()?;
         self.validate_local_lag()?;
-        self.validate_phases()
+        self.validate_phases()?;
+        self.task_judge().map(|_| ())
     }
 
     /// `world`: a finite gravity, and at most [`MAX_PLANES`] planes, each with a normal that is
@@ -257,7 +258,52 @@ impl Scenario {
             0.0,
             1e7,
         )?;
-        self.validate_script(i, s)
+        self.validate_script(i, s)?;
+        self.validate_plan(i, s)
+    }
+
+    /// Site `i`'s participant: its means within what people do, at most
+    /// [`crate::participant::MAX_STEPS`] steps, each checked; with a plan, the script only places
+    /// the hand (one keyframe).
+    fn validate_plan(&self, i: usize, s: &SiteSpec) -> Result<(), ScenarioError> {
+        let at = |f: &str| format!("site[{i}].{f}");
+        let p = &s.participant;
+        for ((name, lo, hi), v) in crate::participant::ParticipantSpec::limits()
+            .into_iter()
+            .zip(p.values())
+        {
+            in_closed(&at(&format!("participant.{name}")), v, lo, hi)?;
+        }
+        in_closed(&at("participant.spread"), p.spread, 0.0, 0.5)?;
+        if s.plan.is_empty() {
+            return Ok(());
+        }
+        if s.plan.len() > crate::participant::MAX_STEPS {
+            return Err(err(
+                at("plan"),
+                s.plan.len(),
+                format!("at most {} steps", crate::participant::MAX_STEPS),
+            ));
+        }
+        if s.script.len() != 1 {
+            return Err(err(
+                at("script"),
+                s.script.len(),
+                "with a plan, the script is one keyframe: where the hand starts",
+            ));
+        }
+        if s.hand_replay.is_some() {
+            return Err(err(
+                at("hand_replay"),
+                "given",
+                "a site has a plan or a recorded hand, not both",
+            ));
+        }
+        let names = self.object_names();
+        for (k, step) in s.plan.iter().enumerate() {
+            step.resolve(&at(&format!("plan[{k}]")), &names)?;
+        }
+        Ok(())
     }
 
     /// Site `i`'s script: at least one keyframe, in time order, each within the device's reach;

@@ -1,0 +1,83 @@
+//! A simulated site's hand: a script of keyframes, or a participant acting on what the site
+//! shows; and the live task judge, which reads what the site shows as a participant does.
+
+use crate::body::{BodyState, Vec3};
+use crate::participant::{GripFigures, Participant};
+use crate::task::{Outcome, TaskJudge, View};
+use crate::user::{target_at, Keyframe};
+use crate::world::MAX_OBJECTS;
+
+/// What moves a site's hand.
+#[derive(Debug, Clone)]
+pub(super) enum Hand {
+    /// Keyframes eased between.
+    Script(Vec<Keyframe>),
+    /// A simulated participant.
+    Person(Box<Participant>),
+}
+
+impl Hand {
+    /// The target the impedance hand follows at `t`, and its velocity.
+    pub(super) fn target(&self, t: f64) -> (Vec3, Vec3) {
+        match self {
+            Hand::Script(s) => target_at(s, t),
+            Hand::Person(p) => p.target(t),
+        }
+    }
+}
+
+/// What a site's task and participant read at a servo tick.
+pub(super) fn view(
+    t_s: f64,
+    shown: &[BodyState],
+    contacts: &[crate::contact::ContactForce],
+    tool: Vec3,
+) -> View {
+    let mut v = View::empty(tool);
+    v.t_s = t_s;
+    v.objects = shown.len();
+    v.shown[..shown.len()].copy_from_slice(shown);
+    for (k, c) in contacts.iter().enumerate().take(MAX_OBJECTS) {
+        v.touching[k] = c.touching;
+        v.slipping[k] = c.touching && c.slipping;
+        v.felt[k] = if c.touching { c.force } else { Vec3::zeros() };
+    }
+    v
+}
+
+/// How a site's task went, and what its participant did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SiteTask {
+    /// The task's outcome as the site showed it (`Running` at the end: not decided in time; no
+    /// `[task]`: `Running` too, see [`super::RunResult::task`]).
+    pub outcome: Outcome,
+    /// The participant's grip figures (`None`: a scripted hand).
+    pub grip: Option<GripFigures>,
+    /// The step the participant was on at the end, and its plan's length.
+    pub steps: Option<(usize, usize)>,
+}
+
+/// Steps the task judge and the participant at one servo tick of a site.
+pub(super) fn tick(hand: &mut Hand, judge: Option<&mut TaskJudge>, view: &View) {
+    if let Hand::Person(p) = hand {
+        p.perceive(view);
+    }
+    if let Some(j) = judge {
+        j.judge(view);
+    }
+}
+
+/// The site's task figures at the end of a run.
+pub(super) fn figures(hand: &Hand, judge: Option<&TaskJudge>, plan_len: usize) -> SiteTask {
+    SiteTask {
+        outcome: judge.map_or(Outcome::Running, TaskJudge::outcome),
+        grip: match hand {
+            Hand::Person(p) => Some(p.grip_figures),
+            Hand::Script(_) => None,
+        },
+        steps: match hand {
+            Hand::Person(p) => Some((p.step(), plan_len)),
+            Hand::Script(_) => None,
+        },
+    }
+}
