@@ -279,8 +279,6 @@ struct Site {
     hand: Hand,
     /// The site's task, judged live on what it shows.
     task: Option<crate::task::TaskJudge>,
-    /// Its participant's plan's length.
-    plan_len: usize,
     servo: Servo,
     force_loop: ScaraForceLoop,
     /// A recorded hand driving the tool by position, instead of the plant.
@@ -465,7 +463,6 @@ impl<'a> Run<'a> {
                         None => Hand::Script(script),
                     },
                     task: scenario.task_judge().ok().flatten(),
-                    plan_len: spec.plan.len(),
                     servo: Servo::new(scenario.servo_params(i)),
                     force_loop: scenario.force_loop(i),
                     replay: spec.hand_trajectory.clone(),
@@ -896,13 +893,7 @@ impl<'a> Run<'a> {
                 display: *s.servo.display_stats(),
                 ..s.force_steps
             });
-            let plan_len = match &s.hand {
-                Hand::Person(_) => s.plan_len,
-                Hand::Script(_) => 0,
-            };
-            result
-                .tasks
-                .push(hand::figures(&s.hand, s.task.as_ref(), plan_len));
+            result.tasks.push(hand::figures(&s.hand, s.task.as_ref()));
             result.task |= s.task.is_some();
         }
         if sites.iter().any(|s| s.servo_ticks.is_some()) {

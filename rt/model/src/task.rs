@@ -88,6 +88,23 @@ impl View {
     }
 }
 
+/// Object `name`'s index in `names`, or the error naming `field` and the objects there are.
+///
+/// # Errors
+/// `name` is not in `names`.
+pub fn find_object(field: &str, name: &str, names: &[&str]) -> Result<usize, ScenarioError> {
+    names.iter().position(|m| *m == name).ok_or_else(|| {
+        err(
+            field,
+            name,
+            format!(
+                "names no object of the scenario (its objects: {})",
+                names.join(", ")
+            ),
+        )
+    })
+}
+
 fn region(field: &str, r: &[[f64; 3]; 2]) -> Result<(Vec3, Vec3), ScenarioError> {
     finite3(&format!("{field}[0]"), &r[0], 100.0)?;
     finite3(&format!("{field}[1]"), &r[1], 100.0)?;
@@ -108,18 +125,7 @@ impl ConditionSpec {
     /// # Errors
     /// The first clause that breaks a rule, or an object that is not in `names`.
     pub fn resolve(&self, field: &str, names: &[&str]) -> Result<Condition, ScenarioError> {
-        let find = |f: &str, n: &str| {
-            names.iter().position(|m| *m == n).ok_or_else(|| {
-                err(
-                    format!("{field}.{f}"),
-                    n,
-                    format!(
-                        "names no object of the scenario (its objects: {})",
-                        names.join(", ")
-                    ),
-                )
-            })
-        };
+        let find = |f: &str, n: &str| find_object(&format!("{field}.{f}"), n, names);
         let object = self
             .object
             .as_deref()

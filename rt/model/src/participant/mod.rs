@@ -181,6 +181,11 @@ impl Participant {
         self.step
     }
 
+    /// How many steps its plan has.
+    pub fn plan_len(&self) -> usize {
+        self.plan.len()
+    }
+
     /// When step `k` began, s (`None`: not yet).
     pub fn step_time(&self, k: usize) -> Option<f64> {
         self.step_times.get(k).copied().filter(|t| !t.is_nan())

@@ -3,7 +3,7 @@
 
 use crate::body::Vec3;
 use crate::rules::{bounded, err, finite3, in_closed, ScenarioError};
-use crate::task::{Condition, ConditionSpec};
+use crate::task::{find_object, Condition, ConditionSpec};
 
 /// What a step does.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -98,19 +98,11 @@ impl StepSpec {
     /// The first field that breaks a rule or does not belong to the step's action.
     pub fn resolve(&self, at: &str, names: &[&str]) -> Result<Step, ScenarioError> {
         let f = |name: &str| format!("{at}.{name}");
-        let object = match &self.object {
-            Some(n) => Some(names.iter().position(|m| m == n).ok_or_else(|| {
-                err(
-                    f("object"),
-                    n,
-                    format!(
-                        "names no object of the scenario (its objects: {})",
-                        names.join(", ")
-                    ),
-                )
-            })?),
-            None => None,
-        };
+        let object = self
+            .object
+            .as_deref()
+            .map(|n| find_object(&f("object"), n, names))
+            .transpose()?;
         let side = match self.side {
             Some(s) => {
                 finite3(&f("side"), &s, 100.0)?;

@@ -68,7 +68,7 @@ pub(super) fn tick(hand: &mut Hand, judge: Option<&mut TaskJudge>, view: &View) 
 }
 
 /// The site's task figures at the end of a run.
-pub(super) fn figures(hand: &Hand, judge: Option<&TaskJudge>, plan_len: usize) -> SiteTask {
+pub(super) fn figures(hand: &Hand, judge: Option<&TaskJudge>) -> SiteTask {
     SiteTask {
         outcome: judge.map_or(Outcome::Running, TaskJudge::outcome),
         grip: match hand {
@@ -76,7 +76,7 @@ pub(super) fn figures(hand: &Hand, judge: Option<&TaskJudge>, plan_len: usize) -
             Hand::Script(_) => None,
         },
         steps: match hand {
-            Hand::Person(p) => Some((p.step(), plan_len)),
+            Hand::Person(p) => Some((p.step(), p.plan_len())),
             Hand::Script(_) => None,
         },
     }
