@@ -455,10 +455,7 @@ fn site_metrics(
             .iter()
             .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
             .collect(),
-        task: run
-            .tasks
-            .get(i)
-            .and_then(|t| crate::task::TaskFigures::of(t, run.task)),
+        task: run.tasks.get(i).and_then(|t| t.figures(run.task)),
         max_force_step_n: if steps.servo_ticks == 0 {
             f64::NAN
         } else {

@@ -363,34 +363,6 @@ pub struct TaskFigures {
     pub steps: (usize, usize),
 }
 
-impl TaskFigures {
-    /// The figures of a site's run (`None`: the scenario has no `[task]` and the hand is a
-    /// script).
-    pub fn of(task: &crate::sim::SiteTask, has_task: bool) -> Option<Self> {
-        if !has_task && task.grip.is_none() {
-            return None;
-        }
-        let (outcome, time_s, failed_by) = match task.outcome {
-            Outcome::Running => ("undecided", f64::NAN, String::new()),
-            Outcome::Done(t) => ("done", t, String::new()),
-            Outcome::Failed(t, None) => ("failed", t, "timeout".to_owned()),
-            Outcome::Failed(t, Some(k)) => ("failed", t, format!("fail[{k}]")),
-        };
-        let g = task.grip.unwrap_or_default();
-        let per = |sum: f64, n: u64| if n == 0 { f64::NAN } else { sum / n as f64 };
-        Some(Self {
-            outcome: outcome.to_owned(),
-            time_s,
-            failed_by,
-            grip_mean_n: per(g.sum_n, g.ticks),
-            grip_peak_n: if g.ticks == 0 { f64::NAN } else { g.peak_n },
-            grip_margin: per(g.sum_margin, g.loaded_ticks),
-            slips: g.slips,
-            steps: task.steps.unwrap_or((0, 0)),
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,7 +3,7 @@
 
 use crate::body::{BodyState, Vec3};
 use crate::participant::{GripFigures, Participant};
-use crate::task::{Outcome, TaskJudge, View};
+use crate::task::{Outcome, TaskFigures, TaskJudge, View};
 use crate::user::{target_at, Keyframe};
 use crate::world::MAX_OBJECTS;
 
@@ -55,6 +55,34 @@ pub struct SiteTask {
     pub grip: Option<GripFigures>,
     /// The step the participant was on at the end, and its plan's length.
     pub steps: Option<(usize, usize)>,
+}
+
+impl SiteTask {
+    /// The figures of a site's run (`None`: the scenario has no `[task]` and the hand is a
+    /// script).
+    pub fn figures(&self, has_task: bool) -> Option<TaskFigures> {
+        if !has_task && self.grip.is_none() {
+            return None;
+        }
+        let (outcome, time_s, failed_by) = match self.outcome {
+            Outcome::Running => ("undecided", f64::NAN, String::new()),
+            Outcome::Done(t) => ("done", t, String::new()),
+            Outcome::Failed(t, None) => ("failed", t, "timeout".to_owned()),
+            Outcome::Failed(t, Some(k)) => ("failed", t, format!("fail[{k}]")),
+        };
+        let g = self.grip.unwrap_or_default();
+        let per = |sum: f64, n: u64| if n == 0 { f64::NAN } else { sum / n as f64 };
+        Some(TaskFigures {
+            outcome: outcome.to_owned(),
+            time_s,
+            failed_by,
+            grip_mean_n: per(g.sum_n, g.ticks),
+            grip_peak_n: if g.ticks == 0 { f64::NAN } else { g.peak_n },
+            grip_margin: per(g.sum_margin, g.loaded_ticks),
+            slips: g.slips,
+            steps: self.steps.unwrap_or((0, 0)),
+        })
+    }
 }
 
 /// Steps the task judge and the participant at one servo tick of a site.
