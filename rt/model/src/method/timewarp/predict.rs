@@ -73,11 +73,14 @@ impl TimeWarp {
         if free {
             // Its mean velocity over the last REACH_VELOCITY_TICKS; through a deadband, that
             // between its last two samples.
-            let step = match self.deadband {
-                None => at(last - REACH_VELOCITY_TICKS).map(|p0| (p, p0, REACH_VELOCITY_TICKS)),
-                Some(_) => self.sampled_step(j, last, p),
+            let (step, stop) = match self.deadband {
+                None => (
+                    at(last - REACH_VELOCITY_TICKS).map(|p0| (p, p0, REACH_VELOCITY_TICKS)),
+                    self.stop_ticks(j, last, p),
+                ),
+                Some(_) => (self.sampled_step(j, last, p), f64::INFINITY),
             };
-            return (self.reach(p, step, t - last), false);
+            return (self.reach(p, step, t - last, stop), false);
         }
         // Through a perceptual deadband (the scenario's: every site runs it) a tool's positions
         // are held runs, and the last step is a jump of a band in one tick, not a velocity:
@@ -127,14 +130,48 @@ impl TimeWarp {
         Some((p, before, (sample - previous).max(1)))
     }
 
+    /// How many ticks of its present velocity a slowing free tool, last known at `p` at tick
+    /// `last`, has left before it stops: `v / 2a`, its speed over its deceleration along its
+    /// way, each from its mean velocities over the last two windows of
+    /// [`REACH_VELOCITY_TICKS`] (a stop at constant deceleration: for a minimum-jerk reach, within
+    /// a millimetre of its end point over its last quarter, ahead of it before). Infinite for a
+    /// tool that is not slowing or whose positions are not known that far back.
+    ///
+    /// A reach that slows to stop short of an object is predicted to stop there, not to glide on
+    /// into it: gliding, the prediction pushed objects a waiting partner's real tool never
+    /// touched, and the rollback took the push back a delay later (a phantom push, seen and
+    /// felt).
+    fn stop_ticks(&self, j: usize, last: i64, p: Quantized) -> f64 {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let w = REACH_VELOCITY_TICKS;
+        let at = |t: i64| self.received_at(j, t);
+        let (Some(p1), Some(p0)) = (at(last - w), at(last - 2 * w)) else {
+            return f64::INFINITY;
+        };
+        let wf = w as f64;
+        let v1: [f64; 3] = std::array::from_fn(|k| f64::from(p[k].saturating_sub(p1[k])) / wf);
+        let v0: [f64; 3] = std::array::from_fn(|k| f64::from(p1[k].saturating_sub(p0[k])) / wf);
+        let speed = (v1[0] * v1[0] + v1[1] * v1[1] + v1[2] * v1[2]).sqrt();
+        if speed == 0.0 {
+            return f64::INFINITY;
+        }
+        let along = (0..3).map(|k| (v1[k] - v0[k]) / wf * v1[k]).sum::<f64>() / speed;
+        if along >= 0.0 {
+            return f64::INFINITY;
+        }
+        speed / (2.0 * -along)
+    }
+
     /// A free remote tool `h` ticks after it was last known at `p`, at the velocity of `step`,
-    /// `(to, from, ticks)` (see [`along`]): see [`REACH_TIME_TICKS`]. Held where nothing earlier
-    /// is known.
+    /// `(to, from, ticks)` (see [`along`]): see [`REACH_TIME_TICKS`]; a slowing one goes no
+    /// farther than `stop` ticks of that velocity ([`Self::stop_ticks`]). Held where nothing
+    /// earlier is known.
     pub(super) fn reach(
         &self,
         p: Quantized,
         step: Option<(Quantized, Quantized, i64)>,
         h: i64,
+        stop: f64,
     ) -> Quantized {
         let Some((to, from, ticks)) = step else {
             return p;
@@ -147,7 +184,7 @@ impl TimeWarp {
         let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         let max = MAX_TOOL_SPEED_M_PER_S * self.dt / QUANTUM_M;
         let scale = if speed > max { max / speed } else { 1.0 };
-        let gone = h * tau / (h + tau) * scale;
+        let gone = (h * tau / (h + tau)).min(stop) * scale;
         let q = |k: usize| {
             let d = (v[k] * gone).round().clamp(-2e9, 2e9) as i32;
             p[k].saturating_add(d)

@@ -268,6 +268,7 @@ fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_sam
             last,
             Some((last, [last[0] + 200, last[1], last[2]], 50)),
             10,
+            f64::INFINITY,
         );
         (tw.input(1, 149).0, reach)
     });
@@ -286,6 +287,36 @@ fn through_a_deadband_a_free_remote_tool_reaches_at_the_velocity_between_its_sam
     let at_120 = quantize(Vec3::new(0.094, 0.0, 0.01));
     // (1538 quanta; at 6.6 a tick, 1523.)
     assert_eq!(far[0] - at_120[0], gone(-200.0 / 30.0), "{far:?}");
+}
+
+/// A free remote tool slowing at the end of a minimum-jerk reach that stops 15 mm short of the
+/// disk is predicted to stop about there, not to glide on into the disk at its last velocity (a
+/// phantom push the waiting partner would see and feel, taken back a delay later).
+#[test]
+fn a_remote_reach_slowing_short_of_the_disk_is_predicted_to_stop_short_of_it() {
+    // From x = 0.20 to 0.06 in 250 ticks (the disk's rim is touched at 0.045), known to tick 199.
+    let x = |k: usize| {
+        let s = (k as f64 / 250.0).min(1.0);
+        0.20 - 0.14 * (10.0 * s.powi(3) - 15.0 * s.powi(4) + 6.0 * s.powi(5))
+    };
+    let (tw, _, _) = after_a_remote_track(false, 200, x);
+    let far = tw.input(1, 199 + REACH_TICKS).0;
+    let end = quantize(Vec3::new(0.06, 0.0, 0.01));
+    let rim = quantize(Vec3::new(0.045, 0.0, 0.01));
+    assert!(
+        (far[0] - end[0]).abs() <= quantize(Vec3::new(0.003, 0.0, 0.0))[0],
+        "predicted to stop within 3 mm of the reach's end: {far:?} vs {end:?}"
+    );
+    // Gliding on at its last velocity would have carried it into the disk.
+    let last = quantize(Vec3::new(x(199), 0.0, 0.01));
+    let p0 = quantize(Vec3::new(x(199 - REACH_VELOCITY_TICKS as usize), 0.0, 0.01));
+    let glide = tw.reach(
+        last,
+        Some((last, p0, REACH_VELOCITY_TICKS)),
+        REACH_TICKS,
+        f64::INFINITY,
+    );
+    assert!(glide[0] < rim[0], "{glide:?}");
 }
 
 /// Two tools squeeze the disk from both sides and carry it: the synctest (a rollback of every
