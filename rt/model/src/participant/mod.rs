@@ -34,6 +34,8 @@ const GRASP_SETTLE_S: f64 = 0.15;
 const GRIP_GAIN: f64 = 0.02;
 /// How far past a face a press may go, m: a person does not drive the hand through an object.
 const MAX_PRESS_M: f64 = 0.03;
+/// The largest miss of a carry a participant corrects by moving on, m (about a hand's width).
+const MAX_CARRY_CORRECTION_M: f64 = 0.08;
 /// A slip raises the grip's floor by this factor.
 const SLIP_BOOST: f64 = 1.3;
 /// Least time between two slips the grip answers, s.
@@ -424,7 +426,22 @@ impl Participant {
                         MinJerk::new(t, from, Vec3::zeros(), Vec3::zeros(), from + step.by, dur);
                 }
                 let there = self.origin[k] + step.by;
-                g.carry.done(t) && (seen.shown[k].pos - there).norm() < width
+                let short = there - seen.shown[k].pos;
+                if short.norm() < width {
+                    return g.carry.done(t);
+                }
+                // The move ended with the object short of where it should be (it slipped in the
+                // grip, or a partner held back): once the eye has seen the move's end, move on by
+                // what is missing, as a person corrects a reach. Beyond a hand's width the object
+                // is no longer in the grip, and no correction brings it.
+                let seen_end = t - g.carry.end() >= self.person.visual_reaction_s;
+                if seen_end && short.norm() < MAX_CARRY_CORRECTION_M {
+                    let from = g.carry.at(t).0;
+                    let dur = self.person.movement_time(short.norm());
+                    g.carry =
+                        MinJerk::new(t, from, Vec3::zeros(), Vec3::zeros(), from + short, dur);
+                }
+                false
             }
             Action::Release => {
                 let (side, from) = match self.grip {
