@@ -5,7 +5,9 @@
 //! - [`ringbench`]: the shared-memory ring against rtrb between two cores.
 //! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
-//! - [`sweep`]: `sim sweep`, every method × delay × seed on one scenario.
+//! - [`sweep`]: `sim sweep`, every method × delay × seed on one scenario; with a live task,
+//!   [`completion`] summarizes success and completion time with confidence intervals
+//!   ([`stats`]).
 //! - [`session`]: a multi-site session of real stations, recorded and measured; [`session_cli`]
 //!   its command line.
 //! - [`certs`]: a session's CA, certificates and access control (`session certs`).
@@ -35,6 +37,7 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 
 pub mod certs;
 pub mod cli;
+pub mod completion;
 pub mod deadband;
 pub mod devbench;
 pub mod figures;
@@ -48,4 +51,5 @@ pub mod session_cli;
 pub mod sim;
 pub mod simbench;
 pub mod station;
+pub mod stats;
 pub mod sweep;

@@ -35,6 +35,8 @@ struct Series {
     /// A dot at every point (for sparse series, where a lone point draws no line).
     markers: bool,
     points: Vec<(f64, f64)>,
+    /// Error bars: (x, low, high).
+    bars: Vec<(f64, f64, f64)>,
 }
 
 /// The horizontal axis: its range and label.
@@ -81,6 +83,10 @@ where
                 lo = lo.min(y);
                 hi = hi.max(y);
             }
+            for &(_, l, h) in &s.bars {
+                lo = lo.min(l);
+                hi = hi.max(h);
+            }
         }
         if !lo.is_finite() {
             (lo, hi) = (-1.0, 1.0);
@@ -113,6 +119,14 @@ where
                     )
                     .map_err(err)?;
             }
+            let bar_style = ShapeStyle::from(&s.color).stroke_width(1);
+            chart
+                .draw_series(
+                    s.bars
+                        .iter()
+                        .map(|&(x, l, h)| PathElement::new(vec![(x, l), (x, h)], bar_style)),
+                )
+                .map_err(err)?;
             let drawn = if s.dashed {
                 chart
                     .draw_series(DashedLineSeries::new(s.points.iter().copied(), 6, 4, style))
@@ -197,6 +211,7 @@ pub fn figures(
                 dashed: false,
                 markers: false,
                 points: r.t.iter().enumerate().map(|(k, &t)| (t, f(i, k))).collect(),
+                bars: Vec::new(),
             })
             .collect();
         if let Some(g) = dashed_ref {
@@ -211,6 +226,7 @@ pub fn figures(
                     .enumerate()
                     .map(|(k, &t)| (t, g(k)))
                     .collect(),
+                bars: Vec::new(),
             });
         }
         out
@@ -297,6 +313,7 @@ pub fn figures(
             dashed: false,
             markers: false,
             points: div,
+            bars: Vec::new(),
         }],
     }];
     write_both(
@@ -358,6 +375,7 @@ pub fn sweep(
                 dashed: false,
                 markers: true,
                 points: f(l),
+                bars: Vec::new(),
             })
             .collect()
     };
@@ -374,4 +392,69 @@ pub fn sweep(
         },
     ];
     write_both(dir, "sweep", title, &panels, &x, (1000, 800))
+}
+
+/// A point with its 95 % interval: (x, value, low, high).
+pub type WithInterval = (f64, f64, f64, f64);
+
+/// One method's lines in the task plot: (delay ms, value, 95 % low, 95 % high).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskLine {
+    /// Method name.
+    pub label: String,
+    /// Share of trials done at every site, %.
+    pub success_pct: Vec<WithInterval>,
+    /// Mean completion time of the trials done, s.
+    pub completion_s: Vec<WithInterval>,
+}
+
+/// Writes `task.png` and `task.svg` into `dir`: the share of trials done and the mean completion
+/// time against delay, one line per method, with their 95 % intervals as bars.
+///
+/// # Errors
+/// The font is missing, or a file cannot be written.
+pub fn task(dir: &Path, title: &str, lines: &[TaskLine]) -> anyhow::Result<()> {
+    ensure_font()?;
+    let delays = lines.iter().flat_map(|l| l.success_pct.iter().map(|p| p.0));
+    let (lo, hi) = delays.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+        (a.min(d), b.max(d))
+    });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    // Methods side by side at each delay, so their bars do not hide one another.
+    let nudge = (hi - lo).max(1.0) * 0.008;
+    let x = XAxis {
+        from: lo - nudge * lines.len() as f64,
+        to: hi + nudge * lines.len() as f64,
+        label: "one-way delay (ms)",
+    };
+    let series = |f: &dyn Fn(&TaskLine) -> &Vec<WithInterval>| -> Vec<Series> {
+        lines
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let dx = (i as f64 - (lines.len() as f64 - 1.0) / 2.0) * nudge;
+                Series {
+                    label: l.label.clone(),
+                    color: COLORS[i % COLORS.len()],
+                    dashed: false,
+                    markers: true,
+                    points: f(l).iter().map(|p| (p.0 + dx, p.1)).collect(),
+                    bars: f(l).iter().map(|p| (p.0 + dx, p.2, p.3)).collect(),
+                }
+            })
+            .collect()
+    };
+    let panels = [
+        Panel {
+            title: "trials done at every site (95 % Wilson interval)".into(),
+            y_label: "%",
+            series: series(&|l| &l.success_pct),
+        },
+        Panel {
+            title: "mean completion time of the trials done (95 % interval)".into(),
+            y_label: "s",
+            series: series(&|l| &l.completion_s),
+        },
+    ];
+    write_both(dir, "task", title, &panels, &x, (1000, 800))
 }

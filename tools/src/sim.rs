@@ -7,7 +7,10 @@
 //! - `sim compare SCENARIO`: every method on the same scenario next to the reference run, one table
 //!   (or `--json`).
 //! - `sim sweep SCENARIO`: every method × constant delay × seed, one row each (or `--json`), and
-//!   with `--out` a plot of phases passed and co-contact divergence against delay.
+//!   with `--out` a plot of phases passed and co-contact divergence against delay. A scenario
+//!   with a live `[task]` and participants adds what a user study would publish: per method and
+//!   delay, trials done and mean completion time with 95 % intervals, and the best method at each
+//!   delay (`task.png` with `--out`); each seed draws other participants.
 //! - `sim bench`: cost of a physics step and a servo step, and the simulator's speed.
 
 use std::collections::BTreeMap;
@@ -70,7 +73,10 @@ pub enum Command {
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
-    /// Run every method at each constant delay and seed; print one row per run.
+    /// Run every method at each constant delay and seed; print one row per run. With a live
+    /// `[task]` (a participant scenario: each seed draws other people), also the share of trials
+    /// done and the mean completion time per method and delay with 95 % intervals, and the best
+    /// method at each delay.
     Sweep {
         /// Scenario file (TOML).
         scenario: PathBuf,
@@ -78,7 +84,8 @@ pub enum Command {
         #[arg(long, value_delimiter = ',', value_parser = parse_delay, allow_hyphen_values = true,
               default_value = crate::sweep::DEFAULT_DELAYS_MS)]
         delays_ms: Vec<f64>,
-        /// Seeds 1 to N (overriding the scenario's).
+        /// Seeds 1 to N (overriding the scenario's); with participants, N people (pairs,
+        /// groups) per delay.
         #[arg(long, default_value_t = 1, value_parser = parse_seeds)]
         seeds: u64,
         /// Methods, comma-separated (default: every one: naive,paper,timewarp,coupled).
@@ -87,7 +94,12 @@ pub enum Command {
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
-        /// Also write sweep.json, sweep.png and sweep.svg into DIR.
+        /// Print only the live task's summary (trials done and completion time per method and
+        /// delay), not a row per run; needs a scenario with a `[task]`.
+        #[arg(long, conflicts_with = "json")]
+        summary: bool,
+        /// Also write sweep.json, sweep.png and sweep.svg (and task.png, task.svg with a live
+        /// task) into DIR.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
     },
@@ -245,11 +257,19 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             seeds,
             methods,
             json,
+            summary,
             out,
         } => {
             let sc = scenario_file::load(&scenario)?;
             let methods = chosen(methods)?;
-            crate::sweep::main(&sc, &delays_ms, seeds, &methods, json, out.as_deref())?;
+            let print = if json {
+                crate::sweep::Print::Json
+            } else if summary {
+                crate::sweep::Print::Summary
+            } else {
+                crate::sweep::Print::Table
+            };
+            crate::sweep::main(&sc, &delays_ms, seeds, &methods, print, out.as_deref())?;
         }
         Command::Deadband {
             scenario,

@@ -20,7 +20,7 @@ use serde::Serialize;
 pub const DEFAULT_DELAYS_MS: &str = "0,25,50,100,150,200,300,500";
 
 /// One run's figures.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Row {
     /// Method name.
     pub method: String,
@@ -85,10 +85,23 @@ pub struct Row {
     pub local_lag_max_ms: f64,
     /// Payload the busiest site puts, kbit/s ([`crate::figures::sent_kbit_s`]).
     pub sent_kbit_s: f64,
+    /// The live task done at every site (null: the scenario has no `[task]`).
+    pub task_done: Option<bool>,
+    /// When the last site saw the task done, s: the trial's completion time (NaN: not done at
+    /// every site).
+    pub completion_s: f64,
+    /// The sites where it was not done, as `site:outcome` (`site:failed:fail[0]`, ...).
+    pub task_missed: Vec<String>,
+    /// The most contact one site was shown live that the confirmed history took back, ms.
+    pub phantom_contact_site_max_ms: f64,
+    /// The largest normal force a participant gripped with, any site, N (NaN: no grip).
+    pub grip_peak_n: f64,
+    /// Slips the participants' grips answered, all sites.
+    pub slips: u64,
 }
 
 impl Row {
-    fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64) -> Self {
+    fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64, has_task: bool) -> Self {
         Self {
             sent_kbit_s: crate::figures::busiest_sent_kbit_s(m, duration_s),
             method: m.method.clone(),
@@ -133,6 +146,55 @@ impl Row {
             phantom_contact_ms: m.phantom_contact_ms,
             replays: m.replays,
             local_lag_max_ms: m.local_lag_max_ms,
+            task_done: has_task.then(|| {
+                m.sites
+                    .iter()
+                    .all(|s| s.task.as_ref().is_some_and(|t| t.outcome == "done"))
+            }),
+            completion_s: if has_task {
+                m.sites
+                    .iter()
+                    .map(|s| match &s.task {
+                        Some(t) if t.outcome == "done" => t.time_s,
+                        _ => f64::NAN,
+                    })
+                    .fold(
+                        f64::NEG_INFINITY,
+                        |a, b| if b.is_nan() { b } else { a.max(b) },
+                    )
+            } else {
+                f64::NAN
+            },
+            task_missed: m
+                .sites
+                .iter()
+                .filter_map(|s| {
+                    let t = s.task.as_ref()?;
+                    (has_task && t.outcome != "done").then(|| {
+                        if t.failed_by.is_empty() {
+                            format!("{}:{}", s.name, t.outcome)
+                        } else {
+                            format!("{}:{}:{}", s.name, t.outcome, t.failed_by)
+                        }
+                    })
+                })
+                .collect(),
+            phantom_contact_site_max_ms: m
+                .sites
+                .iter()
+                .map(|s| s.phantom_contact_ms)
+                .fold(0.0, f64::max),
+            grip_peak_n: m
+                .sites
+                .iter()
+                .filter_map(|s| s.task.as_ref().map(|t| t.grip_peak_n))
+                .filter(|v| !v.is_nan())
+                .fold(f64::NAN, f64::max),
+            slips: m
+                .sites
+                .iter()
+                .filter_map(|s| s.task.as_ref().map(|t| t.slips))
+                .sum(),
         }
     }
 }
@@ -247,6 +309,7 @@ pub fn sweep(
             *seed,
             &metrics::compute(sc, &r, reference),
             sc.duration_s,
+            sc.task.done.is_some(),
         )
     }))
 }
@@ -273,11 +336,12 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}  missed phases",
+        "{:<10}{:>7}{:>5}{:>8}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}  missed phases",
         "method",
         "delay",
         "seed",
         "phases",
+        "task",
         "co-div",
         "co-div",
         "err ref",
@@ -295,11 +359,12 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     );
     let _ = writeln!(
         out,
-        "{:<10}{:>7}{:>5}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}",
+        "{:<10}{:>7}{:>5}{:>8}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}",
         "",
         "ms",
         "",
         "",
+        "s",
         "max mm",
         "rms mm",
         "rms mm",
@@ -318,11 +383,16 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:<10}{:>7}{:>5}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}{:>14}{:>9.0}  {}",
+            "{:<10}{:>7}{:>5}{:>8}{:>8}{} {}{}{}{:>7}{}{}{}{:>8}{:>9.1}{:>10}{:>6}{:>14}{:>9.0}  {}",
             r.method,
             r.delay_ms,
             r.seed,
             format!("{}/{}", r.phases_passed, r.phases_total),
+            match r.task_done {
+                None => "-".to_owned(),
+                Some(false) => "miss".to_owned(),
+                Some(true) => format!("{:.2}", r.completion_s),
+            },
             cell(r.co_contact_divergence_max_m * 1e3, 10, 2),
             cell(r.co_contact_divergence_rms_m * 1e3, 9, 2),
             cell(r.error_vs_reference_rms_m * 1e3, 12, 2),
@@ -337,16 +407,21 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
             r.hash_mismatches,
             format!("{:.0}/{:.0}", r.unfelt_contact_ms, r.phantom_contact_ms),
             r.sent_kbit_s,
-            if r.phases_failed.is_empty() {
+            if r.phases_failed.is_empty() && r.task_missed.is_empty() {
                 "-".to_string()
             } else {
-                r.phases_failed.join(" ")
+                r.phases_failed
+                    .iter()
+                    .cloned()
+                    .chain(r.task_missed.iter().map(|t| format!("task:{t}")))
+                    .collect::<Vec<_>>()
+                    .join(" ")
             }
         );
     }
     let _ = writeln!(
         out,
-        "# co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; unfelt/phant = confirmed contact time a user was never shown live / contact time shown live that the confirmed history took back, all sites (timewarp); sent = payload the busiest site puts (reports and tool tracks at their encoded sizes, each put once); missed phases = site:phase",
+        "# task = when the last site saw the live task done, s ('miss': not done at every site; '-': no [task]); co-div = largest/RMS distance between the sites' copies while two or more users touch ('-': never); err ref = worst site; f step = largest change of a displayed force per servo tick; >JND = servo ticks changing it by more than {:.0} % (at least {} N); c step = largest step beyond the displayed object's own contact change (what the display's step limiter bounds); E disp = most energy the display's deviation from the simulated contact put into a user (passivity observer; <= 0 passive); E corr = energy corrections gave the copies beyond what the forces of the corrected history did (what no user or wall put in; a remote push learned late is the pushing user's work, counted in --json's correction_energy_gross_j); bound = corrections the no-gain bound scaled back; rollback per s = busiest site; depth p99 = all sites' rollbacks; unfelt/phant = confirmed contact time a user was never shown live / contact time shown live that the confirmed history took back, all sites (timewarp); sent = payload the busiest site puts (reports and tool tracks at their encoded sizes, each put once); missed phases = site:phase, and task:site:outcome where the task was not done",
         metrics::FORCE_JND_FRACTION * 100.0,
         metrics::FORCE_JND_FLOOR_N
     );
@@ -397,29 +472,68 @@ pub fn per_method_means(rows: &[Row]) -> Vec<crate::plots::SweepLine> {
         .collect()
 }
 
-/// Runs `sim sweep` and prints its table or JSON; with `out`, writes `sweep.json` and the plot.
+/// What `sim sweep` prints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Print {
+    /// A row per run, and the live task's summary when the scenario has one.
+    Table,
+    /// The live task's summary alone.
+    Summary,
+    /// Everything as JSON.
+    Json,
+}
+
+/// Runs `sim sweep` and prints its table, summary or JSON; with `out`, writes `sweep.json` and
+/// the plots.
 ///
 /// # Errors
-/// As [`sweep`]; the output directory cannot be written.
+/// As [`sweep`]; a summary asked of a scenario without a `[task]`; the output directory cannot
+/// be written.
 pub fn main(
     base: &Scenario,
     delays_ms: &[f64],
     seeds: u64,
     methods: &[MethodName],
-    json: bool,
+    print: Print,
     out: Option<&Path>,
 ) -> anyhow::Result<()> {
+    if print == Print::Summary && base.task.done.is_none() {
+        bail!(
+            "--summary: scenario {} has no [task] (no done condition) to summarize; drop --summary for a row per run",
+            base.name
+        );
+    }
     let rows = sweep(base, delays_ms, seeds, methods)?;
+    let cells = if base.task.done.is_some() {
+        crate::completion::cells(&rows)
+    } else {
+        Vec::new()
+    };
     let doc = serde_json::json!({
         "scenario": base.name,
         "seeds": seeds,
         "jitter_ms": base.network.jitter_ms,
         "rows": rows,
+        "task": cells,
     });
-    if json {
-        println!("{}", serde_json::to_string_pretty(&doc)?);
-    } else {
-        print!("{}", table(base, seeds, &rows));
+    match print {
+        Print::Json => println!("{}", serde_json::to_string_pretty(&doc)?),
+        Print::Table => {
+            print!("{}", table(base, seeds, &rows));
+            if !cells.is_empty() {
+                print!("{}", crate::completion::table(&cells));
+            }
+        }
+        Print::Summary => {
+            println!(
+                "# live task of scenario {} ({} s, {} sites): constant delay, jitter {} ms (none at 0), seeds 1..={seeds}",
+                base.name,
+                base.duration_s,
+                base.site.len(),
+                base.network.jitter_ms
+            );
+            print!("{}", crate::completion::table(&cells));
+        }
     }
     if let Some(dir) = out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -437,6 +551,18 @@ pub fn main(
             total,
             &per_method_means(&rows),
         )?;
+        if !cells.is_empty() {
+            crate::plots::task(
+                dir,
+                &format!(
+                    "scenario {}: the live task against constant delay ({seeds} participant draw{} per delay)",
+                    base.name,
+                    if seeds == 1 { "" } else { "s" }
+                ),
+                &crate::completion::lines(&cells),
+            )?;
+            eprintln!("# task.png and task.svg in {}", dir.display());
+        }
         eprintln!("# sweep.json, sweep.png and sweep.svg in {}", dir.display());
     }
     Ok(())
