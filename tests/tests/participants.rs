@@ -72,3 +72,31 @@ fn a_plan_or_a_task_naming_what_is_not_there_is_refused_with_its_field() {
         assert!(shown.contains(field), "{field}: the error was {shown}");
     }
 }
+
+/// Every shipped participant scenario can be done: without delay, under `timewarp`, every site
+/// sees its task done (a plan whose step can never finish, or a goal no plan reaches, fails here).
+#[test]
+fn every_participant_scenario_is_done_at_every_site_without_delay() {
+    let dir = coop_tests::scenario_path("participants");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("scenarios/participants")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 4, "{files:?}");
+    for file in files {
+        let mut sc = coop_actors::scenario_file::load(&file).expect("a valid scenario");
+        assert!(sc.task.done.is_some(), "{}: no [task]", file.display());
+        sc.network.delay_min_ms = 0.0;
+        sc.network.delay_max_ms = 0.0;
+        sc.network.jitter_ms = 0.0;
+        let r = sim::run(&sc, Mode::Distributed(MethodName::Timewarp), &mut |_| {});
+        let reference = sim::run(&sc, Mode::Reference, &mut |_| {});
+        let m = metrics::compute(&sc, &r, &reference);
+        for s in &m.sites {
+            let t = s.task.as_ref().expect("task figures");
+            assert_eq!(t.outcome, "done", "{} at {}: {t:?}", file.display(), s.name);
+        }
+    }
+}
