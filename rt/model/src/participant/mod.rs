@@ -432,10 +432,10 @@ impl Participant {
                 }
                 // The move ended with the object short of where it should be (it slipped in the
                 // grip, or a partner held back): once the eye has seen the move's end, move on by
-                // what is missing, as a person corrects a reach. Beyond a hand's width the object
-                // is no longer in the grip, and no correction brings it.
+                // what is missing, as a person corrects a reach. An object no longer felt, or
+                // farther than a hand's width, is not in the grip: no correction brings it.
                 let seen_end = t - g.carry.end() >= self.person.visual_reaction_s;
-                if seen_end && short.norm() < MAX_CARRY_CORRECTION_M {
+                if seen_end && felt.touching[k] && short.norm() < MAX_CARRY_CORRECTION_M {
                     let from = g.carry.at(t).0;
                     let dur = self.person.movement_time(short.norm());
                     g.carry =
