@@ -34,7 +34,8 @@ const GRASP_SETTLE_S: f64 = 0.15;
 const GRIP_GAIN: f64 = 0.02;
 /// How far past a face a press may go, m: a person does not drive the hand through an object.
 const MAX_PRESS_M: f64 = 0.03;
-/// The largest miss of a carry a participant corrects by moving on, m (about a hand's width).
+/// The farthest a carry's corrections take the hand from where the step planned it, m (about a
+/// hand's width).
 const MAX_CARRY_CORRECTION_M: f64 = 0.08;
 /// A slip raises the grip's floor by this factor.
 const SLIP_BOOST: f64 = 1.3;
@@ -76,6 +77,9 @@ struct Grip {
     was_slipping: bool,
     /// The carry's path (an offset from `base`).
     carry: MinJerk,
+    /// Where the carry step planned to take the hand (an offset from `base`): corrections stay
+    /// within [`MAX_CARRY_CORRECTION_M`] of it.
+    carry_planned: Vec3,
     /// Felt at the goal since, s.
     settled_since: Option<f64>,
     /// The person's margin over the slip limit.
@@ -393,6 +397,7 @@ impl Participant {
                         slip_seen: f64::NEG_INFINITY,
                         was_slipping: false,
                         carry: MinJerk::hold(Vec3::zeros(), t),
+                        carry_planned: Vec3::zeros(),
                         settled_since: None,
                         margin: self.person.grip_margin,
                         approach_m_per_s: self.person.approach_m_per_s,
@@ -424,6 +429,7 @@ impl Participant {
                     let from = g.carry.at(t).0;
                     g.carry =
                         MinJerk::new(t, from, Vec3::zeros(), Vec3::zeros(), from + step.by, dur);
+                    g.carry_planned = from + step.by;
                 }
                 let there = self.origin[k] + step.by;
                 let short = there - seen.shown[k].pos;
@@ -432,12 +438,21 @@ impl Participant {
                 }
                 // The move ended with the object short of where it should be (it slipped in the
                 // grip, or a partner held back): once the eye has seen the move's end, move on by
-                // what is missing, as a person corrects a reach. An object no longer felt, or
-                // farther than a hand's width, is not in the grip: no correction brings it.
+                // what is missing, at the step's own pace, as a person corrects a reach. An object
+                // no longer felt is not in the grip, and the hand goes no farther than a hand's
+                // width from where the step planned it: what holds the object back then is not
+                // the grip.
                 let seen_end = t - g.carry.end() >= self.person.visual_reaction_s;
-                if seen_end && felt.touching[k] && short.norm() < MAX_CARRY_CORRECTION_M {
-                    let from = g.carry.at(t).0;
-                    let dur = self.person.movement_time(short.norm());
+                let from = g.carry.at(t).0;
+                let within = (from + short - g.carry_planned).norm() <= MAX_CARRY_CORRECTION_M;
+                if seen_end && felt.touching[k] && within {
+                    let d = short.norm();
+                    let paced = if step.for_s > 0.0 && step.by.norm() > 1e-9 {
+                        step.for_s * d / step.by.norm()
+                    } else {
+                        0.0
+                    };
+                    let dur = self.person.movement_time(d).max(paced);
                     g.carry =
                         MinJerk::new(t, from, Vec3::zeros(), Vec3::zeros(), from + short, dur);
                 }
