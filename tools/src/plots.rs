@@ -83,7 +83,7 @@ where
                 lo = lo.min(y);
                 hi = hi.max(y);
             }
-            for &(_, l, h) in &s.bars {
+            for &(_, l, h) in s.bars.iter().filter(|b| b.1.is_finite() && b.2.is_finite()) {
                 lo = lo.min(l);
                 hi = hi.max(h);
             }
@@ -124,6 +124,8 @@ where
                 .draw_series(
                     s.bars
                         .iter()
+                        // One value has no interval.
+                        .filter(|b| b.1.is_finite() && b.2.is_finite())
                         .map(|&(x, l, h)| PathElement::new(vec![(x, l), (x, h)], bar_style)),
                 )
                 .map_err(err)?;

@@ -3,6 +3,9 @@
 //! and does not collapse to a point at 0 % or 100 % as the normal approximation does (Wilson
 //! 1927; Brown, Cai & DasGupta 2001 recommend it for small n).
 
+/// The standard normal's 0.975 quantile.
+const Z975: f64 = 1.959_964;
+
 /// Student's t, two-sided 95 % (the 0.975 quantile), for 1 to 30 degrees of freedom.
 const T975: [f64; 30] = [
     12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
@@ -17,15 +20,15 @@ pub fn t975(df: usize) -> f64 {
         0 => f64::NAN,
         1..=30 => T975[df - 1],
         _ => {
-            let (z, n) = (1.959_964_f64, df as f64);
+            let (z, n) = (Z975, df as f64);
             z + (z.powi(3) + z) / (4.0 * n)
                 + (5.0 * z.powi(5) + 16.0 * z.powi(3) + 3.0 * z) / (96.0 * n * n)
         }
     }
 }
 
-/// The mean of `xs` and its 95 % confidence interval `(mean, lo, hi)` (NaN for an empty set;
-/// the interval is the mean itself for one value, which has no spread to estimate).
+/// The mean of `xs` and its 95 % confidence interval `(mean, lo, hi)` (all NaN for an empty set;
+/// the interval NaN for one value, whose spread cannot be estimated).
 pub fn mean_ci95(xs: &[f64]) -> (f64, f64, f64) {
     let n = xs.len();
     if n == 0 {
@@ -33,7 +36,7 @@ pub fn mean_ci95(xs: &[f64]) -> (f64, f64, f64) {
     }
     let mean = xs.iter().sum::<f64>() / n as f64;
     if n == 1 {
-        return (mean, mean, mean);
+        return (mean, f64::NAN, f64::NAN);
     }
     let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
     let half = t975(n - 1) * (var / n as f64).sqrt();
@@ -46,7 +49,7 @@ pub fn wilson95(k: usize, n: usize) -> (f64, f64, f64) {
     if n == 0 {
         return (f64::NAN, f64::NAN, f64::NAN);
     }
-    let z = 1.959_964_f64;
+    let z = Z975;
     let (nf, p) = (n as f64, k as f64 / n as f64);
     let denom = 1.0 + z * z / nf;
     let centre = (p + z * z / (2.0 * nf)) / denom;
@@ -66,7 +69,8 @@ mod tests {
         assert!((hi - 3.0 - 2.776 * (2.5f64 / 5.0).sqrt()).abs() < 1e-9);
         assert!((3.0 - lo - (hi - 3.0)).abs() < 1e-12);
         assert!(mean_ci95(&[]).0.is_nan());
-        assert_eq!(mean_ci95(&[7.0]), (7.0, 7.0, 7.0));
+        let (m, lo, hi) = mean_ci95(&[7.0]);
+        assert!(m == 7.0 && lo.is_nan() && hi.is_nan());
     }
 
     #[test]

@@ -102,6 +102,12 @@ pub struct Row {
 
 impl Row {
     fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64, has_task: bool) -> Self {
+        let task_done = has_task.then(|| {
+            !m.sites.is_empty()
+                && m.sites
+                    .iter()
+                    .all(|s| s.task.as_ref().is_some_and(|t| t.outcome == "done"))
+        });
         Self {
             sent_kbit_s: crate::figures::busiest_sent_kbit_s(m, duration_s),
             method: m.method.clone(),
@@ -146,22 +152,12 @@ impl Row {
             phantom_contact_ms: m.phantom_contact_ms,
             replays: m.replays,
             local_lag_max_ms: m.local_lag_max_ms,
-            task_done: has_task.then(|| {
+            task_done,
+            completion_s: if task_done == Some(true) {
                 m.sites
                     .iter()
-                    .all(|s| s.task.as_ref().is_some_and(|t| t.outcome == "done"))
-            }),
-            completion_s: if has_task {
-                m.sites
-                    .iter()
-                    .map(|s| match &s.task {
-                        Some(t) if t.outcome == "done" => t.time_s,
-                        _ => f64::NAN,
-                    })
-                    .fold(
-                        f64::NEG_INFINITY,
-                        |a, b| if b.is_nan() { b } else { a.max(b) },
-                    )
+                    .filter_map(|s| s.task.as_ref().map(|t| t.time_s))
+                    .fold(f64::NEG_INFINITY, f64::max)
             } else {
                 f64::NAN
             },
@@ -430,13 +426,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
 
 /// Per method, the mean over seeds of phases passed and of co-contact divergence (mm) at each delay.
 pub fn per_method_means(rows: &[Row]) -> Vec<crate::plots::SweepLine> {
-    let mut methods: Vec<&str> = Vec::new();
-    for r in rows {
-        if !methods.contains(&r.method.as_str()) {
-            methods.push(&r.method);
-        }
-    }
-    methods
+    crate::completion::first_seen(rows.iter().map(|r| r.method.as_str()))
         .into_iter()
         .map(|m| {
             let mut delays: Vec<f64> = Vec::new();
