@@ -6,7 +6,7 @@
 //! - [`sim`]: the deterministic multi-site simulator's CLI.
 //! - [`station`]: the `station` command line over [`coop_actors::station`].
 //! - [`sweep`]: `sim sweep`, every method × delay × seed on one scenario; with a live task,
-//!   [`completion`] summarizes success and completion time with confidence intervals
+//!   [`sweep::completion`] summarizes success and completion time with confidence intervals
 //!   ([`stats`]).
 //! - [`session`]: a multi-site session of real stations, recorded and measured; [`session_cli`]
 //!   its command line.
@@ -37,7 +37,6 @@ pub fn run_main(body: impl FnOnce() -> anyhow::Result<()>) -> std::process::Exit
 
 pub mod certs;
 pub mod cli;
-pub mod completion;
 pub mod deadband;
 pub mod devbench;
 pub mod figures;

@@ -7,6 +7,8 @@
 //! machine's cores, the rows always come out in the same order (method, delay, seed as given), and
 //! every run is deterministic, so the same command prints the same bytes.
 
+pub mod completion;
+
 use std::path::Path;
 
 use anyhow::{bail, Context};
@@ -426,7 +428,7 @@ pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
 
 /// Per method, the mean over seeds of phases passed and of co-contact divergence (mm) at each delay.
 pub fn per_method_means(rows: &[Row]) -> Vec<crate::plots::SweepLine> {
-    crate::completion::first_seen(rows.iter().map(|r| r.method.as_str()))
+    completion::first_seen(rows.iter().map(|r| r.method.as_str()))
         .into_iter()
         .map(|m| {
             let mut delays: Vec<f64> = Vec::new();
@@ -495,7 +497,7 @@ pub fn main(
     }
     let rows = sweep(base, delays_ms, seeds, methods)?;
     let cells = if base.task.done.is_some() {
-        crate::completion::cells(&rows)
+        completion::cells(&rows)
     } else {
         Vec::new()
     };
@@ -511,7 +513,7 @@ pub fn main(
         Print::Table => {
             print!("{}", table(base, seeds, &rows));
             if !cells.is_empty() {
-                print!("{}", crate::completion::table(&cells));
+                print!("{}", completion::table(&cells));
             }
         }
         Print::Summary => {
@@ -522,7 +524,7 @@ pub fn main(
                 base.site.len(),
                 base.network.jitter_ms
             );
-            print!("{}", crate::completion::table(&cells));
+            print!("{}", completion::table(&cells));
         }
     }
     if let Some(dir) = out {
@@ -549,7 +551,7 @@ pub fn main(
                     base.name,
                     if seeds == 1 { "" } else { "s" }
                 ),
-                &crate::completion::lines(&cells),
+                &completion::lines(&cells),
             )?;
             eprintln!("# task.png and task.svg in {}", dir.display());
         }

@@ -10,8 +10,8 @@ use std::fmt::Write;
 
 use serde::Serialize;
 
+use super::Row;
 use crate::stats::{mean_ci95, wilson95};
-use crate::sweep::Row;
 
 /// One method at one delay.
 #[derive(Debug, Clone, PartialEq, Serialize)]
