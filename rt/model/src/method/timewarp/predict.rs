@@ -130,14 +130,16 @@ impl TimeWarp {
         Some((p, before, (sample - previous).max(1)))
     }
 
-    /// How many ticks of its mean velocity over the last [`REACH_VELOCITY_TICKS`] (the velocity
-    /// [`Self::reach`] goes on with) a slowing free tool, last known at `p` at tick `last`, has
-    /// left before it stops: the stop at constant deceleration, `v²/2a`, with the deceleration
-    /// `a` along its way from the mean velocities over the last two windows and `v` the speed at
-    /// `last` (the last window's mean is half a window old: on by `a` for that long). For a
-    /// minimum-jerk reach this lands near its end point over the reach's last fifth, ahead of it
-    /// before. Infinite for a tool that is not slowing or whose positions are not known that far
-    /// back; 0 for one that has already stopped.
+    /// How many ticks of its present velocity a slowing free tool, last known at `p` at tick
+    /// `last`, has left before it stops: `v / 2a`, its speed over its deceleration along its
+    /// way, each from its mean velocities over the last two windows of
+    /// [`REACH_VELOCITY_TICKS`] (a stop at constant deceleration: for a minimum-jerk reach,
+    /// within a few millimetres of its end point over the reach's last fifth, ahead of it before).
+    /// Infinite for a tool that is not slowing or whose positions are not known that far back.
+    ///
+    /// The last window's mean speed is half a window old, and a slowing tool is a little slower
+    /// at its last position: from that speed the stop came out nearer the end point, but the
+    /// three-user grasp at 200 ms then lost its joint carry (`coop-tools`' sweep tests).
     ///
     /// A reach that slows to stop short of an object is predicted to stop there, not to glide on
     /// into it: gliding, the prediction pushed objects a waiting partner's real tool never
@@ -157,20 +159,11 @@ impl TimeWarp {
         if speed == 0.0 {
             return f64::INFINITY;
         }
-        let a: [f64; 3] = std::array::from_fn(|k| (v1[k] - v0[k]) / wf);
-        let along = (0..3).map(|k| a[k] * v1[k]).sum::<f64>() / speed;
+        let along = (0..3).map(|k| (v1[k] - v0[k]) / wf * v1[k]).sum::<f64>() / speed;
         if along >= 0.0 {
             return f64::INFINITY;
         }
-        // The speed at `last`, along the window's way.
-        let now = (0..3)
-            .map(|k| (v1[k] + a[k] * wf * 0.5) * v1[k])
-            .sum::<f64>()
-            / speed;
-        if now <= 0.0 {
-            return 0.0;
-        }
-        now * now / (2.0 * -along) / speed
+        speed / (2.0 * -along)
     }
 
     /// A free remote tool `h` ticks after it was last known at `p`, at the velocity of `step`,

@@ -304,8 +304,8 @@ fn a_remote_reach_slowing_short_of_the_disk_is_predicted_to_stop_short_of_it() {
     let end = quantize(Vec3::new(0.06, 0.0, 0.01));
     let rim = quantize(Vec3::new(0.045, 0.0, 0.01));
     assert!(
-        (far[0] - end[0]).abs() <= quantize(Vec3::new(0.001, 0.0, 0.0))[0],
-        "predicted to stop within 1 mm of the reach's end: {far:?} vs {end:?}"
+        (far[0] - end[0]).abs() <= quantize(Vec3::new(0.003, 0.0, 0.0))[0],
+        "predicted to stop within 3 mm of the reach's end: {far:?} vs {end:?}"
     );
     // Gliding on at its last velocity would have carried it into the disk.
     let last = quantize(Vec3::new(x(199), 0.0, 0.01));
