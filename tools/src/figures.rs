@@ -13,3 +13,12 @@ pub fn busiest_sent_kbit_s(m: &coop_model::metrics::Metrics, duration_s: f64) ->
         .map(|s| sent_kbit_s(s.sent_bytes, duration_s))
         .fold(0.0, f64::max)
 }
+
+/// `v` with `prec` decimals, or `-` when it is NaN (a figure that was not measured).
+pub fn or_dash(v: f64, prec: usize) -> String {
+    if v.is_nan() {
+        "-".to_owned()
+    } else {
+        format!("{v:.prec$}")
+    }
+}

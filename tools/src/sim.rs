@@ -449,13 +449,7 @@ pub fn print_tasks(all: &[Metrics]) {
         "{:<10}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
         "task", "site", "outcome", "time s", "by", "grip N", "peak N", "margin", "slips", "steps"
     );
-    let cell = |v: f64, prec: usize| {
-        if v.is_nan() {
-            "-".to_owned()
-        } else {
-            format!("{v:.prec$}")
-        }
-    };
+    let cell = crate::figures::or_dash;
     for m in all {
         for s in &m.sites {
             let Some(t) = &s.task else { continue };

@@ -313,25 +313,25 @@ pub fn sweep(
 }
 
 fn cell(v: f64, width: usize, prec: usize) -> String {
-    if v.is_nan() {
-        format!("{:>width$}", "-")
-    } else {
-        format!("{v:>width$.prec$}")
-    }
+    format!("{:>width$}", crate::figures::or_dash(v, prec))
+}
+
+/// The line above a table: what ran (`what` of scenario …), its length, sites, delays and seeds.
+fn heading(what: &str, sc: &Scenario, seeds: u64) -> String {
+    format!(
+        "# {what} of scenario {} ({} s, {} sites): constant delay, jitter {} ms (none at 0), seeds 1..={seeds}",
+        sc.name,
+        sc.duration_s,
+        sc.site.len(),
+        sc.network.jitter_ms
+    )
 }
 
 /// The rows as a table.
 pub fn table(sc: &Scenario, seeds: u64, rows: &[Row]) -> String {
     use std::fmt::Write;
     let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "# sweep of scenario {} ({} s, {} sites): constant delay, jitter {} ms (none at 0), seeds 1..={seeds}",
-        sc.name,
-        sc.duration_s,
-        sc.site.len(),
-        sc.network.jitter_ms
-    );
+    let _ = writeln!(out, "{}", heading("sweep", sc, seeds));
     let _ = writeln!(
         out,
         "{:<10}{:>7}{:>5}{:>8}{:>8}{:>10}{:>10}{:>12}{:>9}{:>7}{:>9}{:>9}{:>12}{:>8}{:>9}{:>10}{:>6}{:>14}{:>9}  missed phases",
@@ -517,13 +517,7 @@ pub fn main(
             }
         }
         Print::Summary => {
-            println!(
-                "# live task of scenario {} ({} s, {} sites): constant delay, jitter {} ms (none at 0), seeds 1..={seeds}",
-                base.name,
-                base.duration_s,
-                base.site.len(),
-                base.network.jitter_ms
-            );
+            println!("{}", heading("live task", base, seeds));
             print!("{}", completion::table(&cells));
         }
     }

@@ -11,6 +11,7 @@ use std::fmt::Write;
 use serde::Serialize;
 
 use super::Row;
+use crate::figures::or_dash as num;
 use crate::stats::{mean_ci95, wilson95};
 
 /// One method at one delay.
@@ -128,14 +129,6 @@ pub fn best(cells: &[Cell]) -> Vec<(f64, Option<String>)> {
             (d, winner)
         })
         .collect()
-}
-
-fn num(v: f64, prec: usize) -> String {
-    if v.is_nan() {
-        "-".to_owned()
-    } else {
-        format!("{v:.prec$}")
-    }
 }
 
 /// The summary as a table, with the best method per delay.

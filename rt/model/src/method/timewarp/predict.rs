@@ -137,10 +137,6 @@ impl TimeWarp {
     /// within a few millimetres of its end point over the reach's last fifth, ahead of it before).
     /// Infinite for a tool that is not slowing or whose positions are not known that far back.
     ///
-    /// The last window's mean speed is half a window old, and a slowing tool is a little slower
-    /// at its last position: from that speed the stop came out nearer the end point, but the
-    /// three-user grasp at 200 ms then lost its joint carry (`coop-tools`' sweep tests).
-    ///
     /// A reach that slows to stop short of an object is predicted to stop there, not to glide on
     /// into it: gliding, the prediction pushed objects a waiting partner's real tool never
     /// touched, and the rollback took the push back a delay later (a phantom push, seen and
