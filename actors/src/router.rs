@@ -101,7 +101,7 @@ pub enum RouterError {
 }
 
 /// The router's configuration file (TOML).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RouterConfig {
     /// Its name: its certificate's common name (what the access control knows it by).

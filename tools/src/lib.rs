@@ -44,6 +44,7 @@ pub mod fuzz;
 pub mod latency;
 pub mod netbench;
 pub mod plots;
+pub mod reference;
 pub mod ringbench;
 pub mod session;
 pub mod session_cli;

@@ -126,6 +126,26 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Print a commented scenario to start from: every table a scenario may hold (two sites, a
+    /// simulated participant and a scripted hand, a phase, a live task). Every field:
+    /// docs/reference/scenario.md.
+    Template,
+    /// Check a scenario file without running it: every rule, as `sim run` would (the error names
+    /// the file, the field, the value and the rule); prints what it holds when valid.
+    Check {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+    },
+    /// Write the reference pages of scenario, station and router files (docs/reference/*.md)
+    /// from the code: each field's type, unit, default, rule and meaning.
+    Reference {
+        /// The repository's root (the pages go into its docs/reference/).
+        #[arg(long, default_value = ".")]
+        root: PathBuf,
+        /// Write nothing; fail if a page differs from what the code generates.
+        #[arg(long)]
+        check: bool,
+    },
     /// Benchmark: physics step, servo step (ns) and simulator speed on a scenario.
     Bench {
         /// Scenario for the speed figure.
@@ -282,8 +302,53 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             json,
             quick,
         } => crate::simbench::run(&scenario, json, quick)?,
+        Command::Template => print!("{}", crate::reference::TEMPLATE),
+        Command::Check { scenario } => {
+            let sc = scenario_file::load(&scenario)?;
+            println!("{}: valid", scenario.display());
+            println!("{}", check_summary(&sc));
+        }
+        Command::Reference { root, check } => crate::reference::write(&root, check)?,
     }
     Ok(())
+}
+
+/// What a valid scenario holds, in a few lines: what `sim check` prints.
+fn check_summary(sc: &Scenario) -> String {
+    let names = |v: Vec<&str>| v.join(", ");
+    let hands: Vec<String> = sc
+        .site
+        .iter()
+        .map(|s| {
+            let hand = if !s.plan.is_empty() {
+                format!("a participant, {} steps", s.plan.len())
+            } else if s.hand_replay.is_some() {
+                "a recorded hand".to_owned()
+            } else {
+                format!("a script, {} keyframes", s.script.len())
+            };
+            format!("  {}: {hand}", s.name)
+        })
+        .collect();
+    format!(
+        "{} ({} s, method {}, seed {})\nobjects: {}\nsites:\n{}\nphases: {}\ntask: {}\nnetwork: {}–{} ms one way, jitter ±{} ms, loss {}",
+        sc.name,
+        sc.duration_s,
+        sc.method.as_str(),
+        sc.seed,
+        names(sc.objects.iter().map(|o| o.name.as_str()).collect()),
+        hands.join("\n"),
+        if sc.phase.is_empty() {
+            "none".to_owned()
+        } else {
+            names(sc.phase.iter().map(|p| p.name.as_str()).collect())
+        },
+        if sc.task.done.is_some() { "judged live (done and fail conditions)" } else { "none" },
+        sc.network.delay_min_ms,
+        sc.network.delay_max_ms,
+        sc.network.jitter_ms,
+        sc.network.loss,
+    )
 }
 
 /// The methods of `--methods`, every one if none is given; a method given twice is refused.

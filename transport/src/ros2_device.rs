@@ -49,7 +49,7 @@ use crate::ros2::graph::{self, Attachment, Kind, Node, Qos};
 use crate::ros2::MAX_DOMAIN_ID;
 
 /// The station config's `[device.ros2]` table.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Ros2DeviceConfig {
     /// The driver's end-effector pose (`geometry_msgs/msg/PoseStamped`), a fully qualified topic.

@@ -70,7 +70,9 @@ pub enum DeviceOpenError {
 }
 
 /// `device = "…"`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum BackendName {
     /// The simulated SCARA arm and scripted hand.
@@ -100,7 +102,9 @@ impl BackendName {
 }
 
 /// `loop = "…"`: who runs the device's loop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum LoopOwner {
     /// Our servo loop samples and commands the device at the scenario's servo rate.
@@ -110,8 +114,8 @@ pub enum LoopOwner {
     Vendor,
 }
 
-/// `[device.placement]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// `[device.placement]`: where the device sits in the world (its frame to the world's), and how far a device metre goes in it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlacementSpec {
     /// The device frame's origin in the world, m.
@@ -134,7 +138,7 @@ impl Default for PlacementSpec {
 }
 
 /// `[device.safety]`: the safety contract's limits (see `coop_rt::device::safety`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetySpec {
     /// Force ramp-in on enable, ms (0: none).
@@ -162,8 +166,8 @@ impl Default for SafetySpec {
     }
 }
 
-/// `[device.replay]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+/// `[device.replay]`: a recorded hand played back as the device (`device = "replay"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ReplaySpec {
     /// A station's MCAP recording (its `/tool` positions, timed from its session's start) or a CSV
@@ -171,8 +175,8 @@ pub struct ReplaySpec {
     pub file: PathBuf,
 }
 
-/// `[device]`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+/// `[device]`: which device this station drives (the backend), where it sits in the world, who runs its loop, and the safety contract's limits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DeviceSpec {
     /// The backend.
@@ -190,13 +194,16 @@ pub struct DeviceSpec {
     /// The Haply backend's table (`device = "haply"`), read as
     /// [`coop_rt::device::haply::HaplyConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<coop_rt::device::haply::HaplyConfig>")]
     pub haply: Option<toml::Table>,
     /// The DHD backend's table (`device = "dhd"`), read as [`coop_rt::device::dhd::DhdConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<coop_rt::device::dhd::DhdConfig>")]
     pub dhd: Option<toml::Table>,
     /// The ROS 2 backend's table (`device = "ros2"`), read as
     /// [`coop_transport::ros2_device::Ros2DeviceConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<coop_transport::ros2_device::Ros2DeviceConfig>")]
     pub ros2: Option<toml::Table>,
 }
 

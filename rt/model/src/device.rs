@@ -166,7 +166,7 @@ impl ScaraForceLoop {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Deserialize, serde::Serialize),
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct HandParams {

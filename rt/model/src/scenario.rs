@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize, Serialize),
+    derive(Deserialize, Serialize, schemars::JsonSchema),
     serde(rename_all = "lowercase")
 )]
 pub enum MethodName {
@@ -66,7 +66,7 @@ impl MethodName {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(rename_all = "lowercase")
 )]
 pub enum ShapeName {
@@ -83,7 +83,7 @@ pub enum ShapeName {
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct Scenario {
@@ -133,7 +133,7 @@ pub struct Scenario {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct TimewarpSpec {
@@ -181,7 +181,7 @@ pub const MAX_HORIZON_MS: f64 = 10_000.0;
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct ObjectSpec {
@@ -235,7 +235,7 @@ fn one_or_many<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<ObjectSpec>
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct WorldSpec {
@@ -247,7 +247,11 @@ pub struct WorldSpec {
 
 /// A plane: free space is where `normal · x ≥ offset_m`.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
+    serde(deny_unknown_fields)
+)]
 pub struct PlaneSpec {
     /// Normal into free space (normalised on load).
     pub normal: [f64; 3],
@@ -259,7 +263,7 @@ pub struct PlaneSpec {
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct LinkSpec {
@@ -279,7 +283,7 @@ pub struct LinkSpec {
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct SiteSpec {
@@ -330,7 +334,11 @@ pub struct SiteSpec {
 
 /// A script keyframe.
 #[derive(Debug, Clone, PartialEq)]
-#[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
+    serde(deny_unknown_fields)
+)]
 pub struct KeyframeSpec {
     /// Time, s.
     pub t_s: f64,
@@ -342,7 +350,7 @@ pub struct KeyframeSpec {
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct PhaseSpec {

@@ -37,7 +37,7 @@ pub const DEFAULT_DIRS: &[&str] = &["/usr/local/lib", "/opt/forcedimension/lib",
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Deserialize),
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct DhdConfig {

@@ -10,7 +10,7 @@ use crate::shm::{BlockSegment, CreateError, NameError, RingSegment, SegmentName}
 #[derive(Debug, Clone, PartialEq, Eq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Serialize, serde::Deserialize),
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct RingSlots {

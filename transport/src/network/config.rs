@@ -7,7 +7,17 @@ use std::path::PathBuf;
 use super::NetworkError;
 
 /// How the session reaches the others.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Stations connect to each other.
@@ -36,7 +46,7 @@ impl std::fmt::Display for Mode {
 /// The network process's configuration, the station configuration's `[network]` table: where the
 /// zenoh session listens and whom it connects to, peer or client, TLS, and whether the scenario's
 /// link is emulated on receive.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct NetworkConfig {
     /// Zenoh locators to listen on, e.g. `tcp/127.0.0.1:7447` (port 0: a free port, chosen here).
@@ -92,7 +102,9 @@ impl Default for NetworkConfig {
 /// TLS for `tls/<host>:<port>` locators: PEM files (zenoh's `transport/link/tls`). The
 /// certificates are this side's own: a station's has its site name as common name, which is what
 /// the access control knows it by.
-#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
 #[serde(deny_unknown_fields, default)]
 pub struct Tls {
     /// CA certificate that signed the peers' (or routers') certificates.

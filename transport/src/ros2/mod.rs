@@ -17,7 +17,7 @@ pub mod graph;
 use serde::{Deserialize, Serialize};
 
 /// A station's `[ros2]` table: whether it publishes, in which domain, how often.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Ros2Config {
     /// Publish this site's poses, force, frames and events as ROS 2 topics.

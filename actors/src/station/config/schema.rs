@@ -13,7 +13,7 @@ use coop_transport::recording::Rotation;
 use serde::{Deserialize, Serialize};
 
 /// Scheduling of one loop.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopSpec {
     /// CPU to pin to. Default: the servo gets the last allowed CPU to itself; physics, the network
@@ -27,7 +27,9 @@ pub struct LoopSpec {
 }
 
 /// When the users' scripts start (the session's time 0).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, schemars::JsonSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum StartMode {
     /// When this station starts.
@@ -40,7 +42,7 @@ pub enum StartMode {
 /// The supervisor's policy: `max_restarts` … `backoff_max_ms` are the servo's and physics'
 /// (a failure beyond them stops the station); the network process is retried without limit, its
 /// delay capped by `network_backoff_max_ms` (see [`crate::policy`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SupervisorSpec {
     /// never, on-failure or always.
@@ -78,7 +80,7 @@ impl Default for SupervisorSpec {
 }
 
 /// The configuration file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct StationConfig {
     /// Session name: stations of one session see each other.

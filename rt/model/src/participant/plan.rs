@@ -9,7 +9,7 @@ use crate::task::{find_object, Condition, ConditionSpec};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Deserialize),
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(rename_all = "lowercase")
 )]
 pub enum Action {
@@ -35,7 +35,7 @@ pub enum Action {
 #[derive(Debug, Clone, Default, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Deserialize),
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct StepSpec {

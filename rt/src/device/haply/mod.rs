@@ -42,7 +42,7 @@ pub const DEFAULT_URL: &str = "ws://localhost:10001";
 #[derive(Debug, Clone, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Deserialize),
+    derive(serde::Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct HaplyConfig {

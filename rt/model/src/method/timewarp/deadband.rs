@@ -33,7 +33,7 @@ use super::predict::SAMPLE_VELOCITY_TICKS;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(
     feature = "serde",
-    derive(Deserialize),
+    derive(Deserialize, serde::Serialize, schemars::JsonSchema),
     serde(deny_unknown_fields, default)
 )]
 pub struct DeadbandSpec {
