@@ -126,6 +126,17 @@ fn bad_flags_are_clear_errors() {
     }
 }
 
+/// Every command's help prints and exits 0 (the top level turns clap's help flag off to give
+/// `-h` to the histogram, which a subcommand would inherit).
+#[test]
+fn every_command_has_its_help() {
+    for args in [vec!["--help"], vec!["attach", "--help"], vec!["attach", "-h"]] {
+        let (code, out, err) = run(Command::new(LATENCY).args(&args));
+        assert_eq!(code, 0, "{args:?}: {err}");
+        assert!(out.contains("Usage: latency"), "{args:?}: {out}");
+    }
+}
+
 #[test]
 fn json_holds_the_same_figures() {
     let dir = TempDir::new("latency");

@@ -11,6 +11,7 @@ fn main() -> std::process::ExitCode {
         duration,
         quiet,
         json,
+        ..
     }) = &args.attach
     {
         return coop_tools::run_main(|| {

@@ -123,6 +123,10 @@ pub enum Attach {
         /// Write the summary as JSON to FILE.
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
+        /// Print help (the top level gives `-h` to the histogram, as cyclictest does, and turns
+        /// clap's own help flag off, which a subcommand inherits).
+        #[arg(short = 'h', long, action = ArgAction::Help)]
+        help: Option<bool>,
     },
 }
 
