@@ -42,6 +42,7 @@ pub mod devbench;
 pub mod figures;
 pub mod fuzz;
 pub mod latency;
+pub mod layout;
 pub mod netbench;
 pub mod plots;
 pub mod reference;

@@ -575,5 +575,6 @@ pub fn write_outputs(
         recording::session::SIM_EPOCH_UNIX_NS,
     )
     .with_context(|| format!("writing {}", session.display()))?;
+    crate::layout::write(dir, sc)?;
     crate::plots::figures(dir, sc, r, reference)
 }

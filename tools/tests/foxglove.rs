@@ -512,7 +512,12 @@ fn check_path(value: &str, v: &Value) -> Result<(), String> {
 /// and message path it refers to is in the file `v` summarises (a session file); returns the paths
 /// checked.
 fn check_layout(file: &str, v: &Value) -> usize {
-    let l = layout(file);
+    check_layout_value(&layout(file), v)
+}
+
+/// [`check_layout`] of a layout already read.
+fn check_layout_value(l: &Value, v: &Value) -> usize {
+    let file = "the layout";
     let config = l["configById"].as_object().expect("configById");
     let mut ids = Vec::new();
     placed(&l["layout"], &mut ids);
@@ -612,6 +617,32 @@ fn the_world_layout_refers_only_to_what_a_stack_session_file_has() {
     );
     assert!(check_path("/object{site==\"user1\"}{object==\"base\"}.pos[2]", &v).is_ok());
     assert!(check_path("/object{site==\"user1\"}{object==\"cup\"}.pos[2]", &v).is_err());
+}
+
+/// The `layout.json` a run writes next to its session file, for worlds the shipped layouts were
+/// not written for (the tray's two objects; three sites), names only what that session file has,
+/// and every object of every site.
+#[test]
+fn the_layout_written_with_a_session_file_plots_every_object_of_every_site() {
+    if coop_tests::python_with(&["mcap", "google.protobuf"]).is_none() {
+        return;
+    }
+    for (file, sites, objects) in [("tray.toml", 2, 2), ("three-lift.toml", 3, 1)] {
+        let (sc, v, out) = simulated_session("layout-written", file, &[]);
+        assert_eq!(
+            (sc.site.len(), sc.objects.len()),
+            (sites, objects),
+            "{file}"
+        );
+        let written: Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("layout.json")).expect("layout.json written"),
+        )
+        .expect("JSON");
+        // Each object's x, y, z for each site and the reference, the divergence per site and
+        // between sites.
+        let expected = 3 * objects * (sites + 1) + sites + 1;
+        assert_eq!(check_layout_value(&written, &v), expected, "{file}");
+    }
 }
 
 /// `session run SCENARIO --method METHOD --json --live 127.0.0.1:0 --out OUT`, running: the

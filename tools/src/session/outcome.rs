@@ -403,6 +403,7 @@ pub(crate) fn outcome(
     }
     crate::plots::figures(dir, sc, &real_run, &reference_run)?;
     write_session_file(dir, sc, session, &real_run, &reference_run, t0_unix_ns)?;
+    crate::layout::write(dir, sc)?;
     std::fs::write(
         dir.join("metrics.json"),
         serde_json::to_string_pretty(&serde_json::json!({ "real": real, "simulated": simulated }))?
