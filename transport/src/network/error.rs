@@ -38,6 +38,10 @@ pub enum NetworkError {
     /// The zenoh session could not be opened.
     #[error("opening the zenoh session: {0}")]
     Open(zenoh::Error),
+    /// The zenoh session could not be opened because its links fail, each for the cause found by
+    /// probing it ([`super::link`]).
+    #[error("{0}")]
+    Link(super::link::LinkFailures),
     /// A publisher, subscriber, queryable or liveliness token could not be declared.
     #[error("declaring the {what}: {error}")]
     Declare {

@@ -17,6 +17,10 @@
 //! - with [`NetworkArgs::live_view`], serves the station's own live view to Foxglove
 //!   ([`crate::live_view`]): its samples offered as they are drained, its events logged.
 //!
+//! When its session cannot open because its links fail, its error is their cause ([`probe`] finds
+//! it, [`link`] words it, the station's supervisor says it); a peer's TLS links that keep failing
+//! are watched, and their cause said.
+//!
 //! It is not a real-time loop: zenoh's own threads and this process's loop run at normal priority,
 //! off the servo's CPU, and touch the rings (lock-free, non-blocking) only on the real-time side's
 //! behalf.
@@ -48,8 +52,10 @@ pub mod emulate;
 pub mod epoch;
 mod error;
 pub mod figures;
+pub mod link;
 mod live;
 mod presence;
+pub mod probe;
 pub mod publish;
 mod receive;
 mod record;
@@ -205,6 +211,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         .network
         .emulated
         .store(u64::from(a.emulation.is_some()), Ordering::Relaxed);
+    let _watch = watch_peers(&a.endpoints, &site);
     let session = open(&ctx, a.endpoints)?;
     let mut publish = Publish::declare(&session, ctx.session_name, &site, a.bounds.object_count)?;
     let mut rx = Receiver::new(
@@ -277,7 +284,7 @@ fn open(ctx: &Ctx<'_>, mut endpoints: NetworkConfig) -> Result<Session, NetworkE
     endpoints.listen = concrete_listen(&endpoints.listen);
     let session = zenoh::open(config(&endpoints)?)
         .wait()
-        .map_err(NetworkError::Open)?;
+        .map_err(|e| explain_open(e, &endpoints, station_side(endpoints.mode)))?;
     ctx.ctl.set_locators(&format!(
         "zid {} mode {} listen [{}] connect [{}]",
         session.zid(),
@@ -286,6 +293,57 @@ fn open(ctx: &Ctx<'_>, mut endpoints: NetworkConfig) -> Result<Session, NetworkE
         endpoints.connect.join(", ")
     ));
     Ok(session)
+}
+
+/// Zenoh's failure to open a session on `endpoints`, explained: in client mode a session opens only
+/// when one of its links does, so when every `connect` locator fails its probe ([`probe`]) the
+/// causes are the error; otherwise (or when a probe passes) zenoh's own words are.
+pub fn explain_open(e: zenoh::Error, endpoints: &NetworkConfig, side: link::Side) -> NetworkError {
+    if endpoints.mode == Mode::Client && !endpoints.connect.is_empty() {
+        let found = probe::diagnose(&endpoints.connect, endpoints.tls.as_ref(), side);
+        if found.len() == endpoints.connect.len() {
+            return NetworkError::Link(link::LinkFailures(found));
+        }
+    }
+    NetworkError::Open(e)
+}
+
+/// A peer's session opens whether or not its TLS links to the other stations work, and zenoh
+/// retries them without a word: their certificate problems are watched and said ([`probe::LinkWatch`];
+/// a station not up yet says nothing, peers start in any order).
+fn watch_peers(endpoints: &NetworkConfig, site: &str) -> Option<probe::LinkWatch> {
+    let tls: Vec<String> = endpoints
+        .connect
+        .iter()
+        .filter(|l| l.starts_with("tls/"))
+        .cloned()
+        .collect();
+    if endpoints.mode != Mode::Peer || tls.is_empty() {
+        return None;
+    }
+    let site = site.to_owned();
+    let side = station_side(endpoints.mode);
+    let say = move |m: &str| eprintln!("network {site}: {m}");
+    match probe::LinkWatch::start(tls, endpoints.tls.clone(), side, false, say) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            eprintln!("network: its TLS links to the other stations are not watched ({e}): a certificate problem shows only in zenoh's log (RUST_LOG=zenoh=warn)");
+            None
+        }
+    }
+}
+
+/// How a station's link failures are worded: its `[network.tls]`, towards routers (client mode)
+/// or other stations.
+pub fn station_side(mode: Mode) -> link::Side {
+    link::Side {
+        me: "station",
+        far: match mode {
+            Mode::Client => link::Far::Router,
+            Mode::Peer => link::Far::Station,
+        },
+        files: link::Files::Table("network.tls"),
+    }
 }
 
 /// What the loop owns.
