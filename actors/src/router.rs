@@ -11,11 +11,15 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use coop_transport::network::link::{Far, Files, Side};
+use coop_transport::network::probe::LinkWatch;
 use coop_transport::network::{Locator, Tls};
 use coop_transport::router::{self, Refusals, RouterEndpoints, RouterStatus};
 use serde::{Deserialize, Serialize};
 
-use crate::station::config::{readable, tls_files_readable, Problem};
+use crate::station::config::{
+    certificates_name, listen_ports_free, readable, tls_files_readable, Problem,
+};
 
 /// Why a router could not be configured, run, or its status read.
 #[derive(Debug, thiserror::Error)]
@@ -34,6 +38,15 @@ pub enum RouterError {
     Config {
         /// The file.
         path: PathBuf,
+        /// The field, the value and the rule.
+        #[source]
+        problem: Problem,
+    },
+    /// Values given whole (no file) break a rule that looks at the machine.
+    #[error("router {name}")]
+    Values {
+        /// The router.
+        name: String,
         /// The field, the value and the rule.
         #[source]
         problem: Problem,
@@ -133,6 +146,8 @@ fn default_status_every_ms() -> u64 {
 /// A configuration with its paths made absolute and every value checked.
 #[derive(Debug, Clone)]
 pub struct ResolvedRouter {
+    /// The file it was read from (none: values given whole).
+    pub file: Option<PathBuf>,
     /// The file's values.
     pub config: RouterConfig,
     /// What zenoh is given.
@@ -157,7 +172,9 @@ impl RouterConfig {
             problem,
         };
         let c: RouterConfig = toml::from_str(&text).map_err(|e| in_file(Problem::Toml(e)))?;
-        c.resolve(path.parent()).map_err(in_file)
+        let mut r = c.resolve(path.parent()).map_err(in_file)?;
+        r.file = Some(path.to_owned());
+        Ok(r)
     }
 
     /// Checks every value (relative paths are relative to `base`).
@@ -180,6 +197,8 @@ impl RouterConfig {
         };
         if let Some(t) = &mut self.tls {
             tls_files_readable(t, base, "tls")?;
+            let who = format!("router {}", self.name);
+            certificates_name(t, "tls", &self.name, &who)?;
         }
         let t = self.tls.clone().unwrap_or_default();
         if tls_used {
@@ -225,6 +244,7 @@ impl RouterConfig {
         // are checked when it opens).
         router::router_config(&endpoints).map_err(|e| Problem::Zenoh(Box::new(e)))?;
         Ok(ResolvedRouter {
+            file: None,
             config: self,
             endpoints,
             status_file,
@@ -311,10 +331,23 @@ pub fn run(
             pid,
         });
     }
+    // Checked here, as a station checks its own: zenoh's listener error says neither the field
+    // nor the fix.
+    listen_ports_free("listen", &r.endpoints.listen).map_err(|problem| match &r.file {
+        Some(path) => RouterError::Config {
+            path: path.clone(),
+            problem,
+        },
+        None => RouterError::Values {
+            name: r.config.name.clone(),
+            problem,
+        },
+    })?;
     let session = router::open(&r.endpoints).map_err(|error| RouterError::Open {
         name: r.config.name.clone(),
         error,
     })?;
+    let _watch = watch_links(r);
     let start = Instant::now();
     let every = Duration::from_millis(r.config.status_every_ms);
     let result = (|| loop {
@@ -335,6 +368,33 @@ pub fn run(
     }
     router::close(&session);
     result
+}
+
+/// A router's session opens whether or not its links to other routers work, and zenoh retries
+/// them without a word: they are watched, and each cause said once on stderr
+/// ([`LinkWatch`]).
+fn watch_links(r: &ResolvedRouter) -> Option<LinkWatch> {
+    if r.endpoints.connect.is_empty() {
+        return None;
+    }
+    let side = Side {
+        me: "router",
+        far: Far::Router,
+        files: Files::Table("tls"),
+    };
+    let name = r.config.name.clone();
+    let say = move |m: &str| eprintln!("router {name}: {m}");
+    let connect = r.endpoints.connect.clone();
+    match LinkWatch::start(connect, r.endpoints.tls.clone(), side, true, say) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            eprintln!(
+                "router {}: its links to other routers are not watched ({e}): a link that fails will not be explained",
+                r.config.name
+            );
+            None
+        }
+    }
 }
 
 /// The pid that wrote the status file at `path`, if it holds one.

@@ -325,7 +325,11 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             // The network process's zenoh speaks on stderr when RUST_LOG asks: installed here, by
             // the binary, as a library must not install a process's log subscriber.
             coop_transport::log::zenoh_to_stderr();
-            Ok(child::run_network(&resolve(&a)?, a.parent)?)
+            match child::run_network(&resolve(&a)?, a.parent) {
+                // Its supervisor says why, once: not one line per restart here.
+                Err(e) if a.parent.is_some() && e.said_by_the_station() => std::process::exit(1),
+                r => Ok(r?),
+            }
         }
     })
 }

@@ -317,12 +317,11 @@ fn free_port() -> u16 {
 /// other's states over zenoh (and adopts them), through its network process and rings.
 #[test]
 fn two_stations_by_hand_see_each_other() {
-    two_stations("tcp", None);
+    two_stations("tcp", |_| None);
 }
 
 /// The same over TLS, with the session CA and the sites' certificates made by `session certs`
-/// (rcgen): each station listens with user1's certificate and connects with user2's (the two
-/// stations of this test share one `[network.tls]`).
+/// (rcgen): each station listens and connects with its own site's certificate.
 #[test]
 fn two_stations_see_each_other_over_tls() {
     let session = unique_session();
@@ -339,22 +338,23 @@ fn two_stations_see_each_other_over_tls() {
         "making the test certificates: {}",
         String::from_utf8_lossy(&made.stderr)
     );
-    two_stations(
-        "tls",
+    two_stations("tls", |me| {
+        let (cert, key) = (dir.join(format!("{me}.pem")), dir.join(format!("{me}.key")));
         Some(Tls {
             root_ca_certificate: Some(dir.join("ca.pem")),
-            listen_certificate: Some(dir.join("user1.pem")),
-            listen_private_key: Some(dir.join("user1.key")),
-            connect_certificate: Some(dir.join("user2.pem")),
-            connect_private_key: Some(dir.join("user2.key")),
+            listen_certificate: Some(cert.clone()),
+            listen_private_key: Some(key.clone()),
+            connect_certificate: Some(cert),
+            connect_private_key: Some(key),
             ..Tls::default()
-        }),
-    );
+        })
+    });
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Two stations, `user2` connecting to `user1` with `scheme` (tcp or tls) and these TLS files.
-fn two_stations(scheme: &str, tls: Option<Tls>) {
+/// Two stations, `user2` connecting to `user1` with `scheme` (tcp or tls), each with the TLS files
+/// `tls` gives for its name.
+fn two_stations(scheme: &str, tls: impl Fn(&str) -> Option<Tls>) {
     let session = unique_session();
     let dir = std::env::temp_dir().join(format!("coop-two-{session}"));
     std::fs::create_dir_all(&dir).expect("dir");
@@ -366,7 +366,7 @@ fn two_stations(scheme: &str, tls: Option<Tls>) {
                 .map(|c| format!("{scheme}/127.0.0.1:{c}"))
                 .into_iter()
                 .collect();
-            c.network.tls = tls.clone();
+            c.network.tls = tls(name);
         })
     };
     let a = start(&write("user1", pa, None));

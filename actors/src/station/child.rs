@@ -69,6 +69,18 @@ pub enum ChildError {
     Network(#[from] coop_transport::network::NetworkError),
 }
 
+impl ChildError {
+    /// Whether `station run` says this failure itself: links that fail, which it probes and says
+    /// once however often the network process is restarted (see `station::link`); the network
+    /// process then exits failing without a word.
+    pub fn said_by_the_station(&self) -> bool {
+        matches!(
+            self,
+            Self::Network(coop_transport::network::NetworkError::Link(_))
+        )
+    }
+}
+
 /// Names the ring a failed open was of.
 fn opening(ring: &'static str) -> impl FnOnce(coop_rt::shm::RingOpenError) -> ChildError {
     move |error| ChildError::Ring { ring, error }

@@ -8,7 +8,8 @@
 //!   backend in the servo process, and what each backend finds (`station devices`);
 //! - [`child`]: the entry points of the servo, physics and network processes;
 //! - [`run`]: `station run`, the supervisor bringing the children up and the stop ladder taking them
-//!   down, leaving nothing behind;
+//!   down, leaving nothing behind; and, when the network process cannot link, saying why once
+//!   (`link`);
 //! - [`status`]: [`status::StationStatus`], what a running station is doing, read from its control
 //!   block without touching the loops.
 
@@ -16,5 +17,6 @@ pub mod child;
 pub mod config;
 pub mod device;
 mod error;
+mod link;
 pub mod run;
 pub mod status;

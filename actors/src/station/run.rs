@@ -31,6 +31,7 @@ use tokio::signal::unix::{signal, SignalKind};
 use tokio::sync::watch;
 
 use super::config::{ConfigError, Resolved};
+use super::link::LinkTeller;
 use coop_rt::shm::station::{Names, StationSegments};
 
 /// Why `station run` could not start, or stopped on a failure.
@@ -179,8 +180,9 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, child: Child) -> Result<ChildSp
     })
 }
 
-/// Writes each child's restarts, health and last failure to its slot of the control block.
-fn publish(ctl: &ControlBlock, status: &Status) {
+/// Writes each child's restarts, health and last failure to its slot of the control block; the
+/// network's with `network_cause`, why its links fail, when that is known.
+fn publish(ctl: &ControlBlock, status: &Status, network_cause: Option<String>) {
     for (i, c) in Child::ALL.into_iter().enumerate() {
         let slot = ctl.child(c);
         if let Some(n) = status.restarts.get(i) {
@@ -190,8 +192,12 @@ fn publish(ctl: &ControlBlock, status: &Status) {
             continue;
         };
         if let Some(f) = &h.last_failure {
-            if *f != slot.last_failure() {
-                slot.set_last_failure(f);
+            let f = match (&network_cause, c) {
+                (Some(cause), Child::Network) => format!("{f}: {cause}"),
+                _ => f.clone(),
+            };
+            if f != slot.last_failure() {
+                slot.set_last_failure(&f);
             }
         }
         slot.down_since_ns
@@ -225,6 +231,26 @@ fn say_degraded(cfg: &Resolved, status: &Status, before: &[String]) {
             "station {}: no longer degraded: the {name} process is up again (restarts so far: {restarts})",
             cfg.name
         );
+    }
+}
+
+/// Hands the network's failures to `link` (which probes the links and says why, once) and tells
+/// it when the network is up again.
+fn watch_links(cfg: &Resolved, status: &Status, link: &mut LinkTeller) {
+    let Some(i) = Child::ALL.iter().position(|c| *c == Child::Network) else {
+        return;
+    };
+    let Some(h) = status.health.get(i) else {
+        return;
+    };
+    match (h.state, &h.last_failure) {
+        (ChildState::Down, Some(f)) if status.end.is_none() => link.failed(cfg, f),
+        (ChildState::Up, _) => {
+            if let Some(line) = link.up() {
+                eprintln!("station {}: {line}", cfg.name);
+            }
+        }
+        _ => {}
     }
 }
 
@@ -296,6 +322,7 @@ async fn supervise(
     });
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let mut degraded: Vec<String> = Vec::new();
+    let mut link = LinkTeller::default();
     let end = loop {
         tokio::select! {
             _ = sigint.recv() => break None,
@@ -312,13 +339,20 @@ async fn supervise(
                     )));
                 }
             }
+            found = link.probed(), if link.probing() => {
+                if let Some(line) = link.tell(found) {
+                    eprintln!("station {}: {line}", cfg.name);
+                }
+                publish(&segs.control, &rx.borrow().clone(), link.cause());
+            }
             changed = rx.changed() => {
                 let status = rx.borrow_and_update().clone();
-                publish(&segs.control, &status);
+                publish(&segs.control, &status, link.cause());
                 if status.degraded != degraded && status.end.is_none() {
                     say_degraded(cfg, &status, &degraded);
                     degraded.clone_from(&status.degraded);
                 }
+                watch_links(cfg, &status, &mut link);
                 if changed.is_err() || status.end.is_some() {
                     break status.end;
                 }

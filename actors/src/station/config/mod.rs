@@ -15,7 +15,7 @@ mod schema;
 
 pub use super::error::{ConfigError, Problem};
 pub use resolve::Resolved;
-pub(crate) use rules::{readable, tls_files_readable};
+pub(crate) use rules::{certificates_name, listen_ports_free, readable, tls_files_readable};
 pub use schema::{LoopSpec, StartMode, StationConfig, SupervisorSpec};
 
 /// The paper's experiment, the default world.

@@ -115,6 +115,9 @@ impl StationConfig {
         self.check_values()?;
         let mut config = self;
         let device = config.rebase_and_open_files(base)?;
+        if let Some(t) = &config.network.tls {
+            rules::certificates_name(t, "network.tls", &name, &format!("station {name}"))?;
+        }
         let (servo_sched, physics_sched) = schedules(&config)?;
         let (policy, network_backoff) = supervision(&config)?;
         Ok(Resolved {

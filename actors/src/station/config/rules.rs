@@ -385,6 +385,49 @@ pub(crate) fn tls_files_readable(
     Ok(())
 }
 
+/// The certificates `t` names for this side to present are `name`'s: each one's common name (what
+/// the access control knows a certificate by) or one of its alternative names is `name`. A station
+/// (or router) holding another's certificate would start and link, and then speak under the other's
+/// name; `prefix` names the table, `who` this side in the message (`station user1`).
+///
+/// # Errors
+/// A certificate that does not parse, or names another, naming the field, the file, the name it
+/// holds and the one it should.
+pub(crate) fn certificates_name(
+    t: &Tls,
+    prefix: &str,
+    name: &str,
+    who: &str,
+) -> Result<(), Problem> {
+    for (field, path) in [
+        ("connect_certificate", &t.connect_certificate),
+        ("listen_certificate", &t.listen_certificate),
+    ] {
+        let Some(p) = path else { continue };
+        let field = format!("{prefix}.{field}");
+        let shown = format!("{:?}", p.display().to_string());
+        let names = coop_transport::network::probe::certificate_names(p)
+            .map_err(|e| Problem::value(&field, &shown, e))?;
+        if !names.names(name) {
+            let holds = names.common_name.map_or_else(
+                || {
+                    format!(
+                        "has no common name and names {}",
+                        names.alt_names.join(", ")
+                    )
+                },
+                |cn| format!("is {cn}'s certificate (common name {cn:?})"),
+            );
+            return Err(Problem::value(
+                field,
+                shown,
+                format!("{holds}, not {who}'s: each side presents its own certificate, which the access control knows it by (`session certs` wrote {name}.pem for {name})"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// `field = path` opens and is a regular file.
 ///
 /// # Errors
@@ -465,6 +508,9 @@ fn not_a_file(m: &std::fs::Metadata) -> &'static str {
     }
 }
 
+/// The fix of a listen port that is taken.
+const TAKEN: &str = "choose a free port, or 0 for one chosen at start";
+
 impl Resolved {
     /// The rules that look at the machine as it is now, checked by `station run` before it creates
     /// anything (not by every resolve: a child re-reads the configuration while its station's
@@ -475,7 +521,6 @@ impl Resolved {
     /// A taken port (or an address of another machine), naming the field and the value; the
     /// caller adds the file ([`super::ConfigError::in_file`]).
     pub fn check_listen_ports_free(&self) -> Result<(), Problem> {
-        const TAKEN: &str = "choose a free port, or 0 for one chosen at start";
         if let Some(l) = &self.config.live {
             let shown = format!("{l:?}");
             let addr = coop_transport::live_view::parse_addr(l)
@@ -491,16 +536,25 @@ impl Resolved {
         if net.mode == Mode::Client {
             return Ok(());
         }
-        for l in &net.listen {
-            let shown = format!("{l:?}");
-            let loc = Locator::parse(l).map_err(|e| Problem::entry("network.listen", &shown, e))?;
-            if loc.port != 0 {
-                if let Err(e) = loc.bind_check() {
-                    let rule = format!("cannot listen there now ({e}); {TAKEN}");
-                    return Err(Problem::entry("network.listen", shown, rule));
-                }
+        listen_ports_free("network.listen", &net.listen)
+    }
+}
+
+/// Every locator of the list `field` whose port is not 0 can be listened on now (a station's
+/// `network.listen`, a router's `listen`): zenoh would fail on it with its raw listener error.
+///
+/// # Errors
+/// A taken port (or an address of another machine), naming the field, the locator and the rule.
+pub(crate) fn listen_ports_free(field: &str, listen: &[String]) -> Result<(), Problem> {
+    for l in listen {
+        let shown = format!("{l:?}");
+        let loc = Locator::parse(l).map_err(|e| Problem::entry(field, &shown, e))?;
+        if loc.port != 0 {
+            if let Err(e) = loc.bind_check() {
+                let rule = format!("cannot listen there now ({e}); {TAKEN}");
+                return Err(Problem::entry(field, shown, rule));
             }
         }
-        Ok(())
     }
+    Ok(())
 }
