@@ -132,14 +132,37 @@ impl Attach {
         }
         let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
             .wait()
-            .map_err(|e| {
-                anyhow::anyhow!(
-                    "opening the launcher's zenoh session ({} to {}): {e}",
-                    self.mode,
-                    self.connect.join(", ")
-                )
-            })?;
+            .map_err(
+                |e| match network::explain_open(e, &endpoints, self.side()) {
+                    network::NetworkError::Link(l) => anyhow::anyhow!("{l}"),
+                    e => anyhow::anyhow!(
+                        "opening the launcher's zenoh session ({} to {}): {e}",
+                        self.mode,
+                        self.connect.join(", ")
+                    ),
+                },
+            )?;
         Ok(z)
+    }
+
+    /// How the launcher's link failures are worded: its `--certs`, towards routers (client) or
+    /// stations (peer).
+    fn side(&self) -> network::link::Side {
+        network::link::Side {
+            me: "launcher",
+            far: match self.mode {
+                network::Mode::Client => network::link::Far::Router,
+                network::Mode::Peer => network::link::Far::Station,
+            },
+            files: network::link::Files::CertsDir,
+        }
+    }
+
+    /// Why the links to `connect` fail, if they do (a peer's links do not stop its session from
+    /// opening: the stations' presence just never comes).
+    fn link_failures(&self) -> Option<network::link::LinkFailures> {
+        let found = network::probe::diagnose(&self.connect, self.tls.as_ref(), self.side());
+        (!found.is_empty()).then_some(network::link::LinkFailures(found))
     }
 }
 
@@ -333,6 +356,13 @@ fn wait_present(
             return Ok(());
         }
         if waited.elapsed() > a.start_timeout {
+            if let Some(links) = at.link_failures() {
+                bail!(
+                    "stations not present after {:?}: {}, and the launcher's links fail: {links}",
+                    a.start_timeout,
+                    missing.join(", ")
+                );
+            }
             bail!(
                 "stations not present after {:?}: {} (none of their presence tokens reached the launcher through {}; present: {}). Are they running with session = {session:?}, and reaching the same routers?",
                 a.start_timeout,
