@@ -23,7 +23,9 @@
 //!   jitter and the slowest actor's report period ([`observer_lag_s`]). No site can see a far
 //!   user's push before the push's news arrives: at a constant 500 ms the paper task's push ends
 //!   its window 175 ms after user 1's tool meets the disk, 325 ms before any method can tell
-//!   user 2. The reference run (one world) has no observers.
+//!   user 2. The reference run (one world) has no observers. A phase that did not happen says
+//!   why: its first failed check, what it measured against the phase's threshold, and when
+//!   ([`PhaseMiss`]).
 //! - **Co-contact divergence**: the divergence over only the samples at which two or more users
 //!   touch the object (each site's `touching` flag: its own user on its own copy) — when the copies
 //!   disagreeing is felt as two users pulling at different objects. NaN if that never happens.
@@ -58,6 +60,10 @@ use crate::body::Vec3;
 use crate::scenario::Scenario;
 use crate::sim::{RunResult, SiteTrace};
 
+mod phase;
+
+pub use phase::{observer_lag_s, phase_happened, why_missed, Approach, MissedPhase, PhaseMiss};
+
 #[cfg(feature = "serde")]
 use serde::Serialize;
 
@@ -89,6 +95,9 @@ pub struct SiteMetrics {
     pub others_work_j: f64,
     /// (phase name, happened at this site).
     pub phases: Vec<(String, bool)>,
+    /// The phases that did not happen at this site, in the scenario's order, each with its first
+    /// failed check ([`PhaseMiss`]).
+    pub missed_phases: Vec<MissedPhase>,
     /// The live task's outcome at this site and its participant's grip (`None`: no `[task]`
     /// and a scripted hand).
     pub task: Option<crate::task::TaskFigures>,
@@ -435,6 +444,11 @@ fn site_metrics(
     let steps = run.force_steps.get(i).copied().unwrap_or_default();
     let tw = run.rollback.get(i).copied().flatten().unwrap_or_default();
     let ms = |ticks: u64| ticks as f64 * 1e3 / scenario.site[i].physics_rate_hz;
+    let misses: Vec<Option<PhaseMiss>> = scenario
+        .phase
+        .iter()
+        .map(|p| why_missed(scenario, run, i, p))
+        .collect();
     SiteMetrics {
         name: scenario.site[i].name.clone(),
         error_vs_reference_rms_m: rms(errs.clone()),
@@ -453,7 +467,19 @@ fn site_metrics(
         phases: scenario
             .phase
             .iter()
-            .map(|p| (p.name.clone(), phase_happened(scenario, run, i, p)))
+            .zip(&misses)
+            .map(|(p, miss)| (p.name.clone(), miss.is_none()))
+            .collect(),
+        missed_phases: scenario
+            .phase
+            .iter()
+            .zip(misses)
+            .filter_map(|(p, miss)| {
+                miss.map(|miss| MissedPhase {
+                    phase: p.name.clone(),
+                    miss,
+                })
+            })
             .collect(),
         task: run.tasks.get(i).and_then(|t| t.figures(run.task)),
         max_force_step_n: if steps.servo_ticks == 0 {
@@ -545,210 +571,4 @@ fn energy_beyond_users(scenario: &Scenario, run: &RunResult) -> f64 {
         })
         .map(|total| total - e0 - given)
         .fold(f64::NEG_INFINITY, f64::max)
-}
-
-fn phase_happened(
-    sc: &Scenario,
-    run: &RunResult,
-    i: usize,
-    p: &crate::scenario::PhaseSpec,
-) -> bool {
-    let me = &sc.site[i].name;
-    let s = &run.sites[i];
-    let window: Vec<usize> = (0..run.t.len())
-        .filter(|&k| run.t[k] >= p.from_s && run.t[k] <= p.to_s)
-        .collect();
-    let Some(&first) = window.first() else {
-        return false;
-    };
-    // The object's motion, as late as this site can know of it.
-    let lag = observer_lag_s(sc, run, i, p);
-    let last = (first..run.t.len())
-        .take_while(|&k| run.t[k] <= p.to_s + lag)
-        .last()
-        .unwrap_or(first);
-    // The object the phase names (the first by default); a phase that names one is about
-    // touching that object, one that names none about touching any.
-    let o = sc.phase_object(p);
-    let touches = |k: usize| {
-        if p.object.is_empty() {
-            s.touching[k]
-        } else {
-            s.touches(o, k)
-        }
-    };
-    if p.contact.contains(me) {
-        if !window.iter().any(|&k| touches(k)) {
-            return false;
-        }
-        let peak = window
-            .iter()
-            .map(|&k| s.f_desired[k].norm())
-            .fold(0.0, f64::max);
-        if peak < p.min_force_n {
-            return false;
-        }
-    }
-    if p.no_contact.contains(me) && window.iter().any(|&k| touches(k)) {
-        return false;
-    }
-    let pos = s.object_pos(o);
-    if (pos[last] - pos[first]).norm() < p.object_moves_m {
-        return false;
-    }
-    if let Some([lo, hi]) = p.region_m {
-        let inside = |q: &Vec3| (0..3).all(|a| q[a] >= lo[a] && q[a] <= hi[a]);
-        if !window.iter().all(|&k| inside(&pos[k])) {
-            return false;
-        }
-    }
-    if p.lifted_m > 0.0 {
-        // z is up (the scenarios' convention: the table is z = 0).
-        let rest = Vec3::from(sc.objects[o].start_m).z;
-        let top = (first..=last)
-            .map(|k| pos[k].z)
-            .fold(f64::NEG_INFINITY, f64::max);
-        if top < rest + p.lifted_m {
-            return false;
-        }
-    }
-    true
-}
-
-/// How much later than the phase's window site `i`'s copy may show the object's motion: 0 at an
-/// actor's site (one of the phase's `contact` users), in a phase without actors, and in the
-/// reference run (one world); elsewhere the largest one-way delay and its jitter, plus the slowest
-/// actor's report period, s. See the module docs ("Phases").
-pub fn observer_lag_s(
-    sc: &Scenario,
-    run: &RunResult,
-    i: usize,
-    p: &crate::scenario::PhaseSpec,
-) -> f64 {
-    if run.mode == crate::sim::Mode::Reference
-        || p.contact.is_empty()
-        || p.contact.contains(&sc.site[i].name)
-    {
-        return 0.0;
-    }
-    let slowest_actor = sc
-        .site
-        .iter()
-        .filter(|s| p.contact.contains(&s.name))
-        .map(|s| 1.0 / s.report_rate_hz)
-        .fold(0.0, f64::max);
-    (sc.network.delay_max_ms + sc.network.jitter_ms) / 1e3 + slowest_actor
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::scenario::{PhaseSpec, SiteSpec};
-    use crate::sim::{Mode, SiteTrace};
-
-    /// Two sites 500 ms apart; user 1 pushes in 0.5–1.05 s. Site 2's copy moves 2 cm at `moves_at`.
-    fn push_seen_at(moves_at: f64, mode: Mode) -> (Scenario, RunResult) {
-        let mut sc = Scenario::default();
-        for name in ["user1", "user2"] {
-            sc.site.push(SiteSpec {
-                name: name.into(),
-                report_rate_hz: 20.0,
-                ..SiteSpec::default()
-            });
-        }
-        sc.network.delay_min_ms = 500.0;
-        sc.network.delay_max_ms = 500.0;
-        sc.network.jitter_ms = 10.0;
-        sc.phase.push(PhaseSpec {
-            name: "push".into(),
-            from_s: 0.5,
-            to_s: 1.05,
-            contact: vec!["user1".into()],
-            no_contact: vec!["user2".into()],
-            object_moves_m: 0.02,
-            ..PhaseSpec::default()
-        });
-        let t: Vec<f64> = (0..400).map(|k| f64::from(k) * 0.005).collect();
-        let trace = |moves_at: f64, touching: bool| SiteTrace {
-            obj_pos: t
-                .iter()
-                .map(|&s| Vec3::new(if s >= moves_at { 0.03 } else { 0.0 }, 0.0, 0.01))
-                .collect(),
-            f_desired: vec![Vec3::new(1.0, 0.0, 0.0); t.len()],
-            touching: vec![touching; t.len()],
-            ..SiteTrace::default()
-        };
-        let run = RunResult {
-            sites: vec![trace(0.9, true), trace(moves_at, false)],
-            t,
-            ..RunResult::empty(mode)
-        };
-        (sc, run)
-    }
-
-    /// A far site sees a push when its news can arrive, not sooner: the push phase holds at the
-    /// observer if its copy moves within the delay, jitter and a report period after the window,
-    /// and fails if it moves later, or at all in the reference run (one world, no news to wait for).
-    #[test]
-    fn an_observer_may_see_the_motion_one_delay_late() {
-        let paper = Mode::Distributed(crate::scenario::MethodName::Paper);
-        let (sc, run) = push_seen_at(1.5, paper);
-        assert!((observer_lag_s(&sc, &run, 1, &sc.phase[0]) - 0.56).abs() < 1e-9);
-        assert_eq!(observer_lag_s(&sc, &run, 0, &sc.phase[0]), 0.0);
-        assert!(phase_happened(&sc, &run, 1, &sc.phase[0]));
-        assert!(phase_happened(&sc, &run, 0, &sc.phase[0]));
-        let (sc, run) = push_seen_at(1.65, paper);
-        assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
-        let (sc, run) = push_seen_at(1.5, Mode::Reference);
-        assert!(!phase_happened(&sc, &run, 1, &sc.phase[0]));
-    }
-
-    /// A phase that names an object is about touching that object: a user touching another one
-    /// does not make it, nor break its `no_contact`; a phase that names none takes any object.
-    #[test]
-    fn a_phase_naming_an_object_is_about_touching_that_object() {
-        let paper = Mode::Distributed(crate::scenario::MethodName::Paper);
-        let (mut sc, mut run) = push_seen_at(1.5, paper);
-        sc.objects = vec![
-            crate::scenario::ObjectSpec {
-                name: "a".into(),
-                ..Default::default()
-            },
-            crate::scenario::ObjectSpec {
-                name: "b".into(),
-                start_m: [0.2, 0.0, 0.0],
-                ..Default::default()
-            },
-        ];
-        // User 1 touches object b only; user 2 touches nothing.
-        let n = run.t.len();
-        run.sites[0].touched = vec![0b10; n];
-        run.sites[1].touched = vec![0; n];
-        for s in &mut run.sites {
-            s.others = vec![crate::sim::ObjectTrace {
-                pos: vec![Vec3::new(0.2, 0.0, 0.0); n],
-                vel: vec![Vec3::zeros(); n],
-                rot: vec![[1.0, 0.0, 0.0, 0.0]; n],
-            }];
-        }
-        let mut p = sc.phase[0].clone();
-        p.object_moves_m = 0.0;
-        assert!(phase_happened(&sc, &run, 0, &p), "any object: b is touched");
-        p.object = "b".into();
-        assert!(phase_happened(&sc, &run, 0, &p), "b is touched");
-        p.object = "a".into();
-        assert!(!phase_happened(&sc, &run, 0, &p), "a is not touched");
-        // User 2 must not touch: touching b breaks a phase about b, not one about a.
-        run.sites[1].touched = vec![0b10; n];
-        run.sites[1].touching = vec![true; n];
-        let mut q = p.clone();
-        q.contact.clear();
-        q.object = "a".into();
-        assert!(
-            phase_happened(&sc, &run, 1, &q),
-            "a is not touched by user 2"
-        );
-        q.object = "b".into();
-        assert!(!phase_happened(&sc, &run, 1, &q), "user 2 touches b");
-    }
 }
