@@ -1,7 +1,8 @@
 //! Plots laid out like the paper's Figs. 9–12, as PNG and SVG: per direction (x, y), four panels —
-//! (a) the sum of the users' forces acting on the object at each site, (b) the object's position as
-//! each site believes it, with the reference run dashed, (c) the desired and (d) the measured contact
-//! force of each user — plus the inter-site divergence over time.
+//! (a) the sum of the users' forces acting on the object (in a world of several, on the objects)
+//! at each site, (b) the first object's position as each site believes it, with the reference run
+//! dashed, (c) the desired and (d) the measured contact force of each user — plus the inter-site
+//! divergence over time. Every panel names its object by the scenario's name for it.
 
 use std::path::Path;
 
@@ -234,16 +235,24 @@ pub fn figures(
         out
     };
     let method = r.mode.name();
+    let objects = r.sites.first().map_or(1, |s| s.objects());
+    // Each panel names the object it shows: a world of several has no single "the object".
+    let first = sc.object_name(0);
+    let forces_on = if objects > 1 {
+        "the objects".to_owned()
+    } else {
+        format!("the {first}")
+    };
     for (axis, stem, label) in [(0usize, "fig_x", "x"), (1, "fig_y", "y")] {
         let c = |v: Vec3| v[axis];
         let panels = [
             Panel {
-                title: format!("(a) sum of users' {label}-forces on the object, per site"),
+                title: format!("(a) sum of users' {label}-forces on {forces_on}, per site"),
                 y_label: "N",
                 series: series(&|i, k| c(r.sites[i].f_on_object[k]), None),
             },
             Panel {
-                title: format!("(b) object {label} position as each site believes it"),
+                title: format!("(b) {first} {label} position as each site believes it"),
                 y_label: "m",
                 series: series(
                     &|i, k| c(r.sites[i].obj_pos[k]),
@@ -269,7 +278,6 @@ pub fn figures(
     }
     // A world of several objects: every object's position as each site believes it, one panel
     // per object, per axis.
-    let objects = r.sites.first().map_or(1, |s| s.objects());
     if objects > 1 {
         for (axis, stem, label) in [
             (0usize, "objects_x", "x"),
@@ -306,7 +314,7 @@ pub fn figures(
         title: if objects > 1 {
             "largest distance between any two sites' copies of any object".into()
         } else {
-            "largest distance between any two sites' copies of the object".into()
+            format!("largest distance between any two sites' copies of the {first}")
         },
         y_label: "mm",
         series: vec![Series {
