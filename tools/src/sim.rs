@@ -483,25 +483,31 @@ pub fn print_table(sc: &Scenario, all: &[Metrics]) {
             .join(", "),
         radius * 1e3
     );
+    for line in missed_phase_lines(all) {
+        println!("{line}");
+    }
+    print_tasks(all);
+}
+
+/// Per method with a phase that did not happen, a heading and one line per site and phase
+/// saying why: its first failed check, measured against the phase's threshold, and when.
+fn missed_phase_lines(all: &[Metrics]) -> Vec<String> {
+    let mut out = Vec::new();
     for m in all {
+        if m.sites.iter().all(|s| s.missed_phases.is_empty()) {
+            continue;
+        }
+        out.push(format!(
+            "# {}: phases that did not happen, each with its first failed check:",
+            m.method
+        ));
         for s in &m.sites {
-            let failed: Vec<&str> = s
-                .phases
-                .iter()
-                .filter(|(_, ok)| !ok)
-                .map(|(n, _)| n.as_str())
-                .collect();
-            if !failed.is_empty() {
-                println!(
-                    "# {}: at {} these phases did not happen: {}",
-                    m.method,
-                    s.name,
-                    failed.join(", ")
-                );
+            for p in &s.missed_phases {
+                out.push(format!("#   {} {}: {}", s.name, p.phase, p.miss));
             }
         }
     }
-    print_tasks(all);
+    out
 }
 
 /// The live task per method and site: the outcome as the site showed it, when, and the

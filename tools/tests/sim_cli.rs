@@ -1,7 +1,8 @@
 //! The simulator as a user runs it: bad scenario files are refused with the field, value and
 //! rule and create nothing; runs are deterministic to the byte; on the paper's experiment the naive
 //! Eq. 8 method diverges far beyond the disk while the paper's method keeps the copies together once
-//! contacts end; with zero delay and equal rates both match the reference run.
+//! contacts end; with zero delay and equal rates both match the reference run; a phase that did
+//! not happen says why.
 
 use std::process::Command;
 
@@ -161,6 +162,69 @@ fn paper_scenario_naive_diverges_and_paper_keeps_copies_together() {
         "{:?}",
         r.sites
     );
+}
+
+/// A phase that did not happen says why, the same in the table as in `metrics.json`: one line per
+/// site and phase, `#   <site> <phase>: <reason>`, and in the JSON the check that failed with its
+/// figures. Naive on the paper's task misses the grasp at both sites (the test above), and a grasp
+/// has only its contact to miss: the reason is how close each tool came.
+#[test]
+fn a_missed_phase_says_why_in_the_table_and_the_json() {
+    let out = TempDir::unmade("sim-why");
+    let o = Command::new(SIM)
+        .args(["run", "scenarios/paper.toml", "--method", "naive", "--out"])
+        .arg(&out)
+        .current_dir(repo())
+        .output()
+        .expect("run sim");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let table = String::from_utf8_lossy(&o.stdout);
+    let m: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+    )
+    .expect("json");
+    for site in m["sites"].as_array().expect("sites") {
+        let name = site["name"].as_str().expect("name");
+        let failed: Vec<&str> = site["phases"]
+            .as_array()
+            .expect("phases")
+            .iter()
+            .filter(|p| p[1] == false)
+            .filter_map(|p| p[0].as_str())
+            .collect();
+        let missed = site["missed_phases"].as_array().expect("missed_phases");
+        let named: Vec<&str> = missed.iter().filter_map(|p| p["phase"].as_str()).collect();
+        assert_eq!(
+            named, failed,
+            "{name}: one reason per phase that did not happen"
+        );
+        for p in missed {
+            let line = format!(
+                "#   {name} {}: {}",
+                p["phase"].as_str().expect("phase"),
+                p["reason"].as_str().expect("reason")
+            );
+            assert!(
+                table.lines().any(|l| l == line),
+                "{line:?} not in:\n{table}"
+            );
+        }
+        let grasp = missed
+            .iter()
+            .find(|p| p["phase"] == "grasp")
+            .expect("naive misses the grasp");
+        assert_eq!(grasp["miss"]["check"], "contact", "{grasp}");
+        assert!(
+            grasp["miss"]["closest"]["gap_m"].as_f64() > Some(0.0),
+            "the tool stayed out of reach, by a measured gap: {grasp}"
+        );
+        assert!(
+            grasp["reason"].as_str().is_some_and(
+                |r| r.starts_with("no contact with object in 4.00–5.00 s; closest approach ")
+            ),
+            "{grasp}"
+        );
+    }
 }
 
 /// Zero delay and equal 1 kHz rates: the paper's method matches the reference run within 1 mm
