@@ -3,6 +3,7 @@
 //! supervisor spawns (`station servo|physics|network`). The `station` binary is this; the `session`
 //! binary carries it too (`session station ...`), so one executable can run a whole session.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
@@ -190,6 +191,43 @@ fn probe_json(p: &coop_rt::device::cartesian::ProbeReport, selected: &str) -> se
     })
 }
 
+/// What `station status` without `--config` says when the station it looked for is not there:
+/// which one it looked for (the defaults), and the stations running on this machine (their
+/// control segments, `coop_<session>_<station>_ctl`: neither name holds `_`).
+fn running_hint(session: &str, station: &str) -> String {
+    let mut running: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for e in std::fs::read_dir("/dev/shm")
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let parts: Vec<&str> = name.split('_').collect();
+        if let ["coop", session, station, "ctl"] = parts[..] {
+            running
+                .entry(session.to_owned())
+                .or_default()
+                .push(station.to_owned());
+        }
+    }
+    let found = if running.is_empty() {
+        "no station runs on this machine".to_owned()
+    } else {
+        let list: Vec<String> = running
+            .iter_mut()
+            .map(|(s, sites)| {
+                sites.sort();
+                format!("session {s}: {}", sites.join(", "))
+            })
+            .collect();
+        format!("running here: {}", list.join("; "))
+    };
+    format!(
+        "no --config: looked for station {station} of session {session} (the defaults); {found}. \
+         Give the station's --config FILE, or --session and --station"
+    )
+}
+
 /// Runs the station command line `args` (the first is the program name). `exe_prefix` are the
 /// arguments that come before the subcommand when this executable re-runs itself (empty for the
 /// `station` binary, `["station"]` inside `session`).
@@ -222,7 +260,14 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             let session = session.unwrap_or(r.config.session);
             let station = station.unwrap_or(r.name);
             let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
-            let mut v = status::read(&session, &station, &sites)?;
+            let mut v = status::read(&session, &station, &sites).map_err(|e| {
+                let e = anyhow::Error::from(e);
+                if config.is_some() {
+                    e
+                } else {
+                    e.context(running_hint(&session, &station))
+                }
+            })?;
             v.name_objects(&r.scenario);
             if json {
                 println!("{}", serde_json::to_string_pretty(&v)?);

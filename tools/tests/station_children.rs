@@ -129,6 +129,31 @@ fn a_full_ring_shows_as_drops_in_station_status() {
     let _ = std::fs::remove_dir_all(config.parent().expect("dir"));
 }
 
+/// `station status` without `--config` looks for the defaults' station; when it is not there, the
+/// error says which it looked for and lists the stations that do run here.
+#[test]
+fn station_status_without_a_config_names_what_it_looked_for_and_what_runs() {
+    let session = unique_session();
+    let names = Names::of(&session, "user2").expect("names");
+    let segs = StationSegments::create(&names, &RingSlots::default()).expect("segments");
+    let o = Command::new(STATION)
+        .arg("status")
+        .output()
+        .expect("station status");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "the defaults' station does not run here"
+    );
+    assert!(
+        err.contains("looked for station user1 of session local (the defaults)")
+            && err.contains(&format!("session {session}: user2"))
+            && err.contains("--config"),
+        "{err}"
+    );
+    drop(segs);
+}
+
 #[test]
 fn a_child_refuses_to_start_without_its_supervisor() {
     let session = unique_session();
