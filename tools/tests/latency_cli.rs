@@ -130,7 +130,11 @@ fn bad_flags_are_clear_errors() {
 /// `-h` to the histogram, which a subcommand would inherit).
 #[test]
 fn every_command_has_its_help() {
-    for args in [vec!["--help"], vec!["attach", "--help"], vec!["attach", "-h"]] {
+    for args in [
+        vec!["--help"],
+        vec!["attach", "--help"],
+        vec!["attach", "-h"],
+    ] {
         let (code, out, err) = run(Command::new(LATENCY).args(&args));
         assert_eq!(code, 0, "{args:?}: {err}");
         assert!(out.contains("Usage: latency"), "{args:?}: {out}");
