@@ -2,18 +2,21 @@
 //! the tool in the world, take the newest object state from physics, run the model's servo step
 //! (contact Eq. 7, displayed force Eq. 6, stale ramp, display continuity and passivity), command the force in
 //! the device's frame (through the safety layer, which releases on a stale world or a stop), send
-//! the tool sample to physics, publish statistics. The periodic timer and scheduling around it
+//! the tool sample to physics, publish statistics. From the session's time 0, what the site shows
+//! and the tool feels goes to the device (a simulated participant acts on it) and to the task's
+//! live judge, as in the simulator's servo tick. The periodic timer and scheduling around it
 //! belong to the station's servo process.
 
 use coop_model::body::{BodyState, Vec3};
 use coop_model::contact::ContactForce;
 use coop_model::servo::{Servo, ServoInput};
+use coop_model::task::{TaskJudge, View};
 use coop_model::world::{World, MAX_OBJECTS};
 
 use crate::device::safety::{Guarded, Trip};
 use crate::device::{CartesianDevice, Placement};
 use crate::msg::{ObjectSample, ToolSample};
-use crate::shm::control::{record_counted, ControlBlock, Ring, RunState};
+use crate::shm::control::{record_counted, ControlBlock, Ring, RunState, TaskState};
 use crate::shm::{Consumer, Producer};
 
 /// What one servo tick did.
@@ -65,6 +68,10 @@ pub struct ServoLoop<D: CartesianDevice> {
     last_roundtrip_tool_ns: u64,
     /// The newest partner report's time the displayed states were computed with, ns.
     last_remote_ns: u64,
+    /// The task's live judge (none: the scenario has no `[task]`).
+    task: Option<TaskJudge>,
+    /// The session's time 0, once known: the task and a simulated hand run from it.
+    t0_ns: Option<u64>,
 }
 
 impl<D: CartesianDevice> ServoLoop<D> {
@@ -99,7 +106,29 @@ impl<D: CartesianDevice> ServoLoop<D> {
             stale_limp_recorded: false,
             last_roundtrip_tool_ns: 0,
             last_remote_ns: 0,
+            task: None,
+            t0_ns: None,
         }
+    }
+
+    /// Judges `task` live on what this site shows, from the session's time 0.
+    pub fn set_task(&mut self, task: Option<TaskJudge>) {
+        self.task = task;
+    }
+
+    /// The session's time 0: from then on each tick's view goes to the device and the task.
+    pub fn start_at(&mut self, t0_ns: u64) {
+        self.t0_ns = Some(t0_ns);
+    }
+
+    /// Whether the session's time 0 is known.
+    pub fn started(&self) -> bool {
+        self.t0_ns.is_some()
+    }
+
+    /// The task's judge, if the scenario has a task.
+    pub fn task(&self) -> Option<&TaskJudge> {
+        self.task.as_ref()
     }
 
     /// The device (setup only: the tick goes through the safety layer).
@@ -186,6 +215,26 @@ impl<D: CartesianDevice> ServoLoop<D> {
         );
         let f_device = self.placement.force_to_device(out.f_desired);
         let f_command = self.device.display(now_ns, f_device, out.scale);
+        // What the user is shown and feels, for a simulated hand and the task (as the simulator's
+        // servo tick gives them): from the session's time 0, once the world is fresh.
+        if let Some(t0) = self
+            .t0_ns
+            .filter(|&t0| now_ns >= t0 && self.latest.is_some())
+        {
+            let view = View::of(
+                (now_ns - t0) as f64 * 1e-9,
+                &self.states[..self.n],
+                &out.contacts[..self.n],
+                tool_pos,
+            );
+            self.device.device_mut().observe(&view);
+            if let Some(j) = &mut self.task {
+                j.judge(&view);
+                if let Some(c) = control {
+                    publish_task(c, j.outcome());
+                }
+            }
+        }
         // Back to the world for the record (the identity placement computes nothing).
         let (f_command, f_measured) = if self.placement.is_identity() {
             (f_command, f_sensed)
@@ -279,6 +328,25 @@ pub fn publish_trip(c: &ControlBlock, t: Trip) {
         s.safety_limit.store(t.limit.code(), Relaxed);
         s.safety_at_ns.store(t.at_ns, Relaxed);
         s.safety_episodes.store(t.episodes, Relaxed);
+    }
+}
+
+/// Publishes the task's outcome in the control block's task group.
+pub fn publish_task(c: &ControlBlock, o: coop_model::task::Outcome) {
+    // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+    use crate::sync::Ordering::Relaxed;
+    use coop_model::task::Outcome;
+    let t = &c.task;
+    let (state, at_s, by) = match o {
+        Outcome::Running => (TaskState::Running, 0.0, 0),
+        Outcome::Done(at) => (TaskState::Done, at, 0),
+        Outcome::Failed(at, None) => (TaskState::Failed, at, 0),
+        Outcome::Failed(at, Some(k)) => (TaskState::Failed, at, k as u64 + 1),
+    };
+    if t.state.load(Relaxed) != state as u64 {
+        ControlBlock::store_f64(&t.at_s, at_s);
+        t.failed_by.store(by, Relaxed);
+        t.state.store(state as u64, Relaxed);
     }
 }
 

@@ -295,6 +295,80 @@ fn loop_steps_allocate_nothing() {
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
 }
 
+/// A station's servo with a simulated participant as its hand and the task judged live: the
+/// participant reaches for the disk where the station shows it, pushes it and lets go, the task
+/// (the disk in a region, released) is judged done, and no step allocates once warmed up.
+#[test]
+fn a_participant_hand_acts_on_what_the_station_shows_and_the_task_is_judged_allocation_free() {
+    use coop_model::participant::{Action, StepSpec};
+    use coop_model::task::{ConditionSpec, Outcome};
+    let mut sc = on_a_table();
+    sc.objects[0].start_m = [0.0, 0.0, 0.0099];
+    let mut site = pusher([-0.12, 0.0, 0.01], [-0.12, 0.0, 0.01], 0.5);
+    site.script.truncate(1);
+    let step = |action, side: Option<[f64; 3]>| StepSpec {
+        action,
+        object: Some("object".into()),
+        side,
+        ..StepSpec::default()
+    };
+    site.plan = vec![
+        StepSpec {
+            gap_m: 0.02,
+            ..step(Action::Reach, Some([-1.0, 0.0, 0.0]))
+        },
+        StepSpec {
+            depth_m: 0.04,
+            ..step(Action::Push, Some([-1.0, 0.0, 0.0]))
+        },
+        StepSpec {
+            object: None,
+            away_m: 0.05,
+            ..step(Action::Release, Some([-1.0, 0.0, 0.0]))
+        },
+    ];
+    sc.site.push(site);
+    sc.task.done = Some(ConditionSpec {
+        object: Some("object".into()),
+        in_region_m: Some([[0.02, -0.05, -0.01], [0.2, 0.05, 0.05]]),
+        released: true,
+        ..ConditionSpec::default()
+    });
+    sc.task.hold_s = 0.2;
+    sc.validate().expect("valid scenario");
+    let mut r = rig_in("person", &sc, MethodName::Paper, |sc| {
+        sim_arm(sc).with_participant(sc.participant(0).expect("a participant"))
+    });
+    r.servo.set_task(sc.task_judge().expect("task"));
+    r.servo.start_at(0);
+    for k in 1..=10u64 {
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, None);
+    }
+    let n = allocations_during(|| {
+        for k in 11..=6000u64 {
+            r.physics.step(k * MS);
+            r.servo.step(k * MS, None);
+            while r.reports.pop().is_ok() {}
+        }
+    });
+    assert_eq!(
+        n, 0,
+        "servo steps with a participant and a task allocated {n} times"
+    );
+    let person = r
+        .servo
+        .device()
+        .participant()
+        .expect("the hand is a participant");
+    assert_eq!(person.step(), person.plan_len(), "the plan was carried out");
+    let outcome = r.servo.task().expect("judged").outcome();
+    assert!(
+        matches!(outcome, Outcome::Done(t) if t > 0.5),
+        "{outcome:?}"
+    );
+}
+
 /// The largest world a station takes ([`coop_model::world::MAX_OBJECTS`] pucks in a 4 × 4 grid,
 /// touching their neighbours' gaps), one pushed by the tool into the others: under every method
 /// that steps it on a station, the servo's and physics' steps allocate nothing, every object's

@@ -221,6 +221,9 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         tools,
         start,
     );
+    // The task is judged on what this site shows, as the simulator judges it (a restarted servo
+    // judges it afresh, and a simulated participant starts its plan again).
+    servo.set_task(sc.task_judge().ok().flatten());
     let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
     run_periodic(
         &ctl,
@@ -229,9 +232,10 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         period(sc.site[i].servo_rate_hz),
         &in_force,
         |now| {
-            if servo.device().waits_for_start() {
+            if !servo.started() {
                 if let Some(epoch) = ctl.epoch() {
                     servo.device_mut().start_at(epoch);
+                    servo.start_at(epoch);
                 }
             }
             servo.step(now, Some(&ctl));

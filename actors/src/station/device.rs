@@ -456,12 +456,13 @@ pub fn open(
                 script[0].target,
                 scenario.site[site].elbow,
             );
-            Ok(StationDevice::Sim(SimScara::waiting(
-                plant,
-                scenario.force_loop(site),
-                script,
-                now_ns,
-            )))
+            let arm = SimScara::waiting(plant, scenario.force_loop(site), script, now_ns);
+            // A site with a plan is a simulated participant: the person the simulator draws for
+            // it, acting on what this station shows.
+            Ok(StationDevice::Sim(match scenario.participant(site) {
+                Some(p) => arm.with_participant(p),
+                None => arm,
+            }))
         }
         Backend::Replay => {
             let t = setup.replay.clone().ok_or(DeviceOpenError::NoTrajectory)?;

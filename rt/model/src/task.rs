@@ -82,6 +82,28 @@ impl View {
         }
     }
 
+    /// What a site shows at `t_s` (session time): its objects as `shown`, its own tool at `tool`
+    /// and that tool's `contacts` with each object (what the simulator's servo tick and a
+    /// station's read alike).
+    pub fn of(
+        t_s: f64,
+        shown: &[BodyState],
+        contacts: &[crate::contact::ContactForce],
+        tool: Vec3,
+    ) -> Self {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let mut v = View::empty(tool);
+        v.t_s = t_s;
+        v.objects = shown.len().min(MAX_OBJECTS);
+        v.shown[..v.objects].copy_from_slice(&shown[..v.objects]);
+        for (k, c) in contacts.iter().enumerate().take(MAX_OBJECTS) {
+            v.touching[k] = c.touching;
+            v.slipping[k] = c.touching && c.slipping;
+            v.felt[k] = if c.touching { c.force } else { Vec3::zeros() };
+        }
+        v
+    }
+
     /// The objects' centres, for a condition's `moved_m` origin.
     pub fn centres(&self) -> [Vec3; MAX_OBJECTS] {
         self.shown.map(|s| s.pos)

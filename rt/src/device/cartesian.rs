@@ -108,6 +108,11 @@ pub trait CartesianDevice: Send {
     /// force-controlled to zero. A device that displays the commanded force open-loop ignores it
     /// (the default): the force it is given already carries the ramp.
     fn set_output_gain(&mut self, _gain: f64) {}
+    /// What the site shows and the tool feels at this servo tick (from the session's time 0): a
+    /// device whose hand is simulated (a participant acting on what its site shows) takes it in;
+    /// a device a person holds has nothing to do with it (the default). On the servo path: no
+    /// allocation, no lock, no logging.
+    fn observe(&mut self, _view: &coop_model::task::View) {}
     /// Called once when the station stops or the servo exits (also on error paths): release and
     /// close.
     fn close(&mut self) {}
@@ -125,6 +130,9 @@ impl<D: CartesianDevice + ?Sized> CartesianDevice for Box<D> {
     }
     fn set_output_gain(&mut self, gain: f64) {
         (**self).set_output_gain(gain);
+    }
+    fn observe(&mut self, view: &coop_model::task::View) {
+        (**self).observe(view);
     }
     fn close(&mut self) {
         (**self).close();

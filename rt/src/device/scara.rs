@@ -2,10 +2,14 @@
 //! integrated up to each sample in steps of at most 100 µs under the last torques, and the arm's own
 //! Eq. 12 PI force loop ([`ScaraForceLoop`]), which turns each force command into joint torques with
 //! the handle's force sensor. Its frame is the world (the arm's base and the script are in world
-//! coordinates), so its placement is the identity.
+//! coordinates), so its placement is the identity. The hand follows the site's script, or is a
+//! simulated participant acting on what the site shows ([`SimScara::with_participant`]): the
+//! same person the simulator draws for the site.
 
 use coop_model::body::Vec3;
 use coop_model::device::{Plant, ScaraForceLoop};
+use coop_model::participant::Participant;
+use coop_model::task::View;
 use coop_model::user::{target_at, Keyframe};
 
 use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
@@ -18,6 +22,8 @@ const PLANT_STEP_NS: u64 = coop_model::sim::PLANT_STEP_NS;
 pub struct SimScara {
     plant: Plant,
     script: Vec<Keyframe>,
+    /// A participant instead of the script (which then only placed the hand at the start).
+    person: Option<Box<Participant>>,
     start_ns: Option<u64>,
     plant_ns: u64,
     tau: Vec3,
@@ -68,6 +74,7 @@ impl SimScara {
         Self {
             plant,
             script,
+            person: None,
             start_ns: None,
             plant_ns: now_ns,
             tau: Vec3::zeros(),
@@ -77,6 +84,19 @@ impl SimScara {
             f_command: Vec3::zeros(),
             info,
         }
+    }
+
+    /// The hand is `person`, acting on what the site shows (given by [`CartesianDevice::observe`]
+    /// each servo tick), instead of the script.
+    #[must_use]
+    pub fn with_participant(mut self, person: Participant) -> Self {
+        self.person = Some(Box::new(person));
+        self
+    }
+
+    /// The participant, if the hand is one.
+    pub fn participant(&self) -> Option<&Participant> {
+        self.person.as_deref()
     }
 
     /// Sets the script's time 0 (the hand holds the first pose until then).
@@ -117,7 +137,10 @@ impl CartesianDevice for SimScara {
             let t = self.start_ns.map_or(0.0, |s| {
                 (self.plant_ns + step).saturating_sub(s) as f64 * 1e-9
             });
-            let (target, vel) = target_at(&self.script, t);
+            let (target, vel) = match &self.person {
+                Some(p) => p.target(t),
+                None => target_at(&self.script, t),
+            };
             self.plant.step(self.tau, target, vel, step as f64 * 1e-9);
             self.plant_ns += step;
         }
@@ -151,6 +174,13 @@ impl CartesianDevice for SimScara {
 
     fn set_output_gain(&mut self, gain: f64) {
         self.gain = gain.clamp(0.0, 1.0);
+    }
+
+    fn observe(&mut self, view: &View) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        if let Some(p) = &mut self.person {
+            p.perceive(view);
+        }
     }
 
     fn close(&mut self) {

@@ -110,6 +110,13 @@ impl CartesianDevice for StationDevice {
             StationDevice::Other(d) => d.set_output_gain(gain),
         }
     }
+    fn observe(&mut self, view: &coop_model::task::View) {
+        match self {
+            StationDevice::Sim(d) => d.observe(view),
+            StationDevice::Replay(d) => d.observe(view),
+            StationDevice::Other(d) => d.observe(view),
+        }
+    }
     fn close(&mut self) {
         match self {
             StationDevice::Sim(d) => d.close(),

@@ -593,6 +593,57 @@ pub struct ControlBlock {
     pub physics: PhysicsShared,
     /// The network's figures.
     pub network: NetworkShared,
+    /// The task's outcome as this site shows it (the servo judges it live).
+    pub task: TaskShared,
+}
+
+/// A task's state as the control block holds it ([`TaskShared::state`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u64)]
+pub enum TaskState {
+    /// The scenario has no task, or the session has not started.
+    None = 0,
+    /// Neither done nor failed yet.
+    Running = 1,
+    /// Done (its condition held for its hold time).
+    Done = 2,
+    /// Failed (a fail condition, or the timeout).
+    Failed = 3,
+}
+
+impl TaskState {
+    /// The state a word holds (an unknown value reads as `None`).
+    pub fn from_word(w: u64) -> Self {
+        match w {
+            1 => Self::Running,
+            2 => Self::Done,
+            3 => Self::Failed,
+            _ => Self::None,
+        }
+    }
+
+    /// Its name, as status and recordings say it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Running => "running",
+            Self::Done => "done",
+            Self::Failed => "failed",
+        }
+    }
+}
+
+/// The task's outcome, written by the servo when it changes (state last, Relaxed: a reader may
+/// see a new state with the old time for an instant; it reads again next look).
+#[derive(Debug)]
+#[repr(C)]
+pub struct TaskShared {
+    /// [`TaskState`] as u64.
+    pub state: AtomicU64,
+    /// When it was done or failed, s of session time, as f64 bits.
+    pub at_s: AtomicU64,
+    /// What failed it: 0 the timeout (or not failed), k + 1 the task's `fail[k]`.
+    pub failed_by: AtomicU64,
 }
 
 /// Words of the resume state: a count, then every object's sample.
@@ -604,7 +655,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized) and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v21";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v22";
 }
 
 impl ControlBlock {

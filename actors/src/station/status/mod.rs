@@ -46,8 +46,49 @@ pub struct StationStatus {
     pub servo: ServoStatus,
     /// The pipeline's own latency, hop by hop (`pipeline.rs`).
     pub pipeline: Vec<Hop>,
+    /// The task as this site shows it, judged live by the servo (none: no task, or the session
+    /// has not started).
+    pub task: Option<TaskStatus>,
     /// The run state is `running`.
     pub running: bool,
+}
+
+/// The task's outcome as the site shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TaskStatus {
+    /// `running`, `done` or `failed`.
+    pub outcome: &'static str,
+    /// When it was done or failed, s from the session's time 0 (none while running).
+    pub at_s: Option<f64>,
+    /// What failed it: `timeout` or `fail[k]` (none: not failed).
+    pub failed_by: Option<String>,
+}
+
+impl TaskStatus {
+    /// What the control block holds (none: no task, or not started).
+    pub fn of(t: &coop_rt::shm::control::TaskShared) -> Option<Self> {
+        use coop_rt::shm::control::TaskState;
+        let state = TaskState::from_word(t.state.load(Ordering::Relaxed));
+        let at_s = ControlBlock::load_f64(&t.at_s);
+        match state {
+            TaskState::None => None,
+            TaskState::Running => Some(Self {
+                outcome: state.name(),
+                at_s: None,
+                failed_by: None,
+            }),
+            TaskState::Done | TaskState::Failed => Some(Self {
+                outcome: state.name(),
+                at_s: Some(at_s),
+                failed_by: (state == TaskState::Failed).then(|| {
+                    match t.failed_by.load(Ordering::Relaxed) {
+                        0 => "timeout".to_owned(),
+                        k => format!("fail[{}]", k - 1),
+                    }
+                }),
+            }),
+        }
+    }
 }
 
 /// One child process.
@@ -624,6 +665,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> Result<StationSta
             display: DisplayStatus::of(&ctl.servo.display),
         },
         pipeline: pipeline::hops(&ctl),
+        task: TaskStatus::of(&ctl.task),
         running: run_state == RunState::Running,
     })
 }

@@ -18,6 +18,13 @@ impl fmt::Display for StationStatus {
         self.fmt_network(f)?;
         self.fmt_physics(f)?;
         self.fmt_servo(f)?;
+        if let Some(t) = &self.task {
+            match (t.at_s, &t.failed_by) {
+                (None, _) => write!(f, "\ntask: running")?,
+                (Some(at), None) => write!(f, "\ntask: {} at {at:.2} s", t.outcome)?,
+                (Some(at), Some(by)) => write!(f, "\ntask: {} at {at:.2} s by {by}", t.outcome)?,
+            }
+        }
         super::pipeline::fmt_hops(&self.pipeline, f)
     }
 }

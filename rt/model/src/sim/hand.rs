@@ -5,7 +5,6 @@ use crate::body::{BodyState, Vec3};
 use crate::participant::{GripFigures, Participant};
 use crate::task::{Outcome, TaskFigures, TaskJudge, View};
 use crate::user::{target_at, Keyframe};
-use crate::world::MAX_OBJECTS;
 
 /// What moves a site's hand.
 #[derive(Debug, Clone)]
@@ -33,16 +32,7 @@ pub(super) fn view(
     contacts: &[crate::contact::ContactForce],
     tool: Vec3,
 ) -> View {
-    let mut v = View::empty(tool);
-    v.t_s = t_s;
-    v.objects = shown.len();
-    v.shown[..shown.len()].copy_from_slice(shown);
-    for (k, c) in contacts.iter().enumerate().take(MAX_OBJECTS) {
-        v.touching[k] = c.touching;
-        v.slipping[k] = c.touching && c.slipping;
-        v.felt[k] = if c.touching { c.force } else { Vec3::zeros() };
-    }
-    v
+    View::of(t_s, shown, contacts, tool)
 }
 
 /// How a site's task went, and what its participant did.
