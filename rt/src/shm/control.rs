@@ -1,8 +1,9 @@
 //! A station's control block: its run state, one slot per child process (pid, heartbeat, restarts,
-//! scheduling in force, health and last failure), and one group of live figures per process that writes them: the servo's,
-//! physics' and the network's. The supervisor creates it before spawning; each child writes its own
-//! slot and its own group; `station status` and `latency attach` read it. Nothing here ever blocks a
-//! loop: every field is a relaxed atomic with exactly one writer, named on its group.
+//! scheduling in force, health and last failure), and one group of live figures per process that
+//! writes them: the servo's, physics' and the network's (and the device's, the servo's too: it
+//! alone opens the device). The supervisor creates it before spawning; each child writes its own
+//! slot and its own group; `station status` and `latency attach` read it. Nothing here ever blocks
+//! a loop: every field is a relaxed atomic with exactly one writer, named on its group.
 
 use core::marker::PhantomData;
 
@@ -515,6 +516,8 @@ pub struct PhysicsShared {
 
 pub use super::rollback::{RollbackFigures, RollbackShared};
 
+pub use super::device::DeviceShared;
+
 /// What the network process writes.
 #[derive(Debug)]
 #[repr(C)]
@@ -595,6 +598,8 @@ pub struct ControlBlock {
     pub network: NetworkShared,
     /// The task's outcome as this site shows it (the servo judges it live).
     pub task: TaskShared,
+    /// The device's figures (the servo's: it alone opens the device).
+    pub device: DeviceShared,
 }
 
 /// A task's state as the control block holds it ([`TaskShared::state`]).
@@ -652,10 +657,10 @@ pub const RESUME_WORDS: usize = 1 + MAX_OBJECTS * ObjectSample::WORDS;
 pub const LOCATOR_WORDS: usize = 64;
 
 // Made only of AtomicU64 (directly, in arrays, in LoopStats, ChildSlot, Counters (its PhantomData is
-// zero-sized) and the per-process groups).
+// zero-sized), ShmText and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v22";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v23";
 }
 
 impl ControlBlock {

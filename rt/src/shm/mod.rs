@@ -8,6 +8,8 @@
 pub mod block;
 #[cfg(not(loom))]
 pub mod control;
+#[cfg(not(loom))]
+pub mod device;
 pub mod header;
 pub mod name;
 pub mod ring;
