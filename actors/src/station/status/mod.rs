@@ -15,9 +15,11 @@ use coop_rt::stats::LoopSnapshot;
 use coop_rt::sync::Ordering;
 use serde::Serialize;
 
+mod device;
 mod pipeline;
 mod show;
 
+pub use device::{BridgeStatus, DeviceStatus, FaultsStatus, LastFault};
 pub use pipeline::{Hop, HOPS};
 
 /// Everything `station status` shows.
@@ -44,6 +46,8 @@ pub struct StationStatus {
     pub physics: PhysicsStatus,
     /// What the servo displays.
     pub servo: ServoStatus,
+    /// The servo's device (none before the servo opened it).
+    pub device: Option<DeviceStatus>,
     /// The pipeline's own latency, hop by hop (`pipeline.rs`).
     pub pipeline: Vec<Hop>,
     /// The task as this site shows it, judged live by the servo (none: no task, or the session
@@ -664,6 +668,7 @@ pub fn read(session: &str, station: &str, sites: &[String]) -> Result<StationSta
             }),
             display: DisplayStatus::of(&ctl.servo.display),
         },
+        device: DeviceStatus::of(&ctl.device),
         pipeline: pipeline::hops(&ctl),
         task: TaskStatus::of(&ctl.task),
         running: run_state == RunState::Running,

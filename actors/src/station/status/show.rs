@@ -17,6 +17,10 @@ impl fmt::Display for StationStatus {
         self.fmt_rings(f)?;
         self.fmt_network(f)?;
         self.fmt_physics(f)?;
+        match &self.device {
+            Some(d) => write!(f, "{d}")?,
+            None => writeln!(f, "device: not open yet (the servo opens it as it starts)")?,
+        }
         self.fmt_servo(f)?;
         if let Some(t) = &self.task {
             match (t.at_s, &t.failed_by) {
