@@ -698,6 +698,8 @@ fn a_restarted_physics_resumes_from_its_last_state_and_report_sequence() {
 
 /// A device safety limit that acts on a real station is named by `station status`, with when it
 /// acted: here the force clamp, set below what the user pressing a disk against a wall asks for.
+/// Its device section says what the device is and did: the simulated arm's samples at the servo's
+/// rate, its commands, and the clamp among its safety trips.
 #[test]
 fn station_status_names_the_device_limit_that_acted_last() {
     let session = unique_session();
@@ -724,6 +726,9 @@ fn station_status_names_the_device_limit_that_acted_last() {
     wait_until("the force clamp to act", LIMIT, || {
         (ctl.servo.safety_limit.load(Ordering::Relaxed) != 0).then_some(())
     });
+    wait_until("the device's rates measured", LIMIT, || {
+        (ControlBlock::load_f64(&ctl.device.sample_rate_hz) > 0.0).then_some(())
+    });
     let v = coop_tests::station_status_json(STATION, &cfg);
     let s = &v["servo"]["safety"];
     assert_eq!(s["limit"], "max_force_n", "{v}");
@@ -736,6 +741,20 @@ fn station_status_names_the_device_limit_that_acted_last() {
         ControlBlock::load_f64(&ctl.servo.command_n) <= 0.2 + 1e-9,
         "the command stays within the clamp"
     );
+    let dev = &v["device"];
+    assert_eq!(dev["backend"], "sim", "{v}");
+    assert_eq!(dev["model"], "SCARA (simulated)", "{dev}");
+    assert!(dev["samples"].as_u64() > Some(0), "{dev}");
+    assert!(dev["new_samples"].as_u64() > Some(0), "{dev}");
+    assert!(dev["commands"].as_u64() > Some(0), "{dev}");
+    assert!(dev["sample_rate_hz"].as_f64() > Some(0.0), "{dev}");
+    assert_eq!(dev["faults"]["total"], 0, "{dev}");
+    assert!(dev["faults"]["last"].is_null(), "{dev}");
+    assert!(
+        dev["bridge"].is_null(),
+        "the simulated arm has no bridge: {dev}"
+    );
+    assert!(dev["trips"]["max_force_n"].as_u64() >= Some(1), "{dev}");
     // The display stages (on in this scenario) publish too: the press stepped the force.
     let d = &v["servo"]["display"];
     assert!(d["max_step_n"].as_f64() > Some(0.0), "{d}");
@@ -760,6 +779,11 @@ fn station_status_names_the_device_limit_that_acted_last() {
     );
     assert!(
         text.contains(" corrections blended; step limiter held "),
+        "{text}"
+    );
+    assert!(text.contains("\ndevice: sim SCARA (simulated)"), "{text}");
+    assert!(
+        text.contains("safety trips (episodes): max_force_n "),
         "{text}"
     );
     kill(Pid::from_raw(station.pid() as i32), Signal::SIGTERM).expect("SIGTERM");

@@ -17,7 +17,8 @@
 //!   leaves the driver a zero wrench.
 //!
 //! The driver is the publisher of the first pose (its GID, from `rmw_zenoh`'s attachment): poses
-//! from any other (a second driver, a bag played on the same topic) are refused and counted.
+//! from any other (a second driver, a bag played on the same topic) are refused and counted
+//! (`station status` shows them in its device section).
 //!
 //! A driver that goes silent leaves the newest sample ageing: past `stale_limit_ms`, `sample` and
 //! `command` say [`DeviceFault::Disconnected`] and the safety layer releases the device. Closing
@@ -437,6 +438,21 @@ impl CartesianDevice for Ros2Device {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
+    }
+}
+
+impl coop_rt::device::VendorDevice for Ros2Device {
+    fn bridge_counts(&self) -> Option<coop_rt::device::BridgeCounts> {
+        let s = &self.shared.stats;
+        let n = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        Some(coop_rt::device::BridgeCounts {
+            received: n(&s.poses) + n(&s.bad_poses) + n(&s.foreign_poses),
+            refused: n(&s.bad_poses),
+            foreign: n(&s.foreign_poses),
+            sent_forces: n(&s.forces),
+            losses: 0,
+            reconnects: 0,
+        })
     }
 }
 

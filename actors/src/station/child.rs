@@ -12,7 +12,7 @@ use coop_model::method::{Consistency, ObjectCopy};
 use coop_model::scenario::Scenario;
 use coop_model::servo::Servo;
 use coop_rt::device::safety::{clamp_contact, Guarded};
-use coop_rt::device::CartesianDevice;
+use coop_rt::device::{CartesianDevice, DevicePublisher};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
 use coop_rt::run::run_periodic;
 use coop_rt::sched::{self, Request};
@@ -224,6 +224,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     // The task is judged on what this site shows, as the simulator judges it (a restarted servo
     // judges it afresh, and a simulated participant starts its plan again).
     servo.set_task(sc.task_judge().ok().flatten());
+    let mut figures = DevicePublisher::new(&ctl.device, servo.guarded(), start);
     let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
     run_periodic(
         &ctl,
@@ -239,6 +240,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
                 }
             }
             servo.step(now, Some(&ctl));
+            figures.publish(&ctl.device, now, servo.guarded());
             match ctl.run_state() {
                 RunState::Starting | RunState::Running => true,
                 // Stop only once nothing is displayed or commanded any more.
@@ -247,7 +249,9 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         },
     );
     // Stopped: release and close the device (dropping it would too, also on an error path).
-    servo.close(monotonic_ns());
+    let now = monotonic_ns();
+    figures.publish_now(&ctl.device, now, servo.guarded());
+    servo.close(now);
     Ok(())
 }
 

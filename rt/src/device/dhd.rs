@@ -546,6 +546,9 @@ impl CartesianDevice for DhdDevice {
     }
 }
 
+// No bridge: the servo calls the SDK itself.
+impl crate::device::VendorDevice for DhdDevice {}
+
 impl Drop for DhdDevice {
     fn drop(&mut self) {
         self.close();

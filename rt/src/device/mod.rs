@@ -9,6 +9,7 @@
 
 pub mod cartesian;
 pub mod dhd;
+pub mod figures;
 pub mod haply;
 pub mod placement;
 pub mod replay;
@@ -21,7 +22,8 @@ pub use cartesian::{
     CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,
 };
 
+pub use figures::{BridgeCounts, DevicePublisher};
 pub use placement::Placement;
 pub use scara::SimScara;
 pub use slot::{check_bridged, BridgedState, CommandSlot};
-pub use station::{Backend, StationDevice};
+pub use station::{Backend, StationDevice, VendorDevice};

@@ -17,13 +17,18 @@
 //!   (its display scale reached 0), [`Guarded::close`] releases and closes, and so does `Drop` (a
 //!   panic unwinding through the servo).
 //!
-//! [`Guarded::last_trip`] says which limit acted last and when (the servo publishes it for
-//! `station status`).
+//! [`Guarded::last_trip`] says which limit acted last and when, [`Guarded::trips`] how often each
+//! did, and [`Guarded::counts`] what the device did (samples, faults, commands): the servo
+//! publishes them for `station status`.
 
 use coop_model::body::Vec3;
 use coop_model::contact::ContactParams;
 
 use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
+use crate::shm::device::{DeviceCounts, FaultKind};
+
+/// Slots of [`Guarded::trips`]: one per [`Limit::code`] (slot 0 unused).
+pub const TRIP_SLOTS: usize = 8;
 
 /// The limits a station's config sets (`[device.safety]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -168,6 +173,12 @@ pub struct Guarded<D: CartesianDevice> {
     /// Limits that acted on the previous display tick, as a bit set of codes (for episode counting).
     acting: u64,
     acting_now: u64,
+    /// Episodes of each limit, by code.
+    trips: [u64; TRIP_SLOTS],
+    /// What the device did (the samples, faults and commands fields).
+    counts: DeviceCounts,
+    /// The last fault the device reported, and when.
+    last_fault: Option<(DeviceFault, u64)>,
     closed: bool,
 }
 
@@ -188,6 +199,9 @@ impl<D: CartesianDevice> Guarded<D> {
             last_trip: None,
             acting: 0,
             acting_now: 0,
+            trips: [0; TRIP_SLOTS],
+            counts: DeviceCounts::default(),
+            last_fault: None,
             closed: false,
         }
     }
@@ -223,6 +237,28 @@ impl<D: CartesianDevice> Guarded<D> {
         self.holding
     }
 
+    /// Episodes of each limit so far, indexed by [`Limit::code`].
+    pub fn trips(&self) -> &[u64; TRIP_SLOTS] {
+        &self.trips
+    }
+
+    /// What the device did so far: its samples (and new ones), faults by kind, and force commands
+    /// taken (a bridge's own counts are its backend's to tell).
+    pub fn counts(&self) -> &DeviceCounts {
+        &self.counts
+    }
+
+    /// The last fault the device reported, and when (CLOCK_MONOTONIC, ns).
+    pub fn last_fault(&self) -> Option<(DeviceFault, u64)> {
+        self.last_fault
+    }
+
+    fn fault(&mut self, f: DeviceFault, now_ns: u64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        self.counts.count_fault(FaultKind::of(&f));
+        self.last_fault = Some((f, now_ns));
+    }
+
     /// Records a limit that acted at `now_ns` outside a tick (the contact clamp at setup).
     pub fn record(&mut self, limit: Limit, now_ns: u64) {
         self.acting_now |= 1 << limit.code();
@@ -234,6 +270,7 @@ impl<D: CartesianDevice> Guarded<D> {
         let bit = 1 << limit.code();
         let new_episode = self.acting & bit == 0;
         self.acting_now |= bit;
+        self.trips[limit.code() as usize] += u64::from(new_episode);
         let episodes = self.last_trip.map_or(0, |t| t.episodes) + u64::from(new_episode);
         self.last_trip = Some(Trip {
             limit,
@@ -263,13 +300,16 @@ impl<D: CartesianDevice> Guarded<D> {
         let s = match s {
             Ok(s) => s,
             Err(e) => {
+                self.fault(e, now_ns);
                 self.hold(Limit::Fault, now_ns);
                 return Err(e);
             }
         };
+        self.counts.samples += 1;
         if s.t_ns > self.sample_t_ns {
             self.sample_t_ns = s.t_ns;
             self.fresh_at_ns = now_ns;
+            self.counts.new_samples += 1;
         }
         let watchdog_ns = (self.limits.watchdog_s * 1e9) as u64;
         if now_ns.saturating_sub(self.fresh_at_ns) > watchdog_ns {
@@ -329,8 +369,12 @@ impl<D: CartesianDevice> Guarded<D> {
         self.device
             .set_output_gain(world_scale.min(1.0) * self.ramp);
         match self.device.command(now_ns, Command::Force(f)) {
-            Ok(()) => self.last_force = f,
-            Err(_) => {
+            Ok(()) => {
+                self.last_force = f;
+                self.counts.commands += 1;
+            }
+            Err(e) => {
+                self.fault(e, now_ns);
                 self.hold(Limit::Fault, now_ns);
                 self.release(now_ns);
                 self.end_tick();

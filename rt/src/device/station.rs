@@ -1,6 +1,7 @@
 //! The device a station's servo drives: one of the backends, chosen by its config.
 
 use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
+use super::figures::BridgeCounts;
 use super::replay::Replay;
 use super::scara::SimScara;
 
@@ -53,12 +54,18 @@ pub enum StationDevice {
     /// A recorded hand.
     Replay(Replay),
     /// A vendor backend.
-    Other(Box<dyn CartesianDeviceDebug>),
+    Other(Box<dyn VendorDevice>),
 }
 
-/// A [`CartesianDevice`] that can be printed (every backend derives `Debug`).
-pub trait CartesianDeviceDebug: CartesianDevice + std::fmt::Debug {}
-impl<T: CartesianDevice + std::fmt::Debug> CartesianDeviceDebug for T {}
+/// A vendor backend as a station drives it: a [`CartesianDevice`] that can be printed, and that
+/// says what its bridge thread counted, if it has one.
+pub trait VendorDevice: CartesianDevice + std::fmt::Debug {
+    /// Its bridge's counts (none: no bridge, the servo calls the device itself). Atomic loads
+    /// only: the servo reads them on its thread.
+    fn bridge_counts(&self) -> Option<BridgeCounts> {
+        None
+    }
+}
 
 impl StationDevice {
     /// Sets the session's time 0 for a device that plays a script or a recording.
@@ -67,6 +74,14 @@ impl StationDevice {
             StationDevice::Sim(d) => d.start_at(start_ns),
             StationDevice::Replay(d) => d.start_at(start_ns),
             StationDevice::Other(_) => {}
+        }
+    }
+
+    /// What its bridge thread counted (a vendor backend behind one).
+    pub fn bridge_counts(&self) -> Option<BridgeCounts> {
+        match self {
+            StationDevice::Other(d) => d.bridge_counts(),
+            StationDevice::Sim(_) | StationDevice::Replay(_) => None,
         }
     }
 

@@ -284,7 +284,8 @@ pub struct DeviceShared {
     pub published_ns: AtomicU64,
     /// Its counts.
     pub counts: DeviceCountsShared,
-    /// New samples per second over the last window (about a second), Hz (f64 bits).
+    /// New samples per second over the current window (a tenth of a second to a second), Hz (f64
+    /// bits).
     pub sample_rate_hz: AtomicU64,
     /// Force commands per second over the same window, Hz (f64 bits).
     pub command_rate_hz: AtomicU64,

@@ -26,7 +26,7 @@ pub struct DeviceStatus {
     pub samples: u64,
     /// ... whose time was newer than the one before (what the device delivered).
     pub new_samples: u64,
-    /// New samples per second over about the last second, Hz.
+    /// New samples per second over the last second or less, Hz.
     pub sample_rate_hz: f64,
     /// Servo ticks at which its newest sample was older than its stale limit.
     pub stale: u64,
@@ -36,7 +36,7 @@ pub struct DeviceStatus {
     pub faults: FaultsStatus,
     /// Force commands it took.
     pub commands: u64,
-    /// Force commands per second over about the last second, Hz.
+    /// Force commands per second over the last second or less, Hz.
     pub command_rate_hz: f64,
     /// What its bridge thread counted (a device behind one: ROS 2, Haply).
     pub bridge: Option<BridgeStatus>,

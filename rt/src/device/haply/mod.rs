@@ -385,6 +385,21 @@ impl CartesianDevice for HaplyDevice {
     }
 }
 
+impl crate::device::VendorDevice for HaplyDevice {
+    fn bridge_counts(&self) -> Option<crate::device::BridgeCounts> {
+        let s = &self.shared.stats;
+        let n = |a: &crate::sync::AtomicU64| a.load(crate::sync::Ordering::Relaxed);
+        Some(crate::device::BridgeCounts {
+            received: n(&s.frames) + n(&s.bad_frames),
+            refused: n(&s.bad_frames),
+            foreign: 0,
+            sent_forces: n(&s.forces_sent),
+            losses: n(&s.losses),
+            reconnects: n(&s.reconnects),
+        })
+    }
+}
+
 impl Drop for HaplyDevice {
     fn drop(&mut self) {
         self.close();
