@@ -643,6 +643,49 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
 /// other's tool played 367–395 ticks late at the end in every one. One CI run of the fixed
 /// playout: 9. In the simulator
 /// (`sim compare` on this scenario, seeds 1–9) 12 of 12 but on seed 8 (11).
+/// Simulated participants on real stations: each station's hand is the person the simulator draws
+/// for its site, acting on what that station shows; each station judges the task live, records
+/// it (`/task`) and the launcher's table carries it. On loopback (no emulated delay), every site
+/// is done, as in the simulator.
+#[test]
+fn participants_on_real_stations_do_the_task_and_each_station_judges_it() {
+    let _turn = ONE_AT_A_TIME.lock();
+    let out = TempDir::unmade("session-participants");
+    let v = run_json(session(
+        &[
+            "scenarios/participants/paper.toml",
+            "--method",
+            "timewarp",
+            "--no-emulation",
+        ],
+        &out,
+    ));
+    let m = &v["methods"]["timewarp"];
+    for row in ["simulated", "real"] {
+        let sites = m[row]["sites"].as_array().expect("sites");
+        assert_eq!(sites.len(), 2, "{row}");
+        for site in sites {
+            let task = &site["task"];
+            assert_eq!(task["outcome"], "done", "{row} {}: {task}", site["name"]);
+            assert!(
+                task["time_s"].as_f64().is_some_and(|t| t > 2.0),
+                "{row} {}: done after the task's steps: {task}",
+                site["name"]
+            );
+        }
+    }
+    for site in ["user1", "user2"] {
+        let rec = coop_transport::recording::read(&out.join(format!("timewarp/{site}.mcap")))
+            .expect("the recording reads");
+        let outcomes: Vec<&str> = rec.tasks.iter().map(|t| t.outcome.as_str()).collect();
+        assert_eq!(
+            outcomes,
+            ["running", "done"],
+            "{site}: /task once per change"
+        );
+    }
+}
+
 #[test]
 fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {
     let _turn = ONE_AT_A_TIME.lock();

@@ -16,6 +16,7 @@
 //! | `/presence` | each join or leave           | site, present                                         |
 //! | `/peer`     | each loss or rejoin          | site, lost or rejoined, how long it was silent        |
 //! | `/clock`    | each new estimate            | per peer clock offset and round trip                 |
+//! | `/task`     | each change of the task's outcome | running, done or failed, when, and what failed it |
 //! | `/status`   | at the end                   | the network counters                                  |
 //!
 //! Physics' trace records go in whole ([`Recorder::trace`]); each channel's `jsonschema` is derived
@@ -77,7 +78,8 @@ mod writer;
 
 pub use messages::{
     AdoptionMsg, ClockMsg, DivergenceMsg, LiveSample, ObjectPose, ObjectSamples, PeerMsg,
-    PresenceMsg, PublishedMsg, RemoteMsg, SampleMsg, SessionMsg, StatusMsg, TrafficMsg, WIRE_KINDS,
+    PresenceMsg, PublishedMsg, RemoteMsg, SampleMsg, SessionMsg, StatusMsg, TaskMsg, TrafficMsg,
+    WIRE_KINDS,
 };
 pub use parts::{part_path, Rotation};
 pub use reader::{read, read_part, LogLine, Recording};

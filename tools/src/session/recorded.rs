@@ -5,7 +5,10 @@ use anyhow::bail;
 use coop_model::body::Vec3;
 use coop_model::method::EnergyAccount;
 use coop_model::scenario::Scenario;
-use coop_model::sim::{AdoptionEvent, ForceSteps, Mode, ObjectTrace, RunResult, SiteTrace};
+use coop_model::sim::{
+    AdoptionEvent, ForceSteps, Mode, ObjectTrace, RunResult, SiteTask, SiteTrace,
+};
+use coop_model::task::Outcome;
 use coop_transport::recording::{Recording, SampleMsg};
 
 /// Turns the stations' recordings into the simulator's run layout: every site's trace on the
@@ -67,10 +70,29 @@ pub fn run_from_recordings(
         force_steps: vec![ForceSteps::default(); recs.len()],
         servo_ticks: Vec::new(),
         refused: 0,
-        // The stations do not judge a task yet: their recordings carry no /task channel.
-        tasks: Vec::new(),
-        task: false,
+        tasks: recs.iter().map(site_task).collect(),
+        task: sc.task.done.is_some() || !sc.task.fail.is_empty(),
     })
+}
+
+/// A station's task as its recording says: the last outcome its servo judged (`/task`); its
+/// participant's grip and steps stay in the station (none here).
+fn site_task(r: &Recording) -> SiteTask {
+    let outcome = match r.tasks.last() {
+        Some(m) if m.outcome == "done" => Outcome::Done(m.at_s),
+        Some(m) if m.outcome == "failed" => Outcome::Failed(
+            m.at_s,
+            m.failed_by
+                .strip_prefix("fail[")
+                .and_then(|k| k.trim_end_matches(']').parse().ok()),
+        ),
+        _ => Outcome::Running,
+    };
+    SiteTask {
+        outcome,
+        grip: None,
+        steps: None,
+    }
 }
 
 /// Site `i`'s trace from its recording `r` on the grid `t` (s from time 0, `epoch_ns` in its

@@ -281,7 +281,12 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
 /// Opens the session on `endpoints` (port 0 made concrete) and shows where it is in the control
 /// block.
 fn open(ctx: &Ctx<'_>, mut endpoints: NetworkConfig) -> Result<Session, NetworkError> {
-    endpoints.listen = concrete_listen(&endpoints.listen);
+    endpoints.listen = match endpoints.mode {
+        // A client listens on nothing (`config` gives zenoh no listen endpoints in client mode):
+        // status must not show the default loopback locator as if it did.
+        Mode::Client => Vec::new(),
+        Mode::Peer => concrete_listen(&endpoints.listen),
+    };
     let session = zenoh::open(config(&endpoints)?)
         .wait()
         .map_err(|e| explain_open(e, &endpoints, station_side(endpoints.mode)))?;
@@ -516,6 +521,15 @@ impl Loop {
         for (level, text) in self.events.look(ctx.ctl) {
             self.tell(level, || text.clone(), traffic);
             self.recording.write(|w| w.event(now, level, text));
+        }
+        if let Some(m) = self.events.task(ctx.ctl, now) {
+            let text = match m.outcome.as_str() {
+                "running" => "task: running".to_owned(),
+                "failed" => format!("task failed at {:.2} s by {}", m.at_s, m.failed_by),
+                o => format!("task {o} at {:.2} s", m.at_s),
+            };
+            self.tell(Level::Info, || text, traffic);
+            self.recording.write(|w| w.task(&m));
         }
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {
             self.recording.write(|w| w.presence(&m));

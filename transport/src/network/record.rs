@@ -18,7 +18,7 @@ use coop_rt::sync::Ordering;
 use foxglove::messages::log::Level;
 
 use super::NetworkError;
-use crate::recording::{Recorder, RecordingError, Rotation, Scene, StatusMsg};
+use crate::recording::{Recorder, RecordingError, Rotation, Scene, StatusMsg, TaskMsg};
 
 /// The recording being written, if any.
 pub(super) struct Recording {
@@ -115,6 +115,8 @@ pub(super) struct Events {
     restarts: [u64; CHILDREN],
     /// Device safety episodes already told.
     safety_episodes: u64,
+    /// The task's state last recorded (`TaskState` as u64).
+    task_state: u64,
 }
 
 impl Events {
@@ -135,7 +137,39 @@ impl Events {
             stale: None,
             restarts,
             safety_episodes,
+            task_state: 0,
         }
+    }
+
+    /// The task's outcome when it changed since the last look (the servo judges it and writes
+    /// the control block's task group), for `/task`.
+    pub(super) fn task(&mut self, ctl: &ControlBlock, now_ns: u64) -> Option<TaskMsg> {
+        use coop_rt::shm::control::TaskState;
+        let t = &ctl.task;
+        let w = t.state.load(Ordering::Relaxed);
+        if w == self.task_state {
+            return None;
+        }
+        self.task_state = w;
+        let state = TaskState::from_word(w);
+        if state == TaskState::None {
+            return None;
+        }
+        let ended = matches!(state, TaskState::Done | TaskState::Failed);
+        Some(TaskMsg {
+            t_ns: now_ns,
+            outcome: state.name().to_owned(),
+            at_s: if ended {
+                ControlBlock::load_f64(&t.at_s)
+            } else {
+                0.0
+            },
+            failed_by: match (state, t.failed_by.load(Ordering::Relaxed)) {
+                (TaskState::Failed, 0) => "timeout".to_owned(),
+                (TaskState::Failed, k) => format!("fail[{}]", k - 1),
+                _ => String::new(),
+            },
+        })
     }
 
     /// What changed since the last look, as log lines: the servo's display going stale (its scale
@@ -276,5 +310,29 @@ mod tests {
         assert!(ev.look(&ctl).is_empty(), "still stale: told once");
         ControlBlock::store_f64(&ctl.servo.scale, 1.0);
         assert_eq!(texts(&ev.look(&ctl)), ["fresh: the force display is back"]);
+    }
+
+    #[test]
+    fn the_tasks_outcome_is_recorded_once_per_change() {
+        use coop_rt::shm::control::TaskState;
+        let ctl = control("task");
+        let mut ev = Events::new(&ctl, false);
+        assert_eq!(ev.task(&ctl, 1), None, "no task yet");
+        ctl.task
+            .state
+            .store(TaskState::Running as u64, Ordering::Relaxed);
+        let m = ev.task(&ctl, 2).expect("running told");
+        assert_eq!((m.outcome.as_str(), m.at_s), ("running", 0.0));
+        assert_eq!(ev.task(&ctl, 3), None, "told once");
+        ControlBlock::store_f64(&ctl.task.at_s, 5.25);
+        ctl.task.failed_by.store(2, Ordering::Relaxed);
+        ctl.task
+            .state
+            .store(TaskState::Failed as u64, Ordering::Relaxed);
+        let m = ev.task(&ctl, 4).expect("failure told");
+        assert_eq!(
+            (m.outcome.as_str(), m.at_s, m.failed_by.as_str(), m.t_ns),
+            ("failed", 5.25, "fail[1]", 4)
+        );
     }
 }

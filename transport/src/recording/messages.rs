@@ -339,6 +339,22 @@ json_message! {
 }
 
 json_message! {
+    /// `/task`: the task's outcome as this site showed it, each time it changes (the servo judges
+    /// it live).
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+    pub struct TaskMsg {
+        /// ns (monotonic).
+        pub t_ns: u64,
+        /// `running`, `done` or `failed`.
+        pub outcome: String,
+        /// When it was done or failed, s from the session's time 0 (0 while running).
+        pub at_s: f64,
+        /// What failed it: `timeout` or `fail[k]` (empty: not failed).
+        pub failed_by: String,
+    }
+}
+
+json_message! {
     /// `/status`.
     #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
     pub struct StatusMsg {

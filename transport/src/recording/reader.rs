@@ -8,7 +8,7 @@ use foxglove::messages::Log;
 
 use super::messages::{
     AdoptionMsg, ClockMsg, ObjectPart, ObjectSamples, PeerMsg, PresenceMsg, PublishedMsg,
-    RemoteMsg, SampleMsg, SessionMsg, StatusMsg, ToolPart,
+    RemoteMsg, SampleMsg, SessionMsg, StatusMsg, TaskMsg, ToolPart,
 };
 use super::parts::{metadata_of, parts_on_disk};
 use super::topic::{FoxgloveTopic, Topic};
@@ -36,6 +36,8 @@ pub struct Recording {
     pub peers: Vec<PeerMsg>,
     /// Clock estimates.
     pub clock: Vec<ClockMsg>,
+    /// The task's outcome each time it changed.
+    pub tasks: Vec<TaskMsg>,
     /// Final counters, if the station stopped cleanly.
     pub status: Option<StatusMsg>,
     /// The station's events, as `/log` holds them (with a scene only).
@@ -118,6 +120,7 @@ pub fn read(first: &Path) -> Result<Recording, RecordingError> {
         r.presence.extend(p.presence);
         r.peers.extend(p.peers);
         r.clock.extend(p.clock);
+        r.tasks.extend(p.tasks);
         r.logs.extend(p.logs);
         r.status = p.status.or(r.status);
         r.truncated |= p.truncated;
@@ -187,6 +190,7 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<Recording, RecordingError> {
             Topic::Clock => r.clock.push(serde_json::from_slice(data).map_err(e)?),
             Topic::Status => r.status = Some(serde_json::from_slice(data).map_err(e)?),
             Topic::Published => r.published.push(serde_json::from_slice(data).map_err(e)?),
+            Topic::Task => r.tasks.push(serde_json::from_slice(data).map_err(e)?),
             Topic::Divergence => {}
         }
     }

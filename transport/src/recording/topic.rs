@@ -8,7 +8,7 @@ use foxglove::Encode;
 
 use super::messages::{
     AdoptionMsg, ClockMsg, DivergenceMsg, JsonSchema, ObjectPart, PeerMsg, PresenceMsg,
-    PublishedMsg, RemoteMsg, SessionMsg, StatusMsg, ToolPart,
+    PublishedMsg, RemoteMsg, SessionMsg, StatusMsg, TaskMsg, ToolPart,
 };
 
 /// A JSON channel (`message_encoding = "json"`, its schema a `jsonschema`).
@@ -34,6 +34,8 @@ pub(super) enum Topic {
     Published,
     /// `/peer`.
     Peer,
+    /// `/task`.
+    Task,
     /// `/divergence` (a session file's only).
     Divergence,
 }
@@ -41,7 +43,7 @@ pub(super) enum Topic {
 impl Topic {
     /// A station's recording's channels, in the order every part declares them (their ids follow
     /// it, so a part's layout stays as readers have seen it).
-    pub(super) const STATION: [Topic; 10] = [
+    pub(super) const STATION: [Topic; 11] = [
         Topic::Session,
         Topic::Object,
         Topic::Tool,
@@ -52,6 +54,7 @@ impl Topic {
         Topic::Status,
         Topic::Published,
         Topic::Peer,
+        Topic::Task,
     ];
 
     /// A session file's channels, in order.
@@ -70,6 +73,7 @@ impl Topic {
             Topic::Status => "/status",
             Topic::Published => "/published",
             Topic::Peer => "/peer",
+            Topic::Task => "/task",
             Topic::Divergence => "/divergence",
         }
     }
@@ -96,6 +100,7 @@ impl Topic {
             Topic::Clock => ClockMsg::schema(),
             Topic::Status => StatusMsg::schema(),
             Topic::Published => PublishedMsg::schema(),
+            Topic::Task => TaskMsg::schema(),
             Topic::Divergence => DivergenceMsg::schema(),
         }
     }
@@ -196,6 +201,7 @@ mod tests {
             ("/clock", serde_json::to_value(ClockMsg::default())),
             ("/status", serde_json::to_value(StatusMsg::default())),
             ("/published", serde_json::to_value(PublishedMsg::default())),
+            ("/task", serde_json::to_value(TaskMsg::default())),
         ];
         assert_eq!(written.len(), Topic::STATION.len());
         let session_file = [(

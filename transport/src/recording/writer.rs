@@ -7,7 +7,7 @@ use coop_rt::msg::TraceRecord;
 
 use super::messages::{
     AdoptionMsg, ClockMsg, ObjectPart, PeerMsg, PresenceMsg, PublishedMsg, RemoteMsg, SampleMsg,
-    SessionMsg, StatusMsg, ToolPart,
+    SessionMsg, StatusMsg, TaskMsg, ToolPart,
 };
 use super::parts::{Parts, Rotation, Slot};
 use super::topic::{FoxgloveTopic, Topic};
@@ -301,6 +301,21 @@ impl Recorder {
             ),
         };
         self.one_logged(Topic::Peer, m.t_ns, m, level, text)
+    }
+    /// `/task` (and, with a scene, its `/log` line): the task's outcome changed.
+    ///
+    /// # Errors
+    /// Writing failed.
+    pub fn task(&mut self, m: &TaskMsg) -> Result<(), RecordingError> {
+        let (level, text) = match (m.outcome.as_str(), m.failed_by.is_empty()) {
+            ("failed", _) => (
+                Level::Warning,
+                format!("task failed at {:.2} s by {}", m.at_s, m.failed_by),
+            ),
+            ("done", _) => (Level::Info, format!("task done at {:.2} s", m.at_s)),
+            (o, _) => (Level::Info, format!("task {o}")),
+        };
+        self.one_logged(Topic::Task, m.t_ns, m, level, text)
     }
     /// A station event for `/log` only (nothing without a scene): `level` is Foxglove's.
     ///
