@@ -517,15 +517,17 @@ pub fn print_tasks(all: &[Metrics]) {
         return;
     }
     println!(
-        "{:<10}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
+        "{:<15}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
         "task", "site", "outcome", "time s", "by", "grip N", "peak N", "margin", "slips", "steps"
     );
     let cell = crate::figures::or_dash;
     for m in all {
         for s in &m.sites {
             let Some(t) = &s.task else { continue };
+            // A station keeps its participant's grip and steps to itself: none in its row.
+            let person = t.steps.1 > 0;
             println!(
-                "{:<10}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
+                "{:<15}{:<10}{:>10}{:>10}  {:<10}{:>8}{:>8}{:>8}{:>7}{:>8}",
                 m.method,
                 s.name,
                 t.outcome,
@@ -538,12 +540,20 @@ pub fn print_tasks(all: &[Metrics]) {
                 cell(t.grip_mean_n, 2),
                 cell(t.grip_peak_n, 2),
                 cell(t.grip_margin, 2),
-                t.slips,
-                format!("{}/{}", t.steps.0, t.steps.1),
+                if person {
+                    t.slips.to_string()
+                } else {
+                    "-".to_owned()
+                },
+                if person {
+                    format!("{}/{}", t.steps.0, t.steps.1)
+                } else {
+                    "-".to_owned()
+                },
             );
         }
     }
-    println!("# task: outcome as each site showed it; time = when the goal began to hold (done) or the failure; grip = the participant's mean felt normal force while gripping, margin = over what friction needed for the felt load")
+    println!("# task: outcome as each site showed it; time = when the goal began to hold (done) or the failure; grip = the participant's mean felt normal force while gripping, margin = over what friction needed for the felt load ('-': a scripted hand, or a station's, which keeps its participant's figures)")
 }
 
 /// Writes a run's trace, adoptions, metrics, session file (`session.mcap`) and plots into `dir`.
