@@ -4,7 +4,8 @@
 //! started), waits for it on a tokio task, and watches its heartbeat: a child whose heartbeat stops
 //! for longer than the timeout is hung and gets SIGKILL. When the process exits the actor ends: with
 //! a clean stop for exit status 0 (supervisors see `ActorTerminated`), with an error otherwise
-//! (`ActorFailed`).
+//! (`ActorFailed`, carrying a [`ChildFailed`]: a child that exits with [`EXIT_CANNOT_START`] says
+//! a restart would fail the same way).
 
 use std::path::PathBuf;
 use std::process::Stdio;
@@ -24,6 +25,23 @@ pub struct ChildSpec {
     pub program: PathBuf,
     /// Its arguments.
     pub args: Vec<String>,
+    /// Environment variables set for it (on top of the supervisor's own).
+    pub env: Vec<(String, String)>,
+}
+
+/// The exit status a child uses to say it cannot start and a restart would fail the same way (its
+/// device does not open, say): its supervisor ends the station instead of restarting it, and the
+/// child has left its words where the station reads them. Sysexits' `EX_CONFIG`.
+pub const EXIT_CANNOT_START: i32 = 78;
+
+/// Why a child's actor failed (the error its supervisor gets).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{text}")]
+pub struct ChildFailed {
+    /// What happened, naming the child and its pid.
+    pub text: String,
+    /// It exited with [`EXIT_CANNOT_START`]: a restart would fail the same way.
+    pub cannot_start: bool,
 }
 
 /// Reads a child's heartbeat counter.
@@ -125,6 +143,7 @@ impl Actor for ChildProcess {
     ) -> Result<ChildState, ActorProcessingErr> {
         let mut child = tokio::process::Command::new(&spec.program)
             .args(&spec.args)
+            .envs(spec.env.iter().map(|(k, v)| (k, v)))
             .process_group(0)
             .stdin(Stdio::null())
             .spawn()
@@ -184,12 +203,18 @@ impl Actor for ChildProcess {
                         st.spec.name, st.pid
                     )));
                 } else {
+                    let cannot_start = !st.hung && exit.code == Some(EXIT_CANNOT_START);
                     let why = if st.hung {
                         format!("hung (no heartbeat) and was killed; it {exit}")
+                    } else if cannot_start {
+                        format!("cannot start ({exit}: a restart would fail the same way)")
                     } else {
                         exit.to_string()
                     };
-                    return Err(format!("{} (pid {}) {why}", st.spec.name, st.pid).into());
+                    return Err(Box::new(ChildFailed {
+                        text: format!("{} (pid {}) {why}", st.spec.name, st.pid),
+                        cannot_start,
+                    }));
                 }
             }
             ChildMsg::Signal(sig) => {

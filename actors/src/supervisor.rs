@@ -1,5 +1,5 @@
 //! The station supervisor: starts one linked [`ChildProcess`] actor per child, restarts children per
-//! their [`ChildPolicy`], and reports through a watch channel how many children live, how each is
+//! their [`ChildPolicy`] (except one that says it cannot start: that ends the station), and reports through a watch channel how many children live, how each is
 //! (starting, up, down), whether the station is degraded (a degradable child is down), and whether
 //! the station must end (and why). It never stops itself while a child process may still live; its
 //! owner runs the stop ladder ([`SupervisorMsg::BeginStop`], then signals) and stops it once `live`
@@ -11,7 +11,7 @@ use nix::sys::signal::Signal;
 use ractor::{Actor, ActorProcessingErr, ActorRef, SupervisionEvent};
 use tokio::sync::watch;
 
-use crate::child::{ChildMsg, ChildProcess, ChildSpec, Watch};
+use crate::child::{ChildFailed, ChildMsg, ChildProcess, ChildSpec, Watch};
 use crate::policy::{ChildPolicy, Decision, History, Retries};
 
 /// How often the supervisor looks at the heartbeats of children it has not seen up yet.
@@ -174,14 +174,26 @@ async fn start(
     Ok(())
 }
 
-/// Child `i` ended (`failure`: why it failed; none: a clean exit): restart it or end the station,
-/// per its policy.
-fn exited(
-    myself: &ActorRef<SupervisorMsg>,
-    st: &mut SupervisorState,
-    i: usize,
-    failure: Option<String>,
-) {
+/// How a child ended, as its actor said.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Ending {
+    /// Exit status 0.
+    Clean,
+    /// Any other end, in words.
+    Failed(String),
+    /// It cannot start, and a restart would fail the same way
+    /// ([`crate::child::EXIT_CANNOT_START`]).
+    CannotStart(String),
+}
+
+/// Child `i` ended: restart it or end the station, per its policy (one that cannot start ends
+/// the station whatever the policy: restarting it would only hide why).
+fn exited(myself: &ActorRef<SupervisorMsg>, st: &mut SupervisorState, i: usize, ending: Ending) {
+    let (failure, cannot_start) = match ending {
+        Ending::Clean => (None, false),
+        Ending::Failed(why) => (Some(why), false),
+        Ending::CannotStart(why) => (Some(why), true),
+    };
     let name = st.specs[i].0.name.clone();
     let failed = failure.is_some();
     let what = failure.unwrap_or_else(|| format!("{name} exited cleanly"));
@@ -192,6 +204,10 @@ fn exited(
             h.state = ChildState::Down;
             h.down_since_ns = Some(coop_rt::timer::monotonic_ns());
         }
+    }
+    if cannot_start {
+        st.publish(Some(End::Failed(what)));
+        return;
     }
     let restart = |st: &mut SupervisorState, delay| {
         st.restarts[i] += 1;
@@ -266,7 +282,7 @@ impl Actor for StationSupervisor {
                     st.pending[i] = false;
                     let why = format!("{}: restart failed: {e}", st.specs[i].0.name);
                     if let ChildPolicy::Degradable(_) = st.specs[i].2 {
-                        exited(&myself, st, i, Some(why));
+                        exited(&myself, st, i, Ending::Failed(why));
                     } else {
                         st.publish(Some(End::Failed(why)));
                     }
@@ -308,9 +324,15 @@ impl Actor for StationSupervisor {
         evt: SupervisionEvent,
         st: &mut SupervisorState,
     ) -> Result<(), ActorProcessingErr> {
-        let (cell, failure) = match evt {
-            SupervisionEvent::ActorTerminated(cell, _, _) => (cell, None),
-            SupervisionEvent::ActorFailed(cell, err) => (cell, Some(err.to_string())),
+        let (cell, ending) = match evt {
+            SupervisionEvent::ActorTerminated(cell, _, _) => (cell, Ending::Clean),
+            SupervisionEvent::ActorFailed(cell, err) => {
+                let why = err.to_string();
+                match err.downcast_ref::<ChildFailed>() {
+                    Some(f) if f.cannot_start => (cell, Ending::CannotStart(why)),
+                    _ => (cell, Ending::Failed(why)),
+                }
+            }
             _ => return Ok(()),
         };
         let Some(i) = st
@@ -325,7 +347,7 @@ impl Actor for StationSupervisor {
             st.publish(None);
             return Ok(());
         }
-        exited(&myself, st, i, failure);
+        exited(&myself, st, i, ending);
         Ok(())
     }
 }

@@ -22,6 +22,7 @@ fn spec(name: &str, program: &str, args: &[&str]) -> ChildSpec {
         name: name.into(),
         program: program.into(),
         args: args.iter().map(|s| s.to_string()).collect(),
+        env: Vec::new(),
     }
 }
 
@@ -77,6 +78,37 @@ async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
             );
             assert!(msg.contains("exited with status 1"), "{msg}");
         }
+        other => panic!("expected a failure, got {other:?}"),
+    }
+    sup.stop(None);
+    handle.await.expect("supervisor ends");
+}
+
+/// A child that says it cannot start (its exit status: a restart would fail the same way, its
+/// device does not open, say) is not restarted, whatever the policy: the station ends at once.
+#[tokio::test]
+async fn a_child_that_cannot_start_ends_the_station_without_a_restart() {
+    let (tx, mut rx) = watch::channel(Status::default());
+    let code = coop_actors::child::EXIT_CANNOT_START.to_string();
+    let args = SupervisorArgs {
+        children: vec![(
+            spec("servo", "sh", &["-c", &format!("exit {code}")]),
+            None,
+            ChildPolicy::Essential(policy(3)),
+        )],
+        status: tx,
+    };
+    let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
+        .await
+        .expect("supervisor");
+    let s = wait_for(&mut rx, "the station to end", |s| s.end.is_some()).await;
+    assert_eq!(s.restarts, vec![0], "not restarted");
+    match s.end {
+        Some(End::Failed(msg)) => assert!(
+            msg.contains("servo (pid ")
+                && msg.contains(&format!("cannot start (exited with status {code}")),
+            "{msg}"
+        ),
         other => panic!("expected a failure, got {other:?}"),
     }
     sup.stop(None);

@@ -308,6 +308,82 @@ pub fn lock_memory() -> Result<(), Warning> {
     })
 }
 
+/// What a process about to start real-time loops will ask of the kernel ([`missing_privileges`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wanted {
+    /// Every page locked, now and later ([`lock_memory`]).
+    pub lock_memory: bool,
+    /// `/dev/cpu_dma_latency` held at 0 ([`hold_cpu_dma_latency_zero`]).
+    pub cpu_dma_latency: bool,
+    /// A real-time policy at a priority (none: SCHED_OTHER only, which needs no privilege).
+    pub realtime: Option<(Policy, i32)>,
+}
+
+/// A privilege a process lacks, found by trying it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Missing {
+    /// The [`Warning::key`] of the warning a loop process would print for it: `mlock`,
+    /// `cpu_dma_latency` or `policy`.
+    pub key: &'static str,
+    /// What cannot be done, with the kernel's reason.
+    pub what: String,
+    /// How the loops run without it.
+    pub instead: &'static str,
+    /// What gives it, short of running as root.
+    pub grant: &'static str,
+}
+
+/// Tries each privilege `want` names, undoing each at once, and returns those the kernel refused:
+/// `mlockall` (then `munlockall`), opening `/dev/cpu_dma_latency` for writing (closed again: an
+/// open descriptor is what holds a request), and the real-time policy on a thread of its own that
+/// ends right after. For a supervisor that says once what its children will lack, before they
+/// start.
+pub fn missing_privileges(want: &Wanted) -> Vec<Missing> {
+    let mut missing = Vec::new();
+    if want.lock_memory {
+        match mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE) {
+            Ok(()) => {
+                // Locked only to see whether it could be: the loop processes lock their own.
+                let _ = nix::sys::mman::munlockall();
+            }
+            Err(e) => missing.push(Missing {
+                key: "mlock",
+                what: format!("cannot lock memory ({e})"),
+                instead: "memory pageable",
+                grant: "CAP_IPC_LOCK (or a memlock limit: ulimit -l unlimited, 'memlock' in /etc/security/limits.conf)",
+            }),
+        }
+    }
+    if want.cpu_dma_latency {
+        if let Err(e) = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/cpu_dma_latency")
+        {
+            missing.push(Missing {
+                key: "cpu_dma_latency",
+                what: format!("cannot hold /dev/cpu_dma_latency at 0 ({e})"),
+                instead: "CPUs free to enter deep idle states between cycles",
+                grant: "write access to /dev/cpu_dma_latency",
+            });
+        }
+    }
+    if let Some((policy, priority)) = want.realtime {
+        let tried = std::thread::Builder::new()
+            .name("privilege-check".into())
+            .spawn(move || set_scheduler(policy, priority))
+            .map(|t| t.join());
+        if let Ok(Ok(Err(e))) = tried {
+            missing.push(Missing {
+                key: "policy",
+                what: format!("cannot set {policy} priority {priority} ({e})"),
+                instead: "SCHED_OTHER",
+                grant: "CAP_SYS_NICE (or an rtprio limit: ulimit -r 99, 'rtprio' in /etc/security/limits.conf)",
+            });
+        }
+    }
+    missing
+}
+
 /// Whether the process has memory locked (`VmLck` in `/proc/self/status` is non-zero).
 pub fn memory_locked() -> bool {
     std::fs::read_to_string("/proc/self/status")

@@ -33,8 +33,9 @@ enum Command {
     /// stops with an error naming the child and the policy. The network process is restarted after
     /// every exit without limit, backing off up to `network_backoff_max_ms`; while it is down the
     /// station runs on locally, degraded (said on stderr and by `station status`). A loop whose
-    /// heartbeat stands still `heartbeat_timeout_ms` (`startup_timeout_ms` after a start) is killed
-    /// as hung.
+    /// heartbeat stands still `heartbeat_timeout_ms` (`startup_timeout_ms` after a start; the
+    /// servo's plus its device's own start wait) is killed as hung. A servo whose device does not
+    /// open is not restarted: the station stops with the device's error.
     Run {
         #[command(flatten)]
         child: ChildArgs,
@@ -364,7 +365,13 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             }
             Ok(())
         }
-        Command::Servo(a) => Ok(child::run_servo(&resolve(&a)?, a.parent)?),
+        Command::Servo(a) => match child::run_servo(&resolve(&a)?, a.parent) {
+            // Its supervisor ends the station with the words it left in the control block.
+            Err(e) if a.parent.is_some() && e.cannot_start() => {
+                std::process::exit(coop_actors::child::EXIT_CANNOT_START)
+            }
+            r => Ok(r?),
+        },
         Command::Physics(a) => Ok(child::run_physics(&resolve(&a)?, a.parent)?),
         Command::Network(a) => {
             // The network process's zenoh speaks on stderr when RUST_LOG asks: installed here, by

@@ -337,6 +337,44 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     assert!(d["released_after_s"].as_f64().is_some(), "{d}");
 }
 
+/// A station whose device's ROS 2 driver is not running ends, failing, with the backend's own
+/// error said once (the topic, the wait, the field to look at, the fix): its servo waits for the
+/// first pose within its start limit, and is not restarted as hung until the policy gives up. No
+/// driver and no router here: nothing listens on the port it connects to.
+#[test]
+fn a_station_without_its_ros2_driver_ends_with_the_device_error() {
+    let dir = TempDir::new("ros2-no-driver");
+    let session = coop_tests::unique_session();
+    let cfg = coop_tests::station_config(&dir, &session, "user1", |c| {
+        c.device.device = coop_actors::station::device::BackendName::Ros2;
+        let mut t = toml::Table::new();
+        t.insert("connect".into(), vec!["tcp/127.0.0.1:1".to_owned()].into());
+        t.insert("first_pose_timeout_ms".into(), 300.into());
+        c.device.ros2 = Some(t);
+    });
+    // Bounded by its own duration should it not end by itself.
+    let out = Command::new(env!("CARGO_BIN_EXE_station"))
+        .args(["run", "--duration-s", "120", "--config"])
+        .arg(&cfg)
+        .stdin(Stdio::null())
+        .output()
+        .expect("station runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "the station should fail: {err}");
+    let said = "device.ros2: no geometry_msgs/msg/PoseStamped on /haptic/pose";
+    assert_eq!(err.matches(said).count(), 1, "said once: {err}");
+    assert!(
+        err.contains("within 300 ms (device.ros2.first_pose_timeout_ms): is the driver running"),
+        "{err}"
+    );
+    assert!(!err.contains("hung"), "{err}");
+    assert!(!err.contains("failed 4 times"), "{err}");
+    assert!(
+        coop_tests::shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+}
+
 /// A sample a subscriber got: its key and payload.
 type Seen = (String, Vec<u8>);
 

@@ -805,3 +805,70 @@ fn station_status_names_the_device_limit_that_acted_last() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Without the privileges its loops ask for (here as `nobody`, through setpriv), a station says so
+/// in one warning naming every missing privilege and its fix; its servo and physics do not say it
+/// again, and run anyway. Only root can become `nobody` here: skipped otherwise.
+#[test]
+fn unprivileged_it_warns_once_naming_every_missing_privilege() {
+    use std::os::unix::fs::PermissionsExt;
+    if !nix::unistd::geteuid().is_root() {
+        eprintln!("SKIPPED: not root, so it cannot run a station as nobody");
+        return;
+    }
+    if Command::new("setpriv").arg("--version").output().is_err() {
+        eprintln!("SKIPPED: setpriv is not installed (util-linux); cannot drop root here");
+        return;
+    }
+    let session = unique_session();
+    let dir = std::env::temp_dir().join(format!("coop-unprivileged-{session}"));
+    // Everything it asks for: memory locked, /dev/cpu_dma_latency held, SCHED_FIFO (at the
+    // default priorities).
+    let cfg = station_config(&dir, &session, "user1", |c| {
+        c.mlockall = true;
+        c.cpu_dma_latency_zero = true;
+        for l in [&mut c.servo, &mut c.physics] {
+            l.policy = "fifo".into();
+            l.priority = None;
+        }
+    });
+    // The build tree may not be reachable by nobody: a copy of the binary, next to the
+    // configuration, in a directory nobody may use.
+    let bin = dir.join("station");
+    std::fs::copy(STATION, &bin).expect("copy the station binary");
+    for (p, mode) in [(&dir, 0o777), (&bin, 0o755), (&cfg, 0o644)] {
+        std::fs::set_permissions(p, std::fs::Permissions::from_mode(mode)).expect("chmod");
+    }
+    let out = Command::new("setpriv")
+        .args([
+            "--reuid=65534",
+            "--regid=65534",
+            "--clear-groups",
+            "--inh-caps=-all",
+        ])
+        .arg(&bin)
+        .args(["run", "--duration-s", "2", "--config"])
+        .arg(&cfg)
+        .current_dir(&dir)
+        .output()
+        .expect("setpriv runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "exit {}: {err}", out.status);
+    let warns: Vec<&str> = err.lines().filter(|l| l.contains("WARN")).collect();
+    assert_eq!(warns.len(), 1, "one warning for the station: {err}");
+    for what in [
+        "cannot lock memory",
+        "cannot hold /dev/cpu_dma_latency at 0",
+        "cannot set SCHED_FIFO",
+        "CAP_IPC_LOCK",
+        "CAP_SYS_NICE",
+        "write access to /dev/cpu_dma_latency",
+    ] {
+        assert!(warns[0].contains(what), "{what} missing: {}", warns[0]);
+    }
+    assert!(
+        shm_entries(&format!("coop_{session}_")).is_empty(),
+        "segments left behind"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

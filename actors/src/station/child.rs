@@ -1,10 +1,10 @@
 //! The station's loop processes, as the supervisor starts them (`station servo|physics`, hidden
 //! subcommands of the one `station` binary, so `ps` shows which station a child belongs to).
 //!
-//! Each child dies with its supervisor (parent-death signal), applies its scheduling (one warning per
-//! missing privilege, then it runs anyway), opens the segments the supervisor created, and runs its
-//! loop body under [`coop_rt::run::run_periodic`] until the run state asks it to stop — the servo only
-//! once its force has ramped to zero.
+//! Each child dies with its supervisor (parent-death signal), applies its scheduling (what it lacks
+//! the supervisor has said once for the station, then it runs anyway), opens the segments the
+//! supervisor created, and runs its loop body under [`coop_rt::run::run_periodic`] until the run
+//! state asks it to stop — the servo only once its force has ramped to zero.
 
 use std::time::Duration;
 
@@ -79,6 +79,13 @@ impl ChildError {
             Self::Network(coop_transport::network::NetworkError::Link(_))
         )
     }
+
+    /// Whether this failure is one a restart would meet again: the device does not open (no
+    /// driver, no service, no library). The servo has written its words into the control block
+    /// (`device.open_error`), and the station ends with them instead of restarting it.
+    pub fn cannot_start(&self) -> bool {
+        matches!(self, Self::Device(_))
+    }
 }
 
 /// Names the ring a failed open was of.
@@ -135,17 +142,33 @@ fn attach(
     Ok((names, opts, ctl))
 }
 
-/// Applies scheduling and memory locking, printing each missing privilege once; holds
-/// `/dev/cpu_dma_latency` at 0 while the returned guard lives (when configured).
+/// The environment variable through which the supervisor tells its loop processes which missing
+/// privileges it has already warned of (the [`sched::Warning::key`]s, comma-separated), so that a
+/// station without them says so once, not once per process and privilege.
+pub const PRIVILEGES_SAID_ENV: &str = "COOP_PRIVILEGES_SAID";
+
+/// Whether the supervisor has already warned of the privilege of warning `key`.
+fn said_by_the_supervisor(key: &str) -> bool {
+    std::env::var(PRIVILEGES_SAID_ENV).is_ok_and(|said| said.split(',').any(|k| k == key))
+}
+
+/// Applies scheduling and memory locking, printing each missing privilege once (unless the
+/// supervisor already did); holds `/dev/cpu_dma_latency` at 0 while the returned guard lives (when
+/// configured). What is in force goes to status either way.
 fn setup(
     cfg: &Resolved,
     req: &Request,
     child: Child,
 ) -> Result<(sched::InForce, Option<sched::DmaLatencyGuard>), ChildError> {
     let what = child.name();
+    let say = |w: &sched::Warning| {
+        if !said_by_the_supervisor(w.key) {
+            eprintln!("station {what} {}: {w}", cfg.name);
+        }
+    };
     if cfg.config.mlockall {
         if let Err(w) = sched::lock_memory() {
-            eprintln!("station {what} {}: {w}", cfg.name);
+            say(&w);
         }
     }
     // Without it the idle governor may halt the CPU between cycles, and every wake-up pays the way
@@ -155,10 +178,10 @@ fn setup(
         match sched::hold_cpu_dma_latency_zero() {
             Ok(g) => Some(g),
             Err(e) => {
-                eprintln!(
-                    "station {what} {}: WARN: cannot hold /dev/cpu_dma_latency at 0 ({e}); CPUs may enter deep idle states between cycles. Fix: run as root (or give write access to /dev/cpu_dma_latency)",
-                    cfg.name
-                );
+                say(&sched::Warning {
+                    key: "cpu_dma_latency",
+                    message: format!("cannot hold /dev/cpu_dma_latency at 0 ({e}); CPUs may enter deep idle states between cycles. Fix: run as root (or give write access to /dev/cpu_dma_latency)"),
+                });
                 None
             }
         }
@@ -166,8 +189,8 @@ fn setup(
         None
     };
     let (in_force, warnings) = sched::apply_to_current_thread(req)?;
-    for w in warnings {
-        eprintln!("station {what} {}: {w}", cfg.name);
+    for w in &warnings {
+        say(w);
     }
     Ok((in_force, dma))
 }
@@ -188,7 +211,14 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
     // is, and a station waiting for its session holds the first pose until the session starts.
-    let mut device = crate::station::device::open(&cfg.device, sc, i, start)?;
+    let mut device = match crate::station::device::open(&cfg.device, sc, i, start) {
+        Ok(d) => d,
+        Err(e) => {
+            // The station ends with these words (see `ChildError::cannot_start`).
+            ctl.device.open_error.store_fmt(format_args!("{e}"));
+            return Err(e.into());
+        }
+    };
     if let Some(epoch) = ctl.epoch() {
         device.start_at(epoch);
     }

@@ -35,6 +35,7 @@
 //! ```
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use coop_model::body::Vec3;
 use coop_model::replay::Trajectory;
@@ -424,6 +425,24 @@ impl SafetySpec {
             max_force_step_n: s.max_force_step_n,
             watchdog_s: s.watchdog_ms / 1e3,
         })
+    }
+}
+
+impl DeviceSetup {
+    /// The longest the backend may wait for its device while it opens, beyond ordinary start-up
+    /// work: a ROS 2 driver's first pose (`device.ros2.first_pose_timeout_ms`), the Haply
+    /// service's connection and first frame (`device.haply.connect_timeout_ms` and
+    /// `io_timeout_ms`). The others open at once.
+    pub fn start_wait(&self) -> Duration {
+        let ms = match self.backend {
+            Backend::Ros2 => self.ros2.first_pose_timeout_ms,
+            Backend::Haply => self
+                .haply
+                .connect_timeout_ms
+                .saturating_add(self.haply.io_timeout_ms),
+            Backend::Sim | Backend::Replay | Backend::Dhd => 0,
+        };
+        Duration::from_millis(ms)
     }
 }
 

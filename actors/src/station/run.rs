@@ -1,14 +1,16 @@
 //! `station run`: bring a station up in order, keep it going, and take it down leaving nothing.
 //!
 //! Up: clean stale segments a dead predecessor of this station left (refusing if one is alive),
-//! check its listen ports are free, create the control block and rings, start the supervisor (which
+//! check its listen ports are free, create the control block and rings, say once which real-time
+//! privileges the loops will lack (they do not say it again), start the supervisor (which
 //! starts servo, physics and network as process-group leaders that die with it), then declare the
 //! station running.
 //! Meanwhile: each child's restarts, health and last failure go to its slot of the control block
 //! (for `station status`); while the network process is down the station runs on locally, degraded,
 //! and says so on stderr when it enters and leaves that mode.
 //! Down, on SIGINT/SIGTERM, a duration, the end of the session's scenario (for a station started by
-//! the session's time 0, [`SESSION_END_GRACE`] after it), or a child the policy gave up on — the
+//! the session's time 0, [`SESSION_END_GRACE`] after it), a child the policy gave up on, or a
+//! servo whose device does not open (not restarted: the device's own words are the reason) — the
 //! stop ladder:
 //! cooperative stop through the run state (the servo first ramps its force to zero) → [`STOP_GRACE`]
 //! → SIGTERM to each child's process group → [`TERM_GRACE`] → SIGKILL; then unlink every segment.
@@ -145,16 +147,67 @@ pub fn run(cfg: &Resolved, opts: &RunOptions) -> Result<(), RunError> {
     }
     // The supervisor stays off the servo's CPU too (its children set their own affinity).
     super::child::keep_off_the_servo(cfg);
+    let said = say_missing_privileges(cfg);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    let outcome = rt.block_on(supervise(cfg, opts, segs.clone()));
+    let outcome = rt.block_on(supervise(cfg, opts, segs.clone(), &said));
     segs.control.set_run_state(RunState::Stopped);
     drop(segs); // unlinks every segment
     outcome
 }
 
-fn child_spec(cfg: &Resolved, opts: &RunOptions, child: Child) -> Result<ChildSpec, RunError> {
+/// Tries once what the loop processes will ask of the kernel (`mlockall`, `/dev/cpu_dma_latency`,
+/// a real-time policy) and says in ONE warning everything that is missing, with the fix; returns
+/// the keys of what it said, for the children not to say it again (they still apply what they
+/// can, and status shows what is in force).
+fn say_missing_privileges(cfg: &Resolved) -> Vec<&'static str> {
+    let realtime = [&cfg.servo_sched, &cfg.physics_sched]
+        .into_iter()
+        .find(|r| r.policy.is_realtime())
+        .map(|r| (r.policy, r.priority));
+    let missing = coop_rt::sched::missing_privileges(&coop_rt::sched::Wanted {
+        lock_memory: cfg.config.mlockall,
+        cpu_dma_latency: cfg.config.cpu_dma_latency_zero,
+        realtime,
+    });
+    if missing.is_empty() {
+        return Vec::new();
+    }
+    let list = |f: &dyn Fn(&coop_rt::sched::Missing) -> String, sep: &str| {
+        missing.iter().map(f).collect::<Vec<_>>().join(sep)
+    };
+    let caps: Vec<&str> = missing
+        .iter()
+        .filter_map(|m| match m.key {
+            "mlock" => Some("cap_ipc_lock"),
+            "policy" => Some("cap_sys_nice"),
+            _ => None,
+        })
+        .collect();
+    let setcap = if caps.is_empty() {
+        String::new()
+    } else {
+        let exe =
+            std::env::current_exe().map_or("<station binary>".into(), |p| p.display().to_string());
+        format!(" (setcap {}+ep {exe})", caps.join(","))
+    };
+    eprintln!(
+        "station {}: WARN: missing real-time privileges: {}; the servo and physics run anyway ({}). Fix: run as root, or give it {}{setcap}",
+        cfg.name,
+        list(&|m| m.what.clone(), ", "),
+        list(&|m| m.instead.to_owned(), ", "),
+        list(&|m| m.grant.to_owned(), "; "),
+    );
+    missing.iter().map(|m| m.key).collect()
+}
+
+fn child_spec(
+    cfg: &Resolved,
+    opts: &RunOptions,
+    child: Child,
+    said: &[&str],
+) -> Result<ChildSpec, RunError> {
     let mut args = opts.exe_prefix.clone();
     args.extend([
         child.name().to_owned(),
@@ -177,6 +230,7 @@ fn child_spec(cfg: &Resolved, opts: &RunOptions, child: Child) -> Result<ChildSp
         name: child.name().to_owned(),
         program: std::env::current_exe().map_err(RunError::Exe)?,
         args,
+        env: vec![(super::child::PRIVILEGES_SAID_ENV.to_owned(), said.join(","))],
     })
 }
 
@@ -254,10 +308,19 @@ fn watch_links(cfg: &Resolved, status: &Status, link: &mut LinkTeller) {
     }
 }
 
+/// Why the servo's device did not open, in its own words, if that is why the servo could not start
+/// (it writes them before it exits with `EXIT_CANNOT_START`): the station's reason to stop, said
+/// once, instead of the servo's exit status.
+fn device_words(ctl: &ControlBlock) -> Option<String> {
+    let words = ctl.device.open_error.load();
+    (!words.is_empty()).then(|| format!("the servo cannot open its device: {words}"))
+}
+
 async fn supervise(
     cfg: &Resolved,
     opts: &RunOptions,
     segs: Arc<StationSegments>,
+    said: &[&str],
 ) -> Result<(), RunError> {
     let sup_cfg = &cfg.config.supervisor;
     let watch_of = |c: Child| {
@@ -265,7 +328,7 @@ async fn supervise(
         Some(Watch {
             heartbeat: Arc::new(move || s.control.child(c).heartbeat.load(Ordering::Relaxed)),
             timeout: Duration::from_millis(sup_cfg.heartbeat_timeout_ms),
-            startup: Duration::from_millis(sup_cfg.startup_timeout_ms),
+            startup: cfg.startup_timeout(c),
         })
     };
     // The servo and physics are the station; the network is what it shares, and the station goes
@@ -273,17 +336,17 @@ async fn supervise(
     let essential = ChildPolicy::Essential(cfg.policy);
     let children = vec![
         (
-            child_spec(cfg, opts, Child::Servo)?,
+            child_spec(cfg, opts, Child::Servo, said)?,
             watch_of(Child::Servo),
             essential,
         ),
         (
-            child_spec(cfg, opts, Child::Physics)?,
+            child_spec(cfg, opts, Child::Physics, said)?,
             watch_of(Child::Physics),
             essential,
         ),
         (
-            child_spec(cfg, opts, Child::Network)?,
+            child_spec(cfg, opts, Child::Network, said)?,
             watch_of(Child::Network),
             ChildPolicy::Degradable(cfg.network_backoff),
         ),
@@ -389,7 +452,7 @@ async fn supervise(
     match end {
         Some(End::Failed(why)) => Err(RunError::Stopped {
             station: cfg.name.clone(),
-            why,
+            why: device_words(&segs.control).unwrap_or(why),
         }),
         Some(End::Clean(why)) => {
             eprintln!("station {} stopped: {why}", cfg.name);

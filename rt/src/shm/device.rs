@@ -60,7 +60,7 @@ impl fmt::Write for WordWriter<'_> {
         for &b in &s.as_bytes()[..n] {
             self.word |= u64::from(b) << (8 * (self.len % 8));
             self.len += 1;
-            if self.len % 8 == 0 {
+            if self.len.is_multiple_of(8) {
                 self.words[self.len / 8 - 1].store(self.word, Ordering::Relaxed);
                 self.word = 0;
             }
@@ -81,7 +81,7 @@ impl<const N: usize> ShmText<N> {
         };
         // WordWriter never fails; a Display that does leaves what it wrote before failing.
         let _ = fmt::write(&mut w, args);
-        if w.len % 8 != 0 {
+        if !w.len.is_multiple_of(8) {
             self.words[w.len / 8].store(w.word, Ordering::Relaxed);
         }
         // SYNC: Release publishes the words; pairs with the Acquire in `load`.

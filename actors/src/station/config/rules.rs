@@ -4,8 +4,10 @@
 //! values, or at the files they name.
 
 use std::path::Path;
+use std::time::Duration;
 
 use coop_model::scenario::Scenario;
+use coop_rt::shm::control::Child;
 use coop_rt::shm::SegmentName;
 use coop_transport::network::{Locator, Mode, NetworkConfig, Tls};
 
@@ -512,6 +514,19 @@ fn not_a_file(m: &std::fs::Metadata) -> &'static str {
 const TAKEN: &str = "choose a free port, or 0 for one chosen at start";
 
 impl Resolved {
+    /// How long `child` has from its start to its first heartbeat before the supervisor kills it
+    /// as hung: `supervisor.startup_timeout_ms`, and for the servo that plus its device's own
+    /// start wait ([`crate::station::device::DeviceSetup::start_wait`]), so a device that is allowed
+    /// to take its time opening is not killed for it, and a device that does not open ends with
+    /// its own error rather than as a hung servo.
+    pub fn startup_timeout(&self, child: Child) -> Duration {
+        let limit = Duration::from_millis(self.config.supervisor.startup_timeout_ms);
+        match child {
+            Child::Servo => limit + self.device.start_wait(),
+            Child::Physics | Child::Network => limit,
+        }
+    }
+
     /// The rules that look at the machine as it is now, checked by `station run` before it creates
     /// anything (not by every resolve: a child re-reads the configuration while its station's
     /// network process holds the ports): every listen port that is not 0 is free, the live

@@ -60,7 +60,10 @@ pub struct SupervisorSpec {
     pub network_backoff_max_ms: u64,
     /// A loop whose heartbeat stands still this long is hung and killed, ms.
     pub heartbeat_timeout_ms: u64,
-    /// Time a child has to show its first heartbeat, ms.
+    /// Time a child has to show its first heartbeat, ms. The servo has this plus its device's own
+    /// start wait (`device.ros2.first_pose_timeout_ms`; `device.haply.connect_timeout_ms` plus
+    /// `io_timeout_ms`), so a device that does not open ends the station with its own error, not
+    /// as a hung servo.
     pub startup_timeout_ms: u64,
 }
 

@@ -87,6 +87,35 @@ fn defaults_resolve_to_the_paper_scenario_first_site() {
     assert_eq!(r.network_backoff.max, std::time::Duration::from_secs(5));
 }
 
+/// The servo's start limit covers its device's own start wait (a ROS 2 driver's first pose), so
+/// a device that does not open ends with its own error rather than as a hung servo; the other
+/// children keep `startup_timeout_ms`.
+#[test]
+fn the_servo_start_limit_covers_the_device_start_wait() {
+    use coop_rt::shm::control::Child;
+    use std::time::Duration;
+    let c: StationConfig = toml::from_str(
+        "[supervisor]\nstartup_timeout_ms = 3000\n\
+         [device]\ndevice = \"ros2\"\n[device.ros2]\nfirst_pose_timeout_ms = 5000\n",
+    )
+    .expect("TOML");
+    let r = c.resolve(None).expect("resolves");
+    assert_eq!(r.startup_timeout(Child::Servo), Duration::from_millis(8000));
+    assert_eq!(
+        r.startup_timeout(Child::Physics),
+        Duration::from_millis(3000)
+    );
+    assert_eq!(
+        r.startup_timeout(Child::Network),
+        Duration::from_millis(3000)
+    );
+    let sim = StationConfig::default().resolve(None).expect("defaults");
+    assert_eq!(
+        sim.startup_timeout(Child::Servo),
+        Duration::from_millis(3000)
+    );
+}
+
 #[test]
 fn a_taken_listen_port_is_refused_before_start_and_a_free_one_passes() {
     let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
