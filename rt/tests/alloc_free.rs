@@ -176,7 +176,9 @@ fn publishing_the_device_figures_allocates_nothing() {
         "{text}"
     );
     assert!(
-        d.trips.get(coop_rt::device::safety::Limit::Fault) > 0,
+        d.trips[coop_rt::device::safety::Limit::Fault.code() as usize]
+            .load(coop_rt::sync::Ordering::Relaxed)
+            > 0,
         "every fault released the device"
     );
 }

@@ -6,10 +6,10 @@
 //! what the device does without asking the servo anything.
 
 use super::cartesian::{CartesianDevice, DeviceFault};
-use super::safety::{Guarded, Limit};
-use super::station::StationDevice;
+use super::safety::{fault_kind, Guarded, Limit};
+use super::station::{BridgeCounts, StationDevice};
 use crate::shm::control::ControlBlock;
-use crate::shm::device::{DeviceCounts, DeviceShared, FaultKind};
+use crate::shm::device::{DeviceCounts, DeviceShared};
 use crate::sync::Ordering;
 
 /// How often the figures are published at most, ns: `station status` reads them a few times a
@@ -20,36 +20,6 @@ pub const RATE_WINDOW_NS: u64 = 1_000_000_000;
 /// ... and they are published once it spans this much (so a device that just opened has its
 /// rates within a tenth of a second, not after a second of zeros).
 pub const RATE_SPAN_MIN_NS: u64 = 100_000_000;
-
-/// What a device's bridge thread counted (a device behind one: ROS 2, Haply), as the backend
-/// reads them from its bridge's atomics.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct BridgeCounts {
-    /// Messages taken from the driver or service.
-    pub received: u64,
-    /// ... refused as not a sample.
-    pub refused: u64,
-    /// ... refused for coming from another publisher than the driver's.
-    pub foreign: u64,
-    /// Force commands put that were not zero.
-    pub sent_forces: u64,
-    /// Connections lost.
-    pub losses: u64,
-    /// Reconnections after a loss.
-    pub reconnects: u64,
-}
-
-impl BridgeCounts {
-    /// Copies them into `c`'s bridge fields.
-    fn into_counts(self, c: &mut DeviceCounts) {
-        c.received = self.received;
-        c.refused = self.refused;
-        c.foreign = self.foreign;
-        c.sent_forces = self.sent_forces;
-        c.losses = self.losses;
-        c.reconnects = self.reconnects;
-    }
-}
 
 /// The servo's publisher of its device's figures.
 #[derive(Debug)]
@@ -102,7 +72,7 @@ impl DevicePublisher {
         self.last_ns = now_ns;
         let mut c = *g.counts();
         if let Some(b) = g.device().bridge_counts() {
-            b.into_counts(&mut c);
+            take_bridge(&mut c, b);
         }
         shared.counts.store(&c);
         let (since, samples, commands) = self.window;
@@ -121,16 +91,27 @@ impl DevicePublisher {
                 shared.last_fault.store_fmt(format_args!("{f}"));
                 shared
                     .last_fault_kind
-                    .store(FaultKind::of(&f).code(), Ordering::Relaxed);
+                    .store(fault_kind(&f).code(), Ordering::Relaxed);
             }
             shared.last_fault_ns.store(at, Ordering::Relaxed);
         }
         for l in Limit::ALL {
-            shared.trips.set(l, g.trips()[l.code() as usize]);
+            let k = l.code() as usize;
+            shared.trips[k].store(g.trips()[k], Ordering::Relaxed);
         }
         shared
             .holding
             .store(g.holding().map_or(0, Limit::code), Ordering::Relaxed);
         shared.published_ns.store(now_ns, Ordering::Relaxed);
     }
+}
+
+/// Copies `b` into `c`'s bridge fields.
+fn take_bridge(c: &mut DeviceCounts, b: BridgeCounts) {
+    c.received = b.received;
+    c.refused = b.refused;
+    c.foreign = b.foreign;
+    c.sent_forces = b.sent_forces;
+    c.losses = b.losses;
+    c.reconnects = b.reconnects;
 }

@@ -22,8 +22,8 @@ pub use cartesian::{
     CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,
 };
 
-pub use figures::{BridgeCounts, DevicePublisher};
+pub use figures::DevicePublisher;
 pub use placement::Placement;
 pub use scara::SimScara;
 pub use slot::{check_bridged, BridgedState, CommandSlot};
-pub use station::{Backend, StationDevice, VendorDevice};
+pub use station::{Backend, BridgeCounts, StationDevice, VendorDevice};

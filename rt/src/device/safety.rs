@@ -25,10 +25,7 @@ use coop_model::body::Vec3;
 use coop_model::contact::ContactParams;
 
 use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
-use crate::shm::device::{DeviceCounts, FaultKind};
-
-/// Slots of [`Guarded::trips`]: one per [`Limit::code`] (slot 0 unused).
-pub const TRIP_SLOTS: usize = 8;
+use crate::shm::device::{DeviceCounts, FaultKind, TRIP_SLOTS};
 
 /// The limits a station's config sets (`[device.safety]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -255,7 +252,7 @@ impl<D: CartesianDevice> Guarded<D> {
 
     fn fault(&mut self, f: DeviceFault, now_ns: u64) {
         // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-        self.counts.count_fault(FaultKind::of(&f));
+        self.counts.count_fault(fault_kind(&f));
         self.last_fault = Some((f, now_ns));
     }
 
@@ -413,6 +410,15 @@ impl<D: CartesianDevice> Drop for Guarded<D> {
     fn drop(&mut self) {
         let now = self.last_display_ns;
         self.close(now);
+    }
+}
+
+/// The kind of `f`, as the control block counts it.
+pub fn fault_kind(f: &DeviceFault) -> FaultKind {
+    match f {
+        DeviceFault::Disconnected => FaultKind::Disconnected,
+        DeviceFault::CallFailed { .. } => FaultKind::CallFailed,
+        DeviceFault::BadValue { .. } => FaultKind::BadValue,
     }
 }
 

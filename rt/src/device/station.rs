@@ -1,7 +1,6 @@
 //! The device a station's servo drives: one of the backends, chosen by its config.
 
 use super::cartesian::{CartesianDevice, Command, DeviceFault, DeviceInfo, Sample};
-use super::figures::BridgeCounts;
 use super::replay::Replay;
 use super::scara::SimScara;
 
@@ -55,6 +54,24 @@ pub enum StationDevice {
     Replay(Replay),
     /// A vendor backend.
     Other(Box<dyn VendorDevice>),
+}
+
+/// What a device's bridge thread counted (a device behind one: ROS 2, Haply), as the backend
+/// reads them from its bridge's atomics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BridgeCounts {
+    /// Messages taken from the driver or service.
+    pub received: u64,
+    /// ... refused as not a sample.
+    pub refused: u64,
+    /// ... refused for coming from another publisher than the driver's.
+    pub foreign: u64,
+    /// Force commands put that were not zero.
+    pub sent_forces: u64,
+    /// Connections lost.
+    pub losses: u64,
+    /// Reconnections after a loss.
+    pub reconnects: u64,
 }
 
 /// A vendor backend as a station drives it: a [`CartesianDevice`] that can be printed, and that

@@ -7,9 +7,6 @@
 
 use std::fmt;
 
-use super::control::{CounterKey, Counters};
-use crate::device::cartesian::DeviceFault;
-use crate::device::safety::Limit;
 use crate::sync::{AtomicU64, Ordering};
 
 /// Words of the backend's name (16 bytes).
@@ -20,6 +17,9 @@ pub const MODEL_WORDS: usize = 8;
 pub const SERIAL_WORDS: usize = 4;
 /// Words of the last fault's text (128 bytes).
 pub const FAULT_WORDS: usize = 16;
+/// Slots of [`DeviceShared::trips`]: one per safety limit's code (`device::safety::Limit::code`,
+/// 1..=7; slot 0 unused), with room for limits added later without a layout change.
+pub const TRIP_SLOTS: usize = 16;
 /// Words of the open error's text (512 bytes: a ROS 2 driver's names its topic, domain and every
 /// router locator).
 pub const OPEN_ERROR_WORDS: usize = 64;
@@ -107,15 +107,15 @@ impl<const N: usize> ShmText<N> {
     }
 }
 
-/// A device fault's kind, as the control block keys it.
+/// A device fault's kind (of `coop_rt::device::DeviceFault`), as the control block keys it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FaultKind {
     /// No fresh sample within the device's stale limit: its driver or service went silent, or it
-    /// was unplugged ([`DeviceFault::Disconnected`]).
+    /// was unplugged (`DeviceFault::Disconnected`).
     Disconnected = 1,
-    /// A vendor call returned an error ([`DeviceFault::CallFailed`]).
+    /// A vendor call returned an error (`DeviceFault::CallFailed`).
     CallFailed = 2,
-    /// A value was not finite or out of range ([`DeviceFault::BadValue`]).
+    /// A value was not finite or out of range (`DeviceFault::BadValue`).
     BadValue = 3,
 }
 
@@ -126,15 +126,6 @@ impl FaultKind {
         FaultKind::CallFailed,
         FaultKind::BadValue,
     ];
-
-    /// The kind of `f`.
-    pub fn of(f: &DeviceFault) -> Self {
-        match f {
-            DeviceFault::Disconnected => Self::Disconnected,
-            DeviceFault::CallFailed { .. } => Self::CallFailed,
-            DeviceFault::BadValue { .. } => Self::BadValue,
-        }
-    }
 
     /// Its code in the control block (0 is "none").
     pub fn code(self) -> u64 {
@@ -153,17 +144,6 @@ impl FaultKind {
             Self::CallFailed => "call_failed",
             Self::BadValue => "bad_value",
         }
-    }
-}
-
-impl CounterKey for Limit {
-    const ALL: &'static [Self] = &Limit::ALL;
-    fn slot(self) -> usize {
-        // Codes are 1..=7, below COUNTER_SLOTS.
-        self.code() as usize
-    }
-    fn name(self) -> &'static str {
-        Limit::name(self)
     }
 }
 
@@ -295,9 +275,10 @@ pub struct DeviceShared {
     pub last_fault_ns: AtomicU64,
     /// ... in words.
     pub last_fault: ShmText<FAULT_WORDS>,
-    /// Episodes of each safety limit acting (a limit acting on consecutive ticks counts once).
-    pub trips: Counters<Limit>,
-    /// The limit holding the device released now ([`Limit::code`], 0: none).
+    /// Episodes of each safety limit acting, by its code (a limit acting on consecutive ticks
+    /// counts once).
+    pub trips: [AtomicU64; TRIP_SLOTS],
+    /// The code of the limit holding the device released now (0: none).
     pub holding: AtomicU64,
     /// Why the device did not open (empty: it did, or the servo has not tried yet): the servo
     /// writes it before it exits, the supervisor ends the station with it.
@@ -319,11 +300,6 @@ impl DeviceShared {
             self.last_fault.load(),
             self.last_fault_ns.load(Ordering::Relaxed),
         ))
-    }
-
-    /// The limit holding the device released now, if any.
-    pub fn holding(&self) -> Option<Limit> {
-        Limit::from_code(self.holding.load(Ordering::Relaxed))
     }
 }
 
@@ -355,8 +331,11 @@ mod tests {
         t.store("ros2");
         assert_eq!(t.load(), "ros2");
         let f = ShmText::<FAULT_WORDS>::default();
-        f.store_fmt(format_args!("{}", DeviceFault::Disconnected));
-        assert_eq!(f.load(), "device disconnected (no fresh sample)");
+        f.store_fmt(format_args!(
+            "device call {} failed with code {}",
+            "dhdGetPosition", -1
+        ));
+        assert_eq!(f.load(), "device call dhdGetPosition failed with code -1");
         // 15 ASCII bytes, then a 2-byte character that does not fit in 16.
         t.store("abcdefghijklmnoé");
         assert_eq!(t.load(), "abcdefghijklmno");
@@ -367,17 +346,10 @@ mod tests {
     }
 
     #[test]
-    fn fault_kinds_and_limits_have_codes_and_names() {
+    fn fault_kinds_have_codes() {
         for k in FaultKind::ALL {
             assert_eq!(FaultKind::from_code(k.code()), Some(k));
         }
         assert_eq!(FaultKind::from_code(0), None);
-        assert_eq!(
-            FaultKind::of(&DeviceFault::CallFailed { call: "x", code: 1 }),
-            FaultKind::CallFailed
-        );
-        for l in Limit::ALL {
-            assert!(CounterKey::slot(l) < super::super::control::COUNTER_SLOTS);
-        }
     }
 }

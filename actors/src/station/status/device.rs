@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use coop_rt::device::safety::Limit;
 use coop_rt::shm::control::ControlBlock;
 use coop_rt::shm::device::{DeviceCounts, DeviceShared, FaultKind};
 use coop_rt::sync::Ordering;
@@ -130,13 +131,12 @@ impl DeviceStatus {
                 losses: c.losses,
                 reconnects: c.reconnects,
             }),
-            trips: d
-                .trips
-                .all()
+            trips: Limit::ALL
+                .iter()
+                .map(|l| (l.name(), d.trips[l.code() as usize].load(Ordering::Relaxed)))
                 .filter(|&(_, n)| n > 0)
-                .map(|(l, n)| (l.name(), n))
                 .collect(),
-            holding: d.holding().map(|l| l.name()),
+            holding: Limit::from_code(d.holding.load(Ordering::Relaxed)).map(Limit::name),
             age_s: ago(d.published_ns.load(Ordering::Relaxed)),
         })
     }
