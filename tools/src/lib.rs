@@ -44,6 +44,7 @@ pub mod fuzz;
 pub mod latency;
 pub mod layout;
 pub mod netbench;
+pub mod people;
 pub mod plots;
 pub mod reference;
 pub mod ringbench;

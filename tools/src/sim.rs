@@ -126,6 +126,22 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Measure simulated participants (seeds 1 to N) the way a psychophysics lab measures
+    /// people: reaches against Fitts' law and the minimum-jerk profile, end-point spread, visual
+    /// and haptic reaction times, grip over load and the grip's response to a slip; each figure
+    /// as the participants' mean ± SD beside the published human one, with a verdict.
+    People {
+        /// Participants 1 to N: the people a scenario with seed 1 to N draws for its first site.
+        #[arg(long, default_value_t = crate::people::DEFAULT_PARTICIPANTS)]
+        participants: u64,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Also write fitts.png/svg (MT against ID) and profile.png/svg (a reach's speed
+        /// profile against minimum jerk's) into DIR.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
     /// Print a commented scenario to start from: every table a scenario may hold (two sites, a
     /// simulated participant and a scripted hand, a phase, a live task). Every field:
     /// docs/reference/scenario.md.
@@ -302,6 +318,11 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             json,
             quick,
         } => crate::simbench::run(&scenario, json, quick)?,
+        Command::People {
+            participants,
+            json,
+            out,
+        } => crate::people::main(participants, json, out.as_deref())?,
         Command::Template => print!("{}", crate::reference::TEMPLATE),
         Command::Check { scenario } => {
             let sc = scenario_file::load(&scenario)?;
