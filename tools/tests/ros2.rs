@@ -193,7 +193,8 @@ fn a_ros2_client_sees_every_site_s_poses_and_forces_as_recorded() {
 
 /// The station's device through a ROS 2 driver: the Python driver publishes a pose at 1 kHz, down
 /// onto a disk; the station shows it the contact as wrenches; when the driver goes silent, the
-/// device is released (a zero wrench) and `station status` names the fault.
+/// device is released (a zero wrench) and `station status` names the fault, in its device section
+/// too.
 #[test]
 fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent() {
     use std::io::{BufRead, BufReader};
@@ -314,6 +315,16 @@ fn a_station_drives_a_device_through_its_ros2_driver_and_releases_it_when_silent
     let v = coop_tests::station_status_json(STATION, &cfg);
     assert_eq!(v["servo"]["safety"]["limit"], "device fault", "{v}");
     assert_eq!(v["servo"]["safety"]["releases"], true);
+    // Its device section: the driver's poses as the bridge took them, the silence as stale
+    // samples, the last fault's kind, and the release among the safety trips.
+    let dev = &v["device"];
+    assert_eq!(dev["backend"], "ros2", "{v}");
+    assert!(dev["bridge"]["received"].as_u64() > Some(100), "{dev}");
+    assert!(dev["bridge"]["sent_forces"].as_u64() > Some(0), "{dev}");
+    assert_eq!(dev["bridge"]["foreign"], 0, "one driver: {dev}");
+    assert!(dev["stale"].as_u64() > Some(0), "{dev}");
+    assert_eq!(dev["faults"]["last"]["kind"], "disconnected", "{dev}");
+    assert!(dev["trips"]["device fault"].as_u64() >= Some(1), "{dev}");
     wait_until("the driver sent a zero wrench", LIMIT, || {
         (force(&newest) == 0.0).then_some(())
     });

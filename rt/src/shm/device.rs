@@ -17,7 +17,7 @@ pub const MODEL_WORDS: usize = 8;
 pub const SERIAL_WORDS: usize = 4;
 /// Words of the last fault's text (128 bytes).
 pub const FAULT_WORDS: usize = 16;
-/// Slots of [`DeviceShared::trips`]: one per safety limit's code (`device::safety::Limit::code`,
+/// Slots of [`DeviceShared::trips`]: one per code of the device layer's limits (`Limit::code`,
 /// 1..=7; slot 0 unused), with room for limits added later without a layout change.
 pub const TRIP_SLOTS: usize = 16;
 /// Words of the open error's text (512 bytes: a ROS 2 driver's names its topic, domain and every
