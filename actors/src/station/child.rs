@@ -211,6 +211,9 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
     // is, and a station waiting for its session holds the first pose until the session starts.
+    // A restarted servo opens its device afresh and counts from zero: until it has, status shows
+    // no device rather than its predecessor's.
+    ctl.device.open.store(0, Ordering::Release);
     let mut device = match crate::station::device::open(&cfg.device, sc, i, start) {
         Ok(d) => d,
         Err(e) => {
