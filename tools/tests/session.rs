@@ -683,6 +683,11 @@ fn participants_on_real_stations_do_the_task_and_each_station_judges_it() {
             ["running", "done"],
             "{site}: /task once per change"
         );
+        let device = rec.status.expect("the final status").device;
+        assert!(
+            device.backend == "sim" && device.samples > 1000 && device.faults == 0,
+            "{site}: the device at the end: {device:?}"
+        );
     }
 }
 

@@ -77,9 +77,9 @@ mod topic;
 mod writer;
 
 pub use messages::{
-    AdoptionMsg, ClockMsg, DivergenceMsg, LiveSample, ObjectPose, ObjectSamples, PeerMsg,
-    PresenceMsg, PublishedMsg, RemoteMsg, SampleMsg, SessionMsg, StatusMsg, TaskMsg, TrafficMsg,
-    WIRE_KINDS,
+    AdoptionMsg, ClockMsg, DeviceMsg, DivergenceMsg, LiveSample, ObjectPose, ObjectSamples,
+    PeerMsg, PresenceMsg, PublishedMsg, RemoteMsg, SampleMsg, SessionMsg, StatusMsg, TaskMsg,
+    TrafficMsg, WIRE_KINDS,
 };
 pub use parts::{part_path, Rotation};
 pub use reader::{read, read_part, LogLine, Recording};

@@ -144,7 +144,7 @@ impl StationReport {
         Self {
             recording: record.display().to_string(),
             recording_parts: rec.files.len(),
-            final_status: rec.status,
+            final_status: rec.status.clone(),
             figures: live.as_ref().map(StationRow::of_live),
             live,
             epoch_ns,
@@ -164,7 +164,7 @@ impl StationReport {
             first_adoption_jump_m: rec.adoptions.first().map(|a| a.jump_m),
             truncated: rec.truncated,
             first_adoption_s: rec.adoptions.first().map(|a| since(a.t_ns)),
-            join_states: rec.status.map(|s| s.join_states),
+            join_states: rec.status.as_ref().map(|s| s.join_states),
         }
     }
 }
@@ -330,7 +330,7 @@ impl WireRow {
     /// recording's session message to its status), or `None` if it has not both.
     pub fn of(site: &str, rec: &Recording) -> Option<Self> {
         use coop_rt::shm::control::{CounterKey, WireKind};
-        let status = rec.status?;
+        let status = rec.status.as_ref()?;
         let start = rec.session.as_ref()?.t_ns;
         let dt = status.t_ns.saturating_sub(start) as f64 * 1e-9;
         if dt <= 0.0 {

@@ -51,7 +51,7 @@ pub fn run_from_recordings(
                 clipped_j: f64::NAN,
             });
         }
-        if let Some(s) = r.status {
+        if let Some(s) = &r.status {
             messages.0 += s.published * (recs.len() as u64).saturating_sub(1);
             messages.1 += s.received;
             messages.2 += s.emulated_lost;
@@ -108,7 +108,7 @@ fn site_trace(
         bail!("the recording of site {} has no samples", sc.site[i].name);
     }
     let mut tr = SiteTrace::default();
-    if let Some(st) = r.status {
+    if let Some(st) = &r.status {
         // What the station put: site reports and tool tracks (`WireKind` order).
         tr.puts = [st.traffic.sent_msgs[0], st.traffic.sent_msgs[1]];
         tr.sent_bytes = st.traffic.sent_bytes[0] + st.traffic.sent_bytes[1];

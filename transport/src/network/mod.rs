@@ -454,6 +454,7 @@ fn serve(
                 join_states: rx.join_states,
                 stale_skipped: publish.stale_skipped,
                 traffic: crate::recording::TrafficMsg::of(&ctx.ctl.network.traffic),
+                device: crate::recording::DeviceMsg::of(&ctx.ctl.device),
             }
         };
         lp.recording.finish(site, &status);

@@ -356,7 +356,7 @@ json_message! {
 
 json_message! {
     /// `/status`.
-    #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
     pub struct StatusMsg {
         /// ns (monotonic).
         pub t_ns: u64,
@@ -378,6 +378,59 @@ json_message! {
         /// What the network process put on the wire and got from it, by kind, over its life.
         #[serde(default)]
         pub traffic: TrafficMsg,
+        /// The device as the servo last published it (empty: it never opened one).
+        #[serde(default)]
+        pub device: DeviceMsg,
+    }
+}
+
+json_message! {
+    /// A station's device at the end: what it is and what it saw since the servo opened it (a
+    /// restarted servo counts afresh), as `station status` shows it.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+    pub struct DeviceMsg {
+        /// The backend (`sim`, `replay`, `haply`, `dhd`, `ros2`; empty: none opened).
+        pub backend: String,
+        /// The model, as the device says it.
+        pub model: String,
+        /// Servo ticks at which the device gave a sample.
+        pub samples: u64,
+        /// ... of them newer than the one before (what the device itself delivered).
+        pub new_samples: u64,
+        /// Servo ticks at which it reported a fault, of any kind.
+        pub faults: u64,
+        /// ... of them its samples stale.
+        pub stale: u64,
+        /// Messages its bridge refused (not a sample), and those from another publisher.
+        pub refused: u64,
+        /// ... from another publisher than its driver's.
+        pub foreign: u64,
+        /// Force commands it took.
+        pub commands: u64,
+        /// The last fault, in words (empty: none).
+        pub last_fault: String,
+    }
+}
+
+impl DeviceMsg {
+    /// The device group `d` now.
+    pub fn of(d: &coop_rt::shm::device::DeviceShared) -> Self {
+        if !d.is_open() {
+            return Self::default();
+        }
+        let c = d.counts.load();
+        Self {
+            backend: d.backend.load(),
+            model: d.model.load(),
+            samples: c.samples,
+            new_samples: c.new_samples,
+            faults: c.faults,
+            stale: c.stale,
+            refused: c.refused,
+            foreign: c.foreign,
+            commands: c.commands,
+            last_fault: d.last_fault().map(|(_, text, _)| text).unwrap_or_default(),
+        }
     }
 }
 
