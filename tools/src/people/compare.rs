@@ -77,7 +77,7 @@ pub struct Figure {
     /// People's figure.
     pub people: Reference,
     /// People's figure as printed.
-    pub people_shown: &'static str,
+    pub people_shown: String,
     /// Where it comes from.
     pub source: &'static str,
     /// The participants' mean against it.
@@ -95,7 +95,7 @@ struct Spec {
     decimals: usize,
     value: fn(&Person) -> f64,
     people: Reference,
-    people_shown: &'static str,
+    people_shown: String,
     source: &'static str,
     model: &'static str,
 }
@@ -149,13 +149,26 @@ pub struct ConditionRow {
     pub verdict: &'static str,
 }
 
-/// The slopes of Fitts' law people show in pointing, s/bit.
+/// The slopes of Fitts' law people show in pointing, s/bit: 0.096 for the mouse (Card, English &
+/// Burr 1978, with Welford's ID); 0.25 is the reciprocal of the mouse's ISO throughput, 3.7–4.9
+/// bit/s (Soukoreff & MacKenzie 2004), which bounds the slope from above (TP = ID_e/MT < 1/b while
+/// the intercept is positive and ID_e is near ID) rather than being a fitted slope.
 pub const HUMAN_FITTS_SLOPES: (f64, f64) = (0.10, 0.25);
+
+/// The grip people keep above the slip limit, as a fraction: the 10–40 % commonly cited for
+/// precision grip. Its source and its base are not verified: Westling & Johansson 1984 define the
+/// margin (the grip above the least grip that prevents a slip), later work gives it as a share of
+/// the grip held, here it is a share of the slip limit.
+pub const HUMAN_GRIP_MARGIN: (f64, f64) = (0.10, 0.40);
 
 /// The comparison of `ps` with people.
 pub fn figures(ps: &[Person]) -> Vec<Figure> {
     let mu = lab::friction();
     let (b_lo, b_hi) = HUMAN_FITTS_SLOPES;
+    let (m_lo, m_hi) = HUMAN_GRIP_MARGIN;
+    // Grip over load is friction's slip ratio 1/μ raised by the margin: people's span at this
+    // friction follows from their margin, there is no friction-free figure.
+    let (gl_lo, gl_hi) = ((1.0 + m_lo) / mu, (1.0 + m_hi) / mu);
     let range = |low, high| Reference::Range { low, high };
     let specs = [
         Spec {
@@ -164,8 +177,9 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 3,
             value: |p| p.fitts.b,
             people: range(b_lo, b_hi),
-            people_shown: "0.10–0.25",
-            source: "pointing: 0.096 (Card, English & Burr 1978) to about 4 bit/s (Soukoreff & MacKenzie 2004)",
+            people_shown: "0.10–0.25".into(),
+            source: "mouse: 0.096 (Card, English & Burr 1978); 0.25 = 1 / throughput 4 bit/s \
+                     (3.7–4.9, Soukoreff & MacKenzie 2004), an upper bound, not a fitted slope",
             model: "",
         },
         Spec {
@@ -174,7 +188,7 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 3,
             value: |p| p.fitts.a,
             people: Reference::None,
-            people_shown: "apparatus",
+            people_shown: "apparatus".into(),
             source: "depends on the device and the end criterion (MacKenzie 1992)",
             model: "",
         },
@@ -184,8 +198,9 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 3,
             value: |p| p.fitts.r2,
             people: range(0.81, 1.0),
-            people_shown: "> 0.81",
-            source: "r above 0.9 in the studies reviewed (MacKenzie 1992)",
+            people_shown: "> 0.81".into(),
+            source: "not verified: r above 0.9 in the six studies MacKenzie 1992 reviews (its \
+                     table not read)",
             model: "",
         },
         Spec {
@@ -194,8 +209,9 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 3,
             value: |p| p.peak_over_mean,
             people: range(1.8, 2.0),
-            people_shown: "1.8–2.0",
-            source: "reaches near minimum jerk's 1.875 (Flash & Hogan 1985)",
+            people_shown: "1.8–2.0".into(),
+            source: "minimum jerk's bell: 1.875 (Flash & Hogan 1985); the span about it not \
+                     verified",
             model: "",
         },
         Spec {
@@ -204,8 +220,9 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 3,
             value: |p| p.time_to_peak_share,
             people: range(0.4, 0.5),
-            people_shown: "0.4–0.5",
-            source: "earlier, the smaller the target (MacKenzie et al. 1987)",
+            people_shown: "0.4–0.5".into(),
+            source: "about 0.5 at MT near 0.5 s, less when slower (Nagasaki 1989); earlier, the \
+                     smaller the target (MacKenzie et al. 1987, not read); 0.4 not verified",
             model: "a reach is one minimum-jerk segment, symmetric whatever the target",
         },
         Spec {
@@ -214,7 +231,7 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 1,
             value: |p| 100.0 * p.outside_share,
             people: Reference::About { value: 4.0 },
-            people_shown: "about 4",
+            people_shown: "about 4".into(),
             source: "the miss rate at which W_e = W (MacKenzie 1992)",
             model: "a reach is aimed again, before it ends, until its planned end point lies \
                     within half the target's width",
@@ -225,8 +242,9 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 1,
             value: |p| 1e3 * p.visual_reaction_s,
             people: range(150.0, 250.0),
-            people_shown: "150–250",
-            source: "visually guided correction and choice reaction, as the model cites",
+            people_shown: "150–250".into(),
+            source: "simple reaction to a light, about 190 ms (Welford 1980, in Kosinski's \
+                     review); a choice reaction is slower",
             model: "",
         },
         Spec {
@@ -235,8 +253,10 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 1,
             value: |p| 1e3 * p.haptic_reaction_s,
             people: range(100.0, 150.0),
-            people_shown: "100–150",
-            source: "reaction to a felt contact, as the model cites",
+            people_shown: "100–150".into(),
+            source: "touch acts on the fingers' forces 0.1 s after contact (Jenmalm & Johansson \
+                     1997); an intended response, no sooner than twice the slip response's 74 ms \
+                     (Johansson & Westling 1987)",
             model: "",
         },
         Spec {
@@ -245,7 +265,7 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 1,
             value: |p| 1e3 * p.grip_latency_s,
             people: range(60.0, 80.0),
-            people_shown: "60–80",
+            people_shown: "60–80".into(),
             source: "Johansson & Westling 1984",
             model: "",
         },
@@ -254,9 +274,10 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             unit: "%",
             decimals: 1,
             value: |p| 100.0 * p.grip.margin,
-            people: range(10.0, 40.0),
-            people_shown: "10–40",
-            source: "Westling & Johansson 1984",
+            people: range(100.0 * m_lo, 100.0 * m_hi),
+            people_shown: format!("{:.0}–{:.0}", 100.0 * m_lo, 100.0 * m_hi),
+            source: "commonly cited; not verified in Westling & Johansson 1984, who define the \
+                     margin (later work: a share of the grip held, not of the slip limit)",
             model: "",
         },
         Spec {
@@ -264,9 +285,10 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             unit: "",
             decimals: 3,
             value: |p| p.grip.grip_over_load,
-            people: range(1.3, 1.6),
-            people_shown: "1.3–1.6",
-            source: "typical friction (Westling & Johansson 1984)",
+            people: range(gl_lo, gl_hi),
+            people_shown: format!("{gl_lo:.3}–{gl_hi:.3}"),
+            source: "(1 + margin) / μ: grip scales with the slip ratio (Johansson & Westling \
+                     1984), at this μ with the margin above",
             model: "",
         },
         Spec {
@@ -275,7 +297,7 @@ pub fn figures(ps: &[Person]) -> Vec<Figure> {
             decimals: 1,
             value: |p| p.grip.slips_while_loading as f64,
             people: range(0.0, 0.0),
-            people_shown: "none",
+            people_shown: "none".into(),
             source: "grip rises with the load, in parallel (Johansson & Westling 1984)",
             model: "the grip follows the load it feels, a haptic reaction late; it does not \
                     anticipate the load",
