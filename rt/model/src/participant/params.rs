@@ -14,15 +14,19 @@ use crate::rng::Rng;
 )]
 pub struct ParticipantSpec {
     /// Reaction to what the display shows: from a visual event to the first corrective change of
-    /// the hand's motion, s. 150–250 ms in visually guided tracking and choice reaction.
+    /// the hand's motion, s. 150–250 ms; simple visual reaction is about 190 ms (Welford 1980),
+    /// choice reaction slower.
     pub visual_reaction_s: f64,
-    /// Reaction to what the hand feels (contact made or lost), s. 100–150 ms.
+    /// Reaction to what the hand feels (contact made or lost), s. 100–150 ms: touch shows in the
+    /// finger forces about 0.1 s after contact (Jenmalm & Johansson 1997), an intended grip change
+    /// to a touch about twice the slip response's 74 ms (Johansson & Westling 1987).
     pub haptic_reaction_s: f64,
     /// Latency of the grip's response to a slip, s: the automatic grip-force increase follows a
     /// slip at the fingertips within 60–80 ms (Johansson & Westling 1984).
     pub grip_reflex_s: f64,
-    /// Grip force kept above the slip limit, as a fraction of that limit: 0.1–0.4 (Westling &
-    /// Johansson 1984).
+    /// Grip force kept above the slip limit, as a fraction of that limit: 0.1–0.4, the span
+    /// reported after Westling & Johansson 1984 (their safety margin; its base, the slip limit or
+    /// the grip held, not verified against the paper).
     pub grip_margin: f64,
     /// Fitts' law intercept a, s (MT = a + b·log2(D/W + 1), MacKenzie 1992).
     pub fitts_a_s: f64,
