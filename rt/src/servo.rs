@@ -72,6 +72,8 @@ pub struct ServoLoop<D: CartesianDevice> {
     task: Option<TaskJudge>,
     /// The session's time 0, once known: the task and a simulated hand run from it.
     t0_ns: Option<u64>,
+    /// The task's outcome last published (none yet): published again only when it changes.
+    published_task: Option<coop_model::task::Outcome>,
 }
 
 impl<D: CartesianDevice> ServoLoop<D> {
@@ -108,6 +110,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
             last_remote_ns: 0,
             task: None,
             t0_ns: None,
+            published_task: None,
         }
     }
 
@@ -215,26 +218,7 @@ impl<D: CartesianDevice> ServoLoop<D> {
         );
         let f_device = self.placement.force_to_device(out.f_desired);
         let f_command = self.device.display(now_ns, f_device, out.scale);
-        // What the user is shown and feels, for a simulated hand and the task (as the simulator's
-        // servo tick gives them): from the session's time 0, once the world is fresh.
-        if let Some(t0) = self
-            .t0_ns
-            .filter(|&t0| now_ns >= t0 && self.latest.is_some())
-        {
-            let view = View::of(
-                (now_ns - t0) as f64 * 1e-9,
-                &self.states[..self.n],
-                &out.contacts[..self.n],
-                tool_pos,
-            );
-            self.device.device_mut().observe(&view);
-            if let Some(j) = &mut self.task {
-                j.judge(&view);
-                if let Some(c) = control {
-                    publish_task(c, j.outcome());
-                }
-            }
-        }
+        self.show(now_ns, &out.contacts, tool_pos, control);
         // Back to the world for the record (the identity placement computes nothing).
         let (f_command, f_measured) = if self.placement.is_identity() {
             (f_command, f_sensed)
@@ -303,6 +287,40 @@ impl<D: CartesianDevice> ServoLoop<D> {
         }
     }
 
+    /// What the user is shown and feels at `now_ns` (the objects as they are displayed, the own
+    /// tool at `tool_pos` and its `contacts`), for a simulated hand and the task, as the
+    /// simulator's servo tick gives them: from the session's time 0, once the world is fresh.
+    fn show(
+        &mut self,
+        now_ns: u64,
+        contacts: &[ContactForce; MAX_OBJECTS],
+        tool_pos: coop_model::body::Vec3,
+        control: Option<&ControlBlock>,
+    ) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let Some(t0) = self
+            .t0_ns
+            .filter(|&t0| now_ns >= t0 && self.latest.is_some())
+        else {
+            return;
+        };
+        let view = View::of(
+            (now_ns - t0) as f64 * 1e-9,
+            &self.states[..self.n],
+            &contacts[..self.n],
+            tool_pos,
+        );
+        self.device.device_mut().observe(&view);
+        if let Some(j) = &mut self.task {
+            j.judge(&view);
+            let o = j.outcome();
+            if let Some(c) = control.filter(|_| self.published_task != Some(o)) {
+                publish_task(c, o);
+                self.published_task = Some(o);
+            }
+        }
+    }
+
     /// Releases and closes the device (the station stopped or the servo exits).
     pub fn close(&mut self, now_ns: u64) {
         self.device.close(now_ns);
@@ -334,20 +352,14 @@ pub fn publish_trip(c: &ControlBlock, t: Trip) {
 /// Publishes the task's outcome in the control block's task group.
 pub fn publish_task(c: &ControlBlock, o: coop_model::task::Outcome) {
     // REAL-TIME: no allocation, no lock, no logging, no syscalls.
-    use crate::sync::Ordering::Relaxed;
     use coop_model::task::Outcome;
-    let t = &c.task;
     let (state, at_s, by) = match o {
         Outcome::Running => (TaskState::Running, 0.0, 0),
         Outcome::Done(at) => (TaskState::Done, at, 0),
         Outcome::Failed(at, None) => (TaskState::Failed, at, 0),
         Outcome::Failed(at, Some(k)) => (TaskState::Failed, at, k as u64 + 1),
     };
-    if t.state.load(Relaxed) != state as u64 {
-        ControlBlock::store_f64(&t.at_s, at_s);
-        t.failed_by.store(by, Relaxed);
-        t.state.store(state as u64, Relaxed);
-    }
+    c.task.publish(state, at_s, by);
 }
 
 /// Publishes the display stages' figures in the control block's servo group.

@@ -129,7 +129,7 @@ fn publishing_the_device_figures_allocates_nothing() {
             dof: 3,
             max_force_n: 3.0,
             max_stiffness_n_per_m: 1000.0,
-            max_damping_ns_per_m: 5.0,
+            max_damping_n_s_per_m: 5.0,
             workspace_radius_m: 0.1,
             native_rate_hz: 1000.0,
             senses_force: false,

@@ -54,7 +54,7 @@ fn fake(max_force_n: f64) -> (Fake, Arc<Mutex<Log>>, Arc<Mutex<Behaviour>>) {
             dof: 3,
             max_force_n,
             max_stiffness_n_per_m: 1000.0,
-            max_damping_ns_per_m: 5.0,
+            max_damping_n_s_per_m: 5.0,
             workspace_radius_m: 0.1,
             native_rate_hz: 1000.0,
             senses_force: false,

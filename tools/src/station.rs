@@ -184,7 +184,7 @@ fn probe_json(p: &coop_rt::device::cartesian::ProbeReport, selected: &str) -> se
             "dof": i.dof,
             "max_force_n": finite_or_null(i.max_force_n),
             "max_stiffness_n_per_m": finite_or_null(i.max_stiffness_n_per_m),
-            "max_damping_ns_per_m": finite_or_null(i.max_damping_ns_per_m),
+            "max_damping_n_s_per_m": finite_or_null(i.max_damping_n_s_per_m),
             "workspace_radius_m": finite_or_null(i.workspace_radius_m),
             "native_rate_hz": finite_or_null(i.native_rate_hz),
             "senses_force": i.senses_force,
@@ -192,12 +192,40 @@ fn probe_json(p: &coop_rt::device::cartesian::ProbeReport, selected: &str) -> se
     })
 }
 
+/// `station status`: the station of `--station`/`--session`, else the configuration's.
+fn print_status(
+    station: Option<String>,
+    session: Option<String>,
+    config: Option<PathBuf>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let r = StationConfig::load(config.as_deref())?;
+    let session = session.unwrap_or(r.config.session);
+    let station = station.unwrap_or(r.name);
+    let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
+    let mut v = status::read(&session, &station, &sites).map_err(|e| {
+        let e = anyhow::Error::from(e);
+        if config.is_some() {
+            e
+        } else {
+            e.context(running_hint(&session, &station))
+        }
+    })?;
+    v.name_objects(&r.scenario);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!("{v}");
+    }
+    Ok(())
+}
+
 /// What `station status` without `--config` says when the station it looked for is not there:
 /// which one it looked for (the defaults), and the stations running on this machine (their
 /// control segments, `coop_<session>_<station>_ctl`: neither name holds `_`).
 fn running_hint(session: &str, station: &str) -> String {
     let mut running: BTreeMap<String, Vec<String>> = BTreeMap::new();
-    for e in std::fs::read_dir("/dev/shm")
+    for e in std::fs::read_dir(coop_rt::shm::SHM_DIR)
         .into_iter()
         .flatten()
         .flatten()
@@ -256,27 +284,7 @@ pub fn main(args: Vec<String>, exe_prefix: Vec<String>) -> std::process::ExitCod
             session,
             config,
             json,
-        } => {
-            let r = StationConfig::load(config.as_deref())?;
-            let session = session.unwrap_or(r.config.session);
-            let station = station.unwrap_or(r.name);
-            let sites: Vec<String> = r.scenario.site.iter().map(|s| s.name.clone()).collect();
-            let mut v = status::read(&session, &station, &sites).map_err(|e| {
-                let e = anyhow::Error::from(e);
-                if config.is_some() {
-                    e
-                } else {
-                    e.context(running_hint(&session, &station))
-                }
-            })?;
-            v.name_objects(&r.scenario);
-            if json {
-                println!("{}", serde_json::to_string_pretty(&v)?);
-            } else {
-                println!("{v}");
-            }
-            Ok(())
-        }
+        } => print_status(station, session, config, json),
         Command::Devices { config, json } => {
             let r = StationConfig::load(config.as_deref())?;
             let selected = r.device.backend.name();

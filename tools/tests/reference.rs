@@ -111,3 +111,22 @@ fn sim_template_prints_a_scenario_sim_check_accepts_and_check_names_what_it_refu
     let after: Vec<_> = std::fs::read_dir(dir.path()).expect("dir").collect();
     assert_eq!(before.len(), after.len(), "sim check wrote something");
 }
+
+/// Every shipped scenario (a user's starting points, `scenarios/` and `scenarios/participants/`)
+/// is valid as `sim check` reads it, so none rots unnoticed.
+#[test]
+fn every_shipped_scenario_is_valid() {
+    let mut checked = 0;
+    for dir in ["scenarios", "scenarios/participants"] {
+        for e in std::fs::read_dir(repo().join(dir)).expect("scenarios") {
+            let path = e.expect("entry").path();
+            if path.extension().is_some_and(|x| x == "toml") {
+                if let Err(err) = coop_actors::scenario_file::load(&path) {
+                    panic!("{}: {:#}", path.display(), anyhow::Error::from(err));
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 18, "the shipped scenarios were found: {checked}");
+}

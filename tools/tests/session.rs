@@ -629,20 +629,6 @@ fn timewarp_on_real_stations_passes_every_phase_with_identical_confirmed_states(
     }
 }
 
-/// The paper's task under `coupled` on real stations (tool tracks and states over
-/// zenoh, the remote tool played from the adaptive jitter buffer, pulls towards the site that
-/// touched first in the physics process): each station takes the other's tracks and states and
-/// pulls its copy, nothing rolls back, both users push and catch, the copies hold one object while
-/// both touch it (closer than its radius) and end together.
-///
-/// How much of the cooperative half is done is measured, not asserted: on real stations the catch
-/// depends on when the leader's reports arrive (a state dead-reckoned through the catching tool
-/// and pulled to throws the disk back 15–27 mm, and user 1 then misses the grasp). Under a load on
-/// both cores, 8 runs of this test's (debug) binaries: 12 of 12 phases in four, 11 in one, 10 in
-/// three (the grasp), push and catch at both stations, 11–18 mm co-contact divergence and the
-/// other's tool played 367–395 ticks late at the end in every one. One CI run of the fixed
-/// playout: 9. In the simulator
-/// (`sim compare` on this scenario, seeds 1–9) 12 of 12 but on seed 8 (11).
 /// Simulated participants on real stations: each station's hand is the person the simulator draws
 /// for its site, acting on what that station shows; each station judges the task live, records
 /// it (`/task`) and the launcher's table carries it. On loopback (no emulated delay), every site
@@ -690,6 +676,16 @@ fn participants_on_real_stations_do_the_task_and_each_station_judges_it() {
         );
     }
 }
+
+/// The paper's task under `coupled` on real stations (tool tracks and states over
+/// zenoh, the remote tool played from the adaptive jitter buffer, pulls towards the site that
+/// touched first in the physics process): each station takes the other's tracks and states and
+/// pulls its copy, nothing rolls back, both users push and catch, the copies hold one object while
+/// both touch it (closer than its radius) and end together.
+///
+/// How much of the cooperative half is done is measured, not asserted: on real stations the catch
+/// depends on when the leader's reports arrive (a state dead-reckoned through the catching tool
+/// and pulled to throws the disk back, and user 1 then misses the grasp).
 
 #[test]
 fn coupled_on_real_stations_does_the_task_with_the_copies_pulled_together() {

@@ -72,8 +72,10 @@ pub struct Ros2DeviceConfig {
     pub max_force_n: f64,
     /// The stiffest contact to report as stable, N/m.
     pub max_stiffness_n_per_m: f64,
-    /// The largest damping to report as stable, N·s/m.
-    pub max_damping_ns_per_m: f64,
+    /// The largest damping to report as stable, N·s/m (`max_damping_ns_per_m`, its old name,
+    /// is read too).
+    #[serde(alias = "max_damping_ns_per_m")]
+    pub max_damping_n_s_per_m: f64,
     /// The radius of the workspace sphere to report, m.
     pub workspace_radius_m: f64,
 }
@@ -93,7 +95,7 @@ impl Default for Ros2DeviceConfig {
             first_pose_timeout_ms: 5000,
             max_force_n: 3.0,
             max_stiffness_n_per_m: 1000.0,
-            max_damping_ns_per_m: 5.0,
+            max_damping_n_s_per_m: 5.0,
             workspace_radius_m: 0.1,
         }
     }
@@ -183,7 +185,7 @@ impl Ros2DeviceConfig {
         [
             self.max_force_n,
             self.max_stiffness_n_per_m,
-            self.max_damping_ns_per_m,
+            self.max_damping_n_s_per_m,
             self.workspace_radius_m,
         ]
     }
@@ -196,7 +198,7 @@ impl Ros2DeviceConfig {
             dof: 3,
             max_force_n: self.max_force_n,
             max_stiffness_n_per_m: self.max_stiffness_n_per_m,
-            max_damping_ns_per_m: self.max_damping_ns_per_m,
+            max_damping_n_s_per_m: self.max_damping_n_s_per_m,
             workspace_radius_m: self.workspace_radius_m,
             native_rate_hz: self.rate_hz,
             senses_force: false,

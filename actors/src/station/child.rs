@@ -256,7 +256,11 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     );
     // The task is judged on what this site shows, as the simulator judges it (a restarted servo
     // judges it afresh, and a simulated participant starts its plan again).
+    // (Validation judged the task's conditions: the scenario has one or none.)
     servo.set_task(sc.task_judge().ok().flatten());
+    // This servo's judge starts afresh: no outcome of its predecessor stays shown.
+    ctl.task
+        .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
     let mut figures = DevicePublisher::new(&ctl.device, servo.guarded(), start);
     let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
     run_periodic(

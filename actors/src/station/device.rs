@@ -575,7 +575,7 @@ pub fn info_line(i: &DeviceInfo) -> String {
             .map_or(String::new(), |s| format!(", serial {s}")),
         i.max_force_n,
         i.max_stiffness_n_per_m,
-        i.max_damping_ns_per_m,
+        i.max_damping_n_s_per_m,
         i.workspace_radius_m,
         i.native_rate_hz,
         if i.senses_force { ", senses force" } else { "" }

@@ -327,6 +327,7 @@ impl TaskSpec {
 impl TaskJudge {
     /// Judges one instant of what the site shows; the outcome once decided stays.
     pub fn judge(&mut self, view: &View) -> Outcome {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls (a station's servo judges).
         if self.outcome != Outcome::Running || view.objects == 0 {
             return self.outcome;
         }

@@ -25,7 +25,7 @@ pub struct DeviceInfo {
     /// Stiffest contact it renders stably, N/m (device frame).
     pub max_stiffness_n_per_m: f64,
     /// Largest damping it renders stably, N·s/m (device frame).
-    pub max_damping_ns_per_m: f64,
+    pub max_damping_n_s_per_m: f64,
     /// Radius of the sphere its workspace contains, m.
     pub workspace_radius_m: f64,
     /// The rate its own loop or firmware runs at, Hz.

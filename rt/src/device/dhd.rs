@@ -394,7 +394,7 @@ fn describe(api: &Api, id: c_char) -> DeviceInfo {
         dof,
         max_force_n: force,
         max_stiffness_n_per_m: k,
-        max_damping_ns_per_m: b,
+        max_damping_n_s_per_m: b,
         workspace_radius_m: r,
         native_rate_hz: hz,
         senses_force: false,

@@ -34,7 +34,7 @@ impl Replay {
                 // It displays nothing, so nothing bounds what it is commanded.
                 max_force_n: f64::INFINITY,
                 max_stiffness_n_per_m: f64::INFINITY,
-                max_damping_ns_per_m: f64::INFINITY,
+                max_damping_n_s_per_m: f64::INFINITY,
                 workspace_radius_m: f64::INFINITY,
                 native_rate_hz: f64::INFINITY,
                 senses_force: false,

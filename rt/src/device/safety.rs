@@ -135,7 +135,7 @@ pub fn clamp_contact(
     workspace_scale: f64,
 ) -> (ContactParams, [Option<Limit>; 2]) {
     let k_max = info.max_stiffness_n_per_m / workspace_scale;
-    let b_max = info.max_damping_ns_per_m / workspace_scale;
+    let b_max = info.max_damping_n_s_per_m / workspace_scale;
     let mut c = contact;
     let mut acted = [None, None];
     if c.stiffness_n_per_m > k_max || c.tangential_stiffness_n_per_m > k_max {

@@ -66,7 +66,7 @@ impl SimScara {
             // The plant is integrated in 100 µs steps under a ≥ 500 Hz servo; these bound what
             // it renders without ringing (the committed scenarios use 2 kN/m and 3 N·s/m).
             max_stiffness_n_per_m: 10_000.0,
-            max_damping_ns_per_m: 100.0,
+            max_damping_n_s_per_m: 100.0,
             workspace_radius_m: arm.link1_m + arm.link2_m,
             native_rate_hz: 1e9 / PLANT_STEP_NS as f64,
             senses_force: true,

@@ -24,7 +24,7 @@ pub struct CommandSlot {
 /// The checks every bridged device's table shares: the rate its bridge exchanges at (1 Hz to
 /// 10 kHz), a stale limit of at least two of its periods and at most a second, and the maxima the
 /// device reports (positive, within what any desk device could). `rate_hz`, `stale_limit_ms`,
-/// `max_force_n`, `max_stiffness_n_per_m`, `max_damping_ns_per_m` and `workspace_radius_m` are
+/// `max_force_n`, `max_stiffness_n_per_m`, `max_damping_n_s_per_m` and `workspace_radius_m` are
 /// those fields' values (positive containment: NaN fails).
 ///
 /// # Errors
@@ -57,7 +57,7 @@ pub fn check_bridged(
     for (field, v, max) in [
         ("max_force_n", force, 100.0),
         ("max_stiffness_n_per_m", stiffness, 1e5),
-        ("max_damping_ns_per_m", damping, 1e3),
+        ("max_damping_n_s_per_m", damping, 1e3),
         ("workspace_radius_m", radius, 2.0),
     ] {
         if !(v > 0.0 && v <= max) {

@@ -638,17 +638,55 @@ impl TaskState {
     }
 }
 
-/// The task's outcome, written by the servo when it changes (state last, Relaxed: a reader may
-/// see a new state with the old time for an instant; it reads again next look).
+/// The task's outcome, written by the servo (its one writer) when it changes: a seqlock of
+/// relaxed words, so a reader gets the state, its time and its cause from one write, never a mix
+/// of two ([`TaskShared::publish`], [`TaskShared::read`]).
 #[derive(Debug)]
 #[repr(C)]
 pub struct TaskShared {
+    /// Odd while the servo writes, even when done (0: never written).
+    pub seq: AtomicU64,
     /// [`TaskState`] as u64.
     pub state: AtomicU64,
     /// When it was done or failed, s of session time, as f64 bits.
     pub at_s: AtomicU64,
     /// What failed it: 0 the timeout (or not failed), k + 1 the task's `fail[k]`.
     pub failed_by: AtomicU64,
+}
+
+impl TaskShared {
+    /// Publishes an outcome: `state`, when it ended (s of session time) and what failed it (as
+    /// [`TaskShared::failed_by`]).
+    pub fn publish(&self, state: TaskState, at_s: f64, failed_by: u64) {
+        // REAL-TIME: relaxed and release stores only.
+        let seq = self.seq.load(Ordering::Relaxed);
+        self.seq.store(seq | 1, Ordering::Relaxed);
+        // SYNC: the odd sequence is visible before any word changes.
+        core::sync::atomic::fence(Ordering::Release);
+        self.state.store(state as u64, Ordering::Relaxed);
+        self.at_s.store(at_s.to_bits(), Ordering::Relaxed);
+        self.failed_by.store(failed_by, Ordering::Relaxed);
+        // SYNC: Release publishes the words with the even sequence; pairs with `read`'s Acquire.
+        self.seq.store((seq | 1).wrapping_add(1), Ordering::Release);
+    }
+
+    /// The outcome last published, whole: its state, when it ended and what failed it (`None`
+    /// while the servo is writing after repeated tries; the caller looks again later).
+    pub fn read(&self) -> Option<(TaskState, f64, u64)> {
+        for _ in 0..100 {
+            let before = self.seq.load(Ordering::Acquire);
+            let state = self.state.load(Ordering::Relaxed);
+            let at = self.at_s.load(Ordering::Relaxed);
+            let by = self.failed_by.load(Ordering::Relaxed);
+            // SYNC: the word loads complete before the sequence is read again.
+            core::sync::atomic::fence(Ordering::Acquire);
+            if before & 1 == 0 && self.seq.load(Ordering::Relaxed) == before {
+                return Some((TaskState::from_word(state), f64::from_bits(at), by));
+            }
+            std::thread::yield_now();
+        }
+        None
+    }
 }
 
 /// Words of the resume state: a count, then every object's sample.
@@ -660,7 +698,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized), ShmText and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v23";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v24";
 }
 
 impl ControlBlock {

@@ -115,8 +115,8 @@ pub(super) struct Events {
     restarts: [u64; CHILDREN],
     /// Device safety episodes already told.
     safety_episodes: u64,
-    /// The task's state last recorded (`TaskState` as u64).
-    task_state: u64,
+    /// The task's outcome last recorded: the task group's sequence when it was read.
+    task_seq: u64,
 }
 
 impl Events {
@@ -137,7 +137,12 @@ impl Events {
             stale: None,
             restarts,
             safety_episodes,
-            task_state: 0,
+            // A continued recording has its predecessor's /task already.
+            task_seq: if continued {
+                ctl.task.seq.load(Ordering::Acquire)
+            } else {
+                0
+            },
         }
     }
 
@@ -145,13 +150,12 @@ impl Events {
     /// the control block's task group), for `/task`.
     pub(super) fn task(&mut self, ctl: &ControlBlock, now_ns: u64) -> Option<TaskMsg> {
         use coop_rt::shm::control::TaskState;
-        let t = &ctl.task;
-        let w = t.state.load(Ordering::Relaxed);
-        if w == self.task_state {
+        let seq = ctl.task.seq.load(Ordering::Acquire);
+        if seq == self.task_seq {
             return None;
         }
-        self.task_state = w;
-        let state = TaskState::from_word(w);
+        let (state, at_s, by) = ctl.task.read()?;
+        self.task_seq = seq;
         if state == TaskState::None {
             return None;
         }
@@ -159,12 +163,8 @@ impl Events {
         Some(TaskMsg {
             t_ns: now_ns,
             outcome: state.name().to_owned(),
-            at_s: if ended {
-                ControlBlock::load_f64(&t.at_s)
-            } else {
-                0.0
-            },
-            failed_by: match (state, t.failed_by.load(Ordering::Relaxed)) {
+            at_s: if ended { at_s } else { 0.0 },
+            failed_by: match (state, by) {
                 (TaskState::Failed, 0) => "timeout".to_owned(),
                 (TaskState::Failed, k) => format!("fail[{}]", k - 1),
                 _ => String::new(),
@@ -318,21 +318,22 @@ mod tests {
         let ctl = control("task");
         let mut ev = Events::new(&ctl, false);
         assert_eq!(ev.task(&ctl, 1), None, "no task yet");
-        ctl.task
-            .state
-            .store(TaskState::Running as u64, Ordering::Relaxed);
+        ctl.task.publish(TaskState::Running, 0.0, 0);
         let m = ev.task(&ctl, 2).expect("running told");
         assert_eq!((m.outcome.as_str(), m.at_s), ("running", 0.0));
         assert_eq!(ev.task(&ctl, 3), None, "told once");
-        ControlBlock::store_f64(&ctl.task.at_s, 5.25);
-        ctl.task.failed_by.store(2, Ordering::Relaxed);
-        ctl.task
-            .state
-            .store(TaskState::Failed as u64, Ordering::Relaxed);
+        ctl.task.publish(TaskState::Failed, 5.25, 2);
         let m = ev.task(&ctl, 4).expect("failure told");
         assert_eq!(
             (m.outcome.as_str(), m.at_s, m.failed_by.as_str(), m.t_ns),
             ("failed", 5.25, "fail[1]", 4)
         );
+        // Failed again, another way (a restarted servo's judge): a change, told.
+        ctl.task.publish(TaskState::Failed, 9.0, 0);
+        let m = ev.task(&ctl, 5).expect("the new failure told");
+        assert_eq!((m.at_s, m.failed_by.as_str()), (9.0, "timeout"));
+        // A network process that continues the recording does not tell it again.
+        let mut next = Events::new(&ctl, true);
+        assert_eq!(next.task(&ctl, 6), None, "the predecessor recorded it");
     }
 }

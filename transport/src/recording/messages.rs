@@ -401,9 +401,10 @@ json_message! {
         pub faults: u64,
         /// ... of them its samples stale.
         pub stale: u64,
-        /// Messages its bridge refused (not a sample), and those from another publisher.
+        /// Messages its bridge refused, for any reason (not a sample, or from another publisher),
+        /// as `station status` counts them.
         pub refused: u64,
-        /// ... from another publisher than its driver's.
+        /// ... of them from another publisher than its driver's.
         pub foreign: u64,
         /// Force commands it took.
         pub commands: u64,
@@ -426,7 +427,7 @@ impl DeviceMsg {
             new_samples: c.new_samples,
             faults: c.faults,
             stale: c.stale,
-            refused: c.refused,
+            refused: c.refused + c.foreign,
             foreign: c.foreign,
             commands: c.commands,
             last_fault: d.last_fault().map(|(_, text, _)| text).unwrap_or_default(),

@@ -72,8 +72,7 @@ impl TaskStatus {
     /// What the control block holds (none: no task, or not started).
     pub fn of(t: &coop_rt::shm::control::TaskShared) -> Option<Self> {
         use coop_rt::shm::control::TaskState;
-        let state = TaskState::from_word(t.state.load(Ordering::Relaxed));
-        let at_s = ControlBlock::load_f64(&t.at_s);
+        let (state, at_s, by) = t.read()?;
         match state {
             TaskState::None => None,
             TaskState::Running => Some(Self {
@@ -84,11 +83,9 @@ impl TaskStatus {
             TaskState::Done | TaskState::Failed => Some(Self {
                 outcome: state.name(),
                 at_s: Some(at_s),
-                failed_by: (state == TaskState::Failed).then(|| {
-                    match t.failed_by.load(Ordering::Relaxed) {
-                        0 => "timeout".to_owned(),
-                        k => format!("fail[{}]", k - 1),
-                    }
+                failed_by: (state == TaskState::Failed).then(|| match by {
+                    0 => "timeout".to_owned(),
+                    k => format!("fail[{}]", k - 1),
                 }),
             }),
         }

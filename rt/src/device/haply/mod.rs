@@ -66,8 +66,10 @@ pub struct HaplyConfig {
     pub max_force_n: f64,
     /// The stiffest contact to report as stable, N/m.
     pub max_stiffness_n_per_m: f64,
-    /// The largest damping to report as stable, N·s/m.
-    pub max_damping_ns_per_m: f64,
+    /// The largest damping to report as stable, N·s/m (`max_damping_ns_per_m`, its old name,
+    /// is read too).
+    #[cfg_attr(feature = "serde", serde(alias = "max_damping_ns_per_m"))]
+    pub max_damping_n_s_per_m: f64,
     /// The radius of the workspace sphere to report, m.
     pub workspace_radius_m: f64,
 }
@@ -84,7 +86,7 @@ impl Default for HaplyConfig {
             reconnect_ms: 500,
             max_force_n: 3.0,
             max_stiffness_n_per_m: 1000.0,
-            max_damping_ns_per_m: 5.0,
+            max_damping_n_s_per_m: 5.0,
             workspace_radius_m: 0.1,
         }
     }
@@ -130,7 +132,7 @@ impl HaplyConfig {
             [
                 self.max_force_n,
                 self.max_stiffness_n_per_m,
-                self.max_damping_ns_per_m,
+                self.max_damping_n_s_per_m,
                 self.workspace_radius_m,
             ],
         )?;
@@ -162,7 +164,7 @@ impl HaplyConfig {
             dof: 3,
             max_force_n: self.max_force_n,
             max_stiffness_n_per_m: self.max_stiffness_n_per_m,
-            max_damping_ns_per_m: self.max_damping_ns_per_m,
+            max_damping_n_s_per_m: self.max_damping_n_s_per_m,
             workspace_radius_m: self.workspace_radius_m,
             native_rate_hz: self.rate_hz,
             senses_force: false,
