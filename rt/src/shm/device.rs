@@ -25,7 +25,9 @@ pub const TRIP_SLOTS: usize = 16;
 pub const OPEN_ERROR_WORDS: usize = 64;
 
 /// A text of at most `N` words, written by one process while others read: the bytes, then the
-/// length last (Release), so a reader sees a whole text or, during a rewrite, a shorter one.
+/// length last (Release). A reader after the write sees the whole text; one during a rewrite may
+/// see a mix of the old and the new (read lossily) and reads it whole next time: these texts
+/// name a device and its last fault for people, not for a decision.
 #[derive(Debug)]
 #[repr(C)]
 pub struct ShmText<const N: usize> {
@@ -48,11 +50,17 @@ struct WordWriter<'a> {
     words: &'a [AtomicU64],
     len: usize,
     word: u64,
+    /// A fragment was cut: nothing after it is written (no tail without its middle).
+    full: bool,
 }
 
 impl fmt::Write for WordWriter<'_> {
     fn write_str(&mut self, s: &str) -> fmt::Result {
+        if self.full {
+            return Ok(());
+        }
         let room = self.words.len() * 8 - self.len;
+        self.full = s.len() > room;
         let mut n = s.len().min(room);
         while !s.is_char_boundary(n) {
             n -= 1;
@@ -78,6 +86,7 @@ impl<const N: usize> ShmText<N> {
             words: &self.words,
             len: 0,
             word: 0,
+            full: false,
         };
         // WordWriter never fails; a Display that does leaves what it wrote before failing.
         let _ = fmt::write(&mut w, args);
@@ -343,6 +352,9 @@ mod tests {
         assert_eq!(t.load(), "exactly sixteen!");
         t.store("short");
         assert_eq!(t.load(), "short");
+        // A fragment cut short ends the text: a later one's tail is not appended after the cut.
+        t.store_fmt(format_args!("{}{}", "abcdefghijklmnoé", "x"));
+        assert_eq!(t.load(), "abcdefghijklmno");
     }
 
     #[test]
