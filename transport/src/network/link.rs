@@ -73,7 +73,7 @@ pub struct Side {
     pub files: Files,
 }
 
-/// Why a link fails, as found by [`probe`].
+/// Why a link fails, as found by [`probe`](super::probe::probe).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Cause {
     /// The TCP connect was refused.
