@@ -428,14 +428,12 @@ impl Walk<'_> {
         // The first value refused is enough: the rule states the whole range.
         probes(self.defs, prop)
             .into_iter()
-            .find_map(|v| self.probe(path, v))
-            .map(|r| {
-                // A path's rule names the probe's file and this machine's error: say the rule.
-                if r.starts_with("cannot be read") {
-                    "a file that can be read".to_owned()
-                } else {
-                    r
-                }
+            .find_map(|v| {
+                let shown = match &v {
+                    toml::Value::String(t) => Some(format!("{t:?}")),
+                    _ => None,
+                };
+                self.probe(path, v).map(|r| rule_only(&r, shown.as_deref()))
             })
             .unwrap_or_default()
     }
@@ -553,6 +551,23 @@ fn table_default(default: Option<&Value>, own: Option<&Map<String, Value>>) -> S
     } else {
         format!("its fields' defaults but {}", differ.join(", "))
     }
+}
+
+/// The rule of a check's message, without what is the probe's own: a path's rule names the
+/// probe's file and this machine's error (said as the rule), and a message that quotes the
+/// probe's text before its rule (`invalid session "": use …`) keeps the rule after it.
+fn rule_only(message: &str, probe: Option<&str>) -> String {
+    if message.starts_with("cannot be read") {
+        return "a file that can be read".to_owned();
+    }
+    if let Some(q) = probe {
+        if let Some(i) = message.find(q) {
+            if let Some(j) = message[i + q.len()..].find(": ") {
+                return message[i + q.len() + j + 2..].to_owned();
+            }
+        }
+    }
+    message.to_owned()
 }
 
 /// Values no rule should allow, for a leaf of this schema.
@@ -835,6 +850,25 @@ mod tests {
         ] {
             assert_eq!(unit_of(name), unit, "{name}");
         }
+    }
+
+    #[test]
+    fn a_rule_is_said_without_the_probes_own_text() {
+        assert_eq!(
+            rule_only("invalid session \"\": use 1 to 48 characters", Some("\"\"")),
+            "use 1 to 48 characters"
+        );
+        assert_eq!(
+            rule_only("must be a finite number from 0 to 1", None),
+            "must be a finite number from 0 to 1"
+        );
+        assert_eq!(
+            rule_only(
+                "cannot be read: No such file or directory (os error 2)",
+                None
+            ),
+            "a file that can be read"
+        );
     }
 
     #[test]
