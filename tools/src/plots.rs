@@ -16,7 +16,8 @@ use plotters::prelude::*;
 /// The TrueType font the plots use (Debian package `fonts-dejavu-core`).
 pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 
-fn ensure_font() -> anyhow::Result<()> {
+/// Registers [`FONT`] as the plots' `sans-serif`, once per process (every plot of the tools).
+pub(crate) fn ensure_font() -> anyhow::Result<()> {
     static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
     DONE.get_or_init(|| {
         let bytes = std::fs::read(FONT)

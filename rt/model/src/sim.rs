@@ -798,7 +798,7 @@ impl<'a> Run<'a> {
             ns_to_s(s.period_servo),
         );
         s.tau = tau;
-        let view = hand::view(
+        let view = crate::task::View::of(
             ns_to_s(t),
             &shown[..objects],
             &out.contacts[..objects],

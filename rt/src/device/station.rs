@@ -59,6 +59,7 @@ pub enum StationDevice {
 /// What a device's bridge thread counted (a device behind one: ROS 2, Haply), as the backend
 /// reads them from its bridge's atomics.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct BridgeCounts {
     /// Messages taken from the driver or service.
     pub received: u64,
@@ -99,16 +100,6 @@ impl StationDevice {
         match self {
             StationDevice::Other(d) => d.bridge_counts(),
             StationDevice::Sim(_) | StationDevice::Replay(_) => None,
-        }
-    }
-
-    /// Whether the device still waits for the session's time 0 (only scripted and replayed hands
-    /// do).
-    pub fn waits_for_start(&self) -> bool {
-        match self {
-            StationDevice::Sim(d) => d.start().is_none(),
-            StationDevice::Replay(d) => d.start().is_none(),
-            StationDevice::Other(_) => false,
         }
     }
 }

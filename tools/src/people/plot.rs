@@ -11,21 +11,6 @@ use plotters::prelude::*;
 
 use super::measure::Fit;
 
-/// The plots' font, registered once (`crate::plots` keeps its own registration private).
-fn ensure_font() -> anyhow::Result<()> {
-    static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
-    DONE.get_or_init(|| {
-        let font = crate::plots::FONT;
-        let bytes = std::fs::read(font)
-            .map_err(|e| format!("reading {font} ({e}): install the fonts-dejavu-core package"))?;
-        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
-            .map_err(|_| format!("{font} is not a usable font"))
-    })
-    .clone()
-    .map_err(|e| anyhow!(e))
-}
-
 const BLUE: RGBColor = RGBColor(31, 119, 180);
 const GREY: RGBColor = RGBColor(190, 190, 190);
 
@@ -193,7 +178,7 @@ where
 /// # Errors
 /// The font is missing, or a file cannot be written.
 pub fn write(dir: &Path, fitts: &FittsPlot, profile: &ProfilePlot) -> anyhow::Result<()> {
-    ensure_font()?;
+    crate::plots::ensure_font()?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let size = (900, 600);
     let path = |stem: &str, ext: &str| dir.join(format!("{stem}.{ext}"));

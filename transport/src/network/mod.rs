@@ -524,12 +524,8 @@ impl Loop {
             self.recording.write(|w| w.event(now, level, text));
         }
         if let Some(m) = self.events.task(ctx.ctl, now) {
-            let text = match m.outcome.as_str() {
-                "running" => "task: running".to_owned(),
-                "failed" => format!("task failed at {:.2} s by {}", m.at_s, m.failed_by),
-                o => format!("task {o} at {:.2} s", m.at_s),
-            };
-            self.tell(Level::Info, || text, traffic);
+            let (level, text) = m.said();
+            self.tell(level, || text, traffic);
             self.recording.write(|w| w.task(&m));
         }
         for m in presence.update(ctx.sites, ctx.ctl, receiver) {

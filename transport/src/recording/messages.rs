@@ -3,6 +3,7 @@
 
 use coop_rt::msg::TraceRecord;
 use coop_rt::shm::control::REFUSED_REASONS;
+use foxglove::messages::log::Level;
 use serde::{Deserialize, Serialize};
 
 /// A message type's JSON schema (each channel's `jsonschema`), derived from its fields' types by
@@ -351,6 +352,20 @@ json_message! {
         pub at_s: f64,
         /// What failed it: `timeout` or `fail[k]` (empty: not failed).
         pub failed_by: String,
+    }
+}
+
+impl TaskMsg {
+    /// What it says, for `/log` and a station's event watchers: a failure is a warning.
+    pub fn said(&self) -> (Level, String) {
+        match self.outcome.as_str() {
+            "failed" => (
+                Level::Warning,
+                format!("task failed at {:.2} s by {}", self.at_s, self.failed_by),
+            ),
+            "done" => (Level::Info, format!("task done at {:.2} s", self.at_s)),
+            o => (Level::Info, format!("task {o}")),
+        }
     }
 }
 

@@ -307,14 +307,7 @@ impl Recorder {
     /// # Errors
     /// Writing failed.
     pub fn task(&mut self, m: &TaskMsg) -> Result<(), RecordingError> {
-        let (level, text) = match (m.outcome.as_str(), m.failed_by.is_empty()) {
-            ("failed", _) => (
-                Level::Warning,
-                format!("task failed at {:.2} s by {}", m.at_s, m.failed_by),
-            ),
-            ("done", _) => (Level::Info, format!("task done at {:.2} s", m.at_s)),
-            (o, _) => (Level::Info, format!("task {o}")),
-        };
+        let (level, text) = m.said();
         self.one_logged(Topic::Task, m.t_ns, m, level, text)
     }
     /// A station event for `/log` only (nothing without a scene): `level` is Foxglove's.

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use coop_rt::device::safety::Limit;
+use coop_rt::device::BridgeCounts;
 use coop_rt::shm::control::ControlBlock;
 use coop_rt::shm::device::{DeviceCounts, DeviceShared, FaultKind};
 use coop_rt::sync::Ordering;
@@ -40,7 +41,7 @@ pub struct DeviceStatus {
     /// Force commands per second over the last second or less, Hz.
     pub command_rate_hz: f64,
     /// What its bridge thread counted (a device behind one: ROS 2, Haply).
-    pub bridge: Option<BridgeStatus>,
+    pub bridge: Option<BridgeCounts>,
     /// Episodes of each safety limit acting, by its name (only those that acted).
     pub trips: BTreeMap<&'static str, u64>,
     /// The limit holding the device released now, if any.
@@ -69,23 +70,6 @@ pub struct LastFault {
     pub text: String,
     /// How long ago, s.
     pub ago_s: f64,
-}
-
-/// What a device's bridge thread counted.
-#[derive(Debug, Clone, Serialize)]
-pub struct BridgeStatus {
-    /// Messages taken from the driver or service.
-    pub received: u64,
-    /// ... refused as not a sample.
-    pub refused: u64,
-    /// ... refused for coming from another publisher than the driver's.
-    pub foreign: u64,
-    /// Force commands put that were not zero.
-    pub sent_forces: u64,
-    /// Connections lost.
-    pub losses: u64,
-    /// Reconnections.
-    pub reconnects: u64,
 }
 
 impl DeviceStatus {
@@ -123,7 +107,7 @@ impl DeviceStatus {
             },
             commands: c.commands,
             command_rate_hz: ControlBlock::load_f64(&d.command_rate_hz),
-            bridge: bridged.then_some(BridgeStatus {
+            bridge: bridged.then_some(BridgeCounts {
                 received: c.received,
                 refused: c.refused,
                 foreign: c.foreign,

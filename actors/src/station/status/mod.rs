@@ -19,7 +19,7 @@ mod device;
 mod pipeline;
 mod show;
 
-pub use device::{BridgeStatus, DeviceStatus, FaultsStatus, LastFault};
+pub use device::{DeviceStatus, FaultsStatus, LastFault};
 pub use pipeline::{Hop, HOPS};
 
 /// Everything `station status` shows.

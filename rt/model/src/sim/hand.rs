@@ -1,7 +1,7 @@
 //! A simulated site's hand: a script of keyframes, or a participant acting on what the site
 //! shows; and the live task judge, which reads what the site shows as a participant does.
 
-use crate::body::{BodyState, Vec3};
+use crate::body::Vec3;
 use crate::participant::{GripFigures, Participant};
 use crate::task::{Outcome, TaskFigures, TaskJudge, View};
 use crate::user::{target_at, Keyframe};
@@ -23,16 +23,6 @@ impl Hand {
             Hand::Person(p) => p.target(t),
         }
     }
-}
-
-/// What a site's task and participant read at a servo tick.
-pub(super) fn view(
-    t_s: f64,
-    shown: &[BodyState],
-    contacts: &[crate::contact::ContactForce],
-    tool: Vec3,
-) -> View {
-    View::of(t_s, shown, contacts, tool)
 }
 
 /// How a site's task went, and what its participant did.
