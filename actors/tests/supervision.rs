@@ -53,21 +53,29 @@ async fn wait_for(
     })
 }
 
-#[tokio::test]
-async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
+/// A supervisor of the one child `child` under `policy`, until the station ends: its status then.
+async fn until_the_end(child: ChildSpec, policy: ChildPolicy) -> Status {
     let (tx, mut rx) = watch::channel(Status::default());
     let args = SupervisorArgs {
-        children: vec![(
-            spec("physics", "false", &[]),
-            None,
-            ChildPolicy::Essential(policy(2)),
-        )],
+        children: vec![(child, None, policy)],
         status: tx,
     };
     let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
         .await
         .expect("supervisor");
-    let s = wait_for(&mut rx, "the supervisor to give up", |s| s.end.is_some()).await;
+    let s = wait_for(&mut rx, "the station to end", |s| s.end.is_some()).await;
+    sup.stop(None);
+    handle.await.expect("supervisor ends");
+    s
+}
+
+#[tokio::test]
+async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
+    let s = until_the_end(
+        spec("physics", "false", &[]),
+        ChildPolicy::Essential(policy(2)),
+    )
+    .await;
     assert_eq!(s.restarts, vec![2], "restarted per policy before giving up");
     match s.end {
         Some(End::Failed(msg)) => {
@@ -80,28 +88,18 @@ async fn a_child_that_crashes_on_every_start_is_restarted_then_given_up() {
         }
         other => panic!("expected a failure, got {other:?}"),
     }
-    sup.stop(None);
-    handle.await.expect("supervisor ends");
 }
 
 /// A child that says it cannot start (its exit status: a restart would fail the same way, its
 /// device does not open, say) is not restarted, whatever the policy: the station ends at once.
 #[tokio::test]
 async fn a_child_that_cannot_start_ends_the_station_without_a_restart() {
-    let (tx, mut rx) = watch::channel(Status::default());
     let code = coop_actors::child::EXIT_CANNOT_START.to_string();
-    let args = SupervisorArgs {
-        children: vec![(
-            spec("servo", "sh", &["-c", &format!("exit {code}")]),
-            None,
-            ChildPolicy::Essential(policy(3)),
-        )],
-        status: tx,
-    };
-    let (sup, handle) = Actor::spawn(None, StationSupervisor, args)
-        .await
-        .expect("supervisor");
-    let s = wait_for(&mut rx, "the station to end", |s| s.end.is_some()).await;
+    let s = until_the_end(
+        spec("servo", "sh", &["-c", &format!("exit {code}")]),
+        ChildPolicy::Essential(policy(3)),
+    )
+    .await;
     assert_eq!(s.restarts, vec![0], "not restarted");
     match s.end {
         Some(End::Failed(msg)) => assert!(
@@ -111,8 +109,6 @@ async fn a_child_that_cannot_start_ends_the_station_without_a_restart() {
         ),
         other => panic!("expected a failure, got {other:?}"),
     }
-    sup.stop(None);
-    handle.await.expect("supervisor ends");
 }
 
 #[tokio::test]

@@ -43,6 +43,24 @@ struct Rig<D: CartesianDevice = SimScara> {
     ramp_ms: f64,
 }
 
+impl<D: CartesianDevice> Rig<D> {
+    /// Steps physics and the servo to tick `last` (1 ms apart, reports drained), the first ten
+    /// outside the count (first contact, first adoption paths): the allocations of the rest.
+    fn allocations_to(&mut self, last: u64) -> u64 {
+        for k in 1..=10u64 {
+            self.physics.step(k * MS);
+            self.servo.step(k * MS, None);
+        }
+        allocations_during(|| {
+            for k in 11..=last {
+                self.physics.step(k * MS);
+                self.servo.step(k * MS, None);
+                while self.reports.pop().is_ok() {}
+            }
+        })
+    }
+}
+
 /// With `wall`, a wall at x = 4.5 cm stops the disk so the user can press it against the wall.
 fn rig(tag: &str, wall: bool) -> Rig {
     rig_with(tag, wall, sim_arm)
@@ -280,18 +298,7 @@ fn when_physics_stops_the_commanded_force_ramps_to_zero() {
 #[test]
 fn loop_steps_allocate_nothing() {
     let mut r = rig("alloc", true);
-    // Warm up outside the count (first contact, first adoption paths).
-    for k in 1..=10u64 {
-        r.physics.step(k * MS);
-        r.servo.step(k * MS, None);
-    }
-    let n = allocations_during(|| {
-        for k in 11..=3000u64 {
-            r.physics.step(k * MS);
-            r.servo.step(k * MS, None);
-            while r.reports.pop().is_ok() {}
-        }
-    });
+    let n = r.allocations_to(3000);
     assert_eq!(n, 0, "servo/physics loop steps allocated {n} times");
 }
 
@@ -341,17 +348,7 @@ fn a_participant_hand_acts_on_what_the_station_shows_and_the_task_is_judged_allo
     });
     r.servo.set_task(sc.task_judge().expect("task"));
     r.servo.start_at(0);
-    for k in 1..=10u64 {
-        r.physics.step(k * MS);
-        r.servo.step(k * MS, None);
-    }
-    let n = allocations_during(|| {
-        for k in 11..=6000u64 {
-            r.physics.step(k * MS);
-            r.servo.step(k * MS, None);
-            while r.reports.pop().is_ok() {}
-        }
-    });
+    let n = r.allocations_to(6000);
     assert_eq!(
         n, 0,
         "servo steps with a participant and a task allocated {n} times"

@@ -172,6 +172,34 @@ fn station_says(cfg: &Path, session: &str, dir: &Path) -> String {
     err
 }
 
+/// A session's certificates (`ours`) and another session's (`other`, another CA), and router r1
+/// of ours running at `connect`.
+struct TwoCas {
+    session: String,
+    dir: Dir,
+    ours: PathBuf,
+    other: PathBuf,
+    connect: String,
+    _router: Reaped,
+}
+
+fn two_cas_and_our_router() -> TwoCas {
+    let session = unique_session();
+    let dir = Dir::new(&session);
+    let ours = certs(&session, &dir.0.join("ours"));
+    let other = certs(&format!("{session}o"), &dir.0.join("other"));
+    let connect = format!("tls/127.0.0.1:{}", free_port());
+    let _router = router(&dir.0, &ours, std::slice::from_ref(&connect));
+    TwoCas {
+        session,
+        dir,
+        ours,
+        other,
+        connect,
+        _router,
+    }
+}
+
 /// The station's one line about its links.
 fn cause_line(err: &str) -> &str {
     err.lines()
@@ -182,13 +210,14 @@ fn cause_line(err: &str) -> &str {
 /// The router's certificate is of another CA than the station's root CA.
 #[test]
 fn a_router_of_another_ca_is_named_with_the_ca_file() {
-    let session = unique_session();
-    let dir = Dir::new(&session);
-    let ours = certs(&session, &dir.0.join("ours"));
-    let other = certs(&format!("{session}o"), &dir.0.join("other"));
-    let port = free_port();
-    let _r = router(&dir.0, &ours, &[format!("tls/127.0.0.1:{port}")]);
-    let connect = format!("tls/127.0.0.1:{port}");
+    let TwoCas {
+        session,
+        dir,
+        ours,
+        other,
+        connect,
+        _router,
+    } = two_cas_and_our_router();
     let cfg = client(&dir.0, &session, &connect, &other.join("ca.pem"), &ours);
     let err = station_says(&cfg, &session, &dir.0);
     let line = cause_line(&err);
@@ -204,13 +233,14 @@ fn a_router_of_another_ca_is_named_with_the_ca_file() {
 /// The station's own certificate is of another CA: the router refuses it in the handshake.
 #[test]
 fn a_certificate_the_router_refuses_is_named_with_its_file() {
-    let session = unique_session();
-    let dir = Dir::new(&session);
-    let ours = certs(&session, &dir.0.join("ours"));
-    let other = certs(&format!("{session}o"), &dir.0.join("other"));
-    let port = free_port();
-    let _r = router(&dir.0, &ours, &[format!("tls/127.0.0.1:{port}")]);
-    let connect = format!("tls/127.0.0.1:{port}");
+    let TwoCas {
+        session,
+        dir,
+        ours,
+        other,
+        connect,
+        _router,
+    } = two_cas_and_our_router();
     let cfg = client(&dir.0, &session, &connect, &ours.join("ca.pem"), &other);
     let err = station_says(&cfg, &session, &dir.0);
     let line = cause_line(&err);
@@ -264,13 +294,14 @@ fn a_router_that_is_down_is_said_to_be_down() {
 /// another session: each its own message, once, and the launcher fails.
 #[test]
 fn a_launcher_without_certificates_is_told_to_give_them() {
-    let session = unique_session();
-    let dir = Dir::new(&session);
-    let ours = certs(&session, &dir.0.join("ours"));
-    let other = certs(&format!("{session}o"), &dir.0.join("other"));
-    let port = free_port();
-    let _r = router(&dir.0, &ours, &[format!("tls/127.0.0.1:{port}")]);
-    let connect = format!("tls/127.0.0.1:{port}");
+    let TwoCas {
+        session,
+        dir,
+        other,
+        connect,
+        _router,
+        ..
+    } = two_cas_and_our_router();
     let launch = |certs: Option<&Path>| {
         let mut c = Command::new(SESSION_BIN);
         c.arg("run")

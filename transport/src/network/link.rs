@@ -221,15 +221,17 @@ impl std::fmt::Display for LinkFailures {
     }
 }
 
+/// A client station's side, for the tests of the link's words.
+#[cfg(test)]
+pub(crate) const STATION: Side = Side {
+    me: "station",
+    far: Far::Router,
+    files: Files::Table("network.tls"),
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    const STATION: Side = Side {
-        me: "station",
-        far: Far::Router,
-        files: Files::Table("network.tls"),
-    };
 
     fn failure(cause: Cause) -> String {
         LinkFailure {

@@ -427,13 +427,7 @@ pub fn certificate_names(path: &Path) -> Result<CertificateNames, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::network::link::{Far, Files};
-
-    const STATION: Side = Side {
-        me: "station",
-        far: Far::Router,
-        files: Files::Table("network.tls"),
-    };
+    use crate::network::link::STATION;
 
     #[test]
     fn names_read_as_written() {

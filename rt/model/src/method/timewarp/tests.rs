@@ -1160,60 +1160,29 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
     const HISTORY: usize = 300;
     // Site j's positions reach site i after DELAY[j][i] ticks: one pair at the history's edge.
     const DELAY: [[i64; 3]; 3] = [[0, 20, 45], [30, 0, 290], [285, 60, 0]];
-    let mut radii = [0.0; MAX_SITES];
-    radii[..3].fill(0.005);
     // Run with rollbacks that re-simulate only what a changed input reaches, and with whole
     // ones: every copy at every tick is the same bits.
     let end = 2000i64;
-    let run = |islands: bool| {
-        let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
-            .map(|i| {
-                let mut tw = TimeWarp::new(i, 3, 1e-3, sc.contact, radii, HISTORY, &start);
-                tw.set_islands(islands);
-                (tw, start.clone())
-            })
-            .collect();
-        let mut seen = Vec::new();
-        // Site 0 pushes the row's left end (0.1–0.5 s), site 1 its right end (0.6–1.0 s), site 2
-        // pokes the second puck from behind (0.3–0.7 s); all rest far away otherwise.
-        let tool = |i: usize, t: f64| -> Vec3 {
-            let ramp = |from: f64, to: f64| ((t - from) / (to - from)).clamp(0.0, 1.0);
-            match i {
-                0 => Vec3::new(-0.12 + 0.05 * ramp(0.1, 0.5), 0.0, 0.01),
-                1 => Vec3::new(0.15 - 0.04 * ramp(0.6, 1.0), 0.0, 0.01),
-                _ => Vec3::new(-0.02, -0.06 + 0.035 * ramp(0.3, 0.7), 0.01),
-            }
-        };
-        let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
-        for k in 0..end {
-            let t = k as f64 * 1e-3;
-            let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
-            in_flight.retain(|m| m.0 > k);
-            for (_, from, to, r) in due {
-                let (tw, copy) = &mut sites[to];
-                tw.receive(&w, copy, from, &r, t);
-            }
-            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
-                tw.own_tool(tool(i, t));
-                tw.physics_step(&w, copy, &[ContactForce::default(); 4], 1e-3);
-                if i == 0 {
-                    let depth = if k % 50 == 49 {
-                        (HISTORY as i64 - 1).min(k)
-                    } else {
-                        1 + k % 40
-                    };
-                    assert!(tw.synctest(&w, copy, depth), "tick {k}, depth {depth}");
-                }
-                if k % 10 == 9 {
-                    let r = tw.track_report();
-                    for to in (0..3).filter(|&to| to != i) {
-                        in_flight.push((k + DELAY[i][to], i, to, r));
-                    }
-                }
-                seen.push(copy.clone());
-            }
+    // Site 0 pushes the row's left end (0.1–0.5 s), site 1 its right end (0.6–1.0 s), site 2
+    // pokes the second puck from behind (0.3–0.7 s); all rest far away otherwise.
+    let tool = |i: usize, t: f64| -> Vec3 {
+        let ramp = |from: f64, to: f64| ((t - from) / (to - from)).clamp(0.0, 1.0);
+        match i {
+            0 => Vec3::new(-0.12 + 0.05 * ramp(0.1, 0.5), 0.0, 0.01),
+            1 => Vec3::new(0.15 - 0.04 * ramp(0.6, 1.0), 0.0, 0.01),
+            _ => Vec3::new(-0.02, -0.06 + 0.035 * ramp(0.3, 0.7), 0.01),
         }
-        (sites, seen)
+    };
+    let run = |islands: bool| {
+        let grid = ThreeSites {
+            contact: sc.contact,
+            history: HISTORY,
+            delay: DELAY,
+            end,
+            islands,
+            synctest: &[0],
+        };
+        grid.replay(&w, &start, tool)
     };
     let (sites, seen) = run(true);
     let (_, whole) = run(false);
@@ -1229,6 +1198,91 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
         .map(|o| (sites[0].1.objects()[o].state.pos - states[o].pos).norm())
         .fold(0.0, f64::max);
     assert!(moved > 0.01, "the tools moved the row: {moved} m");
+    assert_confirmed_alike(&sites, end);
+    for (i, (tw, _)) in sites.iter().enumerate() {
+        let st = tw.rollback_stats();
+        assert!(st.rollbacks > 10, "site {i} rolled back: {st:?}");
+        assert!(st.hash_checks > 0, "site {i} compared hashes: {st:?}");
+        assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
+    }
+    let deepest = sites
+        .iter()
+        .map(|(tw, _)| tw.rollback_stats().max_depth)
+        .max();
+    assert!(deepest >= Some(280), "rolled back to the edge: {deepest:?}");
+}
+
+/// Three sites of [`TimeWarp`] on one 1 kHz grid: each steps its own tool and reports it every
+/// 10 ticks, site `j`'s reports reaching site `i` `delay[j][i]` ticks later; the sites in
+/// `synctest` force a rollback every tick (of every depth to 40 ticks, and to the history's edge
+/// every 50th) and must arrive at the same bits.
+struct ThreeSites<'a> {
+    contact: crate::contact::ContactParams,
+    history: usize,
+    delay: [[i64; 3]; 3],
+    end: i64,
+    islands: bool,
+    synctest: &'a [usize],
+}
+
+impl ThreeSites<'_> {
+    /// Runs the grid from `start` with site `i`'s tool at `tool(i, t)`: the sites at the end, and
+    /// every site's copy at every tick.
+    fn replay(
+        &self,
+        w: &World,
+        start: &WorldCopy,
+        mut tool: impl FnMut(usize, f64) -> Vec3,
+    ) -> (Vec<(TimeWarp, WorldCopy)>, Vec<WorldCopy>) {
+        let mut radii = [0.0; MAX_SITES];
+        radii[..3].fill(0.005);
+        let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
+            .map(|i| {
+                let mut tw = TimeWarp::new(i, 3, 1e-3, self.contact, radii, self.history, start);
+                tw.set_islands(self.islands);
+                (tw, start.clone())
+            })
+            .collect();
+        let mut seen = Vec::new();
+        let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
+        for k in 0..self.end {
+            let t = k as f64 * 1e-3;
+            let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
+            in_flight.retain(|m| m.0 > k);
+            for (_, from, to, r) in due {
+                let (tw, copy) = &mut sites[to];
+                tw.receive(w, copy, from, &r, t);
+            }
+            for (i, (tw, copy)) in sites.iter_mut().enumerate() {
+                tw.own_tool(tool(i, t));
+                tw.physics_step(w, copy, &[ContactForce::default(); 4], 1e-3);
+                if self.synctest.contains(&i) {
+                    let depth = if k % 50 == 49 {
+                        (self.history as i64 - 1).min(k)
+                    } else {
+                        1 + k % 40
+                    };
+                    assert!(
+                        tw.synctest(w, copy, depth),
+                        "site {i}, tick {k}, depth {depth}"
+                    );
+                }
+                if k % 10 == 9 {
+                    let r = tw.track_report();
+                    for to in (0..3).filter(|&to| to != i) {
+                        in_flight.push((k + self.delay[i][to], i, to, r));
+                    }
+                }
+                seen.push(copy.clone());
+            }
+        }
+        (sites, seen)
+    }
+}
+
+/// Once every position is known (confirmed to within 400 ticks of `end`), the sites' confirmed
+/// worlds are the same bits.
+fn assert_confirmed_alike(sites: &[(TimeWarp, WorldCopy)], end: i64) {
     let confirmed = sites
         .iter()
         .map(|(tw, _)| tw.confirmed_tick())
@@ -1244,17 +1298,6 @@ fn three_sites_and_several_objects_in_contact_agree_to_the_bit() {
         hashes.iter().all(|h| *h == hashes[0]),
         "the confirmed worlds differ: {hashes:?}"
     );
-    for (i, (tw, _)) in sites.iter().enumerate() {
-        let st = tw.rollback_stats();
-        assert!(st.rollbacks > 10, "site {i} rolled back: {st:?}");
-        assert!(st.hash_checks > 0, "site {i} compared hashes: {st:?}");
-        assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
-    }
-    let deepest = sites
-        .iter()
-        .map(|(tw, _)| tw.rollback_stats().max_depth)
-        .max();
-    assert!(deepest >= Some(280), "rolled back to the edge: {deepest:?}");
 }
 
 /// `n` pucks (radius 2 cm, 0.1 kg) in a row along x on [`paper_world`]'s table, 0.1 mm apart,
@@ -1815,63 +1858,19 @@ fn three_participants_pass_the_synctest_and_agree_to_the_bit() {
         ticks[i][next[i]].tool_pos
     };
     let start = WorldCopy::one(BodyState::at_rest(Vec3::new(0.0, 0.0, 0.01)));
-    const HISTORY: usize = 300;
-    const DELAY: [[i64; 3]; 3] = [[0, 45, 110], [60, 0, 290], [285, 80, 0]];
-    let mut radii = [0.0; MAX_SITES];
-    radii[..3].fill(0.005);
-    let mut sites: Vec<(TimeWarp, WorldCopy)> = (0..3)
-        .map(|i| {
-            let tw = TimeWarp::new(i, 3, 1e-3, sc.contact, radii, HISTORY, &start);
-            (tw, start.clone())
-        })
-        .collect();
     let end = (sc.duration_s * 1e3) as i64;
-    let mut in_flight: Vec<(i64, usize, usize, Report)> = Vec::new();
-    for k in 0..end {
-        let t = k as f64 * 1e-3;
-        let due: Vec<_> = in_flight.iter().filter(|m| m.0 <= k).cloned().collect();
-        in_flight.retain(|m| m.0 > k);
-        for (_, from, to, r) in due {
-            let (tw, copy) = &mut sites[to];
-            tw.receive(&w, copy, from, &r, t);
-        }
-        for (i, (tw, copy)) in sites.iter_mut().enumerate() {
-            tw.own_tool(tool(i, t));
-            tw.physics_step(&w, copy, &[ContactForce::default(); 4], 1e-3);
-            let depth = if k % 50 == 49 {
-                (HISTORY as i64 - 1).min(k)
-            } else {
-                1 + k % 40
-            };
-            assert!(
-                tw.synctest(&w, copy, depth),
-                "site {i}, tick {k}, depth {depth}"
-            );
-            if k % 10 == 9 {
-                let r = tw.track_report();
-                for to in (0..3).filter(|&to| to != i) {
-                    in_flight.push((k + DELAY[i][to], i, to, r));
-                }
-            }
-        }
-    }
+    let grid = ThreeSites {
+        contact: sc.contact,
+        history: 300,
+        delay: [[0, 45, 110], [60, 0, 290], [285, 80, 0]],
+        end,
+        islands: true,
+        synctest: &[0, 1, 2],
+    };
+    let (sites, _) = grid.replay(&w, &start, &mut tool);
     let moved = (sites[0].1.objects()[0].state.pos - start.objects()[0].state.pos).norm();
     assert!(moved > 0.01, "the participants moved the disk: {moved} m");
-    let confirmed = sites
-        .iter()
-        .map(|(tw, _)| tw.confirmed_tick())
-        .min()
-        .unwrap();
-    assert!(confirmed > end - 400, "confirmed up to tick {confirmed}");
-    let hashes: Vec<_> = sites
-        .iter()
-        .map(|(tw, _)| tw.hash_at(confirmed - 1))
-        .collect();
-    assert!(hashes[0].is_some(), "tick {confirmed} is kept");
-    assert!(
-        hashes.iter().all(|h| *h == hashes[0]),
-        "the confirmed worlds differ: {hashes:?}"
-    );
+    assert_confirmed_alike(&sites, end);
     for (i, (tw, _)) in sites.iter().enumerate() {
         let st = tw.rollback_stats();
         assert_eq!(st.hash_mismatches, 0, "site {i}: {st:?}");
