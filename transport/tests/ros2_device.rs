@@ -118,9 +118,11 @@ fn the_bridge_refuses_bad_and_foreign_poses_and_releases_a_driver_it_no_longer_c
             .expect("put");
     };
 
-    // A second publisher on the topic is refused and counted; the driver's poses go on.
-    put(pose(0.5), 2);
+    // A second publisher on the topic is refused and counted; the driver's poses go on. The
+    // bridge's queue keeps the newest poses: one foreign pose may be pushed out by the driver's
+    // stream while the bridge waits for a core, so the second publisher goes on publishing too.
     wait_until("the foreign pose refused", LIMIT, || {
+        put(pose(0.5), 2);
         (dev.stats()
             .foreign_poses
             .load(coop_rt::sync::Ordering::Relaxed)
