@@ -6,6 +6,7 @@
 
 use std::time::Duration;
 
+use crate::device::{VendorLoop, VendorLoopError};
 use crate::sched::{InForce, Policy};
 use crate::shm::control::{Child, ControlBlock};
 use crate::stats::LoopStats;
@@ -32,20 +33,7 @@ pub fn run_periodic(
     mut step: impl FnMut(u64) -> bool,
 ) -> RunSummary {
     let slot = control.child(child);
-    slot.policy
-        .store(policy_number(in_force.policy), Ordering::Relaxed);
-    slot.priority
-        .store(in_force.priority.max(0) as u64, Ordering::Relaxed);
-    slot.cpus.store(
-        in_force
-            .cpus
-            .iter()
-            .filter(|&&c| c < 64)
-            .fold(0u64, |m, &c| m | (1 << c)),
-        Ordering::Relaxed,
-    );
-    slot.pid
-        .store(u64::from(std::process::id()), Ordering::Relaxed);
+    announce(control, child, in_force);
     stats.set_period_ns(u64::try_from(period.as_nanos()).unwrap_or(u64::MAX));
     let mut timer = PeriodicTimer::new(period);
     let mut cycles = 0u64;
@@ -69,6 +57,55 @@ pub fn run_periodic(
         cycles,
         overruns: timer.overruns(),
     }
+}
+
+/// Runs `step(now_ns) -> keep_going` in a vendor's loop (`vendor` calls it on its own thread, at
+/// its own rate) until it returns false, as [`run_periodic`] runs it in ours: `in_force` recorded
+/// in `child`'s slot, each tick in `stats` (its lateness against the vendor's period) and in the
+/// slot's heartbeat, so the supervisor sees a vendor loop that hangs as it sees ours.
+///
+/// # Errors
+/// The vendor's loop did not start, or stopped calling back.
+pub fn run_vendor(
+    control: &ControlBlock,
+    child: Child,
+    stats: &LoopStats,
+    in_force: &InForce,
+    vendor: &dyn VendorLoop,
+    step: &mut (dyn FnMut(u64) -> bool + Send),
+) -> Result<RunSummary, VendorLoopError> {
+    let slot = control.child(child);
+    announce(control, child, in_force);
+    let mut tick = |now: u64| {
+        // REAL-TIME: no allocation, no lock, no logging; the vendor's thread.
+        let keep_going = step(now);
+        slot.heartbeat.fetch_add(1, Ordering::Relaxed);
+        keep_going
+    };
+    let summary = vendor.run(Some(stats), &mut tick)?;
+    Ok(RunSummary {
+        cycles: summary.ticks,
+        overruns: stats.snapshot().overruns,
+    })
+}
+
+/// Records in `child`'s slot what scheduling is in force and which process runs it.
+fn announce(control: &ControlBlock, child: Child, in_force: &InForce) {
+    let slot = control.child(child);
+    slot.policy
+        .store(policy_number(in_force.policy), Ordering::Relaxed);
+    slot.priority
+        .store(in_force.priority.max(0) as u64, Ordering::Relaxed);
+    slot.cpus.store(
+        in_force
+            .cpus
+            .iter()
+            .filter(|&&c| c < 64)
+            .fold(0u64, |m, &c| m | (1 << c)),
+        Ordering::Relaxed,
+    );
+    slot.pid
+        .store(u64::from(std::process::id()), Ordering::Relaxed);
 }
 
 fn policy_number(p: Policy) -> u64 {

@@ -1,11 +1,13 @@
 //! The servo step with each vendor backend (Haply against its stand-in service, DHD against the fake
-//! SDK), through the station's device type and the safety layer, over real shared-memory rings with
-//! the physics loop: it allocates nothing, and the device is commanded a force.
+//! SDK, OpenHaptics against the mock HD library, its step run in the HD scheduler's callbacks),
+//! through the station's device type and the safety layer, over real shared-memory rings with the
+//! physics loop: it allocates nothing, and the device is commanded a force.
 
 use coop_model::scenario::{KeyframeSpec, MethodName, Scenario, SiteSpec};
 use coop_model::servo::Servo;
 use coop_rt::device::dhd::DhdDevice;
 use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
+use coop_rt::device::openhaptics::OpenHapticsDevice;
 use coop_rt::device::safety::{Guarded, SafetyLimits};
 use coop_rt::device::{CartesianDevice, Placement, StationDevice};
 use coop_rt::msg::{ObjectSample, SiteReport, ToolSample};
@@ -20,14 +22,56 @@ use common::counting_alloc::allocations_during;
 mod fake_dhd;
 #[path = "common/haply_service.rs"]
 mod haply_service;
+#[path = "common/mock_hd.rs"]
+mod mock_hd;
 
 const MS: u64 = 1_000_000;
 /// Where the disk starts, and where both devices put the hand.
 const OBJECT: [f64; 3] = [0.0, 0.0, 0.0099];
 
+/// A servo and physics loop over real rings, the segments they live in kept with them.
+struct Rig {
+    servo: ServoLoop<StationDevice>,
+    physics: PhysicsLoop,
+    reports: coop_rt::shm::Consumer<SiteReport>,
+    _segments: (
+        RingSegment<ToolSample>,
+        RingSegment<ObjectSample>,
+        RingSegment<SiteReport>,
+        RingSegment<SiteReport>,
+    ),
+}
+
+impl Rig {
+    /// One tick at `now`: physics, then the servo; the force commanded.
+    fn step(&mut self, now: u64) -> f64 {
+        // REAL-TIME: what a station's tick does (counted by the tests).
+        self.physics.step(now);
+        let f = self.servo.step(now, None).f_command.norm();
+        while self.reports.pop().is_ok() {}
+        f
+    }
+}
+
 /// Steps servo and physics for `ticks` ms of `clock` time from `t0`, counting the servo's and
 /// physics' allocations and the largest force commanded.
 fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f64) {
+    let mut rig = rig(tag, device, clock(0));
+    for k in 1..=10u64 {
+        rig.step(clock(k));
+    }
+    let mut most = 0.0f64;
+    let n = allocations_during(|| {
+        for k in 11..=1500u64 {
+            most = most.max(rig.step(clock(k)));
+        }
+    });
+    rig.servo.guarded_mut().close(clock(1501));
+    (n, most)
+}
+
+/// A servo on `device` and a physics loop at `t0`, a disk where the device puts the hand.
+fn rig(tag: &str, device: StationDevice, t0: u64) -> Rig {
     let mut sc = Scenario::default();
     // A disk on a table, centred where the device's hand is (placement identity): the hand is in
     // contact from the start, so the servo commands a force.
@@ -52,8 +96,7 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
     let rep = RingSegment::<SiteReport>::create(&name("rep"), 64).expect("report ring");
     let rem = RingSegment::<SiteReport>::create(&name("rem"), 64).expect("remote ring");
     let world = sc.world();
-    let t0 = clock(0);
-    let mut servo = ServoLoop::new(
+    let servo = ServoLoop::new(
         Servo::new(sc.servo_params(0)),
         Guarded::new(device, SafetyLimits::default(), t0),
         Placement::IDENTITY,
@@ -62,7 +105,7 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
         tool.producer().expect("p"),
         t0,
     );
-    let mut physics = PhysicsLoop::new(
+    let physics = PhysicsLoop::new(
         0,
         sc.method(0, MethodName::Paper),
         world,
@@ -84,23 +127,13 @@ fn run(tag: &str, device: StationDevice, clock: impl Fn(u64) -> u64) -> (u64, f6
             report_seq: 0,
         },
     );
-    let mut reports = rep.consumer().expect("c");
-    for k in 1..=10u64 {
-        let now = clock(k);
-        physics.step(now);
-        servo.step(now, None);
+    let reports = rep.consumer().expect("c");
+    Rig {
+        servo,
+        physics,
+        reports,
+        _segments: (tool, obj, rep, rem),
     }
-    let mut most = 0.0f64;
-    let n = allocations_during(|| {
-        for k in 11..=1500u64 {
-            let now = clock(k);
-            physics.step(now);
-            most = most.max(servo.step(now, None).f_command.norm());
-            while reports.pop().is_ok() {}
-        }
-    });
-    servo.guarded_mut().close(clock(1501));
-    (n, most)
 }
 
 #[test]
@@ -142,4 +175,36 @@ fn servo_steps_with_the_haply_backend_allocate_nothing() {
         most > 0.0,
         "haply: the device was commanded a force ({most} N)"
     );
+}
+
+#[test]
+fn servo_steps_in_the_hd_schedulers_callbacks_allocate_nothing() {
+    let (mock, _g) = mock_hd::Mock::lock();
+    // The stylus where the disk is (mm).
+    for (k, v) in ["x0", "y0", "z0"].iter().zip(OBJECT) {
+        mock.set(k, v * 1e3);
+    }
+    let dev = OpenHapticsDevice::open(&mock.config()).expect("opens");
+    let sched = dev.scheduler();
+    let mut rig = rig("hd", StationDevice::Other(Box::new(dev)), monotonic_ns());
+    let (mut k, mut n, mut most) = (0u64, 0u64, 0.0f64);
+    sched
+        .run_hd(None, &mut |now| {
+            k += 1;
+            if k <= 10 {
+                rig.step(now);
+            } else {
+                // Counted on the scheduler's thread, where the step runs.
+                n += allocations_during(|| most = most.max(rig.step(now)));
+            }
+            k < 1500
+        })
+        .expect("the scheduler ran");
+    assert_eq!(n, 0, "openhaptics: servo/physics steps allocated {n} times");
+    assert!(
+        most > 0.0,
+        "openhaptics: the device was commanded a force ({most} N)"
+    );
+    rig.servo.guarded_mut().close(monotonic_ns());
+    assert_eq!(mock.get("force_output"), 0.0, "closed at the end");
 }

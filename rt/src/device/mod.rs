@@ -11,6 +11,7 @@ pub mod cartesian;
 pub mod dhd;
 pub mod figures;
 pub mod haply;
+pub mod openhaptics;
 pub mod placement;
 pub mod replay;
 pub mod safety;
@@ -26,4 +27,7 @@ pub use figures::DevicePublisher;
 pub use placement::Placement;
 pub use scara::SimScara;
 pub use slot::{check_bridged, BridgedState, CommandSlot};
-pub use station::{Backend, BridgeCounts, StationDevice, VendorDevice};
+pub use station::{
+    Backend, BridgeCounts, StationDevice, VendorDevice, VendorLoop, VendorLoopError,
+    VendorLoopSummary,
+};

@@ -15,6 +15,8 @@ pub enum Backend {
     Haply,
     /// Force Dimension (and Novint Falcon) through the DHD SDK.
     Dhd,
+    /// 3D Systems' Touch and Phantom devices through OpenHaptics' HD API, in its scheduler.
+    OpenHaptics,
     /// Any device whose ROS 2 driver publishes its end effector's pose (a bridge over zenoh,
     /// `coop_transport::ros2_device`).
     Ros2,
@@ -22,11 +24,12 @@ pub enum Backend {
 
 impl Backend {
     /// Every backend.
-    pub const ALL: [Backend; 5] = [
+    pub const ALL: [Backend; 6] = [
         Backend::Sim,
         Backend::Replay,
         Backend::Haply,
         Backend::Dhd,
+        Backend::OpenHaptics,
         Backend::Ros2,
     ];
 
@@ -37,6 +40,7 @@ impl Backend {
             Backend::Replay => "replay",
             Backend::Haply => "haply",
             Backend::Dhd => "dhd",
+            Backend::OpenHaptics => "openhaptics",
             Backend::Ros2 => "ros2",
         }
     }
@@ -83,7 +87,41 @@ pub trait VendorDevice: CartesianDevice + std::fmt::Debug {
     fn bridge_counts(&self) -> Option<BridgeCounts> {
         None
     }
+
+    /// The vendor's loop, for a device whose vendor runs the servo thread and calls us back
+    /// (`loop = "vendor"`); none: the station's loop calls the device.
+    fn vendor_loop(&self) -> Option<Box<dyn VendorLoop>> {
+        None
+    }
 }
+
+/// A vendor's servo loop (OpenHaptics' scheduler): it calls the station's servo step once per
+/// its own tick, on its own thread.
+pub trait VendorLoop: Send + std::fmt::Debug {
+    /// Calls `tick(now_ns)` once per vendor tick, with the device's state valid inside it, until
+    /// `tick` returns false; records each tick in `stats` (lateness against the vendor's period,
+    /// compute time). The calling thread waits, and watches the vendor's thread.
+    ///
+    /// # Errors
+    /// The loop could not start, or stopped calling back (its output is then off).
+    fn run(
+        &self,
+        stats: Option<&crate::stats::LoopStats>,
+        tick: &mut (dyn FnMut(u64) -> bool + Send),
+    ) -> Result<VendorLoopSummary, VendorLoopError>;
+}
+
+/// How a vendor loop's run went.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VendorLoopSummary {
+    /// Ticks the vendor called back.
+    pub ticks: u64,
+}
+
+/// Why a vendor loop ended other than by the servo's say.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct VendorLoopError(pub String);
 
 impl StationDevice {
     /// Sets the session's time 0 for a device that plays a script or a recording.
@@ -92,6 +130,14 @@ impl StationDevice {
             StationDevice::Sim(d) => d.start_at(start_ns),
             StationDevice::Replay(d) => d.start_at(start_ns),
             StationDevice::Other(_) => {}
+        }
+    }
+
+    /// The vendor's loop, where the vendor runs the servo thread.
+    pub fn vendor_loop(&self) -> Option<Box<dyn VendorLoop>> {
+        match self {
+            StationDevice::Other(d) => d.vendor_loop(),
+            StationDevice::Sim(_) | StationDevice::Replay(_) => None,
         }
     }
 
