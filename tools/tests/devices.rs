@@ -24,7 +24,10 @@ fn lists_every_backend_with_what_it_finds_and_marks_the_configured_one() {
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     let list = v.as_array().expect("a list");
     let names: Vec<&str> = list.iter().filter_map(|b| b["backend"].as_str()).collect();
-    assert_eq!(names, ["sim", "replay", "haply", "dhd", "ros2"]);
+    assert_eq!(
+        names,
+        ["sim", "replay", "haply", "dhd", "openhaptics", "ros2"]
+    );
     let sim = &list[0];
     assert_eq!(
         sim["selected"], true,

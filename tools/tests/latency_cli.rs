@@ -134,6 +134,8 @@ fn every_command_has_its_help() {
         vec!["--help"],
         vec!["attach", "--help"],
         vec!["attach", "-h"],
+        vec!["vendor", "--help"],
+        vec!["vendor", "-h"],
     ] {
         let (code, out, err) = run(Command::new(LATENCY).args(&args));
         assert_eq!(code, 0, "{args:?}: {err}");

@@ -14,7 +14,7 @@ use coop_model::servo::Servo;
 use coop_rt::device::safety::{clamp_contact, Guarded};
 use coop_rt::device::{CartesianDevice, DevicePublisher};
 use coop_rt::physics::{PhysicsLoop, PhysicsRings, PhysicsTiming};
-use coop_rt::run::run_periodic;
+use coop_rt::run::{run_periodic, run_vendor};
 use coop_rt::sched::{self, Request};
 use coop_rt::servo::ServoLoop;
 use coop_rt::shm::control::{Child, ControlBlock, RunState};
@@ -67,6 +67,9 @@ pub enum ChildError {
     /// The network process could not be set up or closed.
     #[error(transparent)]
     Network(#[from] coop_transport::network::NetworkError),
+    /// The vendor's servo loop (OpenHaptics' scheduler) could not start, or stopped calling back.
+    #[error("the device's own servo loop: {0}")]
+    VendorLoop(#[from] coop_rt::device::VendorLoopError),
 }
 
 impl ChildError {
@@ -225,6 +228,9 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     if let Some(epoch) = ctl.epoch() {
         device.start_at(epoch);
     }
+    // A device whose vendor owns the servo thread (OpenHaptics' scheduler) runs the same step in
+    // its callbacks.
+    let vendor = device.vendor_loop();
     let dev = &cfg.device;
     // The contact renders no stiffer nor more damped than the device can (CHAI3D's scaling).
     let mut params = sc.servo_params(i);
@@ -263,33 +269,49 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
     let mut figures = DevicePublisher::new(&ctl.device, servo.guarded(), start);
     let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
-    run_periodic(
-        &ctl,
-        Child::Servo,
-        &ctl.servo.stats,
-        period(sc.site[i].servo_rate_hz),
-        &in_force,
-        |now| {
-            if !servo.started() {
-                if let Some(epoch) = ctl.epoch() {
-                    servo.device_mut().start_at(epoch);
-                    servo.start_at(epoch);
-                }
+    let mut step = |now| {
+        if !servo.started() {
+            if let Some(epoch) = ctl.epoch() {
+                servo.device_mut().start_at(epoch);
+                servo.start_at(epoch);
             }
-            servo.step(now, Some(&ctl));
-            figures.publish(&ctl.device, now, servo.guarded());
-            match ctl.run_state() {
-                RunState::Starting | RunState::Running => true,
-                // Stop only once nothing is displayed or commanded any more.
-                RunState::Stopping | RunState::Stopped => !servo.is_limp(),
-            }
-        },
-    );
+        }
+        servo.step(now, Some(&ctl));
+        figures.publish(&ctl.device, now, servo.guarded());
+        match ctl.run_state() {
+            RunState::Starting | RunState::Running => true,
+            // Stop only once nothing is displayed or commanded any more.
+            RunState::Stopping | RunState::Stopped => !servo.is_limp(),
+        }
+    };
+    let servo_period = period(sc.site[i].servo_rate_hz);
+    let ended = match &vendor {
+        Some(v) => run_vendor(
+            &ctl,
+            Child::Servo,
+            &ctl.servo.stats,
+            &in_force,
+            v.as_ref(),
+            &mut step,
+        )
+        .map(|_| ()),
+        None => {
+            run_periodic(
+                &ctl,
+                Child::Servo,
+                &ctl.servo.stats,
+                servo_period,
+                &in_force,
+                step,
+            );
+            Ok(())
+        }
+    };
     // Stopped: release and close the device (dropping it would too, also on an error path).
     let now = monotonic_ns();
     figures.publish_now(&ctl.device, now, servo.guarded());
     servo.close(now);
-    Ok(())
+    ended.map_err(Into::into)
 }
 
 /// Runs the physics process of the configured station until the run state asks it to stop.

@@ -4,8 +4,9 @@
 //!
 //! ```toml
 //! [device]
-//! device = "sim"          # sim | replay | haply | dhd | ros2
+//! device = "sim"          # sim | replay | haply | dhd | openhaptics | ros2
 //! loop = "station"        # station: our servo loop calls the device; vendor: its thread calls us
+//!                         # (openhaptics runs only so: its HD scheduler owns the servo thread)
 //!
 //! [device.placement]      # world = translation_m + rotation · (workspace_scale · device)
 //! translation_m = [0.0, 0.0, 0.0]
@@ -28,6 +29,9 @@
 //! [device.dhd]            # device = "dhd": `coop_rt::device::dhd::DhdConfig`
 //! library = "/opt/forcedimension/lib/libdhd.so"
 //!
+//! [device.openhaptics]    # device = "openhaptics", loop = "vendor": `coop_rt::device::openhaptics::OpenHapticsConfig`
+//! library = "/usr/lib/libHD.so"
+//!
 //! [device.ros2]           # device = "ros2": `coop_transport::ros2_device::Ros2DeviceConfig`
 //! pose_topic = "/haptic/pose"                # the driver's PoseStamped
 //! wrench_topic = "/haptic/wrench_command"    # our WrenchStamped back
@@ -42,6 +46,7 @@ use coop_model::replay::Trajectory;
 use coop_rt::device::cartesian::{DeviceInfo, ProbeReport};
 use coop_rt::device::dhd::{DhdConfig, DhdDevice};
 use coop_rt::device::haply::{HaplyConfig, HaplyDevice};
+use coop_rt::device::openhaptics::{OpenHapticsConfig, OpenHapticsDevice};
 use coop_rt::device::replay::Replay;
 use coop_rt::device::safety::SafetyLimits;
 use coop_rt::device::{Backend, Placement, SimScara, StationDevice};
@@ -65,6 +70,9 @@ pub enum DeviceOpenError {
     /// The DHD library or device.
     #[error(transparent)]
     Dhd(#[from] coop_rt::device::dhd::DhdError),
+    /// The OpenHaptics HD library or device.
+    #[error(transparent)]
+    OpenHaptics(#[from] coop_rt::device::openhaptics::OpenHapticsError),
     /// The device's ROS 2 driver.
     #[error(transparent)]
     Ros2(#[from] coop_transport::ros2_device::Ros2OpenError),
@@ -85,6 +93,8 @@ pub enum BackendName {
     Haply,
     /// Force Dimension / Novint Falcon (DHD SDK).
     Dhd,
+    /// 3D Systems' Touch and Phantom devices (OpenHaptics' HD API), in the vendor's scheduler.
+    Openhaptics,
     /// A device's ROS 2 driver (its pose in, a wrench out), over zenoh.
     Ros2,
 }
@@ -97,6 +107,7 @@ impl BackendName {
             BackendName::Replay => Backend::Replay,
             BackendName::Haply => Backend::Haply,
             BackendName::Dhd => Backend::Dhd,
+            BackendName::Openhaptics => Backend::OpenHaptics,
             BackendName::Ros2 => Backend::Ros2,
         }
     }
@@ -111,7 +122,7 @@ pub enum LoopOwner {
     /// Our servo loop samples and commands the device at the scenario's servo rate.
     #[default]
     Station,
-    /// The vendor's thread calls us at its own rate (no backend here supports it yet).
+    /// The vendor's thread calls us at its own rate (`openhaptics`: the HD scheduler).
     Vendor,
 }
 
@@ -201,6 +212,11 @@ pub struct DeviceSpec {
     #[serde(skip_serializing_if = "Option::is_none")]
     #[schemars(with = "Option<coop_rt::device::dhd::DhdConfig>")]
     pub dhd: Option<toml::Table>,
+    /// The OpenHaptics backend's table (`device = "openhaptics"`), read as
+    /// [`coop_rt::device::openhaptics::OpenHapticsConfig`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<coop_rt::device::openhaptics::OpenHapticsConfig>")]
+    pub openhaptics: Option<toml::Table>,
     /// The ROS 2 backend's table (`device = "ros2"`), read as
     /// [`coop_transport::ros2_device::Ros2DeviceConfig`].
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -223,6 +239,8 @@ pub struct DeviceSetup {
     pub haply: HaplyConfig,
     /// The DHD table (its defaults when absent).
     pub dhd: DhdConfig,
+    /// The OpenHaptics table (its defaults when absent).
+    pub openhaptics: OpenHapticsConfig,
     /// The ROS 2 table (its defaults when absent).
     pub ros2: Ros2DeviceConfig,
 }
@@ -258,15 +276,25 @@ impl DeviceSpec {
     /// A value that breaks a rule, a backend not built in, a replay file that does not load.
     pub fn resolve(&mut self, base: Option<&Path>) -> Result<DeviceSetup, Problem> {
         let backend = self.device.backend();
-        if self.loop_owner == LoopOwner::Vendor {
-            return Err(Problem::value(
-                "device.loop",
-                "\"vendor\"",
-                format!(
-                    "device {:?} cannot call the station from its own thread in this build; use loop = \"station\"",
-                    backend.name()
-                ),
-            ));
+        match (backend, self.loop_owner) {
+            (Backend::OpenHaptics, LoopOwner::Station) => {
+                return Err(Problem::value(
+                    "device.loop",
+                    "\"station\"",
+                    "device \"openhaptics\" runs its servo inside OpenHaptics' scheduler (the HD API's device calls are valid only in its callbacks); use loop = \"vendor\"",
+                ));
+            }
+            (Backend::OpenHaptics, LoopOwner::Vendor) | (_, LoopOwner::Station) => {}
+            (_, LoopOwner::Vendor) => {
+                return Err(Problem::value(
+                    "device.loop",
+                    "\"vendor\"",
+                    format!(
+                        "device {:?} cannot call the station from its own thread (only \"openhaptics\" can); use loop = \"station\"",
+                        backend.name()
+                    ),
+                ));
+            }
         }
         let placement = self.placement.checked()?;
         let limits = self.safety.checked()?;
@@ -277,7 +305,15 @@ impl DeviceSpec {
         ros2.validate().map_err(|e| backend_rule("ros2", e))?;
         let mut dhd: DhdConfig = backend_table("dhd", self.dhd.as_ref())?;
         dhd.validate().map_err(|e| backend_rule("dhd", e))?;
-        if let Some(lib) = &mut dhd.library {
+        let mut openhaptics: OpenHapticsConfig =
+            backend_table("openhaptics", self.openhaptics.as_ref())?;
+        openhaptics
+            .validate()
+            .map_err(|e| backend_rule("openhaptics", e))?;
+        for lib in [dhd.library.as_mut(), openhaptics.library.as_mut()]
+            .into_iter()
+            .flatten()
+        {
             // A bare file name is the dynamic loader's to find, not the configuration's.
             if let Some(b) = base.filter(|_| lib.is_relative() && lib.components().count() > 1) {
                 *lib = b.join(&*lib);
@@ -295,7 +331,7 @@ impl DeviceSpec {
                 None
             }
             Backend::Replay => Some(self.recorded_hand(base)?),
-            Backend::Haply | Backend::Dhd | Backend::Ros2 => None,
+            Backend::Haply | Backend::Dhd | Backend::OpenHaptics | Backend::Ros2 => None,
         };
         Ok(DeviceSetup {
             backend,
@@ -304,6 +340,7 @@ impl DeviceSpec {
             replay,
             haply,
             dhd,
+            openhaptics,
             ros2,
         })
     }
@@ -314,6 +351,7 @@ impl DeviceSpec {
             (BackendName::Replay, self.replay.is_some()),
             (BackendName::Haply, self.haply.is_some()),
             (BackendName::Dhd, self.dhd.is_some()),
+            (BackendName::Openhaptics, self.openhaptics.is_some()),
             (BackendName::Ros2, self.ros2.is_some()),
         ] {
             if present && name != self.device {
@@ -440,7 +478,7 @@ impl DeviceSetup {
                 .haply
                 .connect_timeout_ms
                 .saturating_add(self.haply.io_timeout_ms),
-            Backend::Sim | Backend::Replay | Backend::Dhd => 0,
+            Backend::Sim | Backend::Replay | Backend::Dhd | Backend::OpenHaptics => 0,
         };
         Duration::from_millis(ms)
     }
@@ -491,6 +529,9 @@ pub fn open(
             &setup.haply,
         )?))),
         Backend::Dhd => Ok(StationDevice::Other(Box::new(DhdDevice::open(&setup.dhd)?))),
+        Backend::OpenHaptics => Ok(StationDevice::Other(Box::new(OpenHapticsDevice::open(
+            &setup.openhaptics,
+        )?))),
         Backend::Ros2 => Ok(StationDevice::Other(Box::new(Ros2Device::open(
             &setup.ros2,
         )?))),
@@ -559,6 +600,7 @@ pub fn probe_all(
             }
             Backend::Haply => coop_rt::device::haply::probe(&setup.haply),
             Backend::Dhd => coop_rt::device::dhd::probe(&setup.dhd),
+            Backend::OpenHaptics => coop_rt::device::openhaptics::probe(&setup.openhaptics),
             Backend::Ros2 => coop_transport::ros2_device::probe(&setup.ros2),
         })
         .collect()

@@ -18,6 +18,18 @@ fn main() -> std::process::ExitCode {
             latency::attach(station, session, *duration, *quiet, json.as_deref())
         });
     }
+    if let Some(latency::Attach::Vendor {
+        library,
+        duration,
+        priority,
+        json,
+        ..
+    }) = &args.attach
+    {
+        return coop_tools::run_main(|| {
+            latency::vendor(library, *duration, *priority, json.as_deref()).map(|_| ())
+        });
+    }
     coop_tools::run_main(|| {
         let cmdline = std::env::args().collect::<Vec<_>>().join(" ");
         let report = latency::run(&args, cmdline, true)?;

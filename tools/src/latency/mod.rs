@@ -25,10 +25,12 @@ use crate::cli::{parse_cpu_list, parse_duration, StopFlag};
 mod attach;
 mod measure;
 mod report;
+mod vendor;
 
 pub use attach::attach;
 pub use measure::{Report, ThreadResult};
 pub use report::{print_report, report_json};
+pub use vendor::vendor;
 
 use measure::{Plan, Threads, PREFAULT_STACK};
 use report::{print_header, print_live};
@@ -53,7 +55,8 @@ use report::{print_header, print_live};
         once and measures under SCHED_OTHER, saying so in the header. Stop early with Ctrl-C.",
     after_help = "Examples:\n  latency -D 5s -q                 5 s, one thread, FIFO 80, summary only\n  \
         latency -i 1000 -p 80 -a 1 -m -D 60s --json out.json\n  latency -t -a -h 100 -l 10000      one thread per CPU, pinned, histogram to 100 us\n  \
-        latency attach user1 -D 60s       a running station's servo and physics loops"
+        latency attach user1 -D 60s       a running station's servo and physics loops\n  \
+        latency vendor --library /usr/lib/libHD.so -D 10s   OpenHaptics' scheduler beside our loop"
 )]
 pub struct Args {
     /// Period of each thread in microseconds.
@@ -125,6 +128,26 @@ pub enum Attach {
         json: Option<PathBuf>,
         /// Print help (the top level gives `-h` to the histogram, as cyclictest does, and turns
         /// clap's own help flag off, which a subcommand inherits).
+        #[arg(short = 'h', long, action = ArgAction::Help)]
+        help: Option<bool>,
+    },
+    /// Run a vendor's own servo loop (OpenHaptics' HD scheduler, on the device its library finds)
+    /// beside ours, same run, same period and scheduling, and print how late each loop's ticks
+    /// start (against the previous tick's start plus the period) to p99.9.
+    Vendor {
+        /// OpenHaptics' libHD.so (or the mock the tests build).
+        #[arg(long, value_name = "FILE")]
+        library: PathBuf,
+        /// Run for this long (s, m, h, d).
+        #[arg(short = 'D', long, value_name = "TIME", value_parser = parse_duration, default_value = "10s")]
+        duration: Duration,
+        /// SCHED_FIFO priority of both loops (0: SCHED_OTHER); warns once if refused.
+        #[arg(short = 'p', long, default_value_t = 80)]
+        priority: i32,
+        /// Write both loops' figures as JSON to FILE.
+        #[arg(long, value_name = "FILE")]
+        json: Option<PathBuf>,
+        /// Print help.
         #[arg(short = 'h', long, action = ArgAction::Help)]
         help: Option<bool>,
     },

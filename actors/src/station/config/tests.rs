@@ -219,7 +219,7 @@ fn a_station_given_tls_presents_its_own_certificate() {
 
 #[test]
 fn each_rule_names_field_value_and_rule() {
-    let cases: [(&str, &str); 29] = [
+    let cases: [(&str, &str); 31] = [
         (
             "[device]\ndevice = \"haply\"\n[device.haply]\nurl = \"http://localhost:10001\"",
             "device.haply.url = \"http://localhost:10001\": must be a ws://host:port URL",
@@ -234,11 +234,19 @@ fn each_rule_names_field_value_and_rule() {
         ),
         (
             "[device]\ndevice = \"phantom\"",
-            "unknown variant `phantom`, expected one of `sim`, `replay`, `haply`, `dhd`",
+            "unknown variant `phantom`, expected one of `sim`, `replay`, `haply`, `dhd`, `openhaptics`",
         ),
         (
             "[device]\nloop = \"vendor\"",
             "device.loop = \"vendor\": device \"sim\" cannot call the station from its own thread",
+        ),
+        (
+            "[device]\ndevice = \"openhaptics\"",
+            "device.loop = \"station\": device \"openhaptics\" runs its servo inside OpenHaptics' scheduler",
+        ),
+        (
+            "[device]\ndevice = \"openhaptics\"\nloop = \"vendor\"\n[device.openhaptics]\nscheduler_rate_hz = 600",
+            "device.openhaptics.scheduler_rate_hz = 600: must be 500, 1000 or 2000",
         ),
         (
             "[device.safety]\nmax_force_n = 0",

@@ -16,7 +16,7 @@ use serde::Serialize;
 /// The device, as the servo last published it.
 #[derive(Debug, Clone, Serialize)]
 pub struct DeviceStatus {
-    /// `sim`, `replay`, `haply`, `dhd` or `ros2`.
+    /// `sim`, `replay`, `haply`, `dhd`, `openhaptics` or `ros2`.
     pub backend: String,
     /// The model, as the device says it.
     pub model: String,
