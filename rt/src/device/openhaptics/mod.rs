@@ -5,7 +5,7 @@
 //! The HD API owns the servo thread: its scheduler calls the application back once per servo tick
 //! (1 kHz by default), and the device's state may be read and its force set only inside such a
 //! callback, between `hdBeginFrame` and `hdEndFrame`. So this backend runs with `loop = "vendor"`:
-//! [`HdScheduler::run`] schedules one callback that opens a frame, runs the station's whole servo
+//! [`HdScheduler::run_hd`] schedules one callback that opens a frame, runs the station's whole servo
 //! step in it (the same step, rings, safety contract and stop ladder as our own loop), and closes
 //! the frame. [`OpenHapticsDevice`]'s `sample` and `command` are the HD calls made inside it.
 //!
@@ -275,7 +275,7 @@ impl OpenHapticsDevice {
     /// Loads the HD library (once per process), initialises the device, checks its calibration
     /// (updating it where the device asks), reads what it is, sets the scheduler's rate and
     /// enables the force output with the vendor's ramping and clamping. The scheduler is not
-    /// started: [`HdScheduler::run`] does that.
+    /// started: [`HdScheduler::run_hd`] does that.
     ///
     /// # Errors
     /// A bad config, no library, a library without the HD entry points, no device, a device that
@@ -338,7 +338,7 @@ impl OpenHapticsDevice {
         &self.api.file
     }
 
-    /// The scheduler that runs this device's servo loop (see [`HdScheduler::run`]).
+    /// The scheduler that runs this device's servo loop (see [`HdScheduler::run_hd`]).
     pub fn scheduler(&self) -> HdScheduler {
         HdScheduler::new(self.api, self.handle, self.shared.clone(), &self.config)
     }
