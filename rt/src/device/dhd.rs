@@ -193,48 +193,15 @@ mod ffi {
         _lib: libloading::Library,
     }
 
-    fn load_one(file: &Path) -> Result<libloading::Library, libloading::Error> {
-        // Loading runs the library's initialisers. We load only the file the station's config names
-        // (or the SDK's own name on the loader's path): a DHD SDK, whose initialisers only set up
-        // its own state.
-        // SAFETY: the trust any program linking the SDK gives it (above).
-        unsafe { libloading::Library::new(file) }
-    }
-
     impl Api {
         /// Loads the library at `configured`, or searches the default names and directories.
         pub(super) fn load(configured: Option<&Path>) -> Result<Self, DhdError> {
-            let (lib, file) = match configured {
-                Some(p) => (
-                    load_one(p).map_err(|e| DhdError::LibraryMissing {
-                        file: p.display().to_string(),
-                        reason: e.to_string(),
-                    })?,
-                    p.display().to_string(),
-                ),
-                None => {
-                    let mut tried = Vec::new();
-                    let candidates = DEFAULT_LIBRARIES.iter().map(PathBuf::from).chain(
-                        DEFAULT_DIRS.iter().flat_map(|d| {
-                            DEFAULT_LIBRARIES.iter().map(move |n| Path::new(d).join(n))
-                        }),
-                    );
-                    let mut found = None;
-                    for c in candidates {
-                        match load_one(&c) {
-                            Ok(l) => {
-                                found = Some((l, c.display().to_string()));
-                                break;
-                            }
-                            Err(_) => tried.push(c.display().to_string()),
-                        }
-                    }
-                    found.ok_or_else(|| DhdError::LibraryMissing {
-                        file: DEFAULT_LIBRARIES[0].to_owned(),
-                        reason: format!("searched {}", tried.join(", ")),
-                    })?
-                }
-            };
+            let (lib, file) =
+                crate::device::vendor_lib::load(configured, DEFAULT_LIBRARIES, DEFAULT_DIRS)
+                    .map_err(|m| DhdError::LibraryMissing {
+                        file: m.file,
+                        reason: m.reason,
+                    })?;
             macro_rules! sym {
                 ($name:literal) => {{
                     // The symbol's type is the DHD SDK's declaration of that function in dhdc.h

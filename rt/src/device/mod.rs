@@ -18,6 +18,7 @@ pub mod safety;
 mod scara;
 mod slot;
 mod station;
+mod vendor_lib;
 
 pub use cartesian::{
     CartesianDevice, Command, ConfigError, DeviceFault, DeviceInfo, ProbeReport, Sample,

@@ -106,14 +106,6 @@ pub(crate) struct Api {
 /// Every library loaded in this process, by the path it was asked for (or "" for the search).
 static LOADED: Mutex<Vec<(PathBuf, &'static Api)>> = Mutex::new(Vec::new());
 
-fn load_one(file: &Path) -> Result<libloading::Library, libloading::Error> {
-    // Loading runs the library's initialisers. We load only the file the station's config names
-    // (or OpenHaptics' own names on the loader's path): the HD library, whose initialisers set up
-    // its own state.
-    // SAFETY: the trust any program linking OpenHaptics gives it (above).
-    unsafe { libloading::Library::new(file) }
-}
-
 impl Api {
     /// The library at `configured` (or found by the default search), loaded on first use and kept
     /// for the process's life.
@@ -131,37 +123,13 @@ impl Api {
     }
 
     fn open(configured: Option<&Path>) -> Result<Self, OpenHapticsError> {
-        let (lib, file) = match configured {
-            Some(p) => (
-                load_one(p).map_err(|e| OpenHapticsError::LibraryMissing {
-                    file: p.display().to_string(),
-                    reason: e.to_string(),
-                })?,
-                p.display().to_string(),
-            ),
-            None => {
-                let mut tried = Vec::new();
-                let candidates = DEFAULT_LIBRARIES.iter().map(PathBuf::from).chain(
-                    DEFAULT_DIRS
-                        .iter()
-                        .flat_map(|d| DEFAULT_LIBRARIES.iter().map(move |n| Path::new(d).join(n))),
-                );
-                let mut found = None;
-                for c in candidates {
-                    match load_one(&c) {
-                        Ok(l) => {
-                            found = Some((l, c.display().to_string()));
-                            break;
-                        }
-                        Err(_) => tried.push(c.display().to_string()),
-                    }
-                }
-                found.ok_or_else(|| OpenHapticsError::LibraryMissing {
-                    file: DEFAULT_LIBRARIES[0].to_owned(),
-                    reason: format!("searched {}", tried.join(", ")),
-                })?
-            }
-        };
+        let (lib, file) =
+            crate::device::vendor_lib::load(configured, DEFAULT_LIBRARIES, DEFAULT_DIRS).map_err(
+                |m| OpenHapticsError::LibraryMissing {
+                    file: m.file,
+                    reason: m.reason,
+                },
+            )?;
         macro_rules! sym {
             ($name:literal) => {{
                 // The symbol's type is OpenHaptics' declaration of that function in hd.h or

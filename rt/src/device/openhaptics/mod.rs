@@ -90,6 +90,13 @@ impl Default for OpenHapticsConfig {
 }
 
 impl OpenHapticsConfig {
+    /// The device's name for `hdInitDevice` (validated: no NUL), none for the default device.
+    fn device_name_c(&self) -> Option<CString> {
+        self.device_name
+            .as_ref()
+            .map(|n| CString::new(n.as_str()).unwrap_or_default())
+    }
+
     /// Checks every field.
     ///
     /// # Errors
@@ -285,10 +292,7 @@ impl OpenHapticsDevice {
         let api = Api::load(config.library.as_deref())?;
         // Whatever an earlier user of this process left on the stack is not ours.
         api.drain_errors();
-        let name = config
-            .device_name
-            .as_ref()
-            .map(|n| CString::new(n.as_str()).unwrap_or_default());
+        let name = config.device_name_c();
         let handle = api.init_device(name.as_deref());
         if let Some(code) = api.take_error() {
             if handle != HD_INVALID_HANDLE {
@@ -501,10 +505,7 @@ pub fn probe(config: &OpenHapticsConfig) -> ProbeReport {
         }
     };
     api.drain_errors();
-    let name = config
-        .device_name
-        .as_ref()
-        .map(|n| CString::new(n.as_str()).unwrap_or_default());
+    let name = config.device_name_c();
     let handle = api.init_device(name.as_deref());
     match api.take_error() {
         None if handle != HD_INVALID_HANDLE => {
