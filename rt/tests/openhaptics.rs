@@ -49,12 +49,31 @@ fn no_device_and_a_device_wanting_its_inkwell_are_refused_and_leave_nothing_init
     assert!(msg.contains("Touch Setup"), "the advice: {msg}");
     assert_eq!(mock.get("initialized"), 0.0);
 
+    // A device that wants its stylus in the inkwell opens (the inkwell calibrates it once the
+    // scheduler runs), and every tick is a calibration fault until it has.
     mock.reset();
     mock.set("calibration", HD_CALIBRATION_NEEDS_MANUAL_INPUT);
-    let e = OpenHapticsDevice::open(&mock.config()).expect_err("uncalibrated");
-    assert_eq!(e, OpenHapticsError::NeedsCalibration);
-    assert!(e.to_string().contains("inkwell"), "{e}");
-    assert_eq!(mock.get("initialized"), 0.0, "disabled again");
+    let mut dev = OpenHapticsDevice::open(&mock.config()).expect("opens uncalibrated");
+    let sched = dev.scheduler();
+    let mut seen = Vec::new();
+    let mut k = 0;
+    sched
+        .run_hd(None, &mut |now| {
+            k += 1;
+            if k == 10 {
+                mock.set("calibration", 20480.0); // HD_CALIBRATION_OK: in the inkwell
+            }
+            seen.push(dev.sample(now).map(|_| ()));
+            k < 20
+        })
+        .expect("runs");
+    let uncalibrated = Err(DeviceFault::CallFailed {
+        call: "hdCheckCalibration",
+        code: 0x5002,
+    });
+    assert!(seen[..9].iter().all(|r| *r == uncalibrated), "{seen:?}");
+    assert!(seen[10..].iter().all(Result::is_ok), "{seen:?}");
+    drop(dev);
 
     // A device that asks for an update gets it, and opens.
     mock.reset();
@@ -138,13 +157,18 @@ fn the_servo_step_runs_in_the_schedulers_frames_and_its_force_is_displayed() {
     assert_eq!(mock.get("initialized"), 0.0);
 }
 
-/// Runs the device under the safety contract, pushing `f` each tick; `inject` is called once at
-/// tick 100. Returns the tick at which the mock's displayed force was zero again after the
-/// injection, and the guard's last fault.
-fn fault_run(
-    mock: &Mock,
-    inject: impl Fn(&Mock) + Sync,
-) -> (Option<u64>, Option<DeviceFault>, Option<Limit>) {
+/// What a fault run left: the ticks from the injection to zero displayed force, the guard's last
+/// fault and limit, and how the scheduler's run ended.
+type FaultRun = (
+    Option<u64>,
+    Option<DeviceFault>,
+    Option<Limit>,
+    Result<(), OpenHapticsError>,
+);
+
+/// Runs the device under the safety contract, pushing 0.5 N each tick; `inject` is called once at
+/// tick 100.
+fn fault_run(mock: &Mock, inject: impl Fn(&Mock) + Sync) -> FaultRun {
     let dev = OpenHapticsDevice::open(&mock.config()).expect("opens");
     let sched = dev.scheduler();
     let mut g = Guarded::new(dev, limits(), 0);
@@ -163,66 +187,97 @@ fn fault_run(
         }
         k < 200
     });
-    run.expect("the scheduler ran to the end");
     let fault = g.last_fault().map(|(f, _)| f);
     let trip = g.last_trip().map(|t| t.limit);
     g.close(0);
-    (zero_at, fault, trip)
+    (zero_at, fault, trip, run.map(|_| ()))
 }
 
 #[test]
 fn each_injected_fault_ends_in_zero_force_within_the_watchdog() {
     let (mock, _g) = Mock::lock();
     let watchdog_ticks = (limits().watchdog_s * 1e3) as u64;
-    // An HD error at the end of a frame (the link to the device lost).
-    let (zero, fault, trip) = fault_run(mock, |m| {
+    // An HD error at the end of a frame (the link to the device lost): the device drops its
+    // output, and the run ends with the output off (the station restarts the servo).
+    let (_, _, _, run) = fault_run(mock, |m| {
         m.set("error_code", HD_COMM_ERROR);
         m.set("error_at_frame", m.get("frames") + 1.0);
     });
+    let e = run.expect_err("the run ends");
+    assert!(
+        matches!(
+            e,
+            OpenHapticsError::CallFailed {
+                call: "hdEndFrame",
+                code: 0x0302,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert_eq!(mock.get("force_output"), 0.0);
+    assert_eq!(mock.force(), [0.0; 3]);
+
+    // An HD error the device keeps its output through (an invalid value) is the next sample's
+    // fault: the safety layer releases, and the run goes on.
+    mock.reset();
+    let (zero, fault, trip, run) = fault_run(mock, |m| {
+        m.set("error_code", 257.0); // HD_INVALID_VALUE
+        m.set("error_at_frame", m.get("frames") + 1.0);
+    });
+    run.expect("the run goes on");
     assert!(
         zero.is_some_and(|t| t <= watchdog_ticks),
-        "comm error: zero at {zero:?}"
+        "invalid value: zero at {zero:?}"
     );
-    assert_eq!(
-        fault,
-        Some(DeviceFault::CallFailed {
-            call: "hdEndFrame",
-            code: 0x0302
-        })
-    );
+    let invalid = DeviceFault::CallFailed {
+        call: "hdEndFrame",
+        code: 0x0101,
+    };
+    assert_eq!(fault, Some(invalid));
     assert_eq!(trip, Some(Limit::Fault));
 
     // The calibration lost mid-run (the stylus must go back in its inkwell).
     mock.reset();
-    let (zero, fault, _) = fault_run(mock, |m| {
+    let (zero, fault, _, run) = fault_run(mock, |m| {
         m.set("calibration", HD_CALIBRATION_NEEDS_MANUAL_INPUT)
     });
+    run.expect("the run goes on");
     assert!(
         zero.is_some_and(|t| t <= watchdog_ticks),
         "calibration: zero at {zero:?}"
     );
-    assert_eq!(
-        fault,
-        Some(DeviceFault::CallFailed {
-            call: "hdCheckCalibration",
-            code: 0x5002
-        })
-    );
+    let uncalibrated = DeviceFault::CallFailed {
+        call: "hdCheckCalibration",
+        code: 0x5002,
+    };
+    assert_eq!(fault, Some(uncalibrated));
 
-    // The device's own over-force error (its force output goes off).
+    // The device's own over-force error: its output goes off, and the run ends.
     mock.reset();
-    let (zero, fault, _) = fault_run(mock, |m| m.set("over_force", 1.0));
+    let (_, _, _, run) = fault_run(mock, |m| m.set("over_force", 1.0));
+    let e = run.expect_err("the run ends");
     assert!(
-        zero.is_some_and(|t| t <= watchdog_ticks),
-        "over-force: zero at {zero:?}"
+        matches!(
+            e,
+            OpenHapticsError::CallFailed {
+                call: "hdEndFrame",
+                code: 0x0201,
+                ..
+            }
+        ),
+        "{e}"
     );
-    assert_eq!(
-        fault,
-        Some(DeviceFault::CallFailed {
-            call: "hdEndFrame",
-            code: 0x0201
-        })
-    );
+    assert_eq!(mock.get("force_output"), 0.0);
+    assert_eq!(mock.force(), [0.0; 3]);
+
+    // The servo step panicking in the callback: caught there, the output off, the run ended.
+    mock.reset();
+    let (_, _, _, run) = fault_run(mock, |_| panic!("a servo step's bug"));
+    assert_eq!(run, Err(OpenHapticsError::ServoPanicked));
+    assert_eq!(mock.get("force_output"), 0.0);
+    assert_eq!(mock.force(), [0.0; 3]);
+    assert_eq!(mock.get("scheduler_running"), 0.0);
 }
 
 #[test]

@@ -36,7 +36,6 @@ pub(crate) mod consts {
 
     pub(crate) const HD_CALIBRATION_OK: u32 = 0x5000;
     pub(crate) const HD_CALIBRATION_NEEDS_UPDATE: u32 = 0x5001;
-    pub(crate) const HD_CALIBRATION_ENCODER_RESET: u32 = 1 << 0;
     pub(crate) const HD_CALIBRATION_AUTO: u32 = 1 << 1;
     pub(crate) const HD_CALIBRATION_INKWELL: u32 = 1 << 2;
 
@@ -237,9 +236,10 @@ impl Api {
 
     /// `N` doubles of parameter `p` (NaN where the call wrote none).
     pub(crate) fn doubles<const N: usize>(&self, p: u32) -> [f64; N] {
-        // The HD API writes as many values as the parameter has; the buffer is the largest any
-        // parameter used here has (a workspace's six), so a parameter longer than asked for
-        // cannot write past it.
+        const { assert!(N <= 16, "at most a transform's sixteen doubles") };
+        // The HD API writes as many values as the parameter has; the buffer holds the largest any
+        // parameter has (a transform's sixteen), so a parameter longer than asked for cannot
+        // write past it.
         let mut out = [f64::NAN; 16];
         // SAFETY: hdGetDoublev(HDenum, HDdouble*) writes at most 16 doubles (a transform, the
         // largest parameter) through a valid pointer to a local array of 16.

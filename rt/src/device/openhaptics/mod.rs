@@ -134,11 +134,12 @@ impl OpenHapticsConfig {
                 "must be 500, 1000 or 2000 (the rates the HD scheduler runs devices at)",
             ));
         }
-        if !(1.0..=100.0).contains(&self.stall_ms) {
+        let three_ticks_ms = 3e3 / f64::from(self.scheduler_rate_hz);
+        if !((1.0..=100.0).contains(&self.stall_ms) && self.stall_ms >= three_ticks_ms) {
             return Err(bad(
                 "stall_ms",
                 self.stall_ms.to_string(),
-                "must be in 1..=100 ms (a few scheduler ticks, and within the safety watchdog)",
+                &format!("must be in 1..=100 ms and at least three scheduler ticks ({three_ticks_ms} ms at scheduler_rate_hz)"),
             ));
         }
         Ok(())
@@ -181,9 +182,9 @@ pub enum OpenHapticsError {
         /// What to do about it, where we know.
         advice: &'static str,
     },
-    /// The device needs its stylus put in the inkwell (or another manual calibration).
-    #[error("the device asks for manual calibration (hdCheckCalibration: HD_CALIBRATION_NEEDS_MANUAL_INPUT): put the stylus in its inkwell, or calibrate it in Touch Diagnostic, then start again")]
-    NeedsCalibration,
+    /// The servo step panicked inside the scheduler's callback (the force output was turned off).
+    #[error("the servo step panicked inside the HD scheduler's callback; the force output was turned off")]
+    ServoPanicked,
     /// The scheduler stopped calling back while the station ran.
     #[error("the HD scheduler stopped calling the servo for {ms} ms (device.openhaptics.stall_ms); the force output was turned off")]
     Stalled {
@@ -285,8 +286,8 @@ impl OpenHapticsDevice {
     /// started: [`HdScheduler::run_hd`] does that.
     ///
     /// # Errors
-    /// A bad config, no library, a library without the HD entry points, no device, a device that
-    /// needs manual calibration, or a setup call failing (the device is disabled again).
+    /// A bad config, no library, a library without the HD entry points, no device, or a setup
+    /// call failing (the output is turned off and the device disabled again).
     pub fn open(config: &OpenHapticsConfig) -> Result<Self, OpenHapticsError> {
         config.validate().map_err(OpenHapticsError::Config)?;
         let api = Api::load(config.library.as_deref())?;
@@ -304,29 +305,39 @@ impl OpenHapticsDevice {
             return Err(call_failed(api, "hdInitDevice", HD_COMM_CONFIG_ERROR));
         }
         let fail = |e: OpenHapticsError| {
+            api.disable(HD_FORCE_OUTPUT);
             api.disable_device(handle);
+            api.drain_errors();
             e
         };
+        let check = |call: &'static str| match api.take_error() {
+            Some(code) => Err(fail(call_failed(api, call, code))),
+            None => Ok(()),
+        };
         api.make_current(handle);
-        match api.check_calibration() {
-            HD_CALIBRATION_OK => {}
-            HD_CALIBRATION_NEEDS_UPDATE => {
-                api.update_calibration(calibration_style(api));
-                if api.check_calibration() != HD_CALIBRATION_OK {
-                    return Err(fail(OpenHapticsError::NeedsCalibration));
-                }
+        check("hdMakeCurrentDevice")?;
+        // Updated where the device asks in a style that needs no pose of the arm. A device that
+        // wants its stylus in the inkwell opens: the inkwell calibrates it once the scheduler
+        // runs (as the vendor's own examples do), and until then every tick is a calibration
+        // fault, the force held released.
+        if api.check_calibration() == HD_CALIBRATION_NEEDS_UPDATE {
+            if let Some(style) = calibration_style(api) {
+                api.update_calibration(style);
+                check("hdUpdateCalibration")?;
             }
-            _ => return Err(fail(OpenHapticsError::NeedsCalibration)),
         }
+        api.drain_errors();
+        // A parameter a device does not have is left at its fallback (`describe`).
         let info = describe(api, config.scheduler_rate_hz);
+        api.drain_errors();
         api.set_scheduler_rate(config.scheduler_rate_hz);
+        check("hdSetSchedulerRate")?;
         // The vendor's ramp on enable and its clamp to the device's maximum, behind ours.
         api.enable(HD_FORCE_RAMPING);
         api.enable(HD_MAX_FORCE_CLAMPING);
+        check("hdEnable")?;
         api.enable(HD_FORCE_OUTPUT);
-        if let Some(code) = api.take_error() {
-            return Err(fail(call_failed(api, "hdEnable", code)));
-        }
+        check("hdEnable")?;
         Ok(Self {
             api,
             handle,
@@ -363,17 +374,13 @@ impl OpenHapticsDevice {
     }
 }
 
-/// The calibration style the device supports, preferring the automatic ones.
-fn calibration_style(api: &Api) -> u32 {
+/// The calibration style to update with: automatic, or the inkwell; none where the device has
+/// only the encoder reset, which needs the arm held at its reset pose (a person's doing).
+fn calibration_style(api: &Api) -> Option<u32> {
     let styles = u32::try_from(api.integer(HD_CALIBRATION_STYLE)).unwrap_or(0);
-    [
-        HD_CALIBRATION_AUTO,
-        HD_CALIBRATION_INKWELL,
-        HD_CALIBRATION_ENCODER_RESET,
-    ]
-    .into_iter()
-    .find(|s| styles & s != 0)
-    .unwrap_or(HD_CALIBRATION_AUTO)
+    [HD_CALIBRATION_AUTO, HD_CALIBRATION_INKWELL]
+        .into_iter()
+        .find(|s| styles & s != 0)
 }
 
 impl CartesianDevice for OpenHapticsDevice {

@@ -23,6 +23,27 @@ pub struct HdScheduler {
     stall: Duration,
 }
 
+/// What ended a run from inside the callback.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u64)]
+enum Ended {
+    /// `hdBeginFrame` failed: nothing of the device could be touched.
+    BeginFrame = 1,
+    /// The device dropped its force output for an error of its own (a force or device error).
+    DeviceError = 2,
+    /// The servo step panicked.
+    Panic = 3,
+}
+
+/// The HD errors after which a device drops its force output (`hdDefines.h`'s force errors and
+/// device faults): the run ends, the servo is restarted and ramps in again from a fresh start.
+fn drops_output(code: u32) -> bool {
+    matches!(code, 0x0200..=0x0204 | 0x0300 | 0x0302..=0x0304)
+}
+
+/// How long the first tick may take to come after the scheduler starts, beyond `stall_ms`.
+const FIRST_TICK_GRACE: Duration = Duration::from_millis(250);
+
 /// What the callback works with; lives on [`HdScheduler::run_hd`]'s stack while the scheduler
 /// may call it. Shared between the scheduler's thread and the watching one: the watcher reads
 /// only the atomics, and only the scheduler's thread reaches into `tick`.
@@ -37,8 +58,12 @@ struct Context<'a> {
     last_ns: AtomicU64,
     /// 1 once the callback has returned `HD_CALLBACK_DONE`.
     done: AtomicU64,
-    /// An HD call of the callback's own failed (`hdBeginFrame`), and with what (0: none).
-    failed: AtomicU64,
+    /// What ended the run from inside the callback (0: nothing): see [`Ended`].
+    ended: AtomicU64,
+    /// The HD code that ended it.
+    code: AtomicU64,
+    /// Callbacks running now (0 or 1): the watcher must not free the context under one.
+    inside: AtomicU64,
 }
 
 impl HdScheduler {
@@ -84,17 +109,19 @@ impl HdScheduler {
             period_ns: self.period_ns,
             last_ns: AtomicU64::new(0),
             done: AtomicU64::new(0),
-            failed: AtomicU64::new(0),
+            ended: AtomicU64::new(0),
+            code: AtomicU64::new(0),
+            inside: AtomicU64::new(0),
         };
         api.drain_errors();
         // SAFETY: `ctx` outlives every call of the callback: the scheduler is stopped and the
         // callback unscheduled below before this function returns (on every path); the callback
         // takes it as a shared reference, and only its thread reaches into `tick`.
         let h = unsafe { api.schedule(servo_callback, std::ptr::from_ref(&ctx).cast_mut().cast()) };
-        if let Some(code) = api.take_error().or((h == 0).then_some(HD_COMM_ERROR)) {
-            if h != 0 {
-                api.unschedule(h);
-            }
+        if let Some(code) = api.take_error() {
+            // Whatever the handle, nothing may stay scheduled with a pointer to `ctx`.
+            api.unschedule(h);
+            api.drain_errors();
             return Err(call_failed(api, "hdScheduleAsynchronous", code));
         }
         api.start_scheduler();
@@ -107,6 +134,8 @@ impl HdScheduler {
         // scheduler is turned off from here.
         let mut seen = self.shared.ticks.load(Ordering::Acquire);
         let mut since = Instant::now();
+        // The first tick may come late (the vendor's thread starting): more time for it.
+        let mut allowed = self.stall + FIRST_TICK_GRACE;
         let poll = (self.stall / 4).clamp(Duration::from_micros(500), Duration::from_millis(5));
         let mut stalled = None;
         while ctx.done.load(Ordering::Acquire) == 0 {
@@ -115,7 +144,8 @@ impl HdScheduler {
             if now != seen {
                 seen = now;
                 since = Instant::now();
-            } else if since.elapsed() >= self.stall {
+                allowed = self.stall;
+            } else if since.elapsed() >= allowed {
                 // Off first: the vendor's thread may be the one that hangs.
                 api.disable(HD_FORCE_OUTPUT);
                 stalled = Some(u64::try_from(since.elapsed().as_millis()).unwrap_or(u64::MAX));
@@ -124,18 +154,28 @@ impl HdScheduler {
         }
         api.stop_scheduler();
         api.unschedule(h);
+        if ctx.inside.load(Ordering::Acquire) != 0 {
+            // The vendor's stop returned with our callback still running on its thread: `ctx`
+            // (and the servo it reaches) cannot be freed under it, nor the run go on. Output off,
+            // and the process ends here; the supervisor starts a new servo.
+            api.disable(HD_FORCE_OUTPUT);
+            std::process::abort();
+        }
         self.shared.in_frame.store(0, Ordering::Release);
         api.drain_errors();
         let ticks = self.shared.ticks.load(Ordering::Acquire) - start_ticks;
-        if let Some(ms) = stalled {
-            return Err(OpenHapticsError::Stalled { ms });
+        // What the callback said ended the run comes first: a panic's report may outlast
+        // `stall_ms`, and the watcher then took it for a stall.
+        let code = u32::try_from(ctx.code.load(Ordering::Acquire)).unwrap_or(u32::MAX);
+        match ctx.ended.load(Ordering::Acquire) {
+            x if x == Ended::BeginFrame as u64 => Err(call_failed(api, "hdBeginFrame", code)),
+            x if x == Ended::DeviceError as u64 => Err(call_failed(api, "hdEndFrame", code)),
+            x if x == Ended::Panic as u64 => Err(OpenHapticsError::ServoPanicked),
+            _ => match stalled {
+                Some(ms) => Err(OpenHapticsError::Stalled { ms }),
+                None => Ok(VendorLoopSummary { ticks }),
+            },
         }
-        let failed = ctx.failed.load(Ordering::Acquire);
-        if failed != 0 {
-            let code = u32::try_from(failed).unwrap_or(u32::MAX);
-            return Err(call_failed(api, "hdBeginFrame", code));
-        }
-        Ok(VendorLoopSummary { ticks })
     }
 }
 
@@ -154,38 +194,67 @@ impl VendorLoop for HdScheduler {
 unsafe extern "C" fn servo_callback(data: *mut c_void) -> u32 {
     // REAL-TIME: no allocation, no lock, no logging; the HD API's own calls and the servo step.
     // SAFETY: `data` is the `Context` `run_hd` scheduled, alive until it has stopped the scheduler
-    // and unscheduled this callback; shared with the watching thread, which reads only atomics.
+    // and unscheduled this callback (and, should the vendor's stop return while this still runs,
+    // `inside` makes `run_hd` end the process rather than free it); shared with the watching
+    // thread, which reads only atomics.
     let ctx = unsafe { &*data.cast::<Context<'_>>() };
+    ctx.inside.fetch_add(1, Ordering::AcqRel);
+    let code = tick_once(ctx);
+    ctx.inside.store(0, Ordering::Release);
+    code
+}
+
+/// One tick: the calibration, the frame, the servo step in it, what the frame left.
+fn tick_once(ctx: &Context<'_>) -> u32 {
+    // REAL-TIME: no allocation, no lock, no logging; the HD API's own calls and the servo step.
     if ctx.done.load(Ordering::Relaxed) != 0 {
         return HD_CALLBACK_DONE;
     }
     let (api, shared) = (ctx.api, ctx.shared);
     let woke = monotonic_ns();
-    // The calibration as the device sees it now; updated where it asks (a manual one it cannot
-    // be: the device faults until its stylus is back in the inkwell).
-    let mut cal = api.check_calibration();
+    // The calibration as the device sees it now. Updated where it asks (in a style that needs no
+    // pose of the arm); the tick of an update, and any manual need, is a fault, so the safety
+    // layer holds the force released and ramps it in again from the new positions.
+    let cal = api.check_calibration();
     if cal == HD_CALIBRATION_NEEDS_UPDATE {
-        api.update_calibration(calibration_style(api));
-        shared.calibration_updates.fetch_add(1, Ordering::Relaxed);
-        cal = api.check_calibration();
+        if let Some(style) = calibration_style(api) {
+            api.update_calibration(style);
+            shared.calibration_updates.fetch_add(1, Ordering::Relaxed);
+        }
     }
     shared.calibration.store(u64::from(cal), Ordering::Release);
+    // What the calibration calls left is not the frame's.
+    api.drain_errors();
     api.begin_frame(ctx.handle);
     if let Some(code) = api.take_error() {
         // No frame: nothing of the device may be touched this tick; the run ends.
-        ctx.failed.store(u64::from(code), Ordering::Release);
         api.disable(HD_FORCE_OUTPUT);
-        ctx.done.store(1, Ordering::Release);
-        return HD_CALLBACK_DONE;
+        return end(ctx, Ended::BeginFrame, code);
     }
     shared.in_frame.store(1, Ordering::Release);
     // SAFETY: only the scheduler's one thread runs this callback, one call at a time, so this is
     // the only reference to the tick closure while it runs (the watcher never touches it).
     let tick = unsafe { &mut *ctx.tick.get() };
-    let keep_going = tick(woke);
+    // A panic must not unwind out of the C callback (that aborts with the force on): caught, the
+    // frame's force is zeroed, the output turned off, and the run ends.
+    let stepped = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| tick(woke)));
     shared.in_frame.store(0, Ordering::Release);
+    if stepped.is_err() {
+        api.set_force(coop_model::body::Vec3::zeros());
+        api.end_frame(ctx.handle);
+        api.disable(HD_FORCE_OUTPUT);
+        api.drain_errors();
+        return end(ctx, Ended::Panic, 0);
+    }
     api.end_frame(ctx.handle);
+    // The first error the frame left (the rest drained): a device that dropped its output for
+    // it ends the run; any other is the next sample's fault.
     if let Some(code) = api.take_error() {
+        api.drain_errors();
+        if drops_output(code) {
+            api.disable(HD_FORCE_OUTPUT);
+            return end(ctx, Ended::DeviceError, code);
+        }
         shared.end_error.store(u64::from(code), Ordering::Release);
     }
     let done = monotonic_ns();
@@ -198,15 +267,22 @@ unsafe extern "C" fn servo_callback(data: *mut c_void) -> u32 {
         } else {
             woke.saturating_sub(last + ctx.period_ns)
         };
-        let missed = u64::from(late >= ctx.period_ns);
-        s.record(late, done.saturating_sub(woke), missed);
+        s.record(late, done.saturating_sub(woke), late / ctx.period_ns.max(1));
     }
     ctx.last_ns.store(woke, Ordering::Relaxed);
     shared.ticks.fetch_add(1, Ordering::Release);
-    if keep_going {
+    if stepped.unwrap_or(false) {
         HD_CALLBACK_CONTINUE
     } else {
         ctx.done.store(1, Ordering::Release);
         HD_CALLBACK_DONE
     }
+}
+
+/// Ends the run from inside the callback for `why`, with the HD `code`.
+fn end(ctx: &Context<'_>, why: Ended, code: u32) -> u32 {
+    ctx.code.store(u64::from(code), Ordering::Release);
+    ctx.ended.store(why as u64, Ordering::Release);
+    ctx.done.store(1, Ordering::Release);
+    HD_CALLBACK_DONE
 }
