@@ -225,9 +225,10 @@ const MAX_SCHEDULED: usize = 32;
 #[derive(Clone, Copy)]
 struct UserData(*mut c_void);
 
-// SAFETY: the library never dereferences the pointer; it only passes it back to the callback it
-// was registered with, possibly on the scheduler thread. That the data may be used from there is
-// the caller's side of the HD scheduler contract, as with the vendor's library.
+// The library never dereferences the pointer; it only passes it back to the callback it was
+// registered with, possibly on the scheduler thread. That the data may be used from there is the
+// caller's side of the HD scheduler contract, as with the vendor's library.
+// SAFETY: sent only to be handed back, never dereferenced here (above).
 unsafe impl Send for UserData {}
 
 struct Entry {

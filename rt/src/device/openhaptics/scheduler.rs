@@ -114,9 +114,10 @@ impl HdScheduler {
             inside: AtomicU64::new(0),
         };
         api.drain_errors();
-        // SAFETY: `ctx` outlives every call of the callback: the scheduler is stopped and the
-        // callback unscheduled below before this function returns (on every path); the callback
-        // takes it as a shared reference, and only its thread reaches into `tick`.
+        // `ctx` outlives every call of the callback: the scheduler is stopped and the callback
+        // unscheduled below before this function returns (on every path); the callback takes it
+        // as a shared reference, and only its thread reaches into `tick`.
+        // SAFETY: `ctx` stays valid for as long as the callback may run (above).
         let h = unsafe { api.schedule(servo_callback, std::ptr::from_ref(&ctx).cast_mut().cast()) };
         if let Some(code) = api.take_error() {
             // Whatever the handle, nothing may stay scheduled with a pointer to `ctx`.
@@ -193,10 +194,11 @@ impl VendorLoop for HdScheduler {
 /// The scheduler's callback: one servo tick in one frame.
 unsafe extern "C" fn servo_callback(data: *mut c_void) -> u32 {
     // REAL-TIME: no allocation, no lock, no logging; the HD API's own calls and the servo step.
-    // SAFETY: `data` is the `Context` `run_hd` scheduled, alive until it has stopped the scheduler
-    // and unscheduled this callback (and, should the vendor's stop return while this still runs,
+    // `data` is the `Context` `run_hd` scheduled, alive until it has stopped the scheduler and
+    // unscheduled this callback (and, should the vendor's stop return while this still runs,
     // `inside` makes `run_hd` end the process rather than free it); shared with the watching
     // thread, which reads only atomics.
+    // SAFETY: a live `Context`, only ever borrowed shared (above).
     let ctx = unsafe { &*data.cast::<Context<'_>>() };
     ctx.inside.fetch_add(1, Ordering::AcqRel);
     let code = tick_once(ctx);
