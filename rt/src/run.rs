@@ -85,7 +85,7 @@ pub fn run_vendor(
     let summary = vendor.run(Some(stats), &mut tick)?;
     Ok(RunSummary {
         cycles: summary.ticks,
-        overruns: stats.snapshot().overruns,
+        overruns: stats.overruns.load(Ordering::Relaxed),
     })
 }
 

@@ -284,7 +284,6 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
             RunState::Stopping | RunState::Stopped => !servo.is_limp(),
         }
     };
-    let servo_period = period(sc.site[i].servo_rate_hz);
     let ended = match &vendor {
         Some(v) => run_vendor(
             &ctl,
@@ -300,7 +299,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
                 &ctl,
                 Child::Servo,
                 &ctl.servo.stats,
-                servo_period,
+                period(sc.site[i].servo_rate_hz),
                 &in_force,
                 step,
             );

@@ -124,6 +124,22 @@ impl LoopStats {
         self.period_ns.store(ns, Ordering::Relaxed);
     }
 
+    /// Records one tick of a loop that has no deadlines of its own to wake to (a vendor's loop,
+    /// which calls us): its lateness is its start against the previous tick's start plus the
+    /// period (none for the first, `previous_ns` 0), and each whole period of it a missed tick.
+    /// Only the loop that owns these statistics may call this.
+    #[inline]
+    pub fn record_tick(&self, started_ns: u64, previous_ns: u64, compute_ns: u64) {
+        // REAL-TIME: no allocation, no lock, no logging, no syscalls.
+        let period = self.period_ns.load(Ordering::Relaxed).max(1);
+        let late = if previous_ns == 0 {
+            0
+        } else {
+            started_ns.saturating_sub(previous_ns + period)
+        };
+        self.record(late, compute_ns, late / period);
+    }
+
     /// Records one cycle. Only the loop that owns these statistics may call this.
     #[inline]
     pub fn record(&self, wake_ns: u64, compute_ns: u64, missed: u64) {

@@ -69,12 +69,8 @@ pub fn vendor(
             while stop.load(Ordering::Relaxed) == 0 {
                 // REAL-TIME: no allocation, no lock, no logging, no syscalls but the sleep.
                 let wake = timer.wait();
-                let late = if last == 0 {
-                    0
-                } else {
-                    wake.woke_ns.saturating_sub(last + period_ns)
-                };
-                ours.record(late, 0, u64::from(late >= period_ns));
+                // The vendor's figure, on our loop: start against the previous start.
+                ours.record_tick(wake.woke_ns, last, 0);
                 last = wake.woke_ns;
             }
         });

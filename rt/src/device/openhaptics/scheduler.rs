@@ -53,7 +53,6 @@ struct Context<'a> {
     shared: &'a FrameShared,
     tick: UnsafeCell<&'a mut (dyn FnMut(u64) -> bool + Send)>,
     stats: Option<&'a LoopStats>,
-    period_ns: u64,
     /// The previous tick's start, ns (0: none yet).
     last_ns: AtomicU64,
     /// 1 once the callback has returned `HD_CALLBACK_DONE`.
@@ -106,7 +105,6 @@ impl HdScheduler {
             shared: &self.shared,
             tick: UnsafeCell::new(tick),
             stats,
-            period_ns: self.period_ns,
             last_ns: AtomicU64::new(0),
             done: AtomicU64::new(0),
             ended: AtomicU64::new(0),
@@ -261,15 +259,11 @@ fn tick_once(ctx: &Context<'_>) -> u32 {
     }
     let done = monotonic_ns();
     if let Some(s) = ctx.stats {
-        // Lateness against the scheduler's own period, as our loop records its wake-ups against
-        // its deadlines.
-        let last = ctx.last_ns.load(Ordering::Relaxed);
-        let late = if last == 0 {
-            0
-        } else {
-            woke.saturating_sub(last + ctx.period_ns)
-        };
-        s.record(late, done.saturating_sub(woke), late / ctx.period_ns.max(1));
+        s.record_tick(
+            woke,
+            ctx.last_ns.load(Ordering::Relaxed),
+            done.saturating_sub(woke),
+        );
     }
     ctx.last_ns.store(woke, Ordering::Relaxed);
     shared.ticks.fetch_add(1, Ordering::Release);
