@@ -11,6 +11,7 @@
 //! - [`session`]: a multi-site session of real stations, recorded and measured; [`session_cli`]
 //!   its command line.
 //! - [`certs`]: a session's CA, certificates and access control (`session certs`).
+//! - [`study`]: a user study's design, its orders, its pilot in simulation and its analysis.
 //! - [`fuzz`]: hostile input at volume (wire, scenario, station config), judged by oracles.
 //!
 //! The binaries set up real-time threads but contain no real-time code of their own beyond the
@@ -54,4 +55,5 @@ pub mod sim;
 pub mod simbench;
 pub mod station;
 pub mod stats;
+pub mod study;
 pub mod sweep;

@@ -42,10 +42,10 @@ struct Series {
 }
 
 /// The horizontal axis: its range and label.
-struct XAxis {
+struct XAxis<'a> {
     from: f64,
     to: f64,
-    label: &'static str,
+    label: &'a str,
 }
 
 struct Panel {
@@ -69,7 +69,7 @@ fn draw<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     title: &str,
     panels: &[Panel],
-    x: &XAxis,
+    x: &XAxis<'_>,
 ) -> anyhow::Result<()>
 where
     DB::ErrorType: 'static,
@@ -166,7 +166,7 @@ fn write_both(
     stem: &str,
     title: &str,
     panels: &[Panel],
-    x: &XAxis,
+    x: &XAxis<'_>,
     size: (u32, u32),
 ) -> anyhow::Result<()> {
     let png = dir.join(format!("{stem}.png"));
@@ -425,6 +425,19 @@ pub struct TaskLine {
 /// # Errors
 /// The font is missing, or a file cannot be written.
 pub fn task(dir: &Path, title: &str, lines: &[TaskLine]) -> anyhow::Result<()> {
+    task_against(dir, title, "one-way delay (ms)", lines)
+}
+
+/// [`task`] against `x_label` (the lines' first coordinate), not the delay.
+///
+/// # Errors
+/// As [`task`].
+pub fn task_against(
+    dir: &Path,
+    title: &str,
+    x_label: &str,
+    lines: &[TaskLine],
+) -> anyhow::Result<()> {
     ensure_font()?;
     let delays = lines.iter().flat_map(|l| l.success_pct.iter().map(|p| p.0));
     let (lo, hi) = delays.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
@@ -436,7 +449,7 @@ pub fn task(dir: &Path, title: &str, lines: &[TaskLine]) -> anyhow::Result<()> {
     let x = XAxis {
         from: lo - nudge * lines.len() as f64,
         to: hi + nudge * lines.len() as f64,
-        label: "one-way delay (ms)",
+        label: x_label,
     };
     let series = |f: &dyn Fn(&TaskLine) -> &Vec<WithInterval>| -> Vec<Series> {
         lines

@@ -91,8 +91,12 @@ pub struct Scenario {
     pub name: String,
     /// What it shows.
     pub description: String,
-    /// Seed of every random choice (sensor noise, network).
+    /// Seed of every random choice (sensor noise, network, the participants' motor noise).
     pub seed: u64,
+    /// Seed the simulated participants are drawn with (their reaction times, reach and grip
+    /// parameters), instead of `seed`: a study keeps the same people through trials whose runs
+    /// differ.
+    pub people_seed: Option<u64>,
     /// Simulated time, s.
     pub duration_s: f64,
     /// Method for `sim run`.
@@ -385,6 +389,7 @@ impl Default for Scenario {
             name: "default".into(),
             description: String::new(),
             seed: 1,
+            people_seed: None,
             duration_s: 10.0,
             method: MethodName::Paper,
             dead_reckoning_order: 2,

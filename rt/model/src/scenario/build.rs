@@ -294,13 +294,24 @@ impl Scenario {
         self.task.judge(&self.object_names(), self.duration_s)
     }
 
-    /// Site `i`'s participant, a person drawn from the site's means with the scenario's seed
-    /// (`None`: the site follows its script). Valid scenarios only.
+    /// Site `i`'s participant, a person drawn from the site's means with the scenario's
+    /// `people_seed`, else its `seed` (`None`: the site follows its script); its motor noise
+    /// drawn with `seed`. Valid scenarios only.
     pub fn participant(&self, i: usize) -> Option<crate::participant::Participant> {
         let s = &self.site[i];
         if s.plan.is_empty() {
             return None;
         }
+        let stream = 2000 + i as u64;
+        // A person drawn apart is a mean with no spread: drawn again from the run's generator
+        // it is the same person to the bit (the draw takes the same numbers from that
+        // generator either way, so a scenario without `people_seed` runs as before).
+        let mean = match self.people_seed {
+            Some(seed) => s
+                .participant
+                .draw(&mut crate::rng::Rng::derive(seed, stream)),
+            None => s.participant,
+        };
         let names = self.object_names();
         let plan = s
             .plan
@@ -310,7 +321,7 @@ impl Scenario {
             .collect();
         let shapes: Vec<_> = self.world().bodies().iter().map(|b| b.shape).collect();
         Some(crate::participant::Participant::new(
-            &s.participant,
+            &mean,
             plan,
             crate::participant::Surroundings {
                 shapes: &shapes,
@@ -318,7 +329,7 @@ impl Scenario {
                 friction: self.contact.friction_static,
             },
             Vec3::from(s.script[0].target_m),
-            crate::rng::Rng::derive(self.seed, 2000 + i as u64),
+            crate::rng::Rng::derive(self.seed, stream),
         ))
     }
 }

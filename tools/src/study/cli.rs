@@ -1,0 +1,99 @@
+//! The `study` command line.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use clap::{Parser, Subcommand};
+
+/// A user study from its file to its figures: the trial order of every group (a balanced Latin
+/// square by default), a pilot with simulated participants in the simulator, and the analysis a
+/// paper needs (completion time and success per condition with within-subject intervals, a
+/// repeated-measures ANOVA, plots, and a table for R's afex or Python's pingouin). The study file
+/// is TOML: see docs/study.md and scenarios/studies/.
+#[derive(Debug, Parser)]
+#[command(name = "study", version)]
+pub struct Args {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// `study` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Check a study file and print every group's trials in the order they do them
+    Plan {
+        /// Study file (TOML)
+        file: PathBuf,
+    },
+    /// Run a study's trials and write trials.csv (one row per site and trial, appended as trials
+    /// finish), study.toml and meta.json into --out
+    Run {
+        /// Study file (TOML)
+        file: PathBuf,
+        /// Run it in the simulator with simulated participants (each group's people drawn once,
+        /// each trial its own run): a pilot before anyone is recruited. Needed: live stations are
+        /// not driven by `study` yet
+        #[arg(long)]
+        sim: bool,
+        /// Output directory (created; it must not hold a study's trials unless --resume)
+        #[arg(long)]
+        out: PathBuf,
+        /// Go on with the run in --out: keep every trial its table holds whole, run the others
+        /// (one that was begun and cut short is run again and marked `cut`)
+        #[arg(long)]
+        resume: bool,
+    },
+    /// Analyse a run: print and write report.txt, cells.csv and the plots (task.svg, task.png)
+    /// into its directory
+    Report {
+        /// The --out directory of a `study run`
+        dir: PathBuf,
+    },
+}
+
+/// Runs the command line.
+///
+/// # Errors
+/// A bad study file, output directory or table; a file that cannot be written.
+pub fn main(args: Args) -> anyhow::Result<()> {
+    match args.command {
+        Command::Plan { file } => {
+            let study = super::Study::load(&file)?;
+            print!("{}", study.plan_text());
+        }
+        Command::Run {
+            file,
+            sim,
+            out,
+            resume,
+        } => {
+            if !sim {
+                bail!("study run: only --sim is built so far (simulated participants in the simulator); trials on live stations are run one session at a time with `session run`");
+            }
+            let study = super::Study::load(&file)?;
+            let total = study.plan().len();
+            eprintln!(
+                "study {}: {total} trials of {} groups in the simulator, into {}",
+                study.file.name,
+                study.groups.len(),
+                out.display()
+            );
+            let ran = super::run::run_sim(&study, &out, resume, &mut |done, total| {
+                eprintln!("  {done}/{total} trials");
+            })?;
+            println!(
+                "study {}: {} trials run, {} kept from before, in {:.0} s; table {}",
+                study.file.name,
+                ran.ran,
+                ran.kept,
+                ran.seconds,
+                out.join("trials.csv").display()
+            );
+        }
+        Command::Report { dir } => {
+            print!("{}", super::report::report(&dir)?);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,340 @@
+//! `study run --sim`: a study's trials with simulated participants, in the simulator.
+//!
+//! Trials run on every core, a batch at a time; each finished batch is appended to
+//! `trials.csv` (one row per site and trial) and flushed before the next starts, so a run cut
+//! short (a crash, Ctrl-C) loses at most the batch in flight: `--resume` reads the table, keeps
+//! every trial it holds whole, and runs the rest. The simulator is deterministic, so a trial run
+//! again gives the same row to the bit. `meta.json` says what ran: the study file's hash, the
+//! commit, the machine, when.
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use coop_model::metrics;
+use coop_model::sim::{self, Mode};
+
+use super::{level_text, Study, Trial, COLUMNS};
+
+/// What a run of the trials did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ran {
+    /// Trials run now.
+    pub ran: usize,
+    /// Trials found done in the table (resumed).
+    pub kept: usize,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// The table's header: its own columns with the factors' after `order_position`.
+pub fn header(study: &Study) -> Vec<String> {
+    let mut h: Vec<String> = COLUMNS[..8].iter().map(|s| (*s).to_owned()).collect();
+    h.extend(study.file.factor.iter().map(|f| f.name.clone()));
+    h.extend(COLUMNS[8..].iter().map(|s| (*s).to_owned()));
+    h
+}
+
+/// Runs `study`'s trials in the simulator into `out` (created), or, with `resume`, those its
+/// `trials.csv` does not hold yet. `progress(done, total)` after each batch.
+///
+/// # Errors
+/// `out` holds another study's (or no) table when resuming, or holds one when not; a file cannot
+/// be written.
+pub fn run_sim(
+    study: &Study,
+    out: &Path,
+    resume: bool,
+    progress: &mut dyn FnMut(usize, usize),
+) -> anyhow::Result<Ran> {
+    let started = Instant::now();
+    let plan = study.plan();
+    let table = out.join("trials.csv");
+    let head = header(study).join(",");
+    let done = if resume {
+        let done = done_trials(study, &table, &head)?;
+        truncate_to_whole_trials(&table, &head, &done)?;
+        done
+    } else {
+        if table.exists() {
+            bail!(
+                "{} already holds a study's trials: give another --out, or --resume to go on with it",
+                out.display()
+            );
+        }
+        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+        let mut f =
+            File::create(&table).with_context(|| format!("creating {}", table.display()))?;
+        writeln!(f, "{head}")?;
+        std::fs::copy(&study.path, out.join("study.toml"))
+            .with_context(|| format!("copying {} into {}", study.path.display(), out.display()))?;
+        Vec::new()
+    };
+    let todo: Vec<&Trial> = plan
+        .iter()
+        .filter(|t| !done.contains(&(t.group_id.clone(), t.trial)))
+        .collect();
+    write_meta(study, out, plan.len())?;
+    let mut file = OpenOptions::new()
+        .append(true)
+        .open(&table)
+        .with_context(|| format!("opening {}", table.display()))?;
+    let batch = std::thread::available_parallelism().map_or(2, |n| n.get()) * 2;
+    let kept = plan.len() - todo.len();
+    let mut finished = kept;
+    // The trials begun: one begun but not in the table was cut short, and is marked when run
+    // again.
+    let begun_path = out.join("begun.txt");
+    let begun: Vec<String> = std::fs::read_to_string(&begun_path)
+        .unwrap_or_default()
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    let mut begun_log = OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&begun_path)
+        .with_context(|| format!("opening {}", begun_path.display()))?;
+    for chunk in todo.chunks(batch) {
+        for t in chunk {
+            writeln!(begun_log, "{} {}", t.group_id, t.trial)?;
+        }
+        begun_log.sync_data()?;
+        let rows = crate::sweep::par_map(chunk, |t| {
+            let cut = begun.contains(&format!("{} {}", t.group_id, t.trial));
+            trial_rows(study, t, cut)
+        });
+        for r in rows {
+            file.write_all(r?.as_bytes())?;
+        }
+        file.flush()?;
+        file.sync_data()?;
+        finished += chunk.len();
+        progress(finished, plan.len());
+    }
+    Ok(Ran {
+        ran: todo.len(),
+        kept,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// One trial in the simulator: its rows (one per site), as CSV lines; `cut`: a run of it was cut
+/// short before (this one replaces it).
+fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let sc = study.scenario_for(&t.levels, t.seed, study.people_seed(t.group))?;
+    let r = sim::run_wired(
+        &sc,
+        Mode::Distributed(sc.method),
+        &mut |_| {},
+        &coop_transport::wire::StationWire,
+    );
+    // The task's figures need no reference run (nothing here is compared with one): the run
+    // stands in for it, and the reference's columns are not written.
+    let m = metrics::compute(&sc, &r, &r);
+    let outcome = |s: &metrics::SiteMetrics| s.task.as_ref().map(|t| t.outcome.clone());
+    let trial_done = m
+        .sites
+        .iter()
+        .all(|s| outcome(s).as_deref() == Some("done"));
+    let completion = if trial_done {
+        m.sites
+            .iter()
+            .filter_map(|s| s.task.as_ref().map(|t| t.time_s))
+            .fold(f64::NEG_INFINITY, f64::max)
+    } else {
+        f64::NAN
+    };
+    let num = |v: f64, prec: usize| {
+        if v.is_finite() {
+            format!("{v:.prec$}")
+        } else {
+            String::new()
+        }
+    };
+    let group = &study.groups[t.group];
+    let mut out = String::new();
+    for (i, s) in m.sites.iter().enumerate() {
+        let task = s.task.clone().unwrap_or(coop_model::task::TaskFigures {
+            outcome: "undecided".into(),
+            time_s: f64::NAN,
+            failed_by: String::new(),
+            grip_mean_n: f64::NAN,
+            grip_peak_n: f64::NAN,
+            grip_margin: f64::NAN,
+            slips: 0,
+            steps: (0, 0),
+        });
+        let mut cells: Vec<String> = vec![
+            study.file.name.clone(),
+            t.group_id.clone(),
+            group.participants[i].clone(),
+            s.name.clone(),
+            t.block.to_string(),
+            t.trial.to_string(),
+            u8::from(t.practice).to_string(),
+            t.block.to_string(),
+        ];
+        cells.extend(
+            study
+                .file
+                .factor
+                .iter()
+                .zip(&t.levels)
+                .map(|(f, &l)| level_text(&f.levels[l])),
+        );
+        cells.extend([
+            t.seed.to_string(),
+            task.outcome.clone(),
+            task.failed_by.clone(),
+            u8::from(task.outcome == "done").to_string(),
+            u8::from(trial_done).to_string(),
+            if task.outcome == "done" {
+                num(task.time_s, 3)
+            } else {
+                String::new()
+            },
+            num(completion, 3),
+            num(task.grip_mean_n, 3),
+            num(task.grip_peak_n, 3),
+            num(task.grip_margin, 3),
+            task.slips.to_string(),
+            num(m.co_contact_divergence_max_m * 1e3, 2),
+            num(s.phantom_contact_ms, 1),
+            num(s.unfelt_contact_ms, 1),
+            s.sent_bytes.to_string(),
+            u8::from(cut).to_string(),
+        ]);
+        let _ = writeln!(
+            out,
+            "{}",
+            cells
+                .iter()
+                .map(|c| super::csv::cell(c))
+                .collect::<Vec<_>>()
+                .join(",")
+        );
+    }
+    Ok(out)
+}
+
+/// The trials `table` holds whole (every site's row), as (group id, trial).
+fn done_trials(study: &Study, table: &Path, head: &str) -> anyhow::Result<Vec<(String, usize)>> {
+    let f = File::open(table).with_context(|| {
+        format!(
+            "--resume: {} has no trials.csv: nothing to resume (run without --resume)",
+            table.parent().unwrap_or(Path::new(".")).display()
+        )
+    })?;
+    let mut lines = BufReader::new(f).lines();
+    let first = lines.next().transpose()?.unwrap_or_default();
+    if first != head {
+        bail!(
+            "--resume: {} was written for another study (its header differs from {}'s)",
+            table.display(),
+            study.path.display()
+        );
+    }
+    let h = header(study);
+    let col = |name: &str| {
+        h.iter()
+            .position(|c| c == name)
+            .expect("a column of the header")
+    };
+    let (g, t, name) = (col("group"), col("trial"), col("study"));
+    let mut counts: std::collections::BTreeMap<(String, usize), usize> = Default::default();
+    for line in lines {
+        let line = line?;
+        // A line cut by a crash has fewer cells, or no newline: it does not count.
+        let cells = super::csv::split(&line);
+        if cells.len() != h.len() || cells[name] != study.file.name {
+            continue;
+        }
+        if let Ok(trial) = cells[t].parse::<usize>() {
+            *counts.entry((cells[g].clone(), trial)).or_default() += 1;
+        }
+    }
+    Ok(counts
+        .into_iter()
+        .filter(|(_, n)| *n == study.sites.len())
+        .map(|(k, _)| k)
+        .collect())
+}
+
+/// Rewrites `table` with only the whole trials' rows (a batch cut mid-write leaves some of a
+/// trial's sites, or half a line).
+fn truncate_to_whole_trials(
+    table: &Path,
+    head: &str,
+    done: &[(String, usize)],
+) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(table)?;
+    let mut keep = String::from(head);
+    keep.push('\n');
+    let width = super::csv::split(head).len();
+    for line in text.split_inclusive('\n').skip(1) {
+        if !line.ends_with('\n') {
+            continue;
+        }
+        let cells = super::csv::split(line.trim_end_matches(['\n', '\r']));
+        if cells.len() != width {
+            continue;
+        }
+        let key = (cells[1].clone(), cells[5].parse::<usize>().unwrap_or(0));
+        if done.contains(&key) {
+            keep.push_str(line);
+        }
+    }
+    let tmp = table.with_extension("csv.tmp");
+    std::fs::write(&tmp, keep)?;
+    std::fs::rename(&tmp, table)?;
+    Ok(())
+}
+
+/// `meta.json`: the study, its hash, the commit, the machine, the time.
+fn write_meta(study: &Study, out: &Path, trials: usize) -> anyhow::Result<()> {
+    let commit = std::process::Command::new("git")
+        .args(["rev-parse", "--short=10", "HEAD"])
+        .current_dir(
+            study
+                .path
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new(".")),
+        )
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned());
+    let host = std::fs::read_to_string("/etc/hostname")
+        .map(|s| s.trim().to_owned())
+        .unwrap_or_default();
+    let meta = serde_json::json!({
+        "study": study.file.name,
+        "study_file": study.path.display().to_string(),
+        "study_hash_xxh3_64": study.hash,
+        "scenario": study.scenario_path.display().to_string(),
+        "mode": "simulation",
+        "sites": study.sites,
+        "groups": study.groups,
+        "trials": trials,
+        "commit": commit,
+        "machine": {
+            "host": host,
+            "cpus": std::thread::available_parallelism().map_or(1, |n| n.get()),
+        },
+        "clock_offsets_ms": serde_json::Value::Null,
+        "written_unix_s": std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+    });
+    std::fs::write(
+        out.join("meta.json"),
+        serde_json::to_string_pretty(&meta)? + "\n",
+    )
+    .with_context(|| format!("writing {}", out.join("meta.json").display()))?;
+    Ok(())
+}
