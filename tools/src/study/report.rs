@@ -413,7 +413,11 @@ impl Run {
                             e.df.0,
                             e.df.1,
                             e.f,
-                            crate::figures::or_dash(e.p, 4),
+                            if e.p < 1e-4 {
+                                "< 0.0001".to_owned()
+                            } else {
+                                crate::figures::or_dash(e.p, 4)
+                            },
                             crate::figures::or_dash(e.eta_p2, 3)
                         );
                     }
