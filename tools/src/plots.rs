@@ -438,47 +438,95 @@ pub fn task_against(
     x_label: &str,
     lines: &[TaskLine],
 ) -> anyhow::Result<()> {
+    let panel =
+        |title: &str, y_label: &'static str, f: &dyn Fn(&TaskLine) -> &Vec<WithInterval>| {
+            LinePanel {
+                title: title.into(),
+                y_label,
+                lines: lines
+                    .iter()
+                    .map(|l| (l.label.clone(), f(l).clone()))
+                    .collect(),
+            }
+        };
+    let panels = [
+        panel(
+            "trials done at every site (95 % Wilson interval)",
+            "%",
+            &|l| &l.success_pct,
+        ),
+        panel(
+            "mean completion time of the trials done (95 % interval)",
+            "s",
+            &|l| &l.completion_s,
+        ),
+    ];
+    intervals_against(dir, "task", title, x_label, &panels)
+}
+
+/// A panel of lines with intervals: its title, its y label, and per line its label and points
+/// `(x, value, low, high)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinePanel {
+    /// The panel's title.
+    pub title: String,
+    /// Its vertical axis's label.
+    pub y_label: &'static str,
+    /// Its lines.
+    pub lines: Vec<(String, Vec<WithInterval>)>,
+}
+
+/// Writes `<stem>.png` and `<stem>.svg` into `dir`: `panels` one above the other against
+/// `x_label`, each line's intervals as bars, the lines side by side at each x.
+///
+/// # Errors
+/// The font is missing, or a file cannot be written.
+pub fn intervals_against(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    x_label: &str,
+    panels: &[LinePanel],
+) -> anyhow::Result<()> {
     ensure_font()?;
-    let delays = lines.iter().flat_map(|l| l.success_pct.iter().map(|p| p.0));
-    let (lo, hi) = delays.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+    let xs = panels
+        .iter()
+        .flat_map(|p| p.lines.iter().flat_map(|l| l.1.iter().map(|p| p.0)));
+    let (lo, hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
         (a.min(d), b.max(d))
     });
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-    // Methods side by side at each delay, so their bars do not hide one another.
+    let most = panels.iter().map(|p| p.lines.len()).max().unwrap_or(1);
+    // Lines side by side at each x, so their bars do not hide one another.
     let nudge = (hi - lo).max(1.0) * 0.008;
     let x = XAxis {
-        from: lo - nudge * lines.len() as f64,
-        to: hi + nudge * lines.len() as f64,
+        from: lo - nudge * most as f64,
+        to: hi + nudge * most as f64,
         label: x_label,
     };
-    let series = |f: &dyn Fn(&TaskLine) -> &Vec<WithInterval>| -> Vec<Series> {
-        lines
-            .iter()
-            .enumerate()
-            .map(|(i, l)| {
-                let dx = (i as f64 - (lines.len() as f64 - 1.0) / 2.0) * nudge;
-                Series {
-                    label: l.label.clone(),
-                    color: COLORS[i % COLORS.len()],
-                    dashed: false,
-                    markers: true,
-                    points: f(l).iter().map(|p| (p.0 + dx, p.1)).collect(),
-                    bars: f(l).iter().map(|p| (p.0 + dx, p.2, p.3)).collect(),
-                }
-            })
-            .collect()
-    };
-    let panels = [
-        Panel {
-            title: "trials done at every site (95 % Wilson interval)".into(),
-            y_label: "%",
-            series: series(&|l| &l.success_pct),
-        },
-        Panel {
-            title: "mean completion time of the trials done (95 % interval)".into(),
-            y_label: "s",
-            series: series(&|l| &l.completion_s),
-        },
-    ];
-    write_both(dir, "task", title, &panels, &x, (1000, 800))
+    let drawn: Vec<Panel> = panels
+        .iter()
+        .map(|p| Panel {
+            title: p.title.clone(),
+            y_label: p.y_label,
+            series: p
+                .lines
+                .iter()
+                .enumerate()
+                .map(|(i, (label, points))| {
+                    let dx = (i as f64 - (p.lines.len() as f64 - 1.0) / 2.0) * nudge;
+                    Series {
+                        label: label.clone(),
+                        color: COLORS[i % COLORS.len()],
+                        dashed: false,
+                        markers: true,
+                        points: points.iter().map(|q| (q.0 + dx, q.1)).collect(),
+                        bars: points.iter().map(|q| (q.0 + dx, q.2, q.3)).collect(),
+                    }
+                })
+                .collect(),
+        })
+        .collect();
+    let height = 400 * drawn.len().max(1) as u32;
+    write_both(dir, stem, title, &drawn, &x, (1000, height))
 }

@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-use coop_tests::{repo, TempDir};
+use coop_tests::{repo, Reaped, TempDir};
 
 const STUDY: &str = env!("CARGO_BIN_EXE_study");
 
@@ -279,4 +279,205 @@ fn every_shipped_study_is_valid() {
         }
     }
     assert!(checked >= 1, "the shipped studies were found");
+}
+
+/// The experimenter's page and the questionnaires in a real browser (headless Chromium through
+/// WebDriver): the run paused and resumed from the page, each participant's questionnaire
+/// answered after each block, an off-scale answer refused, the answers kept as sent, and the
+/// report's questionnaire scores from them.
+#[test]
+fn questionnaires_are_answered_in_a_browser_between_blocks() {
+    if coop_tests::python_with(&["selenium"]).is_none() {
+        return;
+    }
+    let d = TempDir::new("study-browser");
+    let file = small_study(
+        &d,
+        "[questionnaire]\nnasa_tlx = true\n[[questionnaire.item]]\nname = \"copresence\"\ntext = \"I felt my partner was there with me\"\n",
+    );
+    // Without practice trials: two blocks per group, four questionnaires per group.
+    let written = std::fs::read_to_string(&file).expect("study file");
+    std::fs::write(&file, written.replace("practice = 1", "practice = 0")).expect("study file");
+    let out = d.join("run");
+    let mut run = Command::new(STUDY)
+        .args(["run", "--sim"])
+        .arg(&file)
+        .arg("--out")
+        .arg(&out)
+        .args(["--serve", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start study run");
+    let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
+    // Killed and reaped if the test fails on the way.
+    let mut run = Reaped(Some(run));
+    let mut url = String::new();
+    let mut line = String::new();
+    while std::io::BufRead::read_line(&mut err, &mut line).expect("stderr") > 0 {
+        if let Some(rest) = line.split("serving ").nth(1) {
+            url = rest.split_whitespace().next().expect("url").to_owned();
+            break;
+        }
+        line.clear();
+    }
+    assert!(
+        url.starts_with("http://127.0.0.1:"),
+        "no address printed: {line}"
+    );
+    let browser = Command::new("python3")
+        .arg(repo().join("tools/tests/fixtures/study_browser.py"))
+        .args([url.as_str(), "120"])
+        .output()
+        .expect("python3 runs");
+    if browser.status.code() == Some(2) && std::env::var_os("COOP_REQUIRE_MCAP_PY").is_none() {
+        eprintln!(
+            "SKIPPED the browser check: {}",
+            String::from_utf8_lossy(&browser.stderr)
+        );
+        return;
+    }
+    assert!(
+        browser.status.success(),
+        "the browser failed: {}",
+        String::from_utf8_lossy(&browser.stderr)
+    );
+    let status = run
+        .wait_timeout(std::time::Duration::from_secs(60))
+        .expect("study run ends once its page is closed");
+    assert!(status.success(), "study run failed");
+    let v: serde_json::Value = serde_json::from_slice(&browser.stdout).expect("JSON");
+    assert_eq!(v["paused_seen"], true, "{v}");
+    assert_eq!(v["status_paused"], "paused", "{v}");
+    assert_eq!(v["resumed_seen"], true, "{v}");
+    assert_eq!(v["refused_off_scale"], true, "{v}");
+    assert_eq!(v["last_progress"], "trial 4 of 4 — finished", "{v}");
+    assert_eq!(v["closed"], "The study runner has exited.", "{v}");
+    let answers = v["answers"].as_array().expect("answers");
+    // 2 groups × 2 blocks × 2 participants.
+    assert_eq!(answers.len(), 8, "{v}");
+    // Every answer kept as sent: one row per item.
+    let kept = std::fs::read_to_string(out.join("questionnaires.csv")).expect("answers kept");
+    let rows: Vec<Vec<&str>> = kept
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 8 * 7, "{kept}");
+    for a in answers {
+        let who = a["participant"].as_str().expect("who");
+        let block = a["block"].as_u64().expect("block").to_string();
+        for (item, value) in a["sent"].as_object().expect("sent") {
+            let row = rows
+                .iter()
+                .find(|r| r[2] == who && r[4] == block && r[6] == item)
+                .unwrap_or_else(|| panic!("{who} block {block} {item}: not kept"));
+            assert_eq!(row[7], value.to_string(), "{who} block {block} {item}");
+        }
+    }
+    // The report's questionnaire scores.
+    let o = study(&["report", out.to_str().expect("utf-8")]);
+    let (rep, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(rep.contains("questionnaires: 8 answered"), "{rep}");
+    assert!(
+        rep.contains("tlx_raw") && rep.contains("copresence"),
+        "{rep}"
+    );
+    assert!(out.join("questionnaire.svg").is_file());
+}
+
+/// The page refuses what a broken or hostile client sends, with a status and a reason, and
+/// nothing changes.
+#[test]
+fn the_page_refuses_malformed_requests() {
+    use std::io::{Read, Write};
+    let d = TempDir::new("study-hostile");
+    let file = small_study(&d, "[questionnaire]\nnasa_tlx = true\n");
+    let out = d.join("run");
+    let mut run = Command::new(STUDY)
+        .args(["run", "--sim"])
+        .arg(&file)
+        .arg("--out")
+        .arg(&out)
+        .args(["--serve", "127.0.0.1:0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start study run");
+    let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
+    let mut run = Reaped(Some(run));
+    let mut line = String::new();
+    let mut addr = String::new();
+    while std::io::BufRead::read_line(&mut err, &mut line).expect("stderr") > 0 {
+        if let Some(rest) = line.split("serving http://").nth(1) {
+            addr = rest.split('/').next().expect("addr").to_owned();
+            break;
+        }
+        line.clear();
+    }
+    let ask = |raw: &[u8]| -> String {
+        let mut c = std::net::TcpStream::connect(&addr).expect("connect");
+        c.write_all(raw).expect("send");
+        let _ = c.shutdown(std::net::Shutdown::Write);
+        let mut s = String::new();
+        let _ = c.read_to_string(&mut s);
+        s
+    };
+    for (raw, status) in [
+        (b"GARBAGE\r\n\r\n".to_vec(), "400"),
+        (b"GET /nowhere HTTP/1.1\r\nHost: x\r\n\r\n".to_vec(), "404"),
+        (b"DELETE / HTTP/1.1\r\nHost: x\r\n\r\n".to_vec(), "405"),
+        (b"POST /control HTTP/1.1\r\nHost: x\r\n\r\n".to_vec(), "411"),
+        (
+            b"POST /control HTTP/1.1\r\nContent-Length: 99999999\r\n\r\n".to_vec(),
+            "413",
+        ),
+        (
+            b"POST /control HTTP/1.1\r\nContent-Length: 10\r\n\r\naction=zap".to_vec(),
+            "400",
+        ),
+        (
+            b"POST /q/nobody HTTP/1.1\r\nContent-Length: 3\r\n\r\na=1".to_vec(),
+            "409",
+        ),
+        (
+            [
+                b"GET / HTTP/1.1\r\n".to_vec(),
+                b"X: y\r\n".repeat(2000),
+                b"\r\n".to_vec(),
+            ]
+            .concat(),
+            "431",
+        ),
+    ] {
+        let reply = ask(&raw);
+        assert!(
+            reply.starts_with(&format!("HTTP/1.1 {status}")),
+            "{}: {reply}",
+            String::from_utf8_lossy(&raw[..raw.len().min(40)])
+        );
+    }
+    // Still serving, still running, nothing paused or aborted by any of it.
+    let page = ask(b"GET /status.json HTTP/1.1\r\nHost: x\r\n\r\n");
+    assert!(page.contains("\"control\":\"running\""), "{page}");
+    // Not closed while it runs; aborted, then closed.
+    let early = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=close");
+    assert!(early.starts_with("HTTP/1.1 409"), "{early}");
+    let _ = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=abort");
+    loop {
+        let s = ask(b"GET /status.json HTTP/1.1\r\nHost: x\r\n\r\n");
+        if s.contains("\"finished\":true") {
+            break;
+        }
+        // Polled, as a page would.
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let _ = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=close");
+    let status = run
+        .wait_timeout(std::time::Duration::from_secs(60))
+        .expect("study run ends once its page is closed");
+    assert!(status.success(), "an aborted run ends cleanly");
+    let page_gone = std::net::TcpStream::connect(&addr).is_err();
+    assert!(page_gone, "the page ends with the run");
 }

@@ -43,6 +43,12 @@ pub enum Command {
         /// (one that was begun and cut short is run again and marked `cut`)
         #[arg(long)]
         resume: bool,
+        /// Serve the experimenter's page (progress, pause, resume, abort) and the participants'
+        /// questionnaires at this address (e.g. 127.0.0.1:8700; port 0: any free one, printed):
+        /// the trials then run group by group and block by block, each block's questionnaire
+        /// answered before the next
+        #[arg(long, value_name = "ADDR")]
+        serve: Option<String>,
     },
     /// Analyse a run: print and write report.txt, cells.csv and the plots (task.svg, task.png)
     /// into its directory
@@ -67,6 +73,7 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             sim,
             out,
             resume,
+            serve,
         } => {
             if !sim {
                 bail!("study run: only --sim is built so far (simulated participants in the simulator); trials on live stations are run one session at a time with `session run`");
@@ -79,9 +86,45 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                 study.groups.len(),
                 out.display()
             );
-            let ran = super::run::run_sim(&study, &out, resume, &mut |done, total| {
-                eprintln!("  {done}/{total} trials");
-            })?;
+            let ran = match serve {
+                None => {
+                    if study.file.questionnaire.is_some() {
+                        eprintln!(
+                            "study {}: its questionnaire is not asked without --serve",
+                            study.file.name
+                        );
+                    }
+                    super::run::run_sim(&study, &out, resume, &mut |done, total| {
+                        eprintln!("  {done}/{total} trials");
+                    })?
+                }
+                Some(addr) => {
+                    let shared = std::sync::Arc::new(super::board::Shared::new(
+                        &study.file.name,
+                        total,
+                        study.file.questionnaire.clone(),
+                        study.file.factor.iter().map(|f| f.name.clone()).collect(),
+                    ));
+                    let answers = super::web::answers_path(&out);
+                    let kept = study.clone();
+                    let store: std::sync::Arc<super::web::Store> = std::sync::Arc::new(
+                        move |p: &super::board::Pending, a: &[(String, u32)]| {
+                            super::run::store_answers(&kept, &answers, p, a)
+                        },
+                    );
+                    let server =
+                        super::web::Server::start(&addr, std::sync::Arc::clone(&shared), store)?;
+                    // The line a script waits for: where the page is.
+                    eprintln!(
+                        "study {}: serving http://{}/ (questionnaires at /q/<participant>)",
+                        study.file.name, server.addr
+                    );
+                    let ran = super::run::run_served(&study, &out, resume, &shared)?;
+                    eprintln!("study {}: finished; the page stays until Close is pressed on it (or Ctrl-C)", study.file.name);
+                    shared.wait_closed();
+                    ran
+                }
+            };
             println!(
                 "study {}: {} trials run, {} kept from before, in {:.0} s; table {}",
                 study.file.name,

@@ -14,11 +14,15 @@
 //! is one row per site in a tidy table, written as it finishes, so a cut run resumes where it
 //! stopped; [`report`] turns the table into the figures a paper needs.
 
+pub mod board;
 pub mod cli;
 pub mod csv;
 pub mod order;
+pub mod questionnaire;
 pub mod report;
 pub mod run;
+pub mod scores;
+pub mod web;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -64,6 +68,10 @@ pub struct StudyFile {
     pub timeout_s: Option<f64>,
     /// The factors.
     pub factor: Vec<FactorSpec>,
+    /// What each participant answers after each block (asked in a browser while `study run`
+    /// serves its page).
+    #[serde(default)]
+    pub questionnaire: Option<questionnaire::QuestionnaireSpec>,
 }
 
 fn one() -> u64 {
@@ -428,6 +436,10 @@ fn check_fields(path: &Path, file: &StudyFile) -> anyhow::Result<()> {
             return Err(rule(path, "timeout_s", t, "a number of seconds above 0"));
         }
     }
+    if let Some(q) = &file.questionnaire {
+        q.check()
+            .map_err(|why| anyhow::anyhow!("study file {}: {why}", path.display()))?;
+    }
     if file.factor.is_empty() {
         return Err(rule(path, "factor", "[]", "at least one [[factor]]"));
     }
@@ -555,8 +567,11 @@ fn groups_of(path: &Path, file: &StudyFile, sites: &[String]) -> anyhow::Result<
             ));
         }
         for p in &g.participants {
-            if p.is_empty() || p.contains(',') || !people.insert(p.clone()) {
-                return Err(rule(path, &format!("group[{k}].participants"), p, "participant ids are unique, not empty, without commas (a participant is in one group)"));
+            let ok = !p.is_empty()
+                && p.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "._-".contains(c));
+            if !ok || !people.insert(p.clone()) {
+                return Err(rule(path, &format!("group[{k}].participants"), p, "participant ids use 1 or more of A-Z a-z 0-9 . _ - and are unique (a participant is in one group)"));
             }
         }
     }

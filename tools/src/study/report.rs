@@ -636,6 +636,19 @@ pub fn report(dir: &Path) -> anyhow::Result<String> {
         out.push_str(&line);
         out.push('\n');
     }
+    if let Some((table, panels, x)) = super::scores::scores(dir, &run.study)? {
+        out.push_str(&table);
+        if !panels.is_empty() {
+            crate::plots::intervals_against(
+                dir,
+                "questionnaire",
+                &format!("study {}: questionnaire scores", run.study.name),
+                &run.factors[x],
+                &panels,
+            )?;
+            out.push_str("# plots: questionnaire.svg, questionnaire.png\n");
+        }
+    }
     std::fs::write(dir.join("report.txt"), &out)?;
     Ok(out)
 }

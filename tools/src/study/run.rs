@@ -37,8 +37,102 @@ pub fn header(study: &Study) -> Vec<String> {
     h
 }
 
+/// Where a run writes, and what it has written.
+struct Tables {
+    file: File,
+    begun_log: File,
+    /// Trials begun by an earlier run (`group trial`).
+    begun: Vec<String>,
+    /// Trials whole in the table.
+    done: Vec<(String, usize)>,
+}
+
+impl Tables {
+    /// Opens `out`'s table (made, or resumed), its record of trials begun, and `meta.json`.
+    fn open(study: &Study, out: &Path, resume: bool, trials: usize) -> anyhow::Result<Self> {
+        let table = out.join("trials.csv");
+        let head = header(study).join(",");
+        let done = if resume {
+            let done = done_trials(study, &table, &head)?;
+            truncate_to_whole_trials(&table, &head, &done)?;
+            done
+        } else {
+            if table.exists() {
+                bail!(
+                    "{} already holds a study's trials: give another --out, or --resume to go on with it",
+                    out.display()
+                );
+            }
+            std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+            let mut f =
+                File::create(&table).with_context(|| format!("creating {}", table.display()))?;
+            writeln!(f, "{head}")?;
+            std::fs::copy(&study.path, out.join("study.toml")).with_context(|| {
+                format!("copying {} into {}", study.path.display(), out.display())
+            })?;
+            Vec::new()
+        };
+        write_meta(study, out, trials)?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(&table)
+            .with_context(|| format!("opening {}", table.display()))?;
+        // The trials begun: one begun but not in the table was cut short, and is marked when
+        // run again.
+        let begun_path = out.join("begun.txt");
+        let begun: Vec<String> = std::fs::read_to_string(&begun_path)
+            .unwrap_or_default()
+            .lines()
+            .map(str::to_owned)
+            .collect();
+        let begun_log = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&begun_path)
+            .with_context(|| format!("opening {}", begun_path.display()))?;
+        Ok(Self {
+            file,
+            begun_log,
+            begun,
+            done,
+        })
+    }
+
+    /// Whether the table holds `t` whole.
+    fn holds(&self, t: &Trial) -> bool {
+        self.done.contains(&(t.group_id.clone(), t.trial))
+    }
+
+    /// Runs `trials` on every core, then appends their rows and flushes them; each trial's
+    /// outcome line to `outcome`.
+    fn run(
+        &mut self,
+        study: &Study,
+        trials: &[&Trial],
+        outcome: &mut dyn FnMut(String),
+    ) -> anyhow::Result<()> {
+        for t in trials {
+            writeln!(self.begun_log, "{} {}", t.group_id, t.trial)?;
+        }
+        self.begun_log.sync_data()?;
+        let rows = crate::sweep::par_map(trials, |t| {
+            let cut = self.begun.contains(&format!("{} {}", t.group_id, t.trial));
+            trial_rows(study, t, cut)
+        });
+        for r in rows {
+            let (rows, line) = r?;
+            self.file.write_all(rows.as_bytes())?;
+            outcome(line);
+        }
+        self.file.flush()?;
+        self.file.sync_data()?;
+        Ok(())
+    }
+}
+
 /// Runs `study`'s trials in the simulator into `out` (created), or, with `resume`, those its
-/// `trials.csv` does not hold yet. `progress(done, total)` after each batch.
+/// `trials.csv` does not hold yet, on every core, a batch at a time. `progress(done, total)`
+/// after each batch.
 ///
 /// # Errors
 /// `out` holds another study's (or no) table when resuming, or holds one when not; a file cannot
@@ -51,66 +145,13 @@ pub fn run_sim(
 ) -> anyhow::Result<Ran> {
     let started = Instant::now();
     let plan = study.plan();
-    let table = out.join("trials.csv");
-    let head = header(study).join(",");
-    let done = if resume {
-        let done = done_trials(study, &table, &head)?;
-        truncate_to_whole_trials(&table, &head, &done)?;
-        done
-    } else {
-        if table.exists() {
-            bail!(
-                "{} already holds a study's trials: give another --out, or --resume to go on with it",
-                out.display()
-            );
-        }
-        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-        let mut f =
-            File::create(&table).with_context(|| format!("creating {}", table.display()))?;
-        writeln!(f, "{head}")?;
-        std::fs::copy(&study.path, out.join("study.toml"))
-            .with_context(|| format!("copying {} into {}", study.path.display(), out.display()))?;
-        Vec::new()
-    };
-    let todo: Vec<&Trial> = plan
-        .iter()
-        .filter(|t| !done.contains(&(t.group_id.clone(), t.trial)))
-        .collect();
-    write_meta(study, out, plan.len())?;
-    let mut file = OpenOptions::new()
-        .append(true)
-        .open(&table)
-        .with_context(|| format!("opening {}", table.display()))?;
+    let mut tables = Tables::open(study, out, resume, plan.len())?;
+    let todo: Vec<&Trial> = plan.iter().filter(|t| !tables.holds(t)).collect();
     let batch = std::thread::available_parallelism().map_or(2, |n| n.get()) * 2;
     let kept = plan.len() - todo.len();
     let mut finished = kept;
-    // The trials begun: one begun but not in the table was cut short, and is marked when run
-    // again.
-    let begun_path = out.join("begun.txt");
-    let begun: Vec<String> = std::fs::read_to_string(&begun_path)
-        .unwrap_or_default()
-        .lines()
-        .map(str::to_owned)
-        .collect();
-    let mut begun_log = OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&begun_path)
-        .with_context(|| format!("opening {}", begun_path.display()))?;
     for chunk in todo.chunks(batch) {
-        for t in chunk {
-            writeln!(begun_log, "{} {}", t.group_id, t.trial)?;
-        }
-        begun_log.sync_data()?;
-        let rows = crate::sweep::par_map(chunk, |t| {
-            let cut = begun.contains(&format!("{} {}", t.group_id, t.trial));
-            trial_rows(study, t, cut)
-        });
-        for r in rows {
-            file.write_all(r?.as_bytes())?;
-        }
-        file.flush()?;
-        file.sync_data()?;
+        tables.run(study, chunk, &mut |_| {})?;
         finished += chunk.len();
         progress(finished, plan.len());
     }
@@ -121,9 +162,186 @@ pub fn run_sim(
     })
 }
 
+/// [`run_sim`] as a lab's session goes, with the experimenter's page (`shared`, served by
+/// [`super::web`]): group by group and block by block (each block's trials on every core), the
+/// experimenter's pause holding the next block back and an abort ending the run after the block
+/// running, and after each block its questionnaire asked of each of the group's participants
+/// (waited for; one a resumed run finds unanswered is asked again).
+///
+/// # Errors
+/// As [`run_sim`]; the answers cannot be read.
+pub fn run_served(
+    study: &Study,
+    out: &Path,
+    resume: bool,
+    shared: &super::board::Shared,
+) -> anyhow::Result<Ran> {
+    let started = Instant::now();
+    let plan = study.plan();
+    let mut tables = Tables::open(study, out, resume, plan.len())?;
+    let kept = plan.iter().filter(|t| tables.holds(t)).count();
+    shared.update(|b| b.done = kept);
+    let answered = answered(&super::web::answers_path(out))?;
+    let mut ran = 0;
+    'groups: for (g, group) in study.groups.iter().enumerate() {
+        let blocks = plan
+            .iter()
+            .filter(|t| t.group == g)
+            .map(|t| t.block)
+            .max()
+            .unwrap_or(0);
+        for block in 1..=blocks {
+            let trials: Vec<&Trial> = plan
+                .iter()
+                .filter(|t| t.group == g && t.block == block)
+                .collect();
+            let todo: Vec<&Trial> = trials
+                .iter()
+                .copied()
+                .filter(|t| !tables.holds(t))
+                .collect();
+            let levels = &trials[0].levels;
+            if !todo.is_empty() {
+                if !shared.may_go_on() {
+                    break 'groups;
+                }
+                let what = format!(
+                    "{} block {block} of {blocks}: {}",
+                    group.id,
+                    study.condition_name(levels)
+                );
+                shared.update(|b| b.now = what);
+                tables.run(study, &todo, &mut |line| shared.trial_done(line))?;
+                ran += todo.len();
+            }
+            if shared.questionnaire.is_some() {
+                let owed: Vec<super::board::Pending> = group
+                    .participants
+                    .iter()
+                    .zip(&study.sites)
+                    .filter(|(p, _)| !answered.contains(&(group.id.clone(), block, (*p).clone())))
+                    .map(|(p, site)| super::board::Pending {
+                        group: group.id.clone(),
+                        participant: p.clone(),
+                        site: site.clone(),
+                        block,
+                        levels: study
+                            .file
+                            .factor
+                            .iter()
+                            .zip(levels)
+                            .map(|(f, &l)| level_text(&f.levels[l]))
+                            .collect(),
+                    })
+                    .collect();
+                if !owed.is_empty() {
+                    let what =
+                        format!("{} block {block}: waiting for the questionnaires", group.id);
+                    shared.update(|b| {
+                        b.now = what;
+                        b.pending = owed;
+                    });
+                    if !shared.wait_answers() {
+                        break 'groups;
+                    }
+                }
+            }
+        }
+    }
+    let aborted = shared.lock().control == super::board::Control::Aborted;
+    shared.update(|b| {
+        b.finished = true;
+        b.now = if aborted {
+            "aborted: `study run --resume` goes on from here".into()
+        } else {
+            "every trial done".into()
+        };
+    });
+    Ok(Ran {
+        ran,
+        kept,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The questionnaires `path` holds: (group, block, participant).
+fn answered(path: &Path) -> anyhow::Result<Vec<(String, usize, String)>> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::new();
+    for line in text.lines().skip(1) {
+        let c = super::csv::split(line);
+        if c.len() >= 5 {
+            if let Ok(block) = c[4].parse() {
+                out.push((c[1].clone(), block, c[2].clone()));
+            }
+        }
+    }
+    out.sort();
+    out.dedup();
+    Ok(out)
+}
+
+/// Appends a participant's answers to `path` (made with its header): one row per item.
+///
+/// # Errors
+/// The file cannot be written.
+pub fn store_answers(
+    study: &Study,
+    path: &Path,
+    p: &super::board::Pending,
+    answers: &[(String, u32)],
+) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let new = !path.exists();
+    let mut f = OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))?;
+    let mut text = String::new();
+    if new {
+        let factors: Vec<&str> = study.file.factor.iter().map(|f| f.name.as_str()).collect();
+        let _ = writeln!(
+            text,
+            "study,group,participant,site,block,{},item,value,answered_unix_s",
+            factors.join(",")
+        );
+    }
+    let when = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    for (item, value) in answers {
+        let cells: Vec<String> = [
+            study.file.name.clone(),
+            p.group.clone(),
+            p.participant.clone(),
+            p.site.clone(),
+            p.block.to_string(),
+        ]
+        .into_iter()
+        .chain(p.levels.iter().cloned())
+        .chain([item.clone(), value.to_string(), when.to_string()])
+        .collect();
+        let _ = writeln!(
+            text,
+            "{}",
+            cells
+                .iter()
+                .map(|c| super::csv::cell(c))
+                .collect::<Vec<_>>()
+                .join(",")
+        );
+    }
+    f.write_all(text.as_bytes())?;
+    f.sync_data()?;
+    Ok(())
+}
+
 /// One trial in the simulator: its rows (one per site), as CSV lines; `cut`: a run of it was cut
 /// short before (this one replaces it).
-fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<String> {
+fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, String)> {
     use std::fmt::Write as _;
     let sc = study.scenario_for(&t.levels, t.seed, study.people_seed(t.group))?;
     let r = sim::run_wired(
@@ -218,7 +436,19 @@ fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<String> {
                 .join(",")
         );
     }
-    Ok(out)
+    let line = format!(
+        "{} trial {} ({}{}): {}",
+        t.group_id,
+        t.trial,
+        study.condition_name(&t.levels),
+        if t.practice { ", practice" } else { "" },
+        if trial_done {
+            format!("done in {completion:.2} s")
+        } else {
+            "not done".to_owned()
+        }
+    );
+    Ok((out, line))
 }
 
 /// The trials `table` holds whole (every site's row), as (group id, trial).
