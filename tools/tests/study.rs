@@ -173,7 +173,14 @@ fn a_pilot_killed_mid_run_resumes_without_losing_or_repeating_a_trial_and_report
     keys.dedup();
     assert_eq!(keys.len(), 8);
     assert_eq!(after.len(), all.len());
-    let unmark = |l: &str| l.rsplit_once(',').expect("cells").0.to_owned();
+    // The row without its `cut` mark (the last cell but one; the last is the attempt).
+    let unmark = |l: &str| {
+        let mut c: Vec<&str> = l.split(',').collect();
+        let n = c.len();
+        c.remove(n - 2);
+        c.join(",")
+    };
+    let cut = |l: &str| l.split(',').rev().nth(1) == Some("1");
     let mut a: Vec<String> = after.iter().map(|r| unmark(&r.2)).collect();
     let mut w: Vec<String> = all.iter().map(|r| unmark(&r.2)).collect();
     a.sort();
@@ -188,10 +195,10 @@ fn a_pilot_killed_mid_run_resumes_without_losing_or_repeating_a_trial_and_report
         }
     }
     // A trial marked cut was begun before the kill and not finished then.
-    for r in after.iter().filter(|r| r.2.ends_with(",1")) {
+    for r in after.iter().filter(|r| cut(&r.2)) {
         assert!(!before
             .iter()
-            .any(|b| b.0 == r.0 && b.1 == r.1 && b.2.ends_with(",0")));
+            .any(|b| b.0 == r.0 && b.1 == r.1 && !cut(&b.2)));
     }
     // The report: every measured trial, practice left out, and the files it writes.
     let o = study(&["report", out_s]);
@@ -312,22 +319,12 @@ fn questionnaires_are_answered_in_a_browser_between_blocks() {
     let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
     // Killed and reaped if the test fails on the way.
     let mut run = Reaped(Some(run));
-    let mut url = String::new();
-    let mut line = String::new();
-    while std::io::BufRead::read_line(&mut err, &mut line).expect("stderr") > 0 {
-        if let Some(rest) = line.split("serving ").nth(1) {
-            url = rest.split_whitespace().next().expect("url").to_owned();
-            break;
-        }
-        line.clear();
-    }
-    assert!(
-        url.starts_with("http://127.0.0.1:"),
-        "no address printed: {line}"
-    );
+    let (url, key) = served(&mut err);
     let browser = Command::new("python3")
         .arg(repo().join("tools/tests/fixtures/study_browser.py"))
-        .args([url.as_str(), "120"])
+        .args([url.as_str(), key.as_str(), "120"])
+        // Chromium's own temporary files, into the test's directory (removed with it).
+        .env("TMPDIR", d.path())
         .output()
         .expect("python3 runs");
     if browser.status.code() == Some(2) && std::env::var_os("COOP_REQUIRE_MCAP_PY").is_none() {
@@ -350,9 +347,25 @@ fn questionnaires_are_answered_in_a_browser_between_blocks() {
     assert_eq!(v["paused_seen"], true, "{v}");
     assert_eq!(v["status_paused"], "paused", "{v}");
     assert_eq!(v["resumed_seen"], true, "{v}");
+    assert_eq!(
+        v["buttons_without_key"], 0,
+        "no control without the key: {v}"
+    );
     assert_eq!(v["refused_off_scale"], true, "{v}");
     assert_eq!(v["last_progress"], "trial 4 of 4 — finished", "{v}");
     assert_eq!(v["closed"], "The study runner has exited.", "{v}");
+    // The repeat: the first trial's second attempt, its rows beside the first's, and the report
+    // counting the trial once (its last attempt).
+    assert_eq!(v["repeated"].as_array().map(Vec::len), Some(1), "{v}");
+    let table = std::fs::read_to_string(out.join("trials.csv")).expect("trials.csv");
+    let second: Vec<&str> = table.lines().filter(|l| l.ends_with(",0,2")).collect();
+    assert_eq!(second.len(), 2, "one trial's two sites, attempt 2: {table}");
+    assert!(
+        second
+            .iter()
+            .all(|l| l.starts_with("small,g01,") && l.contains(",1,1,0,1,")),
+        "{table}"
+    );
     let answers = v["answers"].as_array().expect("answers");
     // 2 groups × 2 blocks × 2 participants.
     assert_eq!(answers.len(), 8, "{v}");
@@ -380,11 +393,35 @@ fn questionnaires_are_answered_in_a_browser_between_blocks() {
     let (rep, err) = text(&o);
     assert!(o.status.success(), "{err}");
     assert!(rep.contains("questionnaires: 8 answered"), "{rep}");
+    assert!(rep.contains("2 groups, 4 measured trials"), "{rep}");
     assert!(
         rep.contains("tlx_raw") && rep.contains("copresence"),
         "{rep}"
     );
     assert!(out.join("questionnaire.svg").is_file());
+}
+
+/// The base address and the experimenter's key `study run --serve` prints on its stderr.
+fn served(err: &mut impl std::io::BufRead) -> (String, String) {
+    let mut line = String::new();
+    while err.read_line(&mut line).expect("stderr") > 0 {
+        if let Some(rest) = line.split("serving ").nth(1) {
+            let url = rest
+                .split_whitespace()
+                .next()
+                .expect("url")
+                .trim_end_matches('/');
+            let key = line
+                .split("?key=")
+                .nth(1)
+                .and_then(|k| k.split_whitespace().next())
+                .expect("the experimenter's key");
+            assert!(url.starts_with("http://127.0.0.1:"), "{line}");
+            return (url.to_owned(), key.to_owned());
+        }
+        line.clear();
+    }
+    panic!("no address printed");
 }
 
 /// The page refuses what a broken or hostile client sends, with a status and a reason, and
@@ -407,15 +444,8 @@ fn the_page_refuses_malformed_requests() {
         .expect("start study run");
     let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
     let mut run = Reaped(Some(run));
-    let mut line = String::new();
-    let mut addr = String::new();
-    while std::io::BufRead::read_line(&mut err, &mut line).expect("stderr") > 0 {
-        if let Some(rest) = line.split("serving http://").nth(1) {
-            addr = rest.split('/').next().expect("addr").to_owned();
-            break;
-        }
-        line.clear();
-    }
+    let (url, key) = served(&mut err);
+    let addr = url.trim_start_matches("http://").to_owned();
     let ask = |raw: &[u8]| -> String {
         let mut c = std::net::TcpStream::connect(&addr).expect("connect");
         c.write_all(raw).expect("send");
@@ -434,7 +464,15 @@ fn the_page_refuses_malformed_requests() {
             "413",
         ),
         (
-            b"POST /control HTTP/1.1\r\nContent-Length: 10\r\n\r\naction=zap".to_vec(),
+            b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=abort".to_vec(),
+            "403",
+        ),
+        (
+            format!(
+                "POST /control HTTP/1.1\r\nContent-Length: {}\r\n\r\nkey={key}&action=zap",
+                15 + key.len()
+            )
+            .into_bytes(),
             "400",
         ),
         (
@@ -462,18 +500,31 @@ fn the_page_refuses_malformed_requests() {
     let page = ask(b"GET /status.json HTTP/1.1\r\nHost: x\r\n\r\n");
     assert!(page.contains("\"control\":\"running\""), "{page}");
     // Not closed while it runs; aborted, then closed.
-    let early = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=close");
+    let control = |action: &str| {
+        let body = format!("key={key}&action={action}");
+        let request = format!(
+            "POST /control HTTP/1.1\r\nContent-Length: {}\r\n\r\n{body}",
+            body.len()
+        );
+        ask(request.as_bytes())
+    };
+    let early = control("close");
     assert!(early.starts_with("HTTP/1.1 409"), "{early}");
-    let _ = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=abort");
+    let _ = control("abort");
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(60);
     loop {
         let s = ask(b"GET /status.json HTTP/1.1\r\nHost: x\r\n\r\n");
         if s.contains("\"finished\":true") {
             break;
         }
+        assert!(
+            std::time::Instant::now() < until,
+            "the abort did not end the run: {s}"
+        );
         // Polled, as a page would.
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
-    let _ = ask(b"POST /control HTTP/1.1\r\nContent-Length: 12\r\n\r\naction=close");
+    let _ = control("close");
     let status = run
         .wait_timeout(std::time::Duration::from_secs(60))
         .expect("study run ends once its page is closed");

@@ -12,10 +12,21 @@ use super::questionnaire::QuestionnaireSpec;
 pub enum Control {
     /// Trials run.
     Running,
-    /// No new trial starts (the one running finishes).
+    /// No new block starts (the one running finishes).
     Paused,
     /// The run stops after the trials running; `--resume` goes on from there.
     Aborted,
+}
+
+/// How a wait for the questionnaires ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Waited {
+    /// Every one owed is answered.
+    Answered,
+    /// The experimenter aborted the run.
+    Aborted,
+    /// The experimenter asked for the last trial again.
+    Repeat,
 }
 
 /// A questionnaire a participant owes.
@@ -56,12 +67,16 @@ pub struct Board {
     pub answered: usize,
     /// The experimenter closed the page (after the run finished): the runner exits.
     pub closed: bool,
+    /// The experimenter asked for the last trial again (its next attempt).
+    pub repeat: bool,
 }
 
 /// The board behind a lock, and a signal for whoever waits on it.
 #[derive(Debug)]
 pub struct Shared {
     board: Mutex<Board>,
+    /// Held while an answer is checked, stored and taken off the owed list.
+    answering: Mutex<()>,
     changed: Condvar,
     /// The questionnaire (none: nothing is asked).
     pub questionnaire: Option<QuestionnaireSpec>,
@@ -92,7 +107,9 @@ impl Shared {
                 pending: Vec::new(),
                 answered: 0,
                 closed: false,
+                repeat: false,
             }),
+            answering: Mutex::new(()),
             changed: Condvar::new(),
             questionnaire,
             factors,
@@ -102,6 +119,14 @@ impl Shared {
     /// The board (a poisoned lock is taken over: the board is plain data).
     pub fn lock(&self) -> MutexGuard<'_, Board> {
         self.board
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// One answer at a time: held by the page from the check that an answer is owed to its
+    /// removal from the owed list.
+    pub fn answering(&self) -> MutexGuard<'_, ()> {
+        self.answering
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
@@ -116,6 +141,14 @@ impl Shared {
     pub fn trial_done(&self, line: String) {
         self.update(|b| {
             b.done += 1;
+            b.recent.push_front(line);
+            b.recent.truncate(RECENT);
+        });
+    }
+
+    /// A repeated trial's outcome, for the page (the count of trials does not change).
+    pub fn trial_repeated(&self, line: String) {
+        self.update(|b| {
             b.recent.push_front(line);
             b.recent.truncate(RECENT);
         });
@@ -151,15 +184,23 @@ impl Shared {
         }
     }
 
-    /// Waits until nothing is owed; false when the run is aborted first.
-    pub fn wait_answers(&self) -> bool {
+    /// Takes the experimenter's ask for a repeat, if any.
+    pub fn take_repeat(&self) -> bool {
+        std::mem::take(&mut self.lock().repeat)
+    }
+
+    /// Waits until nothing is owed, the run is aborted, or a repeat is asked for.
+    pub fn wait_answers(&self) -> Waited {
         let mut b = self.lock();
         loop {
             if b.control == Control::Aborted {
-                return false;
+                return Waited::Aborted;
+            }
+            if std::mem::take(&mut b.repeat) {
+                return Waited::Repeat;
             }
             if b.pending.is_empty() {
-                return true;
+                return Waited::Answered;
             }
             b = self
                 .changed

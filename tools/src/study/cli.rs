@@ -114,10 +114,12 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                     );
                     let server =
                         super::web::Server::start(&addr, std::sync::Arc::clone(&shared), store)?;
-                    // The line a script waits for: where the page is.
+                    // The line a script waits for: where the pages are.
                     eprintln!(
-                        "study {}: serving http://{}/ (questionnaires at /q/<participant>)",
-                        study.file.name, server.addr
+                        "study {}: serving http://{addr}/ : the experimenter's page http://{addr}/?key={key} (its key is its control: keep it to the experimenter); questionnaires at http://{addr}/q/<participant>",
+                        study.file.name,
+                        addr = server.addr,
+                        key = server.key
                     );
                     let ran = super::run::run_served(&study, &out, resume, &shared)?;
                     eprintln!("study {}: finished; the page stays until Close is pressed on it (or Ctrl-C)", study.file.name);

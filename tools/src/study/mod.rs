@@ -268,13 +268,26 @@ impl Study {
             .collect()
     }
 
+    /// How many between-group cells there are (1: no between factor).
+    pub fn between_cells(&self) -> usize {
+        self.file
+            .factor
+            .iter()
+            .filter(|f| f.between)
+            .map(|f| f.levels.len())
+            .product::<usize>()
+            .max(1)
+    }
+
     /// Every group's trials, in the order each group does them.
     pub fn plan(&self) -> Vec<Trial> {
         let conditions = self.conditions();
         let mut out = Vec::new();
         for (g, group) in self.groups.iter().enumerate() {
             let order = match self.file.order {
-                OrderKind::Williams => order::williams(conditions.len(), g),
+                // The row from the group's place among the groups of its between-group cell
+                // (the cells take the groups in turn): each cell's groups run through the rows.
+                OrderKind::Williams => order::williams(conditions.len(), g / self.between_cells()),
                 OrderKind::Random => {
                     order::shuffled(conditions.len(), mix(self.file.seed, &[1, g as u64]))
                 }
@@ -298,7 +311,7 @@ impl Study {
                         block: b + 1,
                         practice: k < practice,
                         levels: levels.clone(),
-                        seed: mix(self.file.seed, &[2, g as u64, trial as u64]),
+                        seed: seed63(mix(self.file.seed, &[2, g as u64, trial as u64])),
                     });
                 }
             }
@@ -308,7 +321,7 @@ impl Study {
 
     /// The seed group `g`'s participants are drawn with.
     pub fn people_seed(&self, g: usize) -> u64 {
-        mix(self.file.seed, &[3, g as u64])
+        seed63(mix(self.file.seed, &[3, g as u64]))
     }
 
     /// The scenario of a trial at `levels` (a level index per factor) with `seed` and the people
@@ -335,7 +348,8 @@ impl Study {
                 })?;
             }
         }
-        let num = |v: u64| toml::Value::Integer(i64::try_from(v >> 1).unwrap_or(i64::MAX));
+        // (Seeds are below 2^63: a TOML integer holds them as they are.)
+        let num = |v: u64| toml::Value::Integer(i64::try_from(seed63(v)).unwrap_or(0));
         doc.insert("seed".into(), num(seed));
         doc.insert("people_seed".into(), num(people_seed));
         if let Some(t) = self.file.timeout_s {
@@ -579,7 +593,7 @@ fn groups_of(path: &Path, file: &StudyFile, sites: &[String]) -> anyhow::Result<
 }
 
 /// The trial table's own columns (a factor may not take one's name).
-pub const COLUMNS: [&str; 24] = [
+pub const COLUMNS: [&str; 25] = [
     "study",
     "group",
     "participant",
@@ -604,6 +618,7 @@ pub const COLUMNS: [&str; 24] = [
     "unfelt_ms",
     "sent_bytes",
     "cut",
+    "attempt",
 ];
 
 /// A level as the trial table writes it.
@@ -642,6 +657,11 @@ pub fn mix(seed: u64, path: &[u64]) -> u64 {
         z ^ (z >> 31)
     };
     path.iter().fold(step(seed), |acc, &p| step(acc ^ step(p)))
+}
+
+/// `v` below 2^63 (a scenario's seed is a TOML integer, which is signed).
+pub fn seed63(v: u64) -> u64 {
+    v & (u64::MAX >> 1)
 }
 
 /// Sets the dotted `path` of `doc` to `value`: tables are made where missing; a number is an

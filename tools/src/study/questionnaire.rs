@@ -199,10 +199,14 @@ impl QuestionnaireSpec {
         Ok(got)
     }
 
-    /// The form, as an HTML fragment posting to `action`.
-    pub fn form(&self, action: &str) -> String {
+    /// The form for block `block`, as an HTML fragment posting to `action`. Every question
+    /// starts unanswered (a slider would send its preset middle for a scale left alone).
+    pub fn form(&self, action: &str, block: usize) -> String {
         use std::fmt::Write;
-        let mut out = format!("<form method=\"post\" action=\"{}\">\n", html(action));
+        let mut out = format!(
+            "<form method=\"post\" action=\"{}\">\n<input type=\"hidden\" name=\"block\" value=\"{block}\">\n",
+            html(action)
+        );
         for q in self.questions() {
             let (lo, hi, step) = q.range;
             let _ = writeln!(out, "<fieldset><legend>{}</legend>", html(&q.text));
@@ -218,9 +222,8 @@ impl QuestionnaireSpec {
             } else {
                 let _ = write!(
                     out,
-                    "<input type=\"range\" name=\"{0}\" id=\"{0}\" min=\"{lo}\" max=\"{hi}\" step=\"{step}\" value=\"{1}\">",
-                    html(&q.name),
-                    lo + (hi - lo) / 2 / step * step
+                    "<input type=\"number\" name=\"{0}\" id=\"{0}\" min=\"{lo}\" max=\"{hi}\" step=\"{step}\" required>",
+                    html(&q.name)
                 );
             }
             let _ = writeln!(out, " <span>{}</span></fieldset>", html(&q.labels.1));
@@ -323,9 +326,11 @@ mod tests {
     fn the_form_escapes_and_asks_everything() {
         let mut s = spec();
         s.item[0].text = "<b>partner</b> & \"me\"".into();
-        let f = s.form("/q/p1");
+        let f = s.form("/q/p1", 3);
         assert!(f.contains("&lt;b&gt;partner&lt;/b&gt; &amp; &quot;me&quot;"));
-        assert_eq!(f.matches("type=\"range\"").count(), 6);
+        assert_eq!(f.matches("type=\"number\"").count(), 6);
+        assert!(f.contains("name=\"block\" value=\"3\""));
+        assert!(!f.contains("value=\"50\""), "no scale starts answered");
         assert_eq!(f.matches("type=\"radio\"").count(), 7);
         assert!(s.check().is_ok());
         s.item[0].name = "tlx_mental".into();

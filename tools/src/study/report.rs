@@ -24,6 +24,8 @@ use crate::stats::{cousineau_morey95, f_test_p, mean_ci95, sd, wilson95};
 /// One measured trial of one group.
 #[derive(Debug, Clone)]
 struct TrialRow {
+    /// The attempt these figures are of (the last one counts: an experimenter's repeat).
+    attempt: u32,
     group: String,
     levels: Vec<String>,
     done: bool,
@@ -214,7 +216,8 @@ impl Run {
             col("completion_s")?,
             col("phantom_ms")?,
         );
-        // Per (group, trial): its rows' figures.
+        let c_attempt = col("attempt")?;
+        // Per (group, trial): its last attempt's rows' figures.
         let mut trials: BTreeMap<(String, usize), TrialRow> = BTreeMap::new();
         let mut practice = std::collections::BTreeSet::new();
         for (k, line) in lines.enumerate() {
@@ -237,14 +240,22 @@ impl Run {
                 continue;
             }
             let phantom = cells[c_phantom].parse::<f64>().unwrap_or(f64::NAN);
-            let row = trials.entry(key).or_insert_with(|| TrialRow {
+            let attempt = cells[c_attempt].parse::<u32>().unwrap_or(1);
+            let fresh = TrialRow {
+                attempt,
                 group: cells[c_group].clone(),
                 levels: fcols.iter().map(|&c| cells[c].clone()).collect(),
                 done: cells[c_done] == "1",
                 completion_s: cells[c_completion].parse::<f64>().unwrap_or(f64::NAN),
                 phantom_ms: 0.0,
-            });
-            row.phantom_ms = row.phantom_ms.max(phantom);
+            };
+            let row = trials.entry(key).or_insert_with(|| fresh.clone());
+            if attempt > row.attempt {
+                *row = fresh;
+            }
+            if attempt == row.attempt {
+                row.phantom_ms = row.phantom_ms.max(phantom);
+            }
         }
         if trials.is_empty() {
             bail!("{}: no measured trial yet", table.display());

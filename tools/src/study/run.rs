@@ -8,7 +8,7 @@
 //! commit, the machine, when.
 
 use std::fs::{File, OpenOptions};
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
@@ -43,8 +43,8 @@ struct Tables {
     begun_log: File,
     /// Trials begun by an earlier run (`group trial`).
     begun: Vec<String>,
-    /// Trials whole in the table.
-    done: Vec<(String, usize)>,
+    /// Trials whole in the table, with their attempts.
+    done: Whole,
 }
 
 impl Tables {
@@ -53,13 +53,26 @@ impl Tables {
         let table = out.join("trials.csv");
         let head = header(study).join(",");
         let done = if resume {
+            // The same study, to the byte: a changed seed, design or level under the same
+            // factor names would mix two studies in one table.
+            let was = std::fs::read(out.join("study.toml")).unwrap_or_default();
+            if was != std::fs::read(&study.path).unwrap_or_default() {
+                bail!(
+                    "--resume: {} was run from another study file than {} (its study.toml differs): resume with the file it was run from, or give another --out",
+                    out.display(),
+                    study.path.display()
+                );
+            }
             let done = done_trials(study, &table, &head)?;
-            truncate_to_whole_trials(&table, &head, &done)?;
+            truncate_to_whole_trials(study, &table, &head)?;
             done
         } else {
-            if table.exists() {
+            let left = ["trials.csv", "begun.txt", "questionnaires.csv"]
+                .into_iter()
+                .find(|f| out.join(f).exists());
+            if let Some(f) = left {
                 bail!(
-                    "{} already holds a study's trials: give another --out, or --resume to go on with it",
+                    "{} already holds a study's run ({f}): give another --out, or --resume to go on with it",
                     out.display()
                 );
             }
@@ -70,7 +83,7 @@ impl Tables {
             std::fs::copy(&study.path, out.join("study.toml")).with_context(|| {
                 format!("copying {} into {}", study.path.display(), out.display())
             })?;
-            Vec::new()
+            Whole::new()
         };
         write_meta(study, out, trials)?;
         let file = OpenOptions::new()
@@ -100,7 +113,31 @@ impl Tables {
 
     /// Whether the table holds `t` whole.
     fn holds(&self, t: &Trial) -> bool {
-        self.done.contains(&(t.group_id.clone(), t.trial))
+        self.done.contains_key(&(t.group_id.clone(), t.trial))
+    }
+
+    /// Runs `t` again (its next attempt, a new run of the same people) and appends its rows.
+    fn repeat(
+        &mut self,
+        study: &Study,
+        t: &Trial,
+        outcome: &mut dyn FnMut(String),
+    ) -> anyhow::Result<()> {
+        let key = (t.group_id.clone(), t.trial);
+        let attempt = self
+            .done
+            .get(&key)
+            .and_then(|a| a.iter().max())
+            .map_or(1, |a| a + 1);
+        writeln!(self.begun_log, "{} {} {attempt}", t.group_id, t.trial)?;
+        self.begun_log.sync_data()?;
+        let (rows, line) = trial_rows(study, t, false, attempt)?;
+        self.file.write_all(rows.as_bytes())?;
+        self.file.flush()?;
+        self.file.sync_data()?;
+        self.done.entry(key).or_default().push(attempt);
+        outcome(line);
+        Ok(())
     }
 
     /// Runs `trials` on every core, then appends their rows and flushes them; each trial's
@@ -117,7 +154,7 @@ impl Tables {
         self.begun_log.sync_data()?;
         let rows = crate::sweep::par_map(trials, |t| {
             let cut = self.begun.contains(&format!("{} {}", t.group_id, t.trial));
-            trial_rows(study, t, cut)
+            trial_rows(study, t, cut, 1)
         });
         for r in rows {
             let (rows, line) = r?;
@@ -126,6 +163,12 @@ impl Tables {
         }
         self.file.flush()?;
         self.file.sync_data()?;
+        for t in trials {
+            self.done
+                .entry((t.group_id.clone(), t.trial))
+                .or_default()
+                .push(1);
+        }
         Ok(())
     }
 }
@@ -183,6 +226,8 @@ pub fn run_served(
     shared.update(|b| b.done = kept);
     let answered = answered(&super::web::answers_path(out))?;
     let mut ran = 0;
+    // The last trial run, for the experimenter's repeat.
+    let mut last: Option<&Trial> = None;
     'groups: for (g, group) in study.groups.iter().enumerate() {
         let blocks = plan
             .iter()
@@ -201,6 +246,10 @@ pub fn run_served(
                 .filter(|t| !tables.holds(t))
                 .collect();
             let levels = &trials[0].levels;
+            if let (true, Some(t)) = (shared.take_repeat(), last) {
+                tables.repeat(study, t, &mut |line| shared.trial_repeated(line))?;
+                ran += 1;
+            }
             if !todo.is_empty() {
                 if !shared.may_go_on() {
                     break 'groups;
@@ -213,6 +262,7 @@ pub fn run_served(
                 shared.update(|b| b.now = what);
                 tables.run(study, &todo, &mut |line| shared.trial_done(line))?;
                 ran += todo.len();
+                last = todo.last().copied();
             }
             if shared.questionnaire.is_some() {
                 let owed: Vec<super::board::Pending> = group
@@ -241,8 +291,19 @@ pub fn run_served(
                         b.now = what;
                         b.pending = owed;
                     });
-                    if !shared.wait_answers() {
-                        break 'groups;
+                    loop {
+                        match shared.wait_answers() {
+                            super::board::Waited::Answered => break,
+                            super::board::Waited::Aborted => break 'groups,
+                            super::board::Waited::Repeat => {
+                                if let Some(t) = last {
+                                    tables.repeat(study, t, &mut |line| {
+                                        shared.trial_repeated(line)
+                                    })?;
+                                    ran += 1;
+                                }
+                            }
+                        }
                     }
                 }
             }
@@ -339,11 +400,27 @@ pub fn store_answers(
     Ok(())
 }
 
-/// One trial in the simulator: its rows (one per site), as CSV lines; `cut`: a run of it was cut
-/// short before (this one replaces it).
-fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, String)> {
+/// The seed of `t`'s `attempt` (its own for the first; a repeat is a new run of the same people).
+fn attempt_seed(t: &Trial, attempt: u32) -> u64 {
+    if attempt <= 1 {
+        t.seed
+    } else {
+        super::seed63(super::mix(t.seed, &[u64::from(attempt)]))
+    }
+}
+
+/// One trial in the simulator: its rows (one per site), as CSV lines, and its outcome in a
+/// line; `cut`: a run of it was cut short before (this one replaces it); `attempt`: 1, or which
+/// repeat this is.
+fn trial_rows(
+    study: &Study,
+    t: &Trial,
+    cut: bool,
+    attempt: u32,
+) -> anyhow::Result<(String, String)> {
     use std::fmt::Write as _;
-    let sc = study.scenario_for(&t.levels, t.seed, study.people_seed(t.group))?;
+    let seed = attempt_seed(t, attempt);
+    let sc = study.scenario_for(&t.levels, seed, study.people_seed(t.group))?;
     let r = sim::run_wired(
         &sc,
         Mode::Distributed(sc.method),
@@ -405,7 +482,7 @@ fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, St
                 .map(|(f, &l)| level_text(&f.levels[l])),
         );
         cells.extend([
-            t.seed.to_string(),
+            seed.to_string(),
             task.outcome.clone(),
             task.failed_by.clone(),
             u8::from(task.outcome == "done").to_string(),
@@ -425,6 +502,7 @@ fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, St
             num(s.unfelt_contact_ms, 1),
             s.sent_bytes.to_string(),
             u8::from(cut).to_string(),
+            attempt.to_string(),
         ]);
         let _ = writeln!(
             out,
@@ -437,11 +515,16 @@ fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, St
         );
     }
     let line = format!(
-        "{} trial {} ({}{}): {}",
+        "{} trial {} ({}{}{}): {}",
         t.group_id,
         t.trial,
         study.condition_name(&t.levels),
         if t.practice { ", practice" } else { "" },
+        if attempt > 1 {
+            format!(", attempt {attempt}")
+        } else {
+            String::new()
+        },
         if trial_done {
             format!("done in {completion:.2} s")
         } else {
@@ -451,70 +534,77 @@ fn trial_rows(study: &Study, t: &Trial, cut: bool) -> anyhow::Result<(String, St
     Ok((out, line))
 }
 
-/// The trials `table` holds whole (every site's row), as (group id, trial).
-fn done_trials(study: &Study, table: &Path, head: &str) -> anyhow::Result<Vec<(String, usize)>> {
-    let f = File::open(table).with_context(|| {
+/// Per trial (group id, trial), its attempts whose every site's row `text` holds complete (a
+/// line ended by its newline, with every cell).
+type Whole = std::collections::BTreeMap<(String, usize), Vec<u32>>;
+
+/// A complete line of the table and its trial's attempt: (group id, trial, attempt).
+type Line<'a> = (&'a str, (String, usize, u32));
+
+/// The whole attempts of `text`'s trials, and each complete line with its key.
+fn whole_attempts<'a>(
+    text: &'a str,
+    width: usize,
+    name: &str,
+    sites: usize,
+) -> (Whole, Vec<Line<'a>>) {
+    let mut lines = Vec::new();
+    let mut counts: std::collections::BTreeMap<(String, usize, u32), usize> = Default::default();
+    for line in text.split_inclusive('\n').skip(1) {
+        // A line cut by a crash has no newline, or fewer cells: it does not count.
+        if !line.ends_with('\n') {
+            continue;
+        }
+        let cells = super::csv::split(line.trim_end_matches(['\n', '\r']));
+        if cells.len() != width || cells[0] != name {
+            continue;
+        }
+        let (Ok(trial), Ok(attempt)) = (cells[5].parse::<usize>(), cells[width - 1].parse::<u32>())
+        else {
+            continue;
+        };
+        let key = (cells[1].clone(), trial, attempt);
+        *counts.entry(key.clone()).or_default() += 1;
+        lines.push((line, key));
+    }
+    let mut whole: Whole = Default::default();
+    for ((g, t, a), n) in counts {
+        if n == sites {
+            whole.entry((g, t)).or_default().push(a);
+        }
+    }
+    (whole, lines)
+}
+
+/// The trials `table` holds whole (every site's row of some attempt), with their attempts.
+fn done_trials(study: &Study, table: &Path, head: &str) -> anyhow::Result<Whole> {
+    let text = std::fs::read_to_string(table).with_context(|| {
         format!(
             "--resume: {} has no trials.csv: nothing to resume (run without --resume)",
             table.parent().unwrap_or(Path::new(".")).display()
         )
     })?;
-    let mut lines = BufReader::new(f).lines();
-    let first = lines.next().transpose()?.unwrap_or_default();
-    if first != head {
+    if text.lines().next().unwrap_or_default() != head {
         bail!(
             "--resume: {} was written for another study (its header differs from {}'s)",
             table.display(),
             study.path.display()
         );
     }
-    let h = header(study);
-    let col = |name: &str| {
-        h.iter()
-            .position(|c| c == name)
-            .expect("a column of the header")
-    };
-    let (g, t, name) = (col("group"), col("trial"), col("study"));
-    let mut counts: std::collections::BTreeMap<(String, usize), usize> = Default::default();
-    for line in lines {
-        let line = line?;
-        // A line cut by a crash has fewer cells, or no newline: it does not count.
-        let cells = super::csv::split(&line);
-        if cells.len() != h.len() || cells[name] != study.file.name {
-            continue;
-        }
-        if let Ok(trial) = cells[t].parse::<usize>() {
-            *counts.entry((cells[g].clone(), trial)).or_default() += 1;
-        }
-    }
-    Ok(counts
-        .into_iter()
-        .filter(|(_, n)| *n == study.sites.len())
-        .map(|(k, _)| k)
-        .collect())
+    let width = super::csv::split(head).len();
+    Ok(whole_attempts(&text, width, &study.file.name, study.sites.len()).0)
 }
 
-/// Rewrites `table` with only the whole trials' rows (a batch cut mid-write leaves some of a
+/// Rewrites `table` with only the whole attempts' rows (a batch cut mid-write leaves some of a
 /// trial's sites, or half a line).
-fn truncate_to_whole_trials(
-    table: &Path,
-    head: &str,
-    done: &[(String, usize)],
-) -> anyhow::Result<()> {
+fn truncate_to_whole_trials(study: &Study, table: &Path, head: &str) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(table)?;
+    let width = super::csv::split(head).len();
+    let (whole, lines) = whole_attempts(&text, width, &study.file.name, study.sites.len());
     let mut keep = String::from(head);
     keep.push('\n');
-    let width = super::csv::split(head).len();
-    for line in text.split_inclusive('\n').skip(1) {
-        if !line.ends_with('\n') {
-            continue;
-        }
-        let cells = super::csv::split(line.trim_end_matches(['\n', '\r']));
-        if cells.len() != width {
-            continue;
-        }
-        let key = (cells[1].clone(), cells[5].parse::<usize>().unwrap_or(0));
-        if done.contains(&key) {
+    for (line, (g, t, a)) in lines {
+        if whole.get(&(g, t)).is_some_and(|w| w.contains(&a)) {
             keep.push_str(line);
         }
     }
@@ -550,6 +640,14 @@ fn write_meta(study: &Study, out: &Path, trials: usize) -> anyhow::Result<()> {
         "mode": "simulation",
         "sites": study.sites,
         "groups": study.groups,
+        // Each group's people are drawn with this seed (the scenario's people_seed); each
+        // trial's run seed is in the table.
+        "people_seeds": study
+            .groups
+            .iter()
+            .enumerate()
+            .map(|(g, group)| (group.id.clone(), study.people_seed(g)))
+            .collect::<std::collections::BTreeMap<_, _>>(),
         "trials": trials,
         "commit": commit,
         "machine": {
@@ -567,4 +665,36 @@ fn write_meta(study: &Study, out: &Path, trials: usize) -> anyhow::Result<()> {
     )
     .with_context(|| format!("writing {}", out.join("meta.json").display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::whole_attempts;
+
+    #[test]
+    fn only_complete_lines_of_every_site_make_a_trial_whole() {
+        // Columns: study, group, participant, site, block, trial, ..., attempt (8 cells here).
+        let row = |g: &str, site: &str, trial: u32, attempt: u32| {
+            format!("s,{g},{g}-{site},{site},1,{trial},x,{attempt}\n")
+        };
+        let mut text = String::from("head\n");
+        // Trial 1 whole; trial 2 missing a site; trial 3 whole in attempt 1, its attempt 2's
+        // last line cut before its newline; trial 4's second site's line torn short.
+        text += &row("g01", "a", 1, 1);
+        text += &row("g01", "b", 1, 1);
+        text += &row("g01", "a", 2, 1);
+        text += &row("g01", "a", 3, 1);
+        text += &row("g01", "b", 3, 1);
+        text += &row("g01", "a", 3, 2);
+        text += &row("g01", "a", 4, 1);
+        text += "s,g01,g01-b,b,1,4,x\n";
+        text += row("g01", "b", 3, 2).trim_end();
+        let (whole, lines) = whole_attempts(&text, 8, "s", 2);
+        let keys: Vec<_> = whole.iter().map(|(k, a)| (k.1, a.clone())).collect();
+        assert_eq!(keys, vec![(1, vec![1]), (3, vec![1])]);
+        // The cut line is not among the complete ones; another study's rows are not counted.
+        assert_eq!(lines.len(), 7);
+        let (other, _) = whole_attempts(&text, 8, "t", 2);
+        assert!(other.is_empty());
+    }
 }

@@ -4,7 +4,7 @@
 //! | route | what |
 //! |---|---|
 //! | `GET /` | the experimenter's page (refreshes itself every 2 s) |
-//! | `POST /control` | `action=pause`, `resume` or `abort`; `close` once the run has finished |
+//! | `POST /control` | `action=pause`, `resume`, `repeat` (the last trial, again) or `abort`; `close` once the run has finished |
 //! | `GET /status.json` | the progress as JSON |
 //! | `GET /q/<participant>` | the questionnaire owed, or a page that waits for one |
 //! | `POST /q/<participant>` | the answers: each question once, on its scale |
@@ -29,12 +29,34 @@ use super::questionnaire::html;
 const MAX_HEAD: usize = 16 * 1024;
 /// Most body bytes.
 const MAX_BODY: usize = 64 * 1024;
+/// The whole request's time, from the connection's accept.
+const REQUEST_TIME: Duration = Duration::from_secs(5);
+/// Most connections served at once; more are answered 503 at once.
+const MAX_CONNECTIONS: u64 = 64;
 
-/// The server: its address, and where answers are appended.
+/// The server: its address and the experimenter's key.
 #[derive(Debug)]
 pub struct Server {
     /// Where it listens.
     pub addr: SocketAddr,
+    /// What `/control` needs (`key=` in its form; the experimenter's page carries it): a page a
+    /// participant or another site opens cannot pause, repeat or abort the study.
+    pub key: String,
+}
+
+/// A key no one guesses: 128 bits from the standard library's per-process random hash keys.
+fn fresh_key() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    let half = || {
+        let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+        h.write_u128(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos()),
+        );
+        h.finish()
+    };
+    format!("{:016x}{:016x}", half(), half())
 }
 
 /// A response: status, content type, body; or a redirect.
@@ -101,27 +123,78 @@ impl Server {
         let listener = TcpListener::bind(addr)
             .with_context(|| format!("--serve {addr}: cannot listen there"))?;
         let addr = listener.local_addr()?;
+        let key = fresh_key();
+        let page = Arc::new(Page {
+            shared,
+            store,
+            key: key.clone(),
+            open: std::sync::Mutex::new(0),
+        });
         std::thread::Builder::new()
             .name("study-web".into())
             .spawn(move || {
-                for conn in listener.incoming().flatten() {
-                    let (shared, store) = (Arc::clone(&shared), Arc::clone(&store));
-                    // One thread per connection: a slow client does not hold the page up.
-                    let _ = std::thread::Builder::new()
+                for mut conn in listener.incoming().flatten() {
+                    if !page.enter() {
+                        let _ = conn.write_all(b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nConnection: close\r\n\r\n");
+                        continue;
+                    }
+                    // One thread per connection (at most MAX_CONNECTIONS, each given at most
+                    // REQUEST_TIME to send its request): a slow client does not hold the page up.
+                    let mine = Arc::clone(&page);
+                    let spawned = std::thread::Builder::new()
                         .name("study-web-conn".into())
-                        .spawn(move || serve(conn, &shared, &*store));
+                        .spawn(move || {
+                            serve(conn, &mine);
+                            mine.leave();
+                        });
+                    if spawned.is_err() {
+                        page.leave();
+                    }
                 }
             })?;
-        Ok(Self { addr })
+        Ok(Self { addr, key })
+    }
+}
+
+/// What the connections share: the board, where answers go, the experimenter's key, and how
+/// many connections are open.
+struct Page {
+    shared: Arc<Shared>,
+    store: Arc<Store>,
+    key: String,
+    open: std::sync::Mutex<u64>,
+}
+
+impl Page {
+    /// Counts a connection in; false when MAX_CONNECTIONS are open already.
+    fn enter(&self) -> bool {
+        let mut open = self
+            .open
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if *open >= MAX_CONNECTIONS {
+            return false;
+        }
+        *open += 1;
+        true
+    }
+
+    /// Counts a connection out.
+    fn leave(&self) {
+        let mut open = self
+            .open
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        *open = open.saturating_sub(1);
     }
 }
 
 /// Reads one request from `conn`, answers it, closes.
-fn serve(mut conn: TcpStream, shared: &Shared, store: &Store) {
-    let _ = conn.set_read_timeout(Some(Duration::from_secs(5)));
-    let _ = conn.set_write_timeout(Some(Duration::from_secs(5)));
-    let reply = match read_request(&mut conn) {
-        Ok((method, path, body)) => route(&method, &path, &body, shared, store),
+fn serve(mut conn: TcpStream, page: &Page) {
+    let _ = conn.set_write_timeout(Some(REQUEST_TIME));
+    let shared = &*page.shared;
+    let reply = match read_request(&mut conn, std::time::Instant::now() + REQUEST_TIME) {
+        Ok((method, path, body)) => route(&method, &path, &body, page),
         Err(r) => r,
     };
     let mut head = format!(
@@ -150,24 +223,44 @@ fn reason(status: u16) -> &'static str {
         200 => "OK",
         303 => "See Other",
         400 => "Bad Request",
+        403 => "Forbidden",
         404 => "Not Found",
         405 => "Method Not Allowed",
         409 => "Conflict",
         411 => "Length Required",
         413 => "Payload Too Large",
         431 => "Request Header Fields Too Large",
+        500 => "Internal Server Error",
+        503 => "Service Unavailable",
         _ => "Error",
     }
 }
 
+/// Reads into `chunk` before `deadline` (the whole request's, not each read's: a client
+/// sending a byte now and then is cut off too).
+fn read_by(
+    conn: &mut TcpStream,
+    chunk: &mut [u8],
+    deadline: std::time::Instant,
+) -> Result<usize, Reply> {
+    let left = deadline.saturating_duration_since(std::time::Instant::now());
+    if left.is_zero() {
+        return Err(Reply::error(400, "the request did not arrive in time"));
+    }
+    let _ = conn.set_read_timeout(Some(left));
+    conn.read(chunk)
+        .map_err(|_| Reply::error(400, "the request did not arrive in time"))
+}
+
 /// The request's method, path and body, or the reply that refuses it.
-fn read_request(conn: &mut TcpStream) -> Result<(String, String, String), Reply> {
+fn read_request(
+    conn: &mut TcpStream,
+    deadline: std::time::Instant,
+) -> Result<(String, String, String), Reply> {
     let mut buf = Vec::with_capacity(4096);
     let mut chunk = [0u8; 4096];
     loop {
-        let n = conn
-            .read(&mut chunk)
-            .map_err(|_| Reply::error(400, "the request did not arrive in time"))?;
+        let n = read_by(conn, &mut chunk, deadline)?;
         if n == 0 {
             return Err(Reply::error(
                 400,
@@ -203,9 +296,7 @@ fn read_request(conn: &mut TcpStream) -> Result<(String, String, String), Reply>
                 }
                 let mut body = buf[head_len..].to_vec();
                 while body.len() < length {
-                    let n = conn
-                        .read(&mut chunk)
-                        .map_err(|_| Reply::error(400, "the body did not arrive in time"))?;
+                    let n = read_by(conn, &mut chunk, deadline)?;
                     if n == 0 {
                         return Err(Reply::error(
                             400,
@@ -228,11 +319,23 @@ fn read_request(conn: &mut TcpStream) -> Result<(String, String, String), Reply>
     }
 }
 
+/// The value of `name` in a form or query string (`a=1&b=2`), decoded.
+fn field(form: &str, name: &str) -> Option<String> {
+    form.split('&').find_map(|p| {
+        let (k, v) = p.split_once('=')?;
+        (k == name)
+            .then(|| super::questionnaire::url_decode(v).ok())
+            .flatten()
+    })
+}
+
 /// Answers one request.
-fn route(method: &str, path: &str, body: &str, shared: &Shared, store: &Store) -> Reply {
-    let path = path.split('?').next().unwrap_or("/");
+fn route(method: &str, path: &str, body: &str, page: &Page) -> Reply {
+    let (shared, store) = (&*page.shared, &*page.store);
+    let (path, query) = path.split_once('?').unwrap_or((path, ""));
+    let keyed = |form: &str| field(form, "key").is_some_and(|k| k == page.key);
     match (method, path) {
-        ("GET", "/") => experimenter(shared),
+        ("GET", "/") => experimenter(shared, keyed(query).then_some(page.key.as_str())),
         ("GET", "/status.json") => Reply {
             status: 200,
             kind: "application/json",
@@ -241,14 +344,32 @@ fn route(method: &str, path: &str, body: &str, shared: &Shared, store: &Store) -
             closes: false,
         },
         ("POST", "/control") => {
-            let action = body
-                .split('&')
-                .find_map(|p| p.strip_prefix("action="))
-                .unwrap_or("");
+            if !keyed(body) {
+                return Reply::error(
+                    403,
+                    "the experimenter's key is missing or wrong (the address printed at the start carries it)",
+                );
+            }
+            let action = field(body, "action").unwrap_or_default();
+            let action = action.as_str();
             let to = match action {
                 "pause" => Control::Paused,
                 "resume" => Control::Running,
                 "abort" => Control::Aborted,
+                "repeat" => {
+                    let ok = {
+                        let b = shared.lock();
+                        b.done > 0 && !b.finished
+                    };
+                    if !ok {
+                        return Reply::error(
+                            409,
+                            "repeat: no trial has finished yet, or the run has",
+                        );
+                    }
+                    shared.update(|b| b.repeat = true);
+                    return Reply::redirect(&format!("/?key={}", page.key));
+                }
                 "close" => {
                     let finished = shared.lock().finished;
                     if !finished {
@@ -269,7 +390,7 @@ fn route(method: &str, path: &str, body: &str, shared: &Shared, store: &Store) -
                 other => {
                     return Reply::error(
                         400,
-                        &format!("action {other:?}: pause, resume, abort or close"),
+                        &format!("action {other:?}: pause, resume, repeat, abort or close"),
                     )
                 }
             };
@@ -279,7 +400,7 @@ fn route(method: &str, path: &str, body: &str, shared: &Shared, store: &Store) -
                     b.control = to;
                 }
             });
-            Reply::redirect("/")
+            Reply::redirect(&format!("/?key={}", page.key))
         }
         (m, p) if p.starts_with("/q/") => {
             let who = match super::questionnaire::url_decode(&p[3..]) {
@@ -300,7 +421,8 @@ fn route(method: &str, path: &str, body: &str, shared: &Shared, store: &Store) -
     }
 }
 
-fn experimenter(shared: &Shared) -> Reply {
+/// The experimenter's page; its buttons only with the key (`key`: it was given).
+fn experimenter(shared: &Shared, key: Option<&str>) -> Reply {
     use std::fmt::Write;
     let b = shared.lock().clone();
     let mut s = format!(
@@ -312,19 +434,27 @@ fn experimenter(shared: &Shared) -> Reply {
         html(&b.now),
         match b.control {
             Control::Running => "running",
-            Control::Paused => "paused: no new trial starts",
+            Control::Paused => "paused: no new block starts",
             Control::Aborted => "aborted: the run stops after the trials running (study run --resume goes on)",
         }
     );
-    let buttons: &[(&str, &str)] = if b.finished {
+    let buttons: &[(&str, &str)] = if key.is_none() {
+        &[]
+    } else if b.finished {
         &[("close", "Close")]
     } else {
-        &[("pause", "Pause"), ("resume", "Resume"), ("abort", "Abort")]
+        &[
+            ("pause", "Pause"),
+            ("resume", "Resume"),
+            ("repeat", "Repeat the last trial"),
+            ("abort", "Abort"),
+        ]
     };
     for (action, label) in buttons {
         let _ = write!(
             s,
-            "<form method=\"post\" action=\"/control\" style=\"display:inline\"><button name=\"action\" value=\"{action}\" id=\"{action}\">{label}</button></form> "
+            "<form method=\"post\" action=\"/control\" style=\"display:inline\"><input type=\"hidden\" name=\"key\" value=\"{}\"><button name=\"action\" value=\"{action}\" id=\"{action}\">{label}</button></form> ",
+            html(key.unwrap_or_default())
         );
     }
     let _ = write!(s, "<h2>Questionnaires owed</h2><ul id=\"owed\">");
@@ -376,7 +506,7 @@ fn questionnaire_page(shared: &Shared, who: &str) -> Reply {
                 "<h1>Questionnaire</h1><p id=\"who\">{} — block {}</p><p>About the trials you just did.</p>{}",
                 html(&p.participant),
                 p.block,
-                q.form(&format!("/q/{}", html(who)))
+                q.form(&format!("/q/{}", url_encode(who)), p.block)
             ),
             false,
         ),
@@ -395,6 +525,9 @@ fn answer(shared: &Shared, store: &Store, who: &str, body: &str) -> Reply {
     let Some(q) = &shared.questionnaire else {
         return Reply::error(404, "this study asks no questionnaire");
     };
+    // One answer at a time, from the check that it is owed to its removal: a form sent twice
+    // is kept once.
+    let _one = shared.answering();
     let Some(p) = shared
         .lock()
         .pending
@@ -404,7 +537,22 @@ fn answer(shared: &Shared, store: &Store, who: &str, body: &str) -> Reply {
     else {
         return Reply::error(409, &format!("{who}: no questionnaire is owed now"));
     };
-    let answers = match q.parse_answers(body) {
+    // The form names its block: one sent late (a page left open) is not filed under the next.
+    let block = field(body, "block").unwrap_or_default();
+    if block != p.block.to_string() {
+        return Reply::error(
+            409,
+            &format!(
+                "{who}: this form is for block {block:?}, and block {} is owed now",
+                p.block
+            ),
+        );
+    }
+    let rest: Vec<&str> = body
+        .split('&')
+        .filter(|f| !f.starts_with("block="))
+        .collect();
+    let answers = match q.parse_answers(&rest.join("&")) {
         Ok(a) => a,
         Err(e) => return Reply::error(400, &e),
     };
