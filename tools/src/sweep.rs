@@ -104,12 +104,8 @@ pub struct Row {
 
 impl Row {
     fn new(delay_ms: f64, seed: u64, m: &Metrics, duration_s: f64, has_task: bool) -> Self {
-        let task_done = has_task.then(|| {
-            !m.sites.is_empty()
-                && m.sites
-                    .iter()
-                    .all(|s| s.task.as_ref().is_some_and(|t| t.outcome == "done"))
-        });
+        let (done, completion) = crate::figures::task_completion(m);
+        let task_done = has_task.then_some(done);
         Self {
             sent_kbit_s: crate::figures::busiest_sent_kbit_s(m, duration_s),
             method: m.method.clone(),
@@ -156,10 +152,7 @@ impl Row {
             local_lag_max_ms: m.local_lag_max_ms,
             task_done,
             completion_s: if task_done == Some(true) {
-                m.sites
-                    .iter()
-                    .filter_map(|s| s.task.as_ref().map(|t| t.time_s))
-                    .fold(f64::NEG_INFINITY, f64::max)
+                completion
             } else {
                 f64::NAN
             },

@@ -306,20 +306,7 @@ fn questionnaires_are_answered_in_a_browser_between_blocks() {
     let written = std::fs::read_to_string(&file).expect("study file");
     std::fs::write(&file, written.replace("practice = 1", "practice = 0")).expect("study file");
     let out = d.join("run");
-    let mut run = Command::new(STUDY)
-        .args(["run", "--sim"])
-        .arg(&file)
-        .arg("--out")
-        .arg(&out)
-        .args(["--serve", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start study run");
-    let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
-    // Killed and reaped if the test fails on the way.
-    let mut run = Reaped(Some(run));
-    let (url, key) = served(&mut err);
+    let (mut run, url, key) = serve(&file, &out);
     let browser = Command::new("python3")
         .arg(repo().join("tools/tests/fixtures/study_browser.py"))
         .args([url.as_str(), key.as_str(), "120"])
@@ -401,6 +388,27 @@ fn questionnaires_are_answered_in_a_browser_between_blocks() {
     assert!(out.join("questionnaire.svg").is_file());
 }
 
+/// `study run --sim FILE --out OUT --serve` on any free port: the run (killed and reaped if
+/// the test fails on the way), its base address and the experimenter's key.
+fn serve(file: &Path, out: &Path) -> (Reaped, String, String) {
+    let mut run = Command::new(STUDY)
+        .args(["run", "--sim"])
+        .arg(file)
+        .arg("--out")
+        .arg(out)
+        .args(["--serve", "127.0.0.1:0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start study run");
+    let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
+    let run = Reaped(Some(run));
+    let (url, key) = served(&mut err);
+    // The rest of its stderr read to the end: a closed pipe would fail its later lines.
+    std::thread::spawn(move || std::io::copy(&mut err, &mut std::io::sink()));
+    (run, url, key)
+}
+
 /// The base address and the experimenter's key `study run --serve` prints on its stderr.
 fn served(err: &mut impl std::io::BufRead) -> (String, String) {
     let mut line = String::new();
@@ -432,19 +440,7 @@ fn the_page_refuses_malformed_requests() {
     let d = TempDir::new("study-hostile");
     let file = small_study(&d, "[questionnaire]\nnasa_tlx = true\n");
     let out = d.join("run");
-    let mut run = Command::new(STUDY)
-        .args(["run", "--sim"])
-        .arg(&file)
-        .arg("--out")
-        .arg(&out)
-        .args(["--serve", "127.0.0.1:0"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("start study run");
-    let mut err = std::io::BufReader::new(run.stderr.take().expect("stderr"));
-    let mut run = Reaped(Some(run));
-    let (url, key) = served(&mut err);
+    let (mut run, url, key) = serve(&file, &out);
     let addr = url.trim_start_matches("http://").to_owned();
     let ask = |raw: &[u8]| -> String {
         let mut c = std::net::TcpStream::connect(&addr).expect("connect");

@@ -9,6 +9,41 @@ pub fn cell(s: &str) -> String {
     }
 }
 
+/// A table's header line: its columns, found by name.
+#[derive(Debug)]
+pub struct Header<'a> {
+    /// The column names.
+    pub cells: Vec<String>,
+    path: &'a std::path::Path,
+}
+
+impl<'a> Header<'a> {
+    /// The header `line` of the table at `path` (named in errors).
+    pub fn new(line: &str, path: &'a std::path::Path) -> Self {
+        Self {
+            cells: split(line),
+            path,
+        }
+    }
+
+    /// The index of column `name`.
+    ///
+    /// # Errors
+    /// The table has no such column.
+    pub fn col(&self, name: &str) -> anyhow::Result<usize> {
+        use anyhow::Context;
+        self.cells
+            .iter()
+            .position(|c| c == name)
+            .with_context(|| format!("{}: no column {name:?}", self.path.display()))
+    }
+}
+
+/// `cells` as one CSV line (no line break).
+pub fn line(cells: &[String]) -> String {
+    cells.iter().map(|c| cell(c)).collect::<Vec<_>>().join(",")
+}
+
 /// Splits a CSV line (quoted cells may hold commas and doubled quotes).
 pub fn split(line: &str) -> Vec<String> {
     let mut out = Vec::new();

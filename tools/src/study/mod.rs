@@ -621,6 +621,30 @@ pub const COLUMNS: [&str; 25] = [
     "attempt",
 ];
 
+/// `conditions` (each a level per factor, as the tables write them) sorted as `study` lists the
+/// levels, without repeats.
+pub fn in_level_order(study: &StudyFile, mut conditions: Vec<Vec<String>>) -> Vec<Vec<String>> {
+    let rank = |f: usize, l: &str| {
+        study.factor.get(f).map_or(usize::MAX, |factor| {
+            factor
+                .levels
+                .iter()
+                .position(|v| level_text(v) == l)
+                .unwrap_or(usize::MAX)
+        })
+    };
+    // (A level the file does not list sorts last, by its text: equal conditions end up side
+    // by side whatever they hold.)
+    conditions.sort_by_key(|c| {
+        c.iter()
+            .enumerate()
+            .map(|(f, l)| (rank(f, l), l.clone()))
+            .collect::<Vec<_>>()
+    });
+    conditions.dedup();
+    conditions
+}
+
 /// A level as the trial table writes it.
 pub fn level_text(v: &toml::Value) -> String {
     match v {

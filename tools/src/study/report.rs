@@ -18,7 +18,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context};
 
-use super::{level_text, StudyFile};
+use super::StudyFile;
 use crate::stats::{cousineau_morey95, f_test_p, mean_ci95, sd, wilson95};
 
 /// One measured trial of one group.
@@ -200,12 +200,9 @@ impl Run {
         let text = std::fs::read_to_string(&table)
             .with_context(|| format!("reading {}", table.display()))?;
         let mut lines = text.lines();
-        let head = super::csv::split(lines.next().unwrap_or_default());
-        let col = |name: &str| -> anyhow::Result<usize> {
-            head.iter()
-                .position(|c| c == name)
-                .with_context(|| format!("{}: no column {name:?}", table.display()))
-        };
+        let header = super::csv::Header::new(lines.next().unwrap_or_default(), &table);
+        let head = &header.cells;
+        let col = |name: &str| header.col(name);
         let factors: Vec<String> = study.factor.iter().map(|f| f.name.clone()).collect();
         let fcols: Vec<usize> = factors.iter().map(|f| col(f)).collect::<Result<_, _>>()?;
         let (c_group, c_trial, c_practice, c_done, c_completion, c_phantom) = (
@@ -261,21 +258,8 @@ impl Run {
             bail!("{}: no measured trial yet", table.display());
         }
         // The conditions, in the levels' order of the study file.
-        let level_order = |f: usize, l: &str| {
-            study.factor[f]
-                .levels
-                .iter()
-                .position(|v| level_text(v) == l)
-                .unwrap_or(usize::MAX)
-        };
-        let mut conditions: Vec<Vec<String>> = trials.values().map(|t| t.levels.clone()).collect();
-        conditions.sort_by_key(|c| {
-            c.iter()
-                .enumerate()
-                .map(|(f, l)| level_order(f, l))
-                .collect::<Vec<_>>()
-        });
-        conditions.dedup();
+        let conditions =
+            super::in_level_order(&study, trials.values().map(|t| t.levels.clone()).collect());
         let groups: Vec<String> = {
             let mut g: Vec<String> = trials.values().map(|t| t.group.clone()).collect();
             g.sort();
@@ -419,7 +403,7 @@ impl Run {
                     for e in effects {
                         let _ = writeln!(
                             anova_text,
-                            "{:<28} F({:.0}, {:.0}) = {:>8.3}  p = {}  partial eta² = {}",
+                            "{:<28} F({:.0}, {:.0}) = {:>8.3}  p {}  partial eta² = {}",
                             e.name,
                             e.df.0,
                             e.df.1,
@@ -427,7 +411,7 @@ impl Run {
                             if e.p < 1e-4 {
                                 "< 0.0001".to_owned()
                             } else {
-                                crate::figures::or_dash(e.p, 4)
+                                format!("= {}", crate::figures::or_dash(e.p, 4))
                             },
                             crate::figures::or_dash(e.eta_p2, 3)
                         );

@@ -224,7 +224,11 @@ pub fn run_served(
     let mut tables = Tables::open(study, out, resume, plan.len())?;
     let kept = plan.iter().filter(|t| tables.holds(t)).count();
     shared.update(|b| b.done = kept);
-    let answered = answered(&super::web::answers_path(out))?;
+    let items = shared
+        .questionnaire
+        .as_ref()
+        .map_or(0, |q| q.questions().len());
+    let answered = answered(&super::web::answers_path(out), items)?;
     let mut ran = 0;
     // The last trial run, for the experimenter's repeat.
     let mut last: Option<&Trial> = None;
@@ -325,23 +329,31 @@ pub fn run_served(
     })
 }
 
-/// The questionnaires `path` holds: (group, block, participant).
-fn answered(path: &Path) -> anyhow::Result<Vec<(String, usize, String)>> {
+/// The questionnaires `path` holds whole, every one of its `items` on a complete line:
+/// (group, block, participant). One cut by a crash is asked again.
+fn answered(path: &Path, items: usize) -> anyhow::Result<Vec<(String, usize, String)>> {
     let Ok(text) = std::fs::read_to_string(path) else {
         return Ok(Vec::new());
     };
-    let mut out = Vec::new();
-    for line in text.lines().skip(1) {
-        let c = super::csv::split(line);
+    let mut counts: std::collections::BTreeMap<(String, usize, String), usize> = Default::default();
+    for line in text.split_inclusive('\n').skip(1) {
+        if !line.ends_with('\n') {
+            continue;
+        }
+        let c = super::csv::split(line.trim_end_matches(['\n', '\r']));
         if c.len() >= 5 {
             if let Ok(block) = c[4].parse() {
-                out.push((c[1].clone(), block, c[2].clone()));
+                *counts
+                    .entry((c[1].clone(), block, c[2].clone()))
+                    .or_default() += 1;
             }
         }
     }
-    out.sort();
-    out.dedup();
-    Ok(out)
+    Ok(counts
+        .into_iter()
+        .filter(|(_, n)| *n >= items)
+        .map(|(k, _)| k)
+        .collect())
 }
 
 /// Appends a participant's answers to `path` (made with its header): one row per item.
@@ -385,15 +397,7 @@ pub fn store_answers(
         .chain(p.levels.iter().cloned())
         .chain([item.clone(), value.to_string(), when.to_string()])
         .collect();
-        let _ = writeln!(
-            text,
-            "{}",
-            cells
-                .iter()
-                .map(|c| super::csv::cell(c))
-                .collect::<Vec<_>>()
-                .join(",")
-        );
+        let _ = writeln!(text, "{}", super::csv::line(&cells));
     }
     f.write_all(text.as_bytes())?;
     f.sync_data()?;
@@ -430,19 +434,7 @@ fn trial_rows(
     // The task's figures need no reference run (nothing here is compared with one): the run
     // stands in for it, and the reference's columns are not written.
     let m = metrics::compute(&sc, &r, &r);
-    let outcome = |s: &metrics::SiteMetrics| s.task.as_ref().map(|t| t.outcome.clone());
-    let trial_done = m
-        .sites
-        .iter()
-        .all(|s| outcome(s).as_deref() == Some("done"));
-    let completion = if trial_done {
-        m.sites
-            .iter()
-            .filter_map(|s| s.task.as_ref().map(|t| t.time_s))
-            .fold(f64::NEG_INFINITY, f64::max)
-    } else {
-        f64::NAN
-    };
+    let (trial_done, completion) = crate::figures::task_completion(&m);
     let num = |v: f64, prec: usize| {
         if v.is_finite() {
             format!("{v:.prec$}")
@@ -504,15 +496,7 @@ fn trial_rows(
             u8::from(cut).to_string(),
             attempt.to_string(),
         ]);
-        let _ = writeln!(
-            out,
-            "{}",
-            cells
-                .iter()
-                .map(|c| super::csv::cell(c))
-                .collect::<Vec<_>>()
-                .join(",")
-        );
+        let _ = writeln!(out, "{}", super::csv::line(&cells));
     }
     let line = format!(
         "{} trial {} ({}{}{}): {}",

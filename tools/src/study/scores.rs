@@ -9,7 +9,7 @@ use std::path::Path;
 use anyhow::Context;
 
 use super::questionnaire::TLX;
-use super::{level_text, StudyFile};
+use super::StudyFile;
 use crate::plots::LinePanel;
 use crate::stats::mean_ci95;
 
@@ -29,12 +29,9 @@ fn read_sheets(dir: &Path, study: &StudyFile) -> anyhow::Result<Option<Sheets>> 
         return Ok(None);
     };
     let mut lines = text.lines();
-    let head = super::csv::split(lines.next().unwrap_or_default());
-    let col = |name: &str| -> anyhow::Result<usize> {
-        head.iter()
-            .position(|c| c == name)
-            .with_context(|| format!("{}: no column {name:?}", path.display()))
-    };
+    let header = super::csv::Header::new(lines.next().unwrap_or_default(), &path);
+    let head = &header.cells;
+    let col = |name: &str| header.col(name);
     let factors: Vec<usize> = study
         .factor
         .iter()
@@ -47,7 +44,14 @@ fn read_sheets(dir: &Path, study: &StudyFile) -> anyhow::Result<Option<Sheets>> 
         col("value")?,
     );
     let mut sheets: Sheets = BTreeMap::new();
+    let complete = text.ends_with('\n');
+    let count = text.lines().count();
     for (k, line) in lines.enumerate() {
+        // A last line without its newline was cut by a crash (that questionnaire is asked
+        // again when the run resumes).
+        if !complete && k + 2 == count {
+            continue;
+        }
         let c = super::csv::split(line);
         if c.len() != head.len() {
             anyhow::bail!(
@@ -119,22 +123,10 @@ pub fn scores(
         return Ok(None);
     }
     let measures = measures_of(&sheets);
-    let level_order = |f: usize, l: &str| {
-        study.factor[f]
-            .levels
-            .iter()
-            .position(|v| level_text(v) == l)
-            .unwrap_or(usize::MAX)
-    };
-    let mut conditions: Vec<Vec<String>> =
-        measures.values().flat_map(|m| m.keys().cloned()).collect();
-    conditions.sort_by_key(|c| {
-        c.iter()
-            .enumerate()
-            .map(|(f, l)| level_order(f, l))
-            .collect::<Vec<_>>()
-    });
-    conditions.dedup();
+    let conditions = super::in_level_order(
+        study,
+        measures.values().flat_map(|m| m.keys().cloned()).collect(),
+    );
     let names: Vec<&String> = measures.keys().collect();
     let mut out = String::new();
     let _ = writeln!(
