@@ -110,6 +110,10 @@ fn the_plan_counterbalances_and_bad_files_are_refused_by_field() {
             "column of the trial table",
         ),
         (
+            "[[factor]]\nname = \"m\"\nset = [\"description\"]\nlevels = [\"two\\nlines\"]\n",
+            "one line",
+        ),
+        (
             "[[group]]\nid = \"a\"\nparticipants = [\"p1\"]\n",
             "not both",
         ),

@@ -507,6 +507,14 @@ fn check_fields(path: &Path, file: &StudyFile) -> anyhow::Result<()> {
                     "a level is a string, a number or a boolean",
                 ));
             }
+            if level_text(l).contains(['\n', '\r']) {
+                return Err(rule(
+                    path,
+                    &field("levels"),
+                    l,
+                    "a level is one line (it is a cell of the tables)",
+                ));
+            }
             if !seen.insert(level_text(l)) {
                 return Err(rule(path, &field("levels"), l, "levels must differ"));
             }
