@@ -247,6 +247,9 @@ impl Condition {
 pub struct TaskSpec {
     /// Done when this holds at the site for `hold_s`.
     pub done: Option<ConditionSpec>,
+    /// And each of these with it (a condition is about one object: a task on several objects
+    /// names the others here).
+    pub done_also: Vec<ConditionSpec>,
     /// How long `done` must hold, s.
     pub hold_s: f64,
     /// Failed when not done by then, s from the start (0: the scenario's duration).
@@ -271,6 +274,7 @@ pub enum Outcome {
 #[derive(Debug, Clone, PartialEq)]
 pub struct TaskJudge {
     done: Condition,
+    done_also: Vec<Condition>,
     hold_s: f64,
     timeout_s: f64,
     fail: Vec<Condition>,
@@ -290,7 +294,11 @@ impl TaskSpec {
         duration_s: f64,
     ) -> Result<Option<TaskJudge>, ScenarioError> {
         let Some(done) = &self.done else {
-            if !self.fail.is_empty() || self.hold_s != 0.0 || self.timeout_s != 0.0 {
+            if !self.fail.is_empty()
+                || !self.done_also.is_empty()
+                || self.hold_s != 0.0
+                || self.timeout_s != 0.0
+            {
                 return Err(err("task.done", "none", "a task needs its done condition"));
             }
             return Ok(None);
@@ -308,8 +316,15 @@ impl TaskSpec {
             .enumerate()
             .map(|(k, c)| c.resolve(&format!("task.fail[{k}]"), names))
             .collect::<Result<Vec<_>, _>>()?;
+        let done_also = self
+            .done_also
+            .iter()
+            .enumerate()
+            .map(|(k, c)| c.resolve(&format!("task.done_also[{k}]"), names))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Some(TaskJudge {
             done: done.resolve("task.done", names)?,
+            done_also,
             hold_s: self.hold_s,
             timeout_s: if self.timeout_s > 0.0 {
                 self.timeout_s
@@ -336,7 +351,7 @@ impl TaskJudge {
             self.outcome = Outcome::Failed(view.t_s, Some(k));
             return self.outcome;
         }
-        if self.done.holds(view, &origin) {
+        if self.done.holds(view, &origin) && self.done_also.iter().all(|c| c.holds(view, &origin)) {
             let since = *self.since.get_or_insert(view.t_s);
             if view.t_s - since >= self.hold_s {
                 self.outcome = Outcome::Done(since);
@@ -407,6 +422,7 @@ mod tests {
                 released: true,
                 ..ConditionSpec::default()
             }),
+            done_also: vec![],
             hold_s: 0.5,
             timeout_s: 0.0,
             fail: vec![ConditionSpec {
@@ -431,6 +447,45 @@ mod tests {
         assert_eq!(
             j.judge(&view(2.0, Vec3::new(0.0, 0.0, -1.0), false)),
             Outcome::Done(1.4)
+        );
+    }
+
+    #[test]
+    fn done_only_while_every_further_condition_holds_too() {
+        let mut s = spec();
+        s.done_also = vec![ConditionSpec {
+            object: Some("puck".into()),
+            moved_m: Some(0.02),
+            ..ConditionSpec::default()
+        }];
+        let mut j = s.judge(&["disk", "puck"], 10.0).unwrap().unwrap();
+        let there = Vec3::new(0.05, 0.05, 0.01);
+        let two = |t_s: f64, puck_x: f64| {
+            let mut v = view(t_s, there, false);
+            v.objects = 2;
+            v.shown[1] = BodyState::at_rest(Vec3::new(puck_x, 0.0, 0.0));
+            v
+        };
+        // The disk is where it should be, the puck not yet moved: not done, however long.
+        assert_eq!(j.judge(&two(1.0, 0.0)), Outcome::Running);
+        assert_eq!(j.judge(&two(2.0, 0.01)), Outcome::Running);
+        // Moved far enough: the hold starts then.
+        assert_eq!(j.judge(&two(2.5, 0.03)), Outcome::Running);
+        assert_eq!(j.judge(&two(3.0, 0.03)), Outcome::Done(2.5));
+        s.done_also[0].object = Some("cup".into());
+        assert_eq!(
+            s.judge(&["disk", "puck"], 10.0).unwrap_err().field,
+            "task.done_also[0].object"
+        );
+        let lone = TaskSpec {
+            done: None,
+            fail: vec![],
+            hold_s: 0.0,
+            ..s
+        };
+        assert_eq!(
+            lone.judge(&["disk", "puck"], 10.0).unwrap_err().field,
+            "task.done"
         );
     }
 
