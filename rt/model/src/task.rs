@@ -310,18 +310,8 @@ impl TaskSpec {
                 ..e
             },
         )?;
-        let fail = self
-            .fail
-            .iter()
-            .enumerate()
-            .map(|(k, c)| c.resolve(&format!("task.fail[{k}]"), names))
-            .collect::<Result<Vec<_>, _>>()?;
-        let done_also = self
-            .done_also
-            .iter()
-            .enumerate()
-            .map(|(k, c)| c.resolve(&format!("task.done_also[{k}]"), names))
-            .collect::<Result<Vec<_>, _>>()?;
+        let fail = resolve_each(&self.fail, "task.fail", names)?;
+        let done_also = resolve_each(&self.done_also, "task.done_also", names)?;
         Ok(Some(TaskJudge {
             done: done.resolve("task.done", names)?,
             done_also,
@@ -337,6 +327,18 @@ impl TaskSpec {
             outcome: Outcome::Running,
         }))
     }
+}
+
+/// Each condition of a list, its objects found; errors name `field[k]`.
+fn resolve_each(
+    list: &[ConditionSpec],
+    field: &str,
+    names: &[&str],
+) -> Result<Vec<Condition>, ScenarioError> {
+    list.iter()
+        .enumerate()
+        .map(|(k, c)| c.resolve(&format!("{field}[{k}]"), names))
+        .collect()
 }
 
 impl TaskJudge {
