@@ -431,8 +431,11 @@ impl Participant {
                         MinJerk::new(t, from, Vec3::zeros(), Vec3::zeros(), from + step.by, dur);
                     g.carry_planned = from + step.by;
                 }
+                // Judged along the carry: how far across it the object sits is no business of
+                // this step (a carry across a lift that has not quite settled).
+                let along = step.by.try_normalize(1e-9).unwrap_or_else(Vec3::zeros);
                 let there = self.origin[k] + step.by;
-                let short = there - seen.shown[k].pos;
+                let short = along * (there - seen.shown[k].pos).dot(&along);
                 if short.norm() < width {
                     return g.carry.done(t);
                 }

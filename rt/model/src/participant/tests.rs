@@ -156,6 +156,55 @@ fn a_slip_raises_the_grip_a_grip_reflex_after_it() {
 }
 
 #[test]
+fn a_carry_is_judged_along_its_direction_not_across_it() {
+    // Carried 10 cm along +y while the disk shows 1.5 cm lower than when the carry began (a lift
+    // that had not settled, a partner holding it lower): across the carry is not the carry's
+    // business, so it is done once the disk is seen across.
+    let start = Vec3::new(-0.1, 0.0, 0.01);
+    let grasp = StepSpec {
+        action: Action::Grasp,
+        object: Some("disk".into()),
+        side: Some([-1.0, 0.0, 0.0]),
+        force_n: 1.0,
+        ..StepSpec::default()
+    };
+    let carry = StepSpec {
+        action: Action::Carry,
+        by_m: Some([0.0, 0.1, 0.0]),
+        for_s: 1.0,
+        ..StepSpec::default()
+    };
+    let hold = StepSpec {
+        action: Action::Wait,
+        for_s: 10.0,
+        ..StepSpec::default()
+    };
+    let mut p = person(&[grasp, carry, hold], start, 9);
+    let at = Vec3::new(-0.05, 0.0, 0.01);
+    for k in 0..4000 {
+        let t = k as f64 * 1e-3;
+        let hand = p.target(t).0;
+        let carried = p.step_time(1).is_some();
+        let shown = at + Vec3::new(0.0, hand.y - start.y, if carried { -0.015 } else { 0.0 });
+        let mut v = showing(t, shown, hand);
+        v.touching[0] = true;
+        v.felt[0] = Vec3::new(1.0, 0.0, 0.0);
+        p.perceive(&v);
+    }
+    let began = p.step_time(1).expect("the grasp was done");
+    let done = p.step_time(2).expect("the carry was done");
+    assert!(
+        done < began + 1.0 + 0.5,
+        "the carry began at {began} s and was done only at {done} s"
+    );
+    let end = p.target(4.0).0;
+    assert!(
+        (end.z - start.z).abs() < 1e-3,
+        "the hand stayed at its height: {end:?}"
+    );
+}
+
+#[test]
 fn the_same_seed_is_the_same_person_and_the_same_hand() {
     let run = |seed| {
         let mut p = person(&[reach_left_face()], Vec3::new(-0.2, 0.0, 0.01), seed);
