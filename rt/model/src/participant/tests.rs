@@ -52,6 +52,26 @@ fn reach_left_face() -> StepSpec {
     }
 }
 
+/// Grasps the disk's left face with at least 1 N.
+fn grasp_left_face() -> StepSpec {
+    StepSpec {
+        action: Action::Grasp,
+        object: Some("disk".into()),
+        side: Some([-1.0, 0.0, 0.0]),
+        force_n: 1.0,
+        ..StepSpec::default()
+    }
+}
+
+/// Holds still for 10 s.
+fn hold() -> StepSpec {
+    StepSpec {
+        action: Action::Wait,
+        for_s: 10.0,
+        ..StepSpec::default()
+    }
+}
+
 #[test]
 fn a_participant_reaches_where_its_own_copy_shows_the_object() {
     let start = Vec3::new(-0.2, 0.0, 0.01);
@@ -117,19 +137,7 @@ fn a_participant_waits_until_what_it_waits_for_is_shown_and_moves_a_reaction_tim
 #[test]
 fn a_slip_raises_the_grip_a_grip_reflex_after_it() {
     let start = Vec3::new(-0.1, 0.0, 0.01);
-    let grasp = StepSpec {
-        action: Action::Grasp,
-        object: Some("disk".into()),
-        side: Some([-1.0, 0.0, 0.0]),
-        force_n: 1.0,
-        ..StepSpec::default()
-    };
-    let hold = StepSpec {
-        action: Action::Wait,
-        for_s: 10.0,
-        ..StepSpec::default()
-    };
-    let mut p = person(&[grasp, hold], start, 7);
+    let mut p = person(&[grasp_left_face(), hold()], start, 7);
     let at = Vec3::new(-0.05, 0.0, 0.01);
     let slip_at = 1.0;
     let reflex = p.person.grip_reflex_s;
@@ -161,25 +169,13 @@ fn a_carry_is_judged_along_its_direction_not_across_it() {
     // that had not settled, a partner holding it lower): across the carry is not the carry's
     // business, so it is done once the disk is seen across.
     let start = Vec3::new(-0.1, 0.0, 0.01);
-    let grasp = StepSpec {
-        action: Action::Grasp,
-        object: Some("disk".into()),
-        side: Some([-1.0, 0.0, 0.0]),
-        force_n: 1.0,
-        ..StepSpec::default()
-    };
     let carry = StepSpec {
         action: Action::Carry,
         by_m: Some([0.0, 0.1, 0.0]),
         for_s: 1.0,
         ..StepSpec::default()
     };
-    let hold = StepSpec {
-        action: Action::Wait,
-        for_s: 10.0,
-        ..StepSpec::default()
-    };
-    let mut p = person(&[grasp, carry, hold], start, 9);
+    let mut p = person(&[grasp_left_face(), carry, hold()], start, 9);
     let at = Vec3::new(-0.05, 0.0, 0.01);
     for k in 0..4000 {
         let t = k as f64 * 1e-3;
