@@ -209,6 +209,26 @@ impl PhysicsLoop {
         }
     }
 
+    /// Its rings back, for a study's next trial to build its loop on, emptied of what the servo
+    /// and the network sent into them (of the last trial: call it once both produce nothing more
+    /// of it). Not real-time.
+    pub fn into_rings(mut self) -> PhysicsRings {
+        while self.tools.pop().is_ok() {}
+        while self.remote.pop().is_ok() {}
+        if let Some(t) = &mut self.tracks_in {
+            while t.pop().is_ok() {}
+        }
+        PhysicsRings {
+            tools: self.tools,
+            remote: self.remote,
+            objects: self.objects,
+            reports: self.reports,
+            trace: self.trace,
+            tracks_out: self.tracks_out,
+            tracks_in: self.tracks_in,
+        }
+    }
+
     /// The session's time 0 (ns on this machine's CLOCK_MONOTONIC): tick `k` of the grid starts at
     /// `origin_ns + k × period`. Set once; later calls change nothing (the grid never moves).
     pub fn set_tick_origin(&mut self, origin_ns: u64) {

@@ -74,6 +74,9 @@ pub struct ServoLoop<D: CartesianDevice> {
     t0_ns: Option<u64>,
     /// The task's outcome last published (none yet): published again only when it changes.
     published_task: Option<coop_model::task::Outcome>,
+    /// The study's trial this loop runs (0: none, a station not started for a study). A later
+    /// one asked for in the control block ramps the force to zero as a stop does.
+    trial: u64,
 }
 
 impl<D: CartesianDevice> ServoLoop<D> {
@@ -111,7 +114,45 @@ impl<D: CartesianDevice> ServoLoop<D> {
             task: None,
             t0_ns: None,
             published_task: None,
+            trial: 0,
         }
+    }
+
+    /// The study's trial this loop runs (0: none).
+    pub fn trial(&self) -> u64 {
+        self.trial
+    }
+
+    /// Runs trial `trial` from now on: `servo`, `world` and `task` are the trial's, the device
+    /// and rings are kept, and every object state physics sent before (of the last trial: it
+    /// produces nothing more once it has stopped for this one) is dropped. The display starts
+    /// ramped out and ramps in once the new world is fresh (the hand may be anywhere in it).
+    /// Until its time 0 ([`ServoLoop::start_at`]) nothing is shown to a simulated hand or judged.
+    /// Not real-time.
+    pub fn begin_trial(
+        &mut self,
+        trial: u64,
+        servo: Servo,
+        world: World,
+        task: Option<TaskJudge>,
+        now_ns: u64,
+    ) {
+        while self.objects.pop().is_ok() {}
+        self.servo = servo.ramped_out();
+        self.n = world.bodies().len().clamp(1, MAX_OBJECTS);
+        self.world = world;
+        self.states = [BodyState::at_rest(Vec3::new(1e3, 1e3, 1e3)); MAX_OBJECTS];
+        self.latest = None;
+        self.have = 0;
+        self.last_ns = now_ns;
+        self.limp = false;
+        self.stale_state_ns = None;
+        self.stale_limp_recorded = false;
+        self.last_remote_ns = 0;
+        self.task = task;
+        self.t0_ns = None;
+        self.published_task = None;
+        self.trial = trial;
     }
 
     /// Judges `task` live on what this site shows, from the session's time 0.
@@ -212,7 +253,10 @@ impl<D: CartesianDevice> ServoLoop<D> {
                 objects: &self.states[..self.n],
                 object_time_s: t_ns as f64 * 1e-9,
                 adopted,
-                stopping: control.is_some_and(|c| c.run_state() == RunState::Stopping),
+                // A stop, or the next trial: ramp to zero and go limp.
+                stopping: control.is_some_and(|c| {
+                    c.run_state() == RunState::Stopping || c.trial.requested() > self.trial
+                }),
             },
             &self.world.bodies()[..self.n],
         );

@@ -41,6 +41,8 @@ struct Rig<D: CartesianDevice = SimScara> {
     _segments: Segments,
     stale_ms: f64,
     ramp_ms: f64,
+    /// Its scenario.
+    sc: Scenario,
 }
 
 impl<D: CartesianDevice> Rig<D> {
@@ -176,6 +178,7 @@ fn rig_in<D: CartesianDevice>(
         _segments: (trc, tool, obj, rep, rem),
         stale_ms: sc.site[0].stale_limit_ms,
         ramp_ms: sc.site[0].stale_ramp_ms,
+        sc: sc.clone(),
     }
 }
 
@@ -571,6 +574,98 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
     }
     assert_eq!(ControlBlock::load_f64(&ctl.servo.command_n), 0.0);
     assert_eq!(ControlBlock::load_f64(&ctl.servo.scale), 0.0);
+}
+
+/// A study's next trial, asked for in the control block, ramps the commanded force to zero as a
+/// stop does; the loops then rebuilt on the same rings (physics' emptied of the last trial, the
+/// servo's too) start from the new trial's world, with no state of the last one shown.
+#[test]
+fn the_next_trial_ramps_the_force_out_and_nothing_of_the_last_one_crosses_over() {
+    use coop_rt::shm::control::{ControlBlock, RunState};
+    use coop_rt::shm::BlockSegment;
+    let mut r = rig("trial", true);
+    let name =
+        SegmentName::new(&format!("lp{}trial", std::process::id()), "a", "ctl").expect("name");
+    let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
+    ctl.set_run_state(RunState::Running);
+    let mut k = 0u64;
+    let mut pressing = 0.0;
+    while k < 1500 {
+        k += 1;
+        r.physics.step(k * MS);
+        pressing = r.servo.step(k * MS, Some(&ctl)).f_command.norm();
+    }
+    assert!(pressing > 0.3, "holding the disk: {pressing} N");
+    let pushed = r.physics.copy().first().state.pos.x;
+    assert!(
+        pushed > 0.004,
+        "the disk was pushed to the wall: x = {pushed}"
+    );
+    assert!(ctl.trial.request(1, "t1", "# the trial's scenario"));
+    let asked = k;
+    while !r.servo.is_limp() {
+        k += 1;
+        r.physics.step(k * MS);
+        r.servo.step(k * MS, Some(&ctl));
+        assert!(
+            k - asked <= r.ramp_ms as u64 + 1,
+            "not limp {} ms after the next trial was asked for",
+            k - asked
+        );
+    }
+    // Physics sends states the servo has not taken yet; the next trial's loops are built on the
+    // same rings.
+    for _ in 0..3 {
+        k += 1;
+        r.physics.step(k * MS);
+    }
+    let rings = r.physics.into_rings();
+    let sc = r.sc.clone();
+    r.physics = PhysicsLoop::new(
+        0,
+        sc.method(0, MethodName::Paper),
+        sc.world(),
+        sc.start_copy(),
+        rings,
+        PhysicsTiming {
+            period_ns: MS,
+            report_period_ns: 10 * MS,
+            start_ns: k * MS,
+            trace_period_ns: 5 * MS,
+            report_seq: 0,
+        },
+    );
+    r.servo
+        .begin_trial(1, Servo::new(sc.servo_params(0)), sc.world(), None, k * MS);
+    assert_eq!(r.servo.trial(), 1);
+    // No state of the last trial is shown (the tool is still where it pressed the disk against
+    // the wall): until the new physics sends one, nothing is touched and nothing displayed.
+    for _ in 0..20 {
+        k += 1;
+        let out = r.servo.step(k * MS, Some(&ctl));
+        assert!(!out.contacts[0].touching, "a state of the last trial shown");
+        assert_eq!(out.scale, 0.0, "the display starts ramped out");
+        assert_eq!(out.f_command.norm(), 0.0);
+    }
+    let start = r.physics.copy().first().state.pos.x;
+    assert!(
+        (start - sc.objects[0].start_m[0]).abs() < 1e-9,
+        "the new trial starts from its scenario's world, not where the last left it: {start}"
+    );
+    // And runs: the states of the new trial reach the servo, whose display ramps in (never a
+    // step to full force).
+    let (mut scale, mut last) = (0.0, 0.0);
+    for _ in 0..200 {
+        k += 1;
+        r.physics.step(k * MS);
+        scale = r.servo.step(k * MS, Some(&ctl)).scale;
+        assert!(
+            scale - last <= 1.0 / r.ramp_ms + 1e-9,
+            "ramped in: {last} to {scale}"
+        );
+        last = scale;
+    }
+    assert!(scale > 0.0, "the new trial's world is displayed");
 }
 
 /// A report that passes every check a ring conversion makes (finite, unit quaternion) but whose

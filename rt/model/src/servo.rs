@@ -116,6 +116,14 @@ impl Servo {
         }
     }
 
+    /// The same servo with its display ramped out (scale 0): it ramps in over the ramp time once
+    /// its world is fresh, as after a stale spell. What a study's next trial starts from: the
+    /// hand may be anywhere in the new world when its first state comes.
+    pub fn ramped_out(mut self) -> Self {
+        self.scale = 0.0;
+        self
+    }
+
     /// What the display stages did so far.
     pub fn display_stats(&self) -> &DisplayStats {
         &self.stats

@@ -517,6 +517,7 @@ pub struct PhysicsShared {
 pub use super::rollback::{RollbackFigures, RollbackShared};
 
 pub use super::device::DeviceShared;
+pub use super::device::ShmText;
 
 /// What the network process writes.
 #[derive(Debug)]
@@ -600,6 +601,89 @@ pub struct ControlBlock {
     pub task: TaskShared,
     /// The device's figures (the servo's: it alone opens the device).
     pub device: DeviceShared,
+    /// The trial a study asks for, and how far each child is with it (stations started for a
+    /// study: `trials = true`).
+    pub trial: TrialShared,
+}
+
+/// Words of a trial's scenario text (32 KiB: a task scenario with participants is 3-6 KiB).
+pub const TRIAL_SCENARIO_WORDS: usize = 4096;
+/// Words of a trial's name (64 bytes).
+pub const TRIAL_NAME_WORDS: usize = 8;
+
+/// A study's trials on a station that stays up for all of them. The network process (its one
+/// writer of `requested`, the scenario and the name) hears the next trial from the study runner;
+/// each child then stops producing into its rings (`stopped`), and once all three have, drains
+/// what it consumes, rebuilds from the trial's scenario and says so (`ready`); the network then
+/// tells the runner, which announces the trial's time 0. No process restarts: the device stays
+/// open, the rings and the zenoh session are reused.
+#[derive(Debug, Default)]
+#[repr(C)]
+pub struct TrialShared {
+    /// The trial asked for (numbered from 1; 0: none yet). Written after the scenario and name
+    /// (Release); a child reads them after it (Acquire).
+    pub requested: AtomicU64,
+    /// Per child ([`Child`]): the newest trial for which it produces nothing more of the last one.
+    pub stopped: [AtomicU64; CHILDREN],
+    /// Per child: the newest trial it has rebuilt itself for (and waits for its time 0).
+    pub ready: [AtomicU64; CHILDREN],
+    /// Per child: why it could not rebuild for the requested trial (empty: it could).
+    pub refused: [ShmText<FAILURE_WORDS>; CHILDREN],
+    /// The trial's scenario, as TOML.
+    pub scenario: ShmText<TRIAL_SCENARIO_WORDS>,
+    /// The trial's name (its recordings are named by it).
+    pub name: ShmText<TRIAL_NAME_WORDS>,
+}
+
+impl TrialShared {
+    /// The trial asked for (0: none).
+    pub fn requested(&self) -> u64 {
+        // SYNC: Acquire pairs with the Release in `request`: the scenario and name are visible.
+        self.requested.load(Ordering::Acquire)
+    }
+
+    /// Asks for trial `trial` of `scenario` named `name` (the network process); `false` (and
+    /// nothing asked) when the scenario is longer than the block holds.
+    pub fn request(&self, trial: u64, name: &str, scenario: &str) -> bool {
+        if scenario.len() > TRIAL_SCENARIO_WORDS * 8 {
+            return false;
+        }
+        self.scenario.store(scenario);
+        self.name.store(name);
+        // SYNC: Release publishes the texts with the number; pairs with `requested`'s Acquire.
+        self.requested.store(trial, Ordering::Release);
+        true
+    }
+
+    /// `child` produces nothing more of the trial before `trial`.
+    pub fn set_stopped(&self, child: Child, trial: u64) {
+        self.stopped[child as usize].store(trial, Ordering::Release);
+    }
+
+    /// Whether every child has stopped for `trial`.
+    pub fn all_stopped(&self, trial: u64) -> bool {
+        self.stopped
+            .iter()
+            .all(|s| s.load(Ordering::Acquire) >= trial)
+    }
+
+    /// `child` has rebuilt itself for `trial` (`refused`: why it could not; empty: it could).
+    pub fn set_ready(&self, child: Child, trial: u64, refused: &str) {
+        self.refused[child as usize].store(refused);
+        self.ready[child as usize].store(trial, Ordering::Release);
+    }
+
+    /// Whether `child` is ready for `trial`, and if it refused it, why.
+    pub fn ready(&self, child: Child, trial: u64) -> Option<Result<(), String>> {
+        (self.ready[child as usize].load(Ordering::Acquire) >= trial).then(|| {
+            let why = self.refused[child as usize].load();
+            if why.is_empty() {
+                Ok(())
+            } else {
+                Err(why)
+            }
+        })
+    }
 }
 
 /// A task's state as the control block holds it ([`TaskShared::state`]).
@@ -698,7 +782,7 @@ pub const LOCATOR_WORDS: usize = 64;
 // zero-sized), ShmText and the per-process groups).
 // SAFETY: repr(C), AtomicU64s only (above): all-zero and every bit pattern are valid values.
 unsafe impl ShmShared for ControlBlock {
-    const TYPE_NAME: &'static str = "coop.ControlBlock.v24";
+    const TYPE_NAME: &'static str = "coop.ControlBlock.v25";
 }
 
 impl ControlBlock {
