@@ -11,9 +11,10 @@
 //!
 //! - site X, coming in: put only its own state, tool and live-view keys; declare (and answer) only its own
 //!   `current/X`, `clock/X` and `figures/X` queryables; declare only its own presence token;
-//!   subscribe to the session's states, tools and epoch, query its current states, clocks,
+//!   subscribe to the session's states, tools, epoch and trials, query its current states, clocks,
 //!   figures and epoch, and watch its presence tokens;
-//! - the launcher, coming in: the same watching, put, declare and answer the epoch, and declare
+//! - the launcher, coming in: the same watching, put, declare and answer the epoch, put a study's
+//!   trials (`trial`: only a launcher runs a study on stations), and declare
 //!   and answer its own clock, `clock/launcher` (nobody else may do either: stations translate the
 //!   epoch, which is in the launcher's clock, with their offset to that clock);
 //! - a router of the session, coming in: anything on the session's keys (routers are trusted to
@@ -135,6 +136,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
                 keys::all_tools(s, 0),
                 keys::all_live(s),
                 keys::epoch(s),
+                keys::trial(s),
             ],
         ),
         rule(
@@ -158,7 +160,7 @@ pub fn session_acl(m: &Members<'_>) -> Value {
             "launcher-epoch",
             "ingress",
             &["put", "declare_queryable", "reply"],
-            &[keys::epoch(s)],
+            &[keys::epoch(s), keys::trial(s)],
         ),
         rule(
             "launcher-clock",

@@ -105,6 +105,12 @@ pub fn epoch(session: &str) -> String {
     format!("coop/{session}/epoch")
 }
 
+/// A study's trials, put by its runner (the launcher): each trial's scenario, and then its time 0
+/// (`network::trial`).
+pub fn trial(session: &str) -> String {
+    format!("coop/{session}/trial")
+}
+
 /// The key a site puts its newest sample (copy and tool) on for live viewers, at most ~60 Hz.
 pub fn live(session: &str, site: &str) -> String {
     format!("coop/{session}/live/{site}")

@@ -51,6 +51,9 @@ pub struct StationFigures {
     pub physics_compute_p99_us: u64,
     /// Rollback and tool-track figures, if the method rolls back.
     pub rollback: Option<RollbackFigures>,
+    /// A study's station: how far it is with the trial asked for last.
+    #[serde(default)]
+    pub trial: Option<super::trial::TrialFigures>,
 }
 
 /// The station's figures queryable, and the counters at the session's time 0.
@@ -61,6 +64,8 @@ pub(super) struct Figures {
     runs: StationRuns,
     /// (servo overruns, physics overruns, physics cycles) when time 0 came.
     at_epoch: Option<[u64; 3]>,
+    /// A study's station: its trial, as the loop last saw it.
+    pub(super) trial: Option<super::trial::TrialFigures>,
 }
 
 impl Figures {
@@ -82,7 +87,14 @@ impl Figures {
             site: site.to_owned(),
             runs,
             at_epoch: None,
+            trial: None,
         })
+    }
+
+    /// A study's next trial runs `runs`: its counters count from its time 0.
+    pub(super) fn begin_trial(&mut self, runs: StationRuns) {
+        self.runs = runs;
+        self.at_epoch = None;
     }
 
     fn counters(ctl: &ControlBlock) -> [u64; 3] {
@@ -110,6 +122,7 @@ impl Figures {
                 .compute_us
                 .value_at_quantile(0.99),
             rollback: ctl.physics.rollback.figures(),
+            trial: self.trial.clone(),
         }
     }
 

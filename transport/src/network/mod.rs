@@ -60,6 +60,7 @@ pub mod publish;
 mod receive;
 mod record;
 mod ros2_publish;
+pub mod trial;
 
 pub use crate::live_view::LIVE_EVERY_NS;
 pub use clock::{clock_estimate, CLOCK_EVERY, CLOCK_WINDOW};
@@ -128,6 +129,9 @@ pub struct NetworkArgs<'a> {
     pub live_view: Option<String>,
     /// Publish this site as ROS 2 topics (`crate::ros2`), if asked.
     pub ros2: Option<crate::ros2::Ros2Config>,
+    /// A study's station: makes each trial's pieces from its scenario ([`trial`]). Its
+    /// recordings are one per trial, named by it beside `record`; none before the first.
+    pub trials: Option<trial::TrialSetupFn>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -180,12 +184,19 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
     if let Some(run) = &a.station_run {
         metadata.insert(crate::recording::STATION_RUN.into(), run.clone());
     }
+    let studied = a.trials.is_some();
     let recording = Recording::create(
-        a.record.as_deref(),
-        metadata,
+        a.record.as_deref().filter(|_| !studied),
+        metadata.clone(),
         a.record_rotation,
         a.record_foxglove.then(|| a.scene.clone()),
     )?;
+    let record = RecordSpec {
+        path: a.record.clone(),
+        metadata,
+        rotation: a.record_rotation,
+        foxglove: a.record_foxglove,
+    };
     let events = Events::new(ctx.ctl, recording.continued());
     let view = match &a.live_view {
         Some(addr) => {
@@ -271,6 +282,8 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             ros2,
             names,
             runs,
+            record,
+            trials: a.trials,
         },
     )?;
     drop(publish);
@@ -370,6 +383,19 @@ struct Loop {
     names: (String, String),
     /// What the station runs, for a launcher attaching to it.
     runs: figures::StationRuns,
+    /// How the recording was made (a study's station makes one per trial).
+    record: RecordSpec,
+    /// A study's station: what makes each trial's pieces.
+    trials: Option<trial::TrialSetupFn>,
+}
+
+/// How a station's recording is made: where, with what metadata, in what parts, with which
+/// channels.
+struct RecordSpec {
+    path: Option<PathBuf>,
+    metadata: BTreeMap<String, String>,
+    rotation: Rotation,
+    foxglove: bool,
 }
 
 /// Declares the rest, starts the threads and runs the loop; the threads end with it.
@@ -386,6 +412,10 @@ fn serve(
     let stop = &AtomicU64::new(0);
     let clocks = &clock::Sampler::new(session, name, ctx.sites, ctx.me, ctx.ctl);
     let epoch = &epoch::EpochListener::declare(session, name, site)?;
+    let mut trials = match lp.trials.take() {
+        Some(setup) => Some(trial::TrialListener::declare(session, name, setup)?),
+        None => None,
+    };
     std::thread::scope(|scope| {
         // Answered before the presence shows: a launcher that sees it may ask at once.
         let mut figures = figures::Figures::declare(session, name, site, lp.runs.clone())?;
@@ -421,6 +451,23 @@ fn serve(
             clock_answers.count(&ctx.ctl.network.traffic);
             figures.turn(ctx.ctl, now);
             epoch.poll(ctx.ctl, clocks.launcher_offset());
+            if let Some(t) = &mut trials {
+                match t.poll(ctx.ctl, clocks.launcher_offset(), site, receiver) {
+                    Some(trial::Change::Rebuild(setup)) => {
+                        let status = status_now(ctx.ctl, publish, receiver);
+                        lp.next_trial(ctx, receiver, &setup, t.name().unwrap_or(""), &status)?;
+                        figures.begin_trial(lp.runs.clone());
+                        session_recorded = false;
+                        t.network_ready(ctx.ctl);
+                    }
+                    Some(trial::Change::Started(t0)) => {
+                        lock(receiver).gate =
+                            receive::Gate::From(t0.saturating_sub(trial::GATE_SLACK_NS));
+                    }
+                    None => {}
+                }
+                figures.trial = Some(t.figures(ctx.ctl));
+            }
             if !session_recorded {
                 session_recorded = lp.record_session(ctx, now);
             }
@@ -443,26 +490,80 @@ fn serve(
             coop_rt::timer::sleep_until(ros2_due.map_or(wake, |d| d.max(now).min(wake)));
         }
         stop.store(1, Ordering::Relaxed);
-        let status = {
-            let rx = lock(receiver);
-            StatusMsg {
-                t_ns: monotonic_ns(),
-                published: publish.published,
-                received: rx.received,
-                refused: rx.refused,
-                emulated_lost: rx.emulated_lost,
-                join_states: rx.join_states,
-                stale_skipped: publish.stale_skipped,
-                traffic: crate::recording::TrafficMsg::of(&ctx.ctl.network.traffic),
-                device: crate::recording::DeviceMsg::of(&ctx.ctl.device),
-            }
-        };
+        let status = status_now(ctx.ctl, publish, receiver);
         lp.recording.finish(site, &status);
         Ok(status)
     })
 }
 
+/// The station's final counters as they are now, for a recording's end.
+fn status_now(ctl: &ControlBlock, publish: &Publish, receiver: &Mutex<Receiver<'_>>) -> StatusMsg {
+    let rx = lock(receiver);
+    StatusMsg {
+        t_ns: monotonic_ns(),
+        published: publish.published,
+        received: rx.received,
+        refused: rx.refused,
+        emulated_lost: rx.emulated_lost,
+        join_states: rx.join_states,
+        stale_skipped: publish.stale_skipped,
+        traffic: crate::recording::TrafficMsg::of(&ctl.network.traffic),
+        device: crate::recording::DeviceMsg::of(&ctl.device),
+    }
+}
+
 impl Loop {
+    /// A study's next trial, once the servo and physics have stopped the last one: what physics
+    /// sent of it is recorded (its trace) or dropped (its reports and tracks, which no station
+    /// would take now), the last trial's recording is finished with `status` and the new one's
+    /// started (named `name`), and the receiver takes the new trial's links.
+    ///
+    /// # Errors
+    /// The new recording cannot be created.
+    fn next_trial(
+        &mut self,
+        ctx: &Ctx<'_>,
+        receiver: &Mutex<Receiver<'_>>,
+        setup: &trial::TrialSetup,
+        name: &str,
+        status: &StatusMsg,
+    ) -> Result<(), NetworkError> {
+        while self.reports.pop().is_ok() {}
+        if let Some((_, ring)) = &mut self.tracks {
+            while ring.pop().is_ok() {}
+        }
+        self.recording.drain_trace(&mut self.trace);
+        let mut metadata = self.record.metadata.clone();
+        metadata.insert("scenario".into(), setup.names.0.clone());
+        metadata.insert("method".into(), setup.names.1.clone());
+        metadata.insert("trial".into(), name.to_owned());
+        let path = self
+            .record
+            .path
+            .as_deref()
+            .map(|p| trial::record_path(p, name));
+        let next = Recording::create(
+            path.as_deref(),
+            metadata,
+            self.record.rotation,
+            self.record.foxglove.then(|| setup.scene.clone()),
+        )?;
+        std::mem::replace(&mut self.recording, next).finish(ctx.site, status);
+        lock(receiver).begin_trial(
+            setup.emulation.as_ref(),
+            setup.bounds,
+            setup.silence_ns.clone(),
+        );
+        self.names.clone_from(&setup.names);
+        self.runs = figures::StationRuns {
+            scenario: setup.names.0.clone(),
+            scenario_hash: setup.scenario_hash,
+            method: setup.names.1.clone(),
+            emulated: setup.emulation.is_some(),
+        };
+        Ok(())
+    }
+
     /// One turn: publish the newest report, release the emulated states due, and record what
     /// happened since the last turn; returns the time the states were released at.
     fn turn(

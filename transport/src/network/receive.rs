@@ -72,6 +72,32 @@ pub(super) struct Receiver<'a> {
     held: u64,
     /// Tool tracks (methods that exchange tools), if this station takes them.
     pub(super) tracks: Option<TrackIn>,
+    /// What may reach physics (a study's station changing trials: nothing, then only what was
+    /// sent from the new trial's time 0 on).
+    pub(super) gate: Gate,
+}
+
+/// What a study's station lets through to physics while it changes trials.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Gate {
+    /// Everything (no study, or a trial under way).
+    Open,
+    /// Nothing: the next trial is being set up; what arrives is of the last one.
+    Closed,
+    /// Only what was sent at or after this time (our clock, ns): the trial's time 0. Everything
+    /// of the last trial was sent before it, since the runner announces it only once every
+    /// station has stopped that trial.
+    From(u64),
+}
+
+impl Gate {
+    fn lets(self, sent_ns: u64) -> bool {
+        match self {
+            Gate::Open => true,
+            Gate::Closed => false,
+            Gate::From(t0) => sent_ns >= t0,
+        }
+    }
 }
 
 /// The receive side of tool tracks: checked by the same rules and counters as states
@@ -129,6 +155,36 @@ impl<'a> Receiver<'a> {
             waiting: (0..sites.len() * MAX_OBJECTS).map(|_| None).collect(),
             held: 0,
             tracks: None,
+            gate: Gate::Open,
+        }
+    }
+
+    /// A study's next trial: nothing more reaches physics until [`Receiver::gate`] opens again,
+    /// and what was held or known of the last trial is dropped (its emulated links, its sites'
+    /// silences, its held states); the new trial's links are `emulation`, its bounds `bounds`,
+    /// its silences `silence_ns`. The counters go on.
+    pub(super) fn begin_trial(
+        &mut self,
+        emulation: Option<&Emulation>,
+        bounds: Bounds,
+        silence_ns: Vec<u64>,
+    ) {
+        self.gate = Gate::Closed;
+        let n = self.sites.len();
+        self.inbound = admit::Inbound::new(self.sites.clone(), bounds);
+        self.emulator = emulation.map(|e| Emulator::new(e, n, self.me));
+        self.silence_ns = silence_ns;
+        self.last_heard = vec![None; n];
+        self.lost = 0;
+        self.control.network.peers_lost.store(0, Ordering::Relaxed);
+        for w in &mut self.waiting {
+            *w = None;
+        }
+        if let Some(tr) = &mut self.tracks {
+            tr.emulator = emulation.map(|e| Emulator::new(e, n, self.me));
+            for w in &mut tr.waiting {
+                w.clear();
+            }
         }
     }
 
@@ -226,6 +282,9 @@ impl<'a> Receiver<'a> {
 
     fn hand_over_track(&mut self, t: ToolTrack, now: u64) {
         let from = t.site as usize;
+        if !self.gate.lets(t.t_ns) {
+            return;
+        }
         if let Err(e) = self.inbound.age_ok(from, t.t_ns, now) {
             let key = format!("{}'s tool track, at hand-over", self.sites[from]);
             return self.refuse(&key, &e);
@@ -319,6 +378,9 @@ impl<'a> Receiver<'a> {
 
     /// Marks the sites silent past their limit at `now` as lost, and tells physics.
     pub(super) fn check_lost(&mut self, now: u64) {
+        if self.gate == Gate::Closed {
+            return;
+        }
         for j in 0..self.sites.len() {
             let Some(t) = self.last_heard[j] else {
                 continue;
@@ -465,6 +527,9 @@ impl<'a> Receiver<'a> {
     }
 
     fn hand_over(&mut self, d: Delivery, zenoh_ts: Option<String>, join: bool, now: u64) {
+        if !self.gate.lets(d.report.t_ns) {
+            return;
+        }
         // Held by the emulated link, or queued by zenoh behind a partition: still within the age
         // limit when physics gets it, or not at all.
         if let Err(e) = self.inbound.age_ok(d.from, d.report.t_ns, now) {
