@@ -24,6 +24,7 @@ use coop_rt::timer::monotonic_ns;
 
 use super::config::Resolved;
 use super::device::DeviceOpenError;
+use super::trials;
 use coop_rt::shm::station::Names;
 
 /// Why a loop process could not start or run.
@@ -210,7 +211,10 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     let (names, opts, ctl) = attach(cfg, parent)?;
     let objects = Consumer::open(&names.object, &opts).map_err(opening("object"))?;
     let tools = Producer::open(&names.tool, &opts).map_err(opening("tool"))?;
-    let (sc, i) = (&cfg.scenario, cfg.site);
+    let i = cfg.site;
+    // A study's station restarted in the middle of a trial runs that trial's scenario.
+    let (mut trial, trial_sc) = trials::current(cfg, &ctl);
+    let sc = trial_sc.as_ref().unwrap_or(&cfg.scenario);
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
     // is, and a station waiting for its session holds the first pose until the session starts.
@@ -232,9 +236,132 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     // its callbacks.
     let vendor = device.vendor_loop();
     let dev = &cfg.device;
-    // The contact renders no stiffer nor more damped than the device can (CHAI3D's scaling).
-    let mut params = sc.servo_params(i);
-    let (contact, clamped) = clamp_contact(params.contact, device.info(), dev.placement.scale());
+    let params = servo_params(cfg, sc, device.info());
+    let mut guarded = Guarded::new(device, dev.limits, start);
+    for l in params.1.into_iter().flatten() {
+        guarded.record(l, start);
+    }
+    let mut servo = ServoLoop::new(
+        Servo::new(params.0),
+        guarded,
+        dev.placement,
+        sc.world(),
+        objects,
+        tools,
+        start,
+    );
+    if trial > 0 {
+        let judge = sc.task_judge().ok().flatten();
+        servo.begin_trial(trial, Servo::new(params.0), sc.world(), judge, start);
+        trials::joined(&ctl, Child::Servo, trial);
+    }
+    // The task is judged on what this site shows, as the simulator judges it (a restarted servo
+    // judges it afresh, and a simulated participant starts its plan again).
+    // (Validation judged the task's conditions: the scenario has one or none.)
+    servo.set_task(sc.task_judge().ok().flatten());
+    // This servo's judge starts afresh: no outcome of its predecessor stays shown.
+    ctl.task
+        .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
+    let mut figures = DevicePublisher::new(&ctl.device, servo.guarded(), start);
+    let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
+    let mut servo_rate_hz = sc.site[i].servo_rate_hz;
+    loop {
+        let mut step = |now| {
+            if !servo.started() {
+                if let Some(epoch) = ctl.epoch() {
+                    servo.device_mut().start_at(epoch);
+                    servo.start_at(epoch);
+                }
+            }
+            servo.step(now, Some(&ctl));
+            figures.publish(&ctl.device, now, servo.guarded());
+            match ctl.run_state() {
+                // A study's next trial: leave once nothing is displayed or commanded any more.
+                RunState::Starting | RunState::Running => {
+                    ctl.trial.requested() <= servo.trial() || !servo.is_limp()
+                }
+                // Stop only once nothing is displayed or commanded any more.
+                RunState::Stopping | RunState::Stopped => !servo.is_limp(),
+            }
+        };
+        let ended = match &vendor {
+            Some(v) => run_vendor(
+                &ctl,
+                Child::Servo,
+                &ctl.servo.stats,
+                &in_force,
+                v.as_ref(),
+                &mut step,
+            )
+            .map(|_| ()),
+            None => {
+                run_periodic(
+                    &ctl,
+                    Child::Servo,
+                    &ctl.servo.stats,
+                    period(servo_rate_hz),
+                    &in_force,
+                    step,
+                );
+                Ok(())
+            }
+        };
+        if ended.is_err() || !trials::next(&ctl, Child::Servo, &mut trial) {
+            // Stopped: release and close the device (dropping it would too, also on an error
+            // path).
+            let now = monotonic_ns();
+            figures.publish_now(&ctl.device, now, servo.guarded());
+            servo.close(now);
+            return ended.map_err(Into::into);
+        }
+        // Limp, and physics sends nothing more of the last trial: rebuild for this one.
+        let now = monotonic_ns();
+        // Refused: the station's own world, held and judged by nobody (no time 0 comes for a
+        // refused trial).
+        let (sc, mut refused) = match trials::scenario(cfg, &ctl) {
+            Ok(sc) => (sc, String::new()),
+            Err(why) => (cfg.scenario.clone(), why),
+        };
+        // A simulated hand is the trial's participant: it is made again from the trial's
+        // scenario; a device the station opened stays open.
+        if refused.is_empty() && crate::station::device::made_per_trial(&cfg.device) {
+            match crate::station::device::open(&cfg.device, &sc, i, now) {
+                Ok(d) => *servo.device_mut() = d,
+                Err(e) => refused = format!("trial {trial}: its device: {e}"),
+            }
+        }
+        let (params, clamped) = servo_params(cfg, &sc, servo.device().info());
+        for l in clamped.into_iter().flatten() {
+            servo.guarded_mut().record(l, now);
+        }
+        let judge = if refused.is_empty() {
+            sc.task_judge().ok().flatten()
+        } else {
+            None
+        };
+        servo.begin_trial(trial, Servo::new(params), sc.world(), judge, now);
+        servo_rate_hz = sc.site[i].servo_rate_hz;
+        ctl.task
+            .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
+        ctl.trial.set_ready(Child::Servo, trial, &refused);
+        // (A stop meanwhile: the loop's first tick sees it, and the servo is limp already.)
+        trials::wait_network(&ctl, Child::Servo, trial);
+    }
+}
+
+/// The servo's parameters for site `cfg.site` of `sc`, its contact rendered no stiffer nor more
+/// damped than the device `info` can (CHAI3D's scaling), and the limits that clamped it.
+fn servo_params(
+    cfg: &Resolved,
+    sc: &Scenario,
+    info: &coop_rt::device::DeviceInfo,
+) -> (
+    coop_model::servo::ServoParams,
+    [Option<coop_rt::device::safety::Limit>; 2],
+) {
+    let dev = &cfg.device;
+    let mut params = sc.servo_params(cfg.site);
+    let (contact, clamped) = clamp_contact(params.contact, info, dev.placement.scale());
     if contact != params.contact {
         eprintln!(
             "station servo {}: contact stiffness {:.0} N/m, damping {:.1} N·s/m clamped to the device's {:.0} N/m, {:.1} N·s/m (at workspace scale {})",
@@ -247,70 +374,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         );
     }
     params.contact = contact;
-    let mut guarded = Guarded::new(device, dev.limits, start);
-    for l in clamped.into_iter().flatten() {
-        guarded.record(l, start);
-    }
-    let mut servo = ServoLoop::new(
-        Servo::new(params),
-        guarded,
-        dev.placement,
-        sc.world(),
-        objects,
-        tools,
-        start,
-    );
-    // The task is judged on what this site shows, as the simulator judges it (a restarted servo
-    // judges it afresh, and a simulated participant starts its plan again).
-    // (Validation judged the task's conditions: the scenario has one or none.)
-    servo.set_task(sc.task_judge().ok().flatten());
-    // This servo's judge starts afresh: no outcome of its predecessor stays shown.
-    ctl.task
-        .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
-    let mut figures = DevicePublisher::new(&ctl.device, servo.guarded(), start);
-    let (in_force, _dma) = setup(cfg, &cfg.servo_sched, Child::Servo)?;
-    let mut step = |now| {
-        if !servo.started() {
-            if let Some(epoch) = ctl.epoch() {
-                servo.device_mut().start_at(epoch);
-                servo.start_at(epoch);
-            }
-        }
-        servo.step(now, Some(&ctl));
-        figures.publish(&ctl.device, now, servo.guarded());
-        match ctl.run_state() {
-            RunState::Starting | RunState::Running => true,
-            // Stop only once nothing is displayed or commanded any more.
-            RunState::Stopping | RunState::Stopped => !servo.is_limp(),
-        }
-    };
-    let ended = match &vendor {
-        Some(v) => run_vendor(
-            &ctl,
-            Child::Servo,
-            &ctl.servo.stats,
-            &in_force,
-            v.as_ref(),
-            &mut step,
-        )
-        .map(|_| ()),
-        None => {
-            run_periodic(
-                &ctl,
-                Child::Servo,
-                &ctl.servo.stats,
-                period(sc.site[i].servo_rate_hz),
-                &in_force,
-                step,
-            );
-            Ok(())
-        }
-    };
-    // Stopped: release and close the device (dropping it would too, also on an error path).
-    let now = monotonic_ns();
-    figures.publish_now(&ctl.device, now, servo.guarded());
-    servo.close(now);
-    ended.map_err(Into::into)
+    (params, clamped)
 }
 
 /// Runs the physics process of the configured station until the run state asks it to stop.
@@ -328,7 +392,10 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         tracks_out: None,
         tracks_in: None,
     };
-    let (sc, i) = (&cfg.scenario, cfg.site);
+    let i = cfg.site;
+    // A study's station restarted in the middle of a trial runs that trial's scenario.
+    let (mut trial, trial_sc) = trials::current(cfg, &ctl);
+    let sc = trial_sc.as_ref().unwrap_or(&cfg.scenario);
     let (method, join_after) = physics_method(sc, i);
     let mut rings = rings;
     // A method on the session's tick grid exchanges tool tracks (it says so: `join_after`).
@@ -338,15 +405,6 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         rings.tracks_in =
             Some(Consumer::open(&names.track_in, &opts).map_err(opening("track-in"))?);
     }
-    let step = period(sc.site[i].physics_rate_hz);
-    let timing = PhysicsTiming {
-        period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
-        report_period_ns: u64::try_from(period(sc.site[i].report_rate_hz).as_nanos())
-            .unwrap_or(10_000_000),
-        start_ns: monotonic_ns(),
-        trace_period_ns: u64::try_from(period(sc.sample_rate_hz).as_nanos()).unwrap_or(5_000_000),
-        report_seq: ctl.physics.report_seq.load(Ordering::Relaxed),
-    };
     // A restarted physics resumes from the newest state its predecessor published, not from the
     // scenario's start (the servo kept displaying that state; a jump back would be felt). On the
     // grid (timewarp, coupled) only if it joins late; started with the session, it steps from
@@ -378,41 +436,83 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         }
         _ => sc.start_copy(),
     };
+    let (mut step, timing) = physics_timing(sc, i, &ctl);
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     if let Some(after) = join_after {
         physics.join_late(after, resumed);
     }
+    trials::joined(&ctl, Child::Physics, trial);
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, Child::Physics)?;
     let mut last_report_seq = timing.report_seq;
     ctl.physics
         .report_period_ns
         .store(timing.report_period_ns, Ordering::Relaxed);
-    run_periodic(
-        &ctl,
-        Child::Physics,
-        &ctl.physics.stats,
-        step,
-        &in_force,
-        |now| {
-            if let Some(epoch) = ctl.epoch() {
-                // The session's time 0 is tick 0 of the grid (methods that step on it).
-                physics.set_tick_origin(epoch);
-            }
-            physics.step(now);
-            physics.publish_counters(&ctl);
-            if physics.report_seq() != last_report_seq {
-                // At the report rate: what a successor resumes from.
-                last_report_seq = physics.report_seq();
-                ctl.physics.last_report_ns.store(now, Ordering::Relaxed);
-                ctl.physics
-                    .report_seq
-                    .store(last_report_seq, Ordering::Relaxed);
-                ctl.store_resume(physics.objects(), |k| physics.object_sample(now, k));
-            }
-            matches!(ctl.run_state(), RunState::Starting | RunState::Running)
-        },
-    );
-    Ok(())
+    loop {
+        run_periodic(
+            &ctl,
+            Child::Physics,
+            &ctl.physics.stats,
+            step,
+            &in_force,
+            |now| {
+                if let Some(epoch) = ctl.epoch() {
+                    // The session's time 0 is tick 0 of the grid (methods that step on it).
+                    physics.set_tick_origin(epoch);
+                }
+                physics.step(now);
+                physics.publish_counters(&ctl);
+                if physics.report_seq() != last_report_seq {
+                    // At the report rate: what a successor resumes from.
+                    last_report_seq = physics.report_seq();
+                    ctl.physics.last_report_ns.store(now, Ordering::Relaxed);
+                    ctl.physics
+                        .report_seq
+                        .store(last_report_seq, Ordering::Relaxed);
+                    ctl.store_resume(physics.objects(), |k| physics.object_sample(now, k));
+                }
+                // A study's next trial ends this one.
+                matches!(ctl.run_state(), RunState::Starting | RunState::Running)
+                    && ctl.trial.requested() <= trial
+            },
+        );
+        if !trials::next(&ctl, Child::Physics, &mut trial) {
+            return Ok(());
+        }
+        // The servo and the network send nothing more of the last trial: what they sent is
+        // dropped with the last trial's loop, and the next one starts from its scenario at its
+        // time 0 (no state of the last trial crosses over).
+        let rings = physics.into_rings();
+        let (sc, refused) = match trials::scenario(cfg, &ctl) {
+            Ok(sc) => (sc, String::new()),
+            // Refused: the last scenario's world, held (no time 0 comes for a refused trial).
+            Err(why) => (cfg.scenario.clone(), why),
+        };
+        let (p, timing) = physics_timing(&sc, i, &ctl);
+        step = p;
+        last_report_seq = timing.report_seq;
+        ctl.physics
+            .report_period_ns
+            .store(timing.report_period_ns, Ordering::Relaxed);
+        let (method, _) = physics_method(&sc, i);
+        physics = PhysicsLoop::new(i, method, sc.world(), sc.start_copy(), rings, timing);
+        ctl.trial.set_ready(Child::Physics, trial, &refused);
+        trials::wait_network(&ctl, Child::Physics, trial);
+    }
+}
+
+/// Site `i`'s physics period under `sc`, and its clock from now (the report sequence going on
+/// from the control block's).
+fn physics_timing(sc: &Scenario, i: usize, ctl: &ControlBlock) -> (Duration, PhysicsTiming) {
+    let step = period(sc.site[i].physics_rate_hz);
+    let timing = PhysicsTiming {
+        period_ns: u64::try_from(step.as_nanos()).unwrap_or(1_000_000),
+        report_period_ns: u64::try_from(period(sc.site[i].report_rate_hz).as_nanos())
+            .unwrap_or(10_000_000),
+        start_ns: monotonic_ns(),
+        trace_period_ns: u64::try_from(period(sc.sample_rate_hz).as_nanos()).unwrap_or(5_000_000),
+        report_seq: ctl.physics.report_seq.load(Ordering::Relaxed),
+    };
+    (step, timing)
 }
 
 /// Runs the network process of the configured station until the run state asks it to stop.
@@ -463,6 +563,15 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         record_foxglove: cfg.config.record_foxglove,
         live_view: cfg.config.live.clone(),
         ros2: cfg.config.ros2.publish.then(|| cfg.config.ros2.clone()),
+        trials: cfg.config.trials.then(|| {
+            let cfg = cfg.clone();
+            coop_transport::network::trial::TrialSetupFn(Box::new(move |text: &str| {
+                let sc =
+                    crate::scenario_file::parse(text).map_err(|e| format!("its scenario: {e}"))?;
+                trials::fits(&cfg.scenario, &sc)?;
+                trial_network(&cfg, &sc)
+            }))
+        }),
     };
     // Normal priority, off the servo's CPU: the network is not a real-time loop, and its threads
     // (zenoh's, which inherit this affinity) must not run where the servo wakes.
@@ -479,6 +588,30 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     }
     coop_transport::network::run(args)?;
     Ok(())
+}
+
+/// What the network process needs of a study's trial of scenario `sc`.
+fn trial_network(
+    cfg: &Resolved,
+    sc: &Scenario,
+) -> Result<coop_transport::network::trial::TrialSetup, String> {
+    let net = &cfg.config.network;
+    Ok(coop_transport::network::trial::TrialSetup {
+        names: (sc.name.clone(), sc.method.as_str().to_owned()),
+        scenario_hash: coop_transport::network::figures::scenario_hash(sc),
+        emulation: net.emulate.then(|| coop_transport::network::Emulation {
+            link: sc.network.clone(),
+            seed: sc.seed,
+        }),
+        bounds: coop_transport::admit::Bounds::from_scenario(sc, net.max_state_age_ms),
+        silence_ns: sc
+            .site
+            .iter()
+            .map(|s| net.silence_ns(s.report_rate_hz))
+            .collect(),
+        scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
+            .ok_or_else(|| format!("the scenario has no site {}", cfg.site))?,
+    })
 }
 
 /// Site `i`'s method for its physics process, built by the scenario's one factory as the

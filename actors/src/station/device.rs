@@ -484,6 +484,13 @@ impl DeviceSetup {
     }
 }
 
+/// Whether a study's station makes its device again for each trial: a simulated hand (the
+/// trial's participant or script) and a replayed one start over; a device the station opened (a
+/// person's) stays open across the trials.
+pub fn made_per_trial(setup: &DeviceSetup) -> bool {
+    matches!(setup.backend, Backend::Sim | Backend::Replay)
+}
+
 /// Opens the configured backend for station site `site` at `now_ns` (the servo process).
 ///
 /// # Errors

@@ -10,6 +10,7 @@
 //! - [`run`]: `station run`, the supervisor bringing the children up and the stop ladder taking them
 //!   down, leaving nothing behind; and, when the network process cannot link, saying why once
 //!   (`link`);
+//! - [`trials`]: a study's station running trial after trial without a restart;
 //! - [`status`]: [`status::StationStatus`], what a running station is doing, read from its control
 //!   block without touching the loops.
 
@@ -20,3 +21,4 @@ mod error;
 mod link;
 pub mod run;
 pub mod status;
+pub mod trials;

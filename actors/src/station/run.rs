@@ -380,9 +380,12 @@ async fn supervise(
         }
     };
     tokio::pin!(until);
-    let session_end_ns = (cfg.config.start == super::config::StartMode::Session).then(|| {
-        ((cfg.scenario.duration_s * 1e9) as u64).saturating_add(SESSION_END_GRACE.as_nanos() as u64)
-    });
+    // A study's station outlives every trial's scenario: the runner stops it.
+    let session_end_ns =
+        (cfg.config.start == super::config::StartMode::Session && !cfg.config.trials).then(|| {
+            ((cfg.scenario.duration_s * 1e9) as u64)
+                .saturating_add(SESSION_END_GRACE.as_nanos() as u64)
+        });
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let mut degraded: Vec<String> = Vec::new();
     let mut link = LinkTeller::default();

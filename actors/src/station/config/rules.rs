@@ -96,6 +96,7 @@ impl StationConfig {
             return Err(Problem::value("network.lost_after_reports", lost, rule));
         }
         self.check_record_bounds()?;
+        self.check_trials()?;
         if let Some(l) = &self.live {
             if coop_transport::live_view::parse_addr(l).is_err() {
                 return Err(Problem::value(
@@ -109,6 +110,23 @@ impl StationConfig {
             }
         }
         self.ros2.validate().map_err(Problem::Stated)
+    }
+
+    /// A study's station waits for its trials' time 0, and runs its own servo loop (leaving the
+    /// vendor's between trials is not supported).
+    fn check_trials(&self) -> Result<(), Problem> {
+        if !self.trials {
+            return Ok(());
+        }
+        if self.start != super::StartMode::Session {
+            let rule = "a study's station (trials = true) starts each trial at the time 0 the study runner announces: set start = \"session\"";
+            return Err(Problem::value("start", "\"now\"", rule));
+        }
+        if self.device.loop_owner == crate::station::device::LoopOwner::Vendor {
+            let rule = "a study's station (trials = true) runs the servo loop itself: the device's own loop is not left and re-entered between trials (set device.loop = \"station\")";
+            return Err(Problem::value("device.loop", "\"vendor\"", rule));
+        }
+        Ok(())
     }
 
     /// Every ring's slots are a power of two the segment can hold.

@@ -112,6 +112,11 @@ pub struct StationConfig {
     pub network: NetworkConfig,
     /// When the users' scripts start: `now` or `session`.
     pub start: StartMode,
+    /// A study's station: it runs the trials a study runner announces (`study run --stations`),
+    /// each from its scenario and its time 0, and stays up between them: no process restarts,
+    /// the device stays open (a simulated hand is made again per trial), one recording per trial
+    /// (named by it, beside `record`). Needs `start = "session"`. Default: no.
+    pub trials: bool,
     /// Record what this station believed and displayed to this MCAP file (relative to the config
     /// file's directory). Default: no recording.
     pub record: Option<PathBuf>,
@@ -151,6 +156,7 @@ impl Default for StationConfig {
             supervisor: SupervisorSpec::default(),
             network: NetworkConfig::default(),
             start: StartMode::Now,
+            trials: false,
             record: None,
             // A station records about 190 KB/s (130 KB/s without the Foxglove channels): a part
             // holds about 6 minutes, the 24 parts (at most 1.5 GiB) about 2 hours and a half.

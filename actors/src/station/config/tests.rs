@@ -219,7 +219,15 @@ fn a_station_given_tls_presents_its_own_certificate() {
 
 #[test]
 fn each_rule_names_field_value_and_rule() {
-    let cases: [(&str, &str); 31] = [
+    let cases: [(&str, &str); 33] = [
+        (
+            "trials = true",
+            "start = \"now\": a study's station (trials = true) starts each trial at the time 0 the study runner announces",
+        ),
+        (
+            "trials = true\nstart = \"session\"\n[device]\ndevice = \"openhaptics\"\nloop = \"vendor\"",
+            "device.loop = \"vendor\": a study's station (trials = true) runs the servo loop itself",
+        ),
         (
             "[device]\ndevice = \"haply\"\n[device.haply]\nurl = \"http://localhost:10001\"",
             "device.haply.url = \"http://localhost:10001\": must be a ws://host:port URL",
