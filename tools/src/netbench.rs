@@ -99,6 +99,7 @@ pub(crate) fn bench_scenario(
     let sc = coop_actors::scenario_file::load(&scenario)?;
     let dir = std::env::temp_dir().join(format!("coop-bench-{name}-{}", std::process::id()));
     let a = crate::session::RunArgs {
+        trials: false,
         live: None,
         scenario,
         out: dir.clone(),

@@ -39,6 +39,7 @@ mod outcome;
 mod recorded;
 mod report;
 mod stations;
+pub mod trials;
 
 pub use launch::run_method;
 pub use outcome::{
@@ -80,6 +81,9 @@ pub struct RunArgs {
     pub attach: Option<attach::Attach>,
     /// Publish every site as ROS 2 topics (`--ros2`).
     pub ros2: Option<Ros2Run>,
+    /// Start the stations for a study's trials (`trials = true`): they run the trials a study
+    /// runner announces and stay up between them.
+    pub trials: bool,
 }
 
 /// `session run --ros2`: the domain, and the zenoh router the ROS 2 graph meets at.

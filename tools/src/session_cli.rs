@@ -355,6 +355,7 @@ fn run_args(cmd: RunCmd) -> anyhow::Result<crate::session::RunArgs> {
     // Before any thread (zenoh's) starts: SIGINT/SIGTERM stop the session cleanly.
     let stop = crate::cli::StopFlag::on_sigint_sigterm()?;
     Ok(crate::session::RunArgs {
+        trials: false,
         scenario,
         out,
         methods: method.0,
@@ -371,6 +372,45 @@ fn run_args(cmd: RunCmd) -> anyhow::Result<crate::session::RunArgs> {
         ros2: ros2
             .then(|| ros2_run(ros2_domain, &ros2_router))
             .transpose()?,
+    })
+}
+
+/// How `study run --stations` starts a study's stations: the `station` program beside this one,
+/// the defaults of `session run` (emulated network, progress off), the stations waiting for
+/// trials.
+///
+/// # Errors
+/// No `station` program beside this one; the signal handlers cannot be set.
+pub fn study_stations_args(
+    scenario: &std::path::Path,
+    out: &std::path::Path,
+) -> anyhow::Result<crate::session::RunArgs> {
+    let program = std::env::current_exe()?.with_file_name("station");
+    if !program.is_file() {
+        anyhow::bail!(
+            "study run --stations starts its stations with the `station` program, which is not beside this one ({}): build it (cargo build --release -p coop-tools --bin station)",
+            program.display()
+        );
+    }
+    Ok(crate::session::RunArgs {
+        trials: true,
+        scenario: scenario.to_owned(),
+        out: out.to_owned(),
+        methods: Vec::new(),
+        session: None,
+        late: Vec::new(),
+        emulate: true,
+        start_timeout: std::time::Duration::from_secs(20),
+        station_bin: crate::session::StationBin {
+            program,
+            prefix: vec![],
+        },
+        progress: false,
+        stop: crate::cli::StopFlag::on_sigint_sigterm()?,
+        record_max_file_s: None,
+        live: None,
+        attach: None,
+        ros2: None,
     })
 }
 

@@ -165,6 +165,7 @@ fn through_router(
         recordings.insert(s.name.clone(), record);
     }
     let a = RunArgs {
+        trials: false,
         scenario: scenario.to_owned(),
         out: dir.join("attached"),
         methods: vec![MethodName::Paper],

@@ -189,6 +189,7 @@ impl SiteConfig<'_> {
             scenario: Some(self.scenario.to_owned()),
             method: Some(self.method),
             start: StartMode::Session,
+            trials: a.trials,
             record: Some(self.record.to_owned()),
             network: network::NetworkConfig {
                 listen: vec![self.listen.to_owned()],

@@ -32,10 +32,15 @@ pub enum Command {
         /// Study file (TOML)
         file: PathBuf,
         /// Run it in the simulator with simulated participants (each group's people drawn once,
-        /// each trial its own run): a pilot before anyone is recruited. Needed: live stations are
-        /// not driven by `study` yet
-        #[arg(long)]
+        /// each trial its own run): a pilot before anyone is recruited
+        #[arg(long, conflicts_with = "stations")]
         sim: bool,
+        /// Run it on live stations of this machine (one per site, zenoh peers on loopback, the
+        /// scenario's devices), started once for the whole run: between trials the stations
+        /// rebuild themselves from the next trial's scenario without a restart and take its time
+        /// 0 from the runner; one recording per station and trial in --out/stations
+        #[arg(long)]
+        stations: bool,
         /// Output directory (created; it must not hold a study's trials unless --resume)
         #[arg(long)]
         out: PathBuf,
@@ -71,12 +76,32 @@ pub fn main(args: Args) -> anyhow::Result<()> {
         Command::Run {
             file,
             sim,
+            stations,
             out,
             resume,
             serve,
         } => {
+            if stations {
+                if serve.is_some() {
+                    bail!("study run --stations: --serve (the experimenter's page and questionnaires) runs with --sim only so far");
+                }
+                let study = super::Study::load(&file)?;
+                let a = crate::session_cli::study_stations_args(&study.scenario_path, &out)?;
+                let ran = super::live::run_stations(&study, &out, resume, &a, &mut |line| {
+                    eprintln!("  {line}");
+                })?;
+                println!(
+                    "study {}: {} trials run on stations, {} kept from before, in {:.0} s; table {}",
+                    study.file.name,
+                    ran.ran,
+                    ran.kept,
+                    ran.seconds,
+                    out.join("trials.csv").display()
+                );
+                return Ok(());
+            }
             if !sim {
-                bail!("study run: only --sim is built so far (simulated participants in the simulator); trials on live stations are run one session at a time with `session run`");
+                bail!("study run: say where the trials run: --sim (simulated participants in the simulator) or --stations (live stations on this machine)");
             }
             let study = super::Study::load(&file)?;
             let total = study.plan().len();

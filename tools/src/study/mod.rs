@@ -17,6 +17,7 @@
 pub mod board;
 pub mod cli;
 pub mod csv;
+pub mod live;
 pub mod order;
 pub mod questionnaire;
 pub mod report;
@@ -335,6 +336,19 @@ impl Study {
         seed: u64,
         people_seed: u64,
     ) -> anyhow::Result<coop_model::scenario::Scenario> {
+        Ok(self.scenario_text_for(levels, seed, people_seed)?.1)
+    }
+
+    /// [`Study::scenario_for`], with the scenario's TOML (what a study's stations are sent).
+    ///
+    /// # Errors
+    /// As [`Study::scenario_for`].
+    pub fn scenario_text_for(
+        &self,
+        levels: &[usize],
+        seed: u64,
+        people_seed: u64,
+    ) -> anyhow::Result<(String, coop_model::scenario::Scenario)> {
         let mut doc = self.scenario.clone();
         let what = self.condition_name(levels);
         for (f, &l) in self.file.factor.iter().zip(levels) {
@@ -356,7 +370,7 @@ impl Study {
             doc.insert("duration_s".into(), toml::Value::Float(t));
         }
         let text = toml::to_string(&doc).context("writing the condition's scenario")?;
-        coop_actors::scenario_file::parse_at(&text, self.scenario_path.parent())
+        let sc = coop_actors::scenario_file::parse_at(&text, self.scenario_path.parent())
             .map_err(|e| anyhow::anyhow!("{e}"))
             .with_context(|| {
                 format!(
@@ -364,7 +378,8 @@ impl Study {
                     self.path.display(),
                     self.scenario_path.display()
                 )
-            })
+            })?;
+        Ok((text, sc))
     }
 
     /// A condition as `factor=level, ...`.

@@ -38,7 +38,7 @@ pub fn header(study: &Study) -> Vec<String> {
 }
 
 /// Where a run writes, and what it has written.
-struct Tables {
+pub(super) struct Tables {
     file: File,
     begun_log: File,
     /// Trials begun by an earlier run (`group trial`).
@@ -49,7 +49,12 @@ struct Tables {
 
 impl Tables {
     /// Opens `out`'s table (made, or resumed), its record of trials begun, and `meta.json`.
-    fn open(study: &Study, out: &Path, resume: bool, trials: usize) -> anyhow::Result<Self> {
+    pub(super) fn open(
+        study: &Study,
+        out: &Path,
+        resume: bool,
+        trials: usize,
+    ) -> anyhow::Result<Self> {
         let table = out.join("trials.csv");
         let head = header(study).join(",");
         let done = if resume {
@@ -112,8 +117,28 @@ impl Tables {
     }
 
     /// Whether the table holds `t` whole.
-    fn holds(&self, t: &Trial) -> bool {
+    pub(super) fn holds(&self, t: &Trial) -> bool {
         self.done.contains_key(&(t.group_id.clone(), t.trial))
+    }
+
+    /// Notes that `t` begins (a trial begun and not in the table was cut short), and whether an
+    /// earlier run began it.
+    pub(super) fn begin(&mut self, t: &Trial) -> anyhow::Result<bool> {
+        writeln!(self.begun_log, "{} {}", t.group_id, t.trial)?;
+        self.begun_log.sync_data()?;
+        Ok(self.begun.contains(&format!("{} {}", t.group_id, t.trial)))
+    }
+
+    /// Appends `t`'s `rows` (its first attempt) and flushes them.
+    pub(super) fn append(&mut self, t: &Trial, rows: &str) -> anyhow::Result<()> {
+        self.file.write_all(rows.as_bytes())?;
+        self.file.flush()?;
+        self.file.sync_data()?;
+        self.done
+            .entry((t.group_id.clone(), t.trial))
+            .or_default()
+            .push(1);
+        Ok(())
     }
 
     /// Runs `t` again (its next attempt, a new run of the same people) and appends its rows.
@@ -405,7 +430,7 @@ pub fn store_answers(
 }
 
 /// The seed of `t`'s `attempt` (its own for the first; a repeat is a new run of the same people).
-fn attempt_seed(t: &Trial, attempt: u32) -> u64 {
+pub(super) fn attempt_seed(t: &Trial, attempt: u32) -> u64 {
     if attempt <= 1 {
         t.seed
     } else {

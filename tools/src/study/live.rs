@@ -1,0 +1,253 @@
+//! `study run --stations`: a study's trials on live stations of this machine, started once for
+//! the whole run ([`crate::session::trials`]): between trials no process restarts, the stations
+//! rebuild themselves from each trial's scenario and take its time 0 from the runner. Each trial
+//! leaves one recording per station (`stations/<site>-<group>-t<trial>.mcap`) and a row per site
+//! in `trials.csv`, written as `study run --sim` writes them; what the stations do not measure
+//! live yet (grip force, divergence, phantom contact) is left empty. A run cut short resumes as
+//! a simulated one does: finished trials are kept, the cut one runs again, marked.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::bail;
+use coop_transport::network::trial::TrialFigures;
+
+use super::run::{attempt_seed, Ran, Tables};
+use super::{level_text, Study, Trial};
+use crate::session::trials::{StudyStations, TrialRun};
+use crate::session::RunArgs;
+
+/// The name a trial's recordings carry: its group and number.
+pub fn trial_name(t: &Trial) -> String {
+    let safe: String = t
+        .group_id
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "_.-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{safe}-t{:03}", t.trial)
+}
+
+/// Runs `study`'s trials (those `trials.csv` does not hold yet, with `resume`) on stations
+/// started once from `a` (its scenario the study's), into `out`; `outcome` gets a line per trial.
+///
+/// # Errors
+/// As `run_sim`; a station that does not start, refuses a trial or exits.
+pub fn run_stations(
+    study: &Study,
+    out: &Path,
+    resume: bool,
+    a: &RunArgs,
+    outcome: &mut dyn FnMut(String),
+) -> anyhow::Result<Ran> {
+    let started = Instant::now();
+    let plan = study.plan();
+    // The stations are made for the first trial's world; every condition must fit it (same
+    // sites, objects and kind of method), which each station checks again: said here, before
+    // anything starts.
+    let Some(first) = plan.first() else {
+        bail!("study file {}: no trials", study.path.display());
+    };
+    let (_, sc) = study.scenario_text_for(&first.levels, first.seed, 0)?;
+    for levels in study.all_level_combinations() {
+        let (_, other) = study.scenario_text_for(&levels, first.seed, 0)?;
+        coop_actors::station::trials::fits(&sc, &other).map_err(|why| {
+            anyhow::anyhow!(
+                "study file {}: the condition {} cannot run on the stations of {}: {why}",
+                study.path.display(),
+                study.condition_name(&levels),
+                study.condition_name(&first.levels)
+            )
+        })?;
+    }
+    let mut tables = Tables::open(study, out, resume, plan.len())?;
+    let todo: Vec<&Trial> = plan.iter().filter(|t| !tables.holds(t)).collect();
+    let kept = plan.len() - todo.len();
+    if todo.is_empty() {
+        return Ok(Ran {
+            ran: 0,
+            kept,
+            seconds: 0.0,
+        });
+    }
+    let session = format!("study-{}-{}", std::process::id(), study.file.name);
+    let session: String = session
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect();
+    let mut stations = StudyStations::start(a, &sc, &session, &out.join("stations"))?;
+    let timeout = Duration::from_secs_f64(study.file.timeout_s.unwrap_or(sc.duration_s) + 1.0);
+    let mut gaps = Vec::new();
+    // Per trial, how long the stations took to be ready and which processes ran it: a lab's
+    // evidence that nothing restarted between trials.
+    let log_path = out.join("stations").join("trials.csv");
+    let fresh = !log_path.exists();
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)?;
+    if fresh {
+        writeln!(
+            log,
+            "group,trial,name,site,setup_s,run_s,servo_pid,physics_pid,network_pid"
+        )?;
+    }
+    // A trial's number on the stations rises through the run (resumed or not: stations started
+    // afresh count from 1).
+    let mut k = 0u64;
+    let run = (|| -> anyhow::Result<()> {
+        for t in &todo {
+            if a.stop.is_raised() {
+                bail!("interrupted");
+            }
+            let cut = tables.begin(t)?;
+            let (text, _) = study.scenario_text_for(
+                &t.levels,
+                attempt_seed(t, 1),
+                study.people_seed(t.group),
+            )?;
+            k += 1;
+            let name = trial_name(t);
+            let r = stations.trial(a, k, &name, &text, timeout)?;
+            gaps.push(r.setup_s + Duration::from_millis(500).as_secs_f64());
+            for (site, f) in &r.sites {
+                let pid = |i: usize| f.pids.get(i).copied().unwrap_or(0);
+                writeln!(
+                    log,
+                    "{},{},{name},{site},{:.3},{:.3},{},{},{}",
+                    t.group_id,
+                    t.trial,
+                    r.setup_s,
+                    r.run_s,
+                    pid(0),
+                    pid(1),
+                    pid(2)
+                )?;
+            }
+            log.flush()?;
+            let (rows, line) = rows(study, t, &r, cut);
+            tables.append(t, &rows)?;
+            outcome(line);
+        }
+        Ok(())
+    })();
+    let stopped = stations.stop();
+    run?;
+    stopped?;
+    if !gaps.is_empty() {
+        let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
+        let max = gaps.iter().copied().fold(0.0, f64::max);
+        outcome(format!(
+            "between trials (asking for a trial to its time 0): mean {mean:.2} s, max {max:.2} s"
+        ));
+    }
+    Ok(Ran {
+        ran: todo.len(),
+        kept,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// `t`'s rows from what the stations said at its end (`cut`: an earlier run began it), and its
+/// line for the log.
+fn rows(study: &Study, t: &Trial, r: &TrialRun, cut: bool) -> (String, String) {
+    let group = &study.groups[t.group];
+    let none = TrialFigures::default();
+    let sites: Vec<(&String, &TrialFigures)> = r.sites.iter().collect();
+    let done = |f: &TrialFigures| f.task == "done";
+    let trial_done = !sites.is_empty() && sites.iter().all(|(_, f)| done(f));
+    let completion = sites.iter().map(|(_, f)| f.task_at_s).fold(0.0, f64::max);
+    let mut out = String::new();
+    let names: BTreeMap<&str, usize> = study
+        .sites
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.as_str(), i))
+        .collect();
+    for (site, i) in &names {
+        let f = r.sites.get(*site).unwrap_or(&none);
+        let outcome = match f.task.as_str() {
+            "done" | "failed" => f.task.clone(),
+            _ => "undecided".to_owned(),
+        };
+        let failed_by = match (f.task.as_str(), f.failed_by) {
+            ("failed", 0) => "timeout".to_owned(),
+            ("failed", k) => format!("fail[{}]", k - 1),
+            _ => String::new(),
+        };
+        let mut cells: Vec<String> = vec![
+            study.file.name.clone(),
+            t.group_id.clone(),
+            group.participants[*i].clone(),
+            (*site).to_owned(),
+            t.block.to_string(),
+            t.trial.to_string(),
+            u8::from(t.practice).to_string(),
+            t.block.to_string(),
+        ];
+        cells.extend(
+            study
+                .file
+                .factor
+                .iter()
+                .zip(&t.levels)
+                .map(|(f, &l)| level_text(&f.levels[l])),
+        );
+        cells.extend([
+            attempt_seed(t, 1).to_string(),
+            outcome,
+            failed_by,
+            u8::from(done(f)).to_string(),
+            u8::from(trial_done).to_string(),
+            if done(f) {
+                format!("{:.3}", f.task_at_s)
+            } else {
+                String::new()
+            },
+            if trial_done {
+                format!("{completion:.3}")
+            } else {
+                String::new()
+            },
+            // Grip force, slips, divergence, phantom and unfelt contact: not measured live yet.
+            String::new(),
+            String::new(),
+            String::new(),
+            String::new(),
+            String::new(),
+            String::new(),
+            String::new(),
+            r.sent_bytes.get(*site).copied().unwrap_or(0).to_string(),
+            u8::from(cut).to_string(),
+            "1".to_owned(),
+        ]);
+        out.push_str(&super::csv::line(&cells));
+        out.push('\n');
+    }
+    let line = format!(
+        "{} trial {} ({}{}) on stations: {}",
+        t.group_id,
+        t.trial,
+        study.condition_name(&t.levels),
+        if t.practice { ", practice" } else { "" },
+        if trial_done {
+            format!("done in {completion:.2} s")
+        } else {
+            "not done".to_owned()
+        }
+    );
+    (out, line)
+}
