@@ -91,6 +91,8 @@ pub fn run_stations(
     let mut stations = StudyStations::start(a, &sc, &session, &out.join("stations"))?;
     let timeout = Duration::from_secs_f64(study.file.timeout_s.unwrap_or(sc.duration_s) + 1.0);
     let mut gaps = Vec::new();
+    // Per site, the processes (servo, physics, network) that ran each trial.
+    let mut processes: BTreeMap<String, Vec<Vec<u64>>> = BTreeMap::new();
     // Per trial, how long the stations took to be ready and which processes ran it: a lab's
     // evidence that nothing restarted between trials.
     let log_path = out.join("stations").join("trials.csv");
@@ -124,6 +126,10 @@ pub fn run_stations(
             let r = stations.trial(a, k, &name, &text, timeout)?;
             gaps.push(r.setup_s + Duration::from_millis(500).as_secs_f64());
             for (site, f) in &r.sites {
+                let seen = processes.entry(site.clone()).or_default();
+                if !seen.contains(&f.pids) {
+                    seen.push(f.pids.clone());
+                }
                 let pid = |i: usize| f.pids.get(i).copied().unwrap_or(0);
                 writeln!(
                     log,
@@ -151,8 +157,18 @@ pub fn run_stations(
         let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
         let max = gaps.iter().copied().fold(0.0, f64::max);
         outcome(format!(
-            "between trials (asking for a trial to its time 0): mean {mean:.2} s, max {max:.2} s"
+            "between trials (asking for a trial to its time 0): mean {mean:.2} s, max {max:.2} s over {} trials",
+            gaps.len()
         ));
+        for (site, seen) in &processes {
+            outcome(format!(
+                "station {site}: {} set{} of servo, physics and network processes ran its {} trials{}",
+                seen.len(),
+                if seen.len() == 1 { "" } else { "s" },
+                gaps.len(),
+                if seen.len() == 1 { " (none restarted)" } else { " (a process was restarted)" }
+            ));
+        }
     }
     Ok(Ran {
         ran: todo.len(),
