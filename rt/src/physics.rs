@@ -158,6 +158,18 @@ pub struct PhysicsRings {
     pub tracks_in: Option<Consumer<ToolTrack>>,
 }
 
+impl PhysicsRings {
+    /// Empties the rings physics reads (tool samples, remote reports, remote tracks): what the
+    /// servo and the network sent before. Not real-time.
+    pub fn drain_inputs(&mut self) {
+        while self.tools.pop().is_ok() {}
+        while self.remote.pop().is_ok() {}
+        if let Some(t) = &mut self.tracks_in {
+            while t.pop().is_ok() {}
+        }
+    }
+}
+
 impl PhysicsLoop {
     /// A physics loop for `site` with `method`, starting from `copy`. A method that steps on the
     /// session's tick grid (it says so: [`Consistency::grid_history_ticks`]) holds the copy until
@@ -212,13 +224,8 @@ impl PhysicsLoop {
     /// Its rings back, for a study's next trial to build its loop on, emptied of what the servo
     /// and the network sent into them (of the last trial: call it once both produce nothing more
     /// of it). Not real-time.
-    pub fn into_rings(mut self) -> PhysicsRings {
-        while self.tools.pop().is_ok() {}
-        while self.remote.pop().is_ok() {}
-        if let Some(t) = &mut self.tracks_in {
-            while t.pop().is_ok() {}
-        }
-        PhysicsRings {
+    pub fn into_rings(self) -> PhysicsRings {
+        let mut rings = PhysicsRings {
             tools: self.tools,
             remote: self.remote,
             objects: self.objects,
@@ -226,7 +233,9 @@ impl PhysicsLoop {
             trace: self.trace,
             tracks_out: self.tracks_out,
             tracks_in: self.tracks_in,
-        }
+        };
+        rings.drain_inputs();
+        rings
     }
 
     /// The session's time 0 (ns on this machine's CLOCK_MONOTONIC): tick `k` of the grid starts at

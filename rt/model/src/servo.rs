@@ -83,6 +83,10 @@ pub struct ServoOutput {
     pub scale: f64,
 }
 
+/// The longest tick the display's ramp-in counts, s: a tick later than this (a stalled servo, the
+/// first of a study's next trial) ramps in as if it were this long. Ramping out is never slowed.
+pub const MAX_RAMP_IN_TICK_S: f64 = 0.005;
+
 /// A servo loop's state.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Servo {
@@ -155,11 +159,13 @@ impl Servo {
             |c: &[ContactForce; MAX_OBJECTS]| c[1..n].iter().fold(c[0].force, |a, c| a + c.force);
         // Stale world: ramp the display to zero, and back once fresh.
         let stale = inp.stopping || inp.now_s - inp.object_time_s > p.stale_limit_s;
-        let rate = inp.dt_s / p.stale_ramp_s.max(1e-9);
+        let ramp = p.stale_ramp_s.max(1e-9);
         self.scale = if stale {
-            (self.scale - rate).max(0.0)
+            (self.scale - inp.dt_s / ramp).max(0.0)
         } else {
-            (self.scale + rate).min(1.0)
+            // A late tick ramps in no further than one of [`MAX_RAMP_IN_TICK_S`]: the first tick
+            // after a stall, or of a study's next trial, never skips the ramp.
+            (self.scale + inp.dt_s.min(MAX_RAMP_IN_TICK_S) / ramp).min(1.0)
         };
         if !p.display.enabled {
             return self.bounded_adoption_step(inp, total(&contacts), contacts);

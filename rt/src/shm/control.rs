@@ -3,7 +3,9 @@
 //! writes them: the servo's, physics' and the network's (and the device's, the servo's too: it
 //! alone opens the device). The supervisor creates it before spawning; each child writes its own
 //! slot and its own group; `station status` and `latency attach` read it. Nothing here ever blocks
-//! a loop: every field is a relaxed atomic with exactly one writer, named on its group.
+//! a loop: every field is an atomic with exactly one writer, named on its group (relaxed, but
+//! for the run state, the epoch, the seqlocks and a study's trial handshake, whose orderings are
+//! said where they are used).
 
 use core::marker::PhantomData;
 
