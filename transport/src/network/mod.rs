@@ -234,6 +234,11 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
         a.bounds,
         a.silence_ns,
     );
+    if studied {
+        // Nothing reaches physics before a trial is set up (a restarted network process takes up
+        // the trial running, and opens the gate at its time 0).
+        rx.gate = receive::Gate::Closed;
+    }
     let tracks = match a.tracks {
         Some((from_physics, to_physics)) => {
             rx.take_tracks(to_physics, a.emulation.as_ref());
@@ -284,6 +289,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             runs,
             record,
             trials: a.trials,
+            emulation: None,
         },
     )?;
     drop(publish);
@@ -387,6 +393,8 @@ struct Loop {
     record: RecordSpec,
     /// A study's station: what makes each trial's pieces.
     trials: Option<trial::TrialSetupFn>,
+    /// A study's station: the emulated link of the trial running (the station's own otherwise).
+    emulation: Option<String>,
 }
 
 /// How a station's recording is made: where, with what metadata, in what parts, with which
@@ -438,7 +446,9 @@ fn serve(
         if let Some(t) = tracks {
             scope.spawn(move || receive::deliver_tracks(&t, receiver, stop));
         }
-        scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
+        if trials.is_none() {
+            scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
+        }
         scope.spawn(move || clocks.run(stop));
         scope.spawn(move || clocks.run_launcher(stop));
 
@@ -450,15 +460,27 @@ fn serve(
             let now = lp.turn(ctx, publish, receiver, &mut presence, clocks);
             clock_answers.count(&ctx.ctl.network.traffic);
             figures.turn(ctx.ctl, now);
-            epoch.poll(ctx.ctl, clocks.launcher_offset());
+            // A study's station takes each trial's time 0 from its trial, never the session's.
+            if trials.is_none() {
+                epoch.poll(ctx.ctl, clocks.launcher_offset());
+            }
             if let Some(t) = &mut trials {
                 match t.poll(ctx.ctl, clocks.launcher_offset(), site, receiver) {
                     Some(trial::Change::Rebuild(setup)) => {
                         let status = status_now(ctx.ctl, publish, receiver);
-                        lp.next_trial(ctx, receiver, &setup, t.name().unwrap_or(""), &status)?;
+                        let name = t.name().unwrap_or("").to_owned();
+                        let set_up = lp.next_trial(ctx, receiver, &setup, &name, &status);
                         figures.begin_trial(lp.runs.clone());
                         session_recorded = false;
-                        t.network_ready(ctx.ctl);
+                        match set_up {
+                            Ok(()) => t.network_ready(ctx.ctl),
+                            // The station goes on; the runner sees the trial refused.
+                            Err(e) => t.fail(format!("its recording: {e}"), site),
+                        }
+                    }
+                    Some(trial::Change::End) => {
+                        let status = status_now(ctx.ctl, publish, receiver);
+                        lp.end_trial(ctx.site, &status);
                     }
                     Some(trial::Change::Started(t0)) => {
                         lock(receiver).gate =
@@ -533,35 +555,44 @@ impl Loop {
             while ring.pop().is_ok() {}
         }
         self.recording.drain_trace(&mut self.trace);
-        let mut metadata = self.record.metadata.clone();
-        metadata.insert("scenario".into(), setup.names.0.clone());
-        metadata.insert("method".into(), setup.names.1.clone());
-        metadata.insert("trial".into(), name.to_owned());
-        let path = self
-            .record
-            .path
-            .as_deref()
-            .map(|p| trial::record_path(p, name));
-        let next = Recording::create(
-            path.as_deref(),
-            metadata,
-            self.record.rotation,
-            self.record.foxglove.then(|| setup.scene.clone()),
-        )?;
-        std::mem::replace(&mut self.recording, next).finish(ctx.site, status);
         lock(receiver).begin_trial(
             setup.emulation.as_ref(),
             setup.bounds,
             setup.silence_ns.clone(),
         );
         self.names.clone_from(&setup.names);
+        self.emulation = Some(setup.emulation_text.clone());
         self.runs = figures::StationRuns {
             scenario: setup.names.0.clone(),
             scenario_hash: setup.scenario_hash,
             method: setup.names.1.clone(),
             emulated: setup.emulation.is_some(),
         };
+        std::mem::replace(&mut self.recording, Recording::none()).finish(ctx.site, status);
+        let mut metadata = self.record.metadata.clone();
+        metadata.insert("scenario".into(), setup.names.0.clone());
+        metadata.insert("method".into(), setup.names.1.clone());
+        metadata.insert("emulation".into(), setup.emulation_text.clone());
+        metadata.insert("trial".into(), name.to_owned());
+        let path = self
+            .record
+            .path
+            .as_deref()
+            .map(|p| trial::record_path(p, name));
+        self.recording = Recording::create(
+            path.as_deref(),
+            metadata,
+            self.record.rotation,
+            self.record.foxglove.then(|| setup.scene.clone()),
+        )?;
         Ok(())
+    }
+
+    /// A study's trial is over: what physics sent of it is recorded, and its recording finished;
+    /// nothing is recorded until the next trial.
+    fn end_trial(&mut self, site: &str, status: &StatusMsg) {
+        self.recording.drain_trace(&mut self.trace);
+        std::mem::replace(&mut self.recording, Recording::none()).finish(site, status);
     }
 
     /// One turn: publish the newest report, release the emulated states due, and record what
@@ -668,7 +699,10 @@ impl Loop {
             scenario: self.names.0.clone(),
             method: self.names.1.clone(),
             epoch_ns,
-            emulation: ctx.emulation.clone(),
+            emulation: self
+                .emulation
+                .clone()
+                .unwrap_or_else(|| ctx.emulation.clone()),
         };
         self.recording.write(|w| w.session(&m));
         true

@@ -48,6 +48,14 @@ impl Recording {
         })
     }
 
+    /// A recording of nothing (a study's station between trials).
+    pub(super) fn none() -> Self {
+        Self {
+            recorder: None,
+            err: None,
+        }
+    }
+
     /// Whether it continues what an earlier network process of this station run recorded.
     pub(super) fn continued(&self) -> bool {
         self.recorder

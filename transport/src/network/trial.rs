@@ -8,7 +8,9 @@
 //! have stopped the last trial it drains what physics sent, finishes the last trial's recording,
 //! starts the new one's and sets its receiver up for the new trial's links. It takes the time 0
 //! once its servo and physics are ready, translated by the launcher's clock offset, and opens the
-//! gate to what was sent from then on.
+//! gate to what was sent from then on. When every site's task has ended (or the trial's timeout
+//! passed), the runner puts the trial once more, ended: each station finishes its recording of
+//! it, and records nothing until the next trial.
 //!
 //! Puts are repeated, and a station acts on a trial once (a number it has not seen yet), so a lost
 //! put or one that overtakes another changes nothing.
@@ -43,6 +45,10 @@ pub struct TrialMsg {
     pub scenario: String,
     /// Its time 0 in the runner's CLOCK_MONOTONIC, ns, once every station is ready for it.
     pub epoch_ns: Option<u64>,
+    /// The trial is over (every site's task ended, or its timeout): each station finishes its
+    /// recording of it, so that the runner can read it.
+    #[serde(default)]
+    pub end: bool,
 }
 
 /// How far a station is with the trial asked for last, in its figures.
@@ -56,8 +62,10 @@ pub struct TrialFigures {
     pub ready: bool,
     /// Why the station cannot run it (then it never becomes ready).
     pub refused: Option<String>,
-    /// Its time 0 is taken (the trial runs).
+    /// Its time 0 is taken (the trial runs, or ran).
     pub started: bool,
+    /// Its end was heard and its recording is finished.
+    pub recorded: bool,
     /// The task as this site shows it: `none`, `running`, `done`, `failed`.
     pub task: String,
     /// When it was done or failed, s from the trial's time 0.
@@ -69,6 +77,9 @@ pub struct TrialFigures {
     /// The process ids of its servo, physics and network processes: the same through a study
     /// (its processes are not restarted between trials).
     pub pids: Vec<u64>,
+    /// The runner's clock minus this station's, as measured when the trial's time 0 was taken,
+    /// ns (0: not measured).
+    pub clock_offset_ns: i64,
 }
 
 /// What a station's network process needs for a trial, made from its scenario by the station
@@ -87,6 +98,8 @@ pub struct TrialSetup {
     pub silence_ns: Vec<u64>,
     /// What this site shows.
     pub scene: Scene,
+    /// The emulated link, as the recording says it ([`Emulation::describe`], or `none`).
+    pub emulation_text: String,
 }
 
 /// Makes a trial's [`TrialSetup`] from its scenario text, or says why the station cannot run it.
@@ -135,6 +148,10 @@ pub(super) struct TrialListener {
     refused: Option<String>,
     /// The trial's time 0 as announced, in the runner's clock.
     epoch_heard: Option<u64>,
+    /// The trial's end was heard.
+    end_heard: bool,
+    /// The runner's clock offset when the time 0 was taken, ns.
+    offset_ns: i64,
     said_bad: bool,
 }
 
@@ -150,6 +167,8 @@ enum Phase {
     Ready,
     /// Its time 0 is taken.
     Started,
+    /// Its end was heard: its recording is finished.
+    Ended,
 }
 
 /// What the network loop must do for a trial.
@@ -160,6 +179,8 @@ pub(super) enum Change {
     Rebuild(Box<TrialSetup>),
     /// The trial's time 0 is taken, ns on our clock: open the receiver's gate from it.
     Started(u64),
+    /// The trial is over: finish its recording (nothing is recorded until the next trial).
+    End,
 }
 
 impl TrialListener {
@@ -181,6 +202,8 @@ impl TrialListener {
             phase: Phase::Idle,
             refused: None,
             epoch_heard: None,
+            end_heard: false,
+            offset_ns: 0,
             said_bad: false,
         })
     }
@@ -229,6 +252,15 @@ impl TrialListener {
                     _ => self.phase = Phase::Rebuilding,
                 }
             }
+            Phase::Started if self.end_heard => {
+                self.phase = Phase::Ended;
+                return Some(Change::End);
+            }
+            // Taken already: a restarted network process took the trial up as it runs.
+            Phase::Ready if ctl.epoch().is_some() => {
+                self.phase = Phase::Started;
+                return ctl.epoch().map(Change::Started);
+            }
             Phase::Ready => match (self.epoch_heard, launcher) {
                 (Some(e), Some((_, offset))) => {
                     let local = translate(e, offset);
@@ -241,6 +273,7 @@ impl TrialListener {
                         Ordering::Relaxed,
                     );
                     self.phase = Phase::Started;
+                    self.offset_ns = offset;
                     eprintln!(
                         "network {site}: trial {} ({}) starts",
                         self.asked, self.name
@@ -259,6 +292,12 @@ impl TrialListener {
         ctl.trial.set_ready(Child::Network, self.asked, "");
     }
 
+    /// The network process could not set itself up for the trial (its recording): refused.
+    pub(super) fn fail(&mut self, why: String, site: &str) {
+        let why = format!("trial {} ({}): {why}", self.asked, self.name);
+        self.refuse(why, site);
+    }
+
     fn refuse(&mut self, why: String, site: &str) {
         eprintln!("network {site}: refused {why}");
         self.refused = Some(why);
@@ -273,6 +312,7 @@ impl TrialListener {
             if let Some(e) = m.epoch_ns.filter(|&e| e != 0) {
                 self.epoch_heard.get_or_insert(e);
             }
+            self.end_heard |= m.end;
             return;
         }
         // A new trial: whatever happens next, it is the one this station answers for.
@@ -280,6 +320,8 @@ impl TrialListener {
         self.name.clone_from(&m.name);
         self.refused = None;
         self.epoch_heard = m.epoch_ns.filter(|&e| e != 0);
+        self.end_heard = m.end;
+        self.offset_ns = 0;
         if !valid_name(&m.name) {
             return self.refuse(
                 format!(
@@ -305,13 +347,23 @@ impl TrialListener {
                 site,
             );
         }
-        // Nothing more of the last trial reaches physics, and nothing of its time 0 stays: the
-        // servo and physics wait for the next one's.
         lock(rx).gate = Gate::Closed;
-        ctl.epoch_ns.store(0, Ordering::Release);
-        ctl.trial.request(m.trial, &m.name, &m.scenario);
+        if m.trial == ctl.trial.requested() {
+            // Asked for already, by this station's network process before a restart: the
+            // servo and physics have it (and may be running it); this process sets itself up
+            // for it and takes its time 0 as it stands.
+            eprintln!(
+                "network {site}: trial {} ({}) taken up as the station runs it",
+                m.trial, m.name
+            );
+        } else {
+            // Nothing more of the last trial reaches physics, and nothing of its time 0 stays:
+            // the servo and physics wait for the next one's.
+            ctl.epoch_ns.store(0, Ordering::Release);
+            ctl.trial.request(m.trial, &m.name, &m.scenario);
+            eprintln!("network {site}: trial {} ({}) asked for", m.trial, m.name);
+        }
         ctl.trial.set_stopped(Child::Network, m.trial);
-        eprintln!("network {site}: trial {} ({}) asked for", m.trial, m.name);
         self.phase = Phase::Stopping(Box::new(setup));
     }
 
@@ -321,9 +373,10 @@ impl TrialListener {
         TrialFigures {
             trial: self.asked,
             name: self.name.clone(),
-            ready: matches!(self.phase, Phase::Ready | Phase::Started),
+            ready: matches!(self.phase, Phase::Ready | Phase::Started | Phase::Ended),
             refused: self.refused.clone(),
-            started: matches!(self.phase, Phase::Started),
+            started: matches!(self.phase, Phase::Started | Phase::Ended),
+            recorded: matches!(self.phase, Phase::Ended),
             task: task.name().into(),
             task_at_s: at_s,
             failed_by,
@@ -332,6 +385,7 @@ impl TrialListener {
                 .iter()
                 .map(|&c| ctl.child(c).pid.load(Ordering::Relaxed))
                 .collect(),
+            clock_offset_ns: self.offset_ns,
         }
     }
 }
