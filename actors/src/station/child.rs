@@ -214,7 +214,14 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     let i = cfg.site;
     // A study's station restarted in the middle of a trial runs that trial's scenario.
     let (mut trial, trial_sc) = trials::current(cfg, &ctl);
-    let sc = trial_sc.as_ref().unwrap_or(&cfg.scenario);
+    let sc = match &trial_sc {
+        Some(Ok(sc)) => sc,
+        _ => &cfg.scenario,
+    };
+    let refused = match &trial_sc {
+        Some(Err(why)) => why.as_str(),
+        _ => "",
+    };
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
     // is, and a station waiting for its session holds the first pose until the session starts.
@@ -253,7 +260,10 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     if trial > 0 {
         let judge = sc.task_judge().ok().flatten();
         servo.begin_trial(trial, Servo::new(params.0), sc.world(), judge, start);
-        trials::joined(&ctl, Child::Servo, trial);
+        trials::joined(&ctl, Child::Servo, trial, refused);
+        if ctl.epoch().is_none() {
+            trials::wait_network(&ctl, Child::Servo, trial);
+        }
     }
     // The task is judged on what this site shows, as the simulator judges it (a restarted servo
     // judges it afresh, and a simulated participant starts its plan again).
@@ -395,7 +405,14 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     let i = cfg.site;
     // A study's station restarted in the middle of a trial runs that trial's scenario.
     let (mut trial, trial_sc) = trials::current(cfg, &ctl);
-    let sc = trial_sc.as_ref().unwrap_or(&cfg.scenario);
+    let sc = match &trial_sc {
+        Some(Ok(sc)) => sc,
+        _ => &cfg.scenario,
+    };
+    let refused = match &trial_sc {
+        Some(Err(why)) => why.as_str(),
+        _ => "",
+    };
     let (method, join_after) = physics_method(sc, i);
     let mut rings = rings;
     // A method on the session's tick grid exchanges tool tracks (it says so: `join_after`).
@@ -410,9 +427,12 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     // grid (timewarp, coupled) only if it joins late; started with the session, it steps from
     // tick 0 like every other site.
     // (Of this scenario's world: a block another world's physics wrote is not resumed from.)
+    // (A study's trial not started yet starts from its scenario: the block may hold the last
+    // trial's end.)
     let resumed = ctl
         .resume()
         .filter(|r| r.objects == sc.objects.len())
+        .filter(|_| trial == 0 || ctl.epoch().is_some())
         .map(|r| r.states());
     if resumed.is_some() {
         eprintln!(
@@ -436,12 +456,19 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         }
         _ => sc.start_copy(),
     };
+    if trial > 0 && ctl.epoch().is_none() {
+        // A study's trial not started yet: nothing its predecessor left in the rings is taken.
+        rings.drain_inputs();
+    }
     let (mut step, timing) = physics_timing(sc, i, &ctl);
     let mut physics = PhysicsLoop::new(i, method, sc.world(), copy, rings, timing);
     if let Some(after) = join_after {
         physics.join_late(after, resumed);
     }
-    trials::joined(&ctl, Child::Physics, trial);
+    trials::joined(&ctl, Child::Physics, trial, refused);
+    if trial > 0 && ctl.epoch().is_none() {
+        trials::wait_network(&ctl, Child::Physics, trial);
+    }
     let (in_force, _dma) = setup(cfg, &cfg.physics_sched, Child::Physics)?;
     let mut last_report_seq = timing.report_seq;
     ctl.physics
@@ -484,7 +511,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         let rings = physics.into_rings();
         let (sc, refused) = match trials::scenario(cfg, &ctl) {
             Ok(sc) => (sc, String::new()),
-            // Refused: the last scenario's world, held (no time 0 comes for a refused trial).
+            // Refused: the station's own world, held (no time 0 comes for a refused trial).
             Err(why) => (cfg.scenario.clone(), why),
         };
         let (p, timing) = physics_timing(&sc, i, &ctl);
@@ -495,6 +522,9 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
             .store(timing.report_period_ns, Ordering::Relaxed);
         let (method, _) = physics_method(&sc, i);
         physics = PhysicsLoop::new(i, method, sc.world(), sc.start_copy(), rings, timing);
+        // A physics process restarted in this trial resumes from its world, not the last one's.
+        let now = monotonic_ns();
+        ctl.store_resume(physics.objects(), |k| physics.object_sample(now, k));
         ctl.trial.set_ready(Child::Physics, trial, &refused);
         trials::wait_network(&ctl, Child::Physics, trial);
     }
@@ -611,6 +641,15 @@ fn trial_network(
             .collect(),
         scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
             .ok_or_else(|| format!("the scenario has no site {}", cfg.site))?,
+        emulation_text: if net.emulate {
+            coop_transport::network::Emulation {
+                link: sc.network.clone(),
+                seed: sc.seed,
+            }
+            .describe()
+        } else {
+            "none".into()
+        },
     })
 }
 

@@ -68,24 +68,24 @@ pub fn wait_network(ctl: &ControlBlock, child: Child, trial: u64) -> bool {
     true
 }
 
-/// A process started (or restarted) while trial `trial` is asked for builds it at once: it has
-/// nothing of the last trial to stop, and says it is stopped and ready (its predecessor may have
-/// died before it did).
-pub fn joined(ctl: &ControlBlock, child: Child, trial: u64) {
+/// A process started (or restarted) while trial `trial` is asked for builds it at once (having
+/// emptied the rings it reads, if the trial has not started: its predecessor may have died before
+/// it did), and says it is stopped and ready, or why it cannot run the trial (`refused`).
+pub fn joined(ctl: &ControlBlock, child: Child, trial: u64, refused: &str) {
     if trial > 0 {
         ctl.trial.set_stopped(child, trial);
         if ctl.trial.ready(child, trial).is_none() {
-            ctl.trial.set_ready(child, trial, "");
+            ctl.trial.set_ready(child, trial, refused);
         }
     }
 }
 
 /// The trial asked for now, if any (a process restarted in the middle of one runs it), and its
-/// scenario when it fits this station.
-pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Option<Scenario>) {
+/// scenario, or why it does not fit this station.
+pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Option<Result<Scenario, String>>) {
     match ctl.trial.requested() {
         0 => (0, None),
-        k => (k, scenario(cfg, ctl).ok()),
+        k => (k, Some(scenario(cfg, ctl))),
     }
 }
 
@@ -97,10 +97,17 @@ pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Option<Scenario>) {
 /// The scenario does not parse, breaks a rule, or does not fit the station (in words that name
 /// the trial and the field).
 pub fn scenario(cfg: &Resolved, ctl: &ControlBlock) -> Result<Scenario, String> {
-    let name = ctl.trial.name.load();
-    let what = format!("trial {} ({name})", ctl.trial.requested());
-    let sc = crate::scenario_file::parse(&ctl.trial.scenario.load())
-        .map_err(|e| format!("{what}: its scenario: {e}"))?;
+    // The texts are read whole: a trial asked for while they were read is read again.
+    let (k, name, text) = loop {
+        let k = ctl.trial.requested();
+        let (name, text) = (ctl.trial.name.load(), ctl.trial.scenario.load());
+        if ctl.trial.requested() == k {
+            break (k, name, text);
+        }
+    };
+    let what = format!("trial {k} ({name})");
+    let sc =
+        crate::scenario_file::parse(&text).map_err(|e| format!("{what}: its scenario: {e}"))?;
     fits(&cfg.scenario, &sc).map_err(|e| format!("{what}: {e}"))?;
     Ok(sc)
 }
