@@ -100,6 +100,7 @@ fn a_study_on_stations_started_once_resumes_after_its_runner_is_killed_mid_trial
         std::thread::sleep(Duration::from_millis(50));
     }
 
+    let resumed = std::time::SystemTime::now();
     let o = Command::new(STUDY)
         .args(["run", "--stations", file_s, "--out", out_s, "--resume"])
         .output()
@@ -129,16 +130,23 @@ fn a_study_on_stations_started_once_resumes_after_its_runner_is_killed_mid_trial
         );
         assert_eq!(r["site_done"] == "1", !r["site_time_s"].is_empty(), "{r:?}");
         assert!(r["sent_bytes"].parse::<u64>().expect("bytes") > 0, "{r:?}");
+        // From the trial's recordings and its rollbacks (timewarp): measured, not left empty.
+        for col in ["co_divergence_max_mm", "phantom_ms", "unfelt_ms"] {
+            let v: f64 = r[col]
+                .parse()
+                .unwrap_or_else(|_| panic!("{col} measured: {r:?}"));
+            assert!(v >= 0.0, "{col}: {r:?}");
+        }
     }
-    // Every trial left each station's recording of it.
+    // Every trial left each station's recording of it; the cut trial's and the last are the
+    // resumed run's.
     for t in 1..=3 {
         for site in ["user1", "user2"] {
             let p = out.join(format!("stations/{site}-g01-t{t:03}.mcap"));
-            assert!(
-                std::fs::metadata(&p).is_ok_and(|m| m.len() > 0),
-                "{}",
-                p.display()
-            );
+            let m = std::fs::metadata(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            assert!(m.len() > 0, "{}", p.display());
+            let written = m.modified().expect("mtime");
+            assert_eq!(written >= resumed, t > 1, "{}", p.display());
         }
     }
     // The resumed run's stations ran trials 2 and 3 with the same processes.

@@ -57,6 +57,8 @@ pub struct TrialRun {
     pub run_s: f64,
     /// Per site, the bytes it sent from being ready for the trial to its end.
     pub sent_bytes: BTreeMap<String, u64>,
+    /// Per site, its method's rollback figures over the trial (`timewarp`; none for the others).
+    pub rollback: BTreeMap<String, Option<coop_rt::shm::rollback::RollbackFigures>>,
 }
 
 impl StudyStations {
@@ -143,15 +145,18 @@ impl StudyStations {
             .map_err(|e| anyhow::anyhow!("putting trial {}: {e}", m.trial))
     }
 
-    /// Every station's figures of trial `k`, once each has answered for it.
-    fn ask(&self, k: u64) -> Option<BTreeMap<String, TrialFigures>> {
-        let got: BTreeMap<String, StationFigures> = figures::ask(&self.z, &self.session, ASK_EVERY);
-        let out: BTreeMap<String, TrialFigures> = self
+    /// Every station's figures of trial `k` (its trial's and the whole station's), once each
+    /// has answered for it.
+    fn ask(&self, k: u64) -> Option<BTreeMap<String, (TrialFigures, StationFigures)>> {
+        let mut got: BTreeMap<String, StationFigures> =
+            figures::ask(&self.z, &self.session, ASK_EVERY);
+        let out: BTreeMap<String, (TrialFigures, StationFigures)> = self
             .sites
             .iter()
             .filter_map(|s| {
-                let t = got.get(s)?.trial.clone()?;
-                (t.trial == k).then(|| (s.clone(), t))
+                let f = got.remove(s)?;
+                let t = f.trial.clone().filter(|t| t.trial == k)?;
+                Some((s.clone(), (t, f)))
             })
             .collect();
         (out.len() == self.sites.len()).then_some(out)
@@ -175,6 +180,7 @@ impl StudyStations {
             name: name.to_owned(),
             scenario: text.to_owned(),
             epoch_ns: None,
+            end: false,
         };
         let asked = Instant::now();
         let at_ready: BTreeMap<String, TrialFigures>;
@@ -185,12 +191,12 @@ impl StudyStations {
             if let Some(f) = self.ask(k) {
                 if let Some((site, why)) = f
                     .iter()
-                    .find_map(|(s, t)| t.refused.as_ref().map(|w| (s, w)))
+                    .find_map(|(s, (t, _))| t.refused.as_ref().map(|w| (s, w)))
                 {
                     bail!("station {site} refused trial {k} ({name}): {why}");
                 }
-                if f.values().all(|t| t.ready) {
-                    at_ready = f;
+                if f.values().all(|(t, _)| t.ready) {
+                    at_ready = f.into_iter().map(|(s, (t, _))| (s, t)).collect();
                     break;
                 }
             }
@@ -205,39 +211,59 @@ impl StudyStations {
         let t0 = coop_rt::timer::monotonic_ns() + LEAD.as_nanos() as u64;
         m.epoch_ns = Some(t0);
         let end = t0 + timeout.as_nanos() as u64;
-        let mut last = BTreeMap::new();
         loop {
             self.check(a)?;
             let f = self.ask(k);
-            if f.as_ref().is_none_or(|f| f.values().any(|t| !t.started)) {
+            if f.as_ref()
+                .is_none_or(|f| f.values().any(|(t, _)| !t.started))
+            {
                 self.put(&m)?;
             }
-            if let Some(f) = f {
-                let ended = f
-                    .values()
-                    .all(|t| t.started && matches!(t.task.as_str(), "done" | "failed"));
-                last = f;
-                if ended {
-                    break;
-                }
-            }
-            if coop_rt::timer::monotonic_ns() >= end {
+            let ended = f.is_some_and(|f| {
+                f.values()
+                    .all(|(t, _)| t.started && matches!(t.task.as_str(), "done" | "failed"))
+            });
+            if ended || coop_rt::timer::monotonic_ns() >= end {
                 break;
             }
         }
         let run_s = coop_rt::timer::monotonic_ns().saturating_sub(t0) as f64 * 1e-9;
+        // Over: every station finishes its recording of it (what the runner then reads), and
+        // says so with its figures at the end.
+        m.end = true;
+        let ending = Instant::now();
+        let last = loop {
+            self.check(a)?;
+            self.put(&m)?;
+            if let Some(f) = self.ask(k) {
+                if f.values().all(|(t, _)| t.recorded) || ending.elapsed() > READY_TIMEOUT {
+                    break f;
+                }
+            }
+            if ending.elapsed() > READY_TIMEOUT {
+                bail!(
+                    "the stations did not answer for trial {k} ({name}) at its end (logs in {})",
+                    self.dir.display()
+                );
+            }
+        };
         let sent_bytes = last
             .iter()
-            .map(|(s, t)| {
+            .map(|(s, (t, _))| {
                 let before = at_ready.get(s).map_or(0, |r| r.sent_bytes);
                 (s.clone(), t.sent_bytes.saturating_sub(before))
             })
             .collect();
+        let rollback = last
+            .iter()
+            .map(|(s, (_, f))| (s.clone(), f.rollback))
+            .collect();
         Ok(TrialRun {
-            sites: last,
+            sites: last.into_iter().map(|(s, (t, _))| (s, t)).collect(),
             setup_s,
             run_s,
             sent_bytes,
+            rollback,
         })
     }
 

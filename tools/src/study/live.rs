@@ -11,7 +11,7 @@ use std::io::Write;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::bail;
+use anyhow::{bail, Context};
 use coop_transport::network::trial::TrialFigures;
 
 use super::run::{attempt_seed, Ran, Tables};
@@ -104,7 +104,7 @@ pub fn run_stations(
     if fresh {
         writeln!(
             log,
-            "group,trial,name,site,setup_s,run_s,servo_pid,physics_pid,network_pid"
+            "group,trial,name,site,setup_s,run_s,servo_pid,physics_pid,network_pid,clock_offset_ms"
         )?;
     }
     // A trial's number on the stations rises through the run (resumed or not: stations started
@@ -116,7 +116,7 @@ pub fn run_stations(
                 bail!("interrupted");
             }
             let cut = tables.begin(t)?;
-            let (text, _) = study.scenario_text_for(
+            let (text, trial_sc) = study.scenario_text_for(
                 &t.levels,
                 attempt_seed(t, 1),
                 study.people_seed(t.group),
@@ -124,6 +124,7 @@ pub fn run_stations(
             k += 1;
             let name = trial_name(t);
             let r = stations.trial(a, k, &name, &text, timeout)?;
+            let divergence = recorded_divergence(&stations, &name, &trial_sc)?;
             gaps.push(r.setup_s + Duration::from_millis(500).as_secs_f64());
             for (site, f) in &r.sites {
                 let seen = processes.entry(site.clone()).or_default();
@@ -133,18 +134,19 @@ pub fn run_stations(
                 let pid = |i: usize| f.pids.get(i).copied().unwrap_or(0);
                 writeln!(
                     log,
-                    "{},{},{name},{site},{:.3},{:.3},{},{},{}",
+                    "{},{},{name},{site},{:.3},{:.3},{},{},{},{:.3}",
                     t.group_id,
                     t.trial,
                     r.setup_s,
                     r.run_s,
                     pid(0),
                     pid(1),
-                    pid(2)
+                    pid(2),
+                    f.clock_offset_ns as f64 * 1e-6
                 )?;
             }
             log.flush()?;
-            let (rows, line) = rows(study, t, &r, cut);
+            let (rows, line) = rows(study, t, &trial_sc, &r, divergence, cut);
             tables.append(t, &rows)?;
             outcome(line);
         }
@@ -177,9 +179,44 @@ pub fn run_stations(
     })
 }
 
-/// `t`'s rows from what the stations said at its end (`cut`: an earlier run began it), and its
-/// line for the log.
-fn rows(study: &Study, t: &Trial, r: &TrialRun, cut: bool) -> (String, String) {
+/// The largest distance between the sites' copies while their users touched the object together
+/// over trial `name` of scenario `sc`, m, from the stations' recordings of it (read as `session
+/// run` reads its stations': the simulator's metric on the recorded traces).
+///
+/// # Errors
+/// A recording that cannot be read or has no time 0.
+fn recorded_divergence(
+    stations: &StudyStations,
+    name: &str,
+    sc: &coop_model::scenario::Scenario,
+) -> anyhow::Result<f64> {
+    let recs: Vec<coop_transport::recording::Recording> = stations
+        .recordings(name)
+        .iter()
+        .map(|(site, p)| {
+            coop_transport::recording::read(p)
+                .with_context(|| format!("station {site}'s recording of trial {name}"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let epochs: Vec<u64> = recs
+        .iter()
+        .map(|r| r.session.as_ref().map(|s| s.epoch_ns))
+        .collect::<Option<_>>()
+        .with_context(|| format!("a recording of trial {name} without its time 0"))?;
+    let run = crate::session::run_from_recordings(sc, &recs, &epochs)?;
+    Ok(coop_model::metrics::compute(sc, &run, &run).co_contact_divergence_max_m)
+}
+
+/// `t`'s rows from what the stations said at its end and the divergence their recordings show
+/// (`cut`: an earlier run began it), and its line for the log.
+fn rows(
+    study: &Study,
+    t: &Trial,
+    sc: &coop_model::scenario::Scenario,
+    r: &TrialRun,
+    divergence_m: f64,
+    cut: bool,
+) -> (String, String) {
     let group = &study.groups[t.group];
     let none = TrialFigures::default();
     let sites: Vec<(&String, &TrialFigures)> = r.sites.iter().collect();
@@ -193,8 +230,18 @@ fn rows(study: &Study, t: &Trial, r: &TrialRun, cut: bool) -> (String, String) {
         .enumerate()
         .map(|(i, s)| (s.as_str(), i))
         .collect();
+    let num = |v: f64, prec: usize| {
+        if v.is_finite() {
+            format!("{v:.prec$}")
+        } else {
+            String::new()
+        }
+    };
     for (site, i) in &names {
         let f = r.sites.get(*site).unwrap_or(&none);
+        let rollback = r.rollback.get(*site).copied().flatten();
+        let tick_ms = 1e3 / sc.site[*i].physics_rate_hz;
+        let ms = |ticks: u64| ticks as f64 * tick_ms;
         let outcome = match f.task.as_str() {
             "done" | "failed" => f.task.clone(),
             _ => "undecided".to_owned(),
@@ -238,14 +285,15 @@ fn rows(study: &Study, t: &Trial, r: &TrialRun, cut: bool) -> (String, String) {
             } else {
                 String::new()
             },
-            // Grip force, slips, divergence, phantom and unfelt contact: not measured live yet.
+            // Grip force and slips: the participant's, not sent by its station yet.
             String::new(),
             String::new(),
             String::new(),
             String::new(),
-            String::new(),
-            String::new(),
-            String::new(),
+            num(divergence_m * 1e3, 2),
+            // Phantom and unfelt contact: what the method's rollbacks took back (`timewarp`).
+            rollback.map_or(String::new(), |f| num(ms(f.phantom_contact_ticks), 1)),
+            rollback.map_or(String::new(), |f| num(ms(f.unfelt_contact_ticks), 1)),
             r.sent_bytes.get(*site).copied().unwrap_or(0).to_string(),
             u8::from(cut).to_string(),
             "1".to_owned(),
