@@ -2,7 +2,8 @@
 //! run (no process of theirs restarted between trials, each trial its own recordings), a runner
 //! killed in the middle of a trial and resumed (no finished trial lost or repeated, the cut one
 //! run again and marked), and a study whose conditions cannot share stations refused before
-//! anything starts.
+//! anything starts; with the experimenter's page, a trial repeated on the same stations while the
+//! questionnaire is owed, and the run aborted there.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -12,14 +13,15 @@ use coop_tests::{repo, TempDir};
 
 const STUDY: &str = env!("CARGO_BIN_EXE_study");
 
-/// The paper task (participants) at three constant delays, one group, one trial each, `method`.
-fn study_file(dir: &Path, methods: &str) -> std::path::PathBuf {
+/// The paper task (participants) at three constant delays, one group, one trial each, `method`;
+/// `extra` appended.
+fn study_file(dir: &Path, methods: &str, extra: &str) -> std::path::PathBuf {
     let scenario = repo().join("scenarios/participants/paper.toml");
     let file = dir.join("live.toml");
     std::fs::write(
         &file,
         format!(
-            "name = \"live\"\nscenario = {scenario:?}\nseed = 3\ngroups = 1\nrepetitions = 1\npractice = 0\norder = \"fixed\"\ntimeout_s = 9.0\n\n[[factor]]\nname = \"method\"\nset = [\"method\"]\nlevels = {methods}\n\n[[factor]]\nname = \"delay_ms\"\nset = [\"network.delay_min_ms\", \"network.delay_max_ms\"]\nlevels = [0.0, 50.0, 100.0]\n"
+            "name = \"live\"\nscenario = {scenario:?}\nseed = 3\ngroups = 1\nrepetitions = 1\npractice = 0\norder = \"fixed\"\ntimeout_s = 9.0\n\n[[factor]]\nname = \"method\"\nset = [\"method\"]\nlevels = {methods}\n\n[[factor]]\nname = \"delay_ms\"\nset = [\"network.delay_min_ms\", \"network.delay_max_ms\"]\nlevels = [0.0, 50.0, 100.0]\n{extra}"
         ),
     )
     .expect("write the study file");
@@ -61,7 +63,7 @@ fn segments_of(pid: u32) -> Vec<String> {
 #[test]
 fn a_study_on_stations_started_once_resumes_after_its_runner_is_killed_mid_trial() {
     let d = TempDir::new("study-stations");
-    let file = study_file(&d, "[\"timewarp\"]");
+    let file = study_file(&d, "[\"timewarp\"]", "");
     let out = d.join("run");
     let (file_s, out_s) = (file.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
     let mut runner = Command::new(STUDY)
@@ -174,7 +176,7 @@ fn a_study_on_stations_started_once_resumes_after_its_runner_is_killed_mid_trial
 #[test]
 fn conditions_that_cannot_share_stations_are_refused_before_anything_starts() {
     let d = TempDir::new("study-stations-mixed");
-    let file = study_file(&d, "[\"timewarp\", \"paper\"]");
+    let file = study_file(&d, "[\"timewarp\", \"paper\"]", "");
     let out = d.join("run");
     let o = Command::new(STUDY)
         .args([
@@ -193,4 +195,126 @@ fn conditions_that_cannot_share_stations_are_refused_before_anything_starts() {
         "{err}"
     );
     assert!(!out.join("stations").exists(), "nothing started");
+}
+
+/// `POST /control` with `action` and the experimenter's `key`: the reply's status line.
+fn control(url: &str, key: &str, action: &str) -> String {
+    use std::io::{Read, Write};
+    let addr = url.trim_start_matches("http://");
+    let body = format!("action={action}&key={key}");
+    let mut s = std::net::TcpStream::connect(addr).expect("connect to the page");
+    write!(
+        s,
+        "POST /control HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("send");
+    let mut reply = String::new();
+    let _ = s.read_to_string(&mut reply);
+    reply.lines().next().unwrap_or_default().to_owned()
+}
+
+/// Waits (at most 120 s) until `path` has `rows` data rows.
+fn wait_rows(path: &Path, rows: usize, runner: &mut std::process::Child) {
+    let waited = Instant::now();
+    while table(path).len() < rows {
+        assert!(
+            runner.try_wait().expect("poll the runner").is_none(),
+            "the runner ended early"
+        );
+        assert!(
+            waited.elapsed() < Duration::from_secs(120),
+            "no {rows} rows in 120 s"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn the_experimenter_repeats_a_trial_on_the_same_stations_and_aborts_the_run() {
+    use std::io::BufRead;
+    let d = TempDir::new("study-stations-served");
+    // A questionnaire after each block: the run waits there for the experimenter's repeat.
+    let extra = "\n[questionnaire]\nnasa_tlx = false\n\n[[questionnaire.item]]\nname = \"ease\"\ntext = \"It was easy\"\npoints = 7\nlow = \"no\"\nhigh = \"yes\"\n";
+    let file = study_file(&d, "[\"timewarp\"]", extra);
+    let out = d.join("run");
+    let mut runner = Command::new(STUDY)
+        .args(["run", "--stations"])
+        .arg(&file)
+        .arg("--out")
+        .arg(&out)
+        .args(["--serve", "127.0.0.1:0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start study run --stations --serve");
+    let pid = runner.id();
+    let mut err = std::io::BufReader::new(runner.stderr.take().expect("stderr"));
+    let (url, key) = {
+        let mut line = String::new();
+        loop {
+            line.clear();
+            assert!(
+                err.read_line(&mut line).expect("stderr") > 0,
+                "no address printed"
+            );
+            if let Some(rest) = line.split("serving ").nth(1) {
+                let url = rest.split_whitespace().next().expect("url");
+                let key = line
+                    .split("?key=")
+                    .nth(1)
+                    .and_then(|k| k.split_whitespace().next());
+                break (
+                    url.trim_end_matches('/').to_owned(),
+                    key.expect("key").to_owned(),
+                );
+            }
+        }
+    };
+    let log = std::thread::spawn(move || {
+        let mut rest = String::new();
+        let _ = std::io::Read::read_to_string(&mut err, &mut rest);
+        rest
+    });
+    let table_path = out.join("trials.csv");
+    // The first block's trial; then the questionnaire is owed, and the trial is repeated.
+    wait_rows(&table_path, 2, &mut runner);
+    assert!(
+        control(&url, &key, "repeat").contains("303"),
+        "repeat taken"
+    );
+    wait_rows(&table_path, 4, &mut runner);
+    assert!(control(&url, &key, "abort").contains("303"), "abort taken");
+    // Aborted while the questionnaire is owed: the run ends there, its stations stop, and the
+    // page waits to be closed.
+    let waited = Instant::now();
+    loop {
+        let r = control(&url, &key, "close");
+        if r.contains("200") {
+            break;
+        }
+        assert!(r.contains("409"), "{r}");
+        assert!(
+            waited.elapsed() < Duration::from_secs(60),
+            "the run never finished"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = runner.wait().expect("the runner exits once closed");
+    let said = log.join().unwrap_or_default();
+    assert!(status.success(), "{said}");
+    assert!(said.contains("(none restarted)"), "{said}");
+    let rows = table(&table_path);
+    assert_eq!(rows.len(), 4, "trial 1 twice, nothing else: {rows:?}");
+    for (r, attempt) in rows.iter().zip(["1", "1", "2", "2"]) {
+        assert_eq!(r["trial"], "1", "{r:?}");
+        assert_eq!(r["attempt"], attempt, "{r:?}");
+    }
+    for name in ["g01-t001", "g01-t001-a2"] {
+        for site in ["user1", "user2"] {
+            let p = out.join(format!("stations/{site}-{name}.mcap"));
+            assert!(p.is_file(), "{}", p.display());
+        }
+    }
+    assert!(segments_of(pid).is_empty(), "{:?}", segments_of(pid));
 }

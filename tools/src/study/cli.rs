@@ -48,10 +48,11 @@ pub enum Command {
         /// (one that was begun and cut short is run again and marked `cut`)
         #[arg(long)]
         resume: bool,
-        /// Serve the experimenter's page (progress, pause, resume, abort) and the participants'
-        /// questionnaires at this address (e.g. 127.0.0.1:8700; port 0: any free one, printed):
-        /// the trials then run group by group and block by block, each block's questionnaire
-        /// answered before the next
+        /// Serve the experimenter's page (progress, pause, resume, repeat, abort) and the
+        /// participants' questionnaires at this address (e.g. 127.0.0.1:8700; port 0: any free
+        /// one, printed): the trials then run group by group and block by block, each block's
+        /// questionnaire answered before the next (on stations, pause and abort act between
+        /// trials)
         #[arg(long, value_name = "ADDR")]
         serve: Option<String>,
     },
@@ -81,36 +82,30 @@ pub fn main(args: Args) -> anyhow::Result<()> {
             resume,
             serve,
         } => {
-            if stations {
-                if serve.is_some() {
-                    bail!("study run --stations: --serve (the experimenter's page and questionnaires) runs with --sim only so far");
-                }
-                let study = super::Study::load(&file)?;
-                let a = crate::session_cli::study_stations_args(&study.scenario_path, &out)?;
-                let ran = super::live::run_stations(&study, &out, resume, &a, &mut |line| {
-                    eprintln!("  {line}");
-                })?;
-                println!(
-                    "study {}: {} trials run on stations, {} kept from before, in {:.0} s; table {}",
-                    study.file.name,
-                    ran.ran,
-                    ran.kept,
-                    ran.seconds,
-                    out.join("trials.csv").display()
-                );
-                return Ok(());
-            }
-            if !sim {
+            if !sim && !stations {
                 bail!("study run: say where the trials run: --sim (simulated participants in the simulator) or --stations (live stations on this machine)");
             }
             let study = super::Study::load(&file)?;
             let total = study.plan().len();
             eprintln!(
-                "study {}: {total} trials of {} groups in the simulator, into {}",
+                "study {}: {total} trials of {} groups {}, into {}",
                 study.file.name,
                 study.groups.len(),
+                if stations {
+                    "on live stations of this machine"
+                } else {
+                    "in the simulator"
+                },
                 out.display()
             );
+            // On stations: every condition checked against the stations' world before anything
+            // starts; the stations themselves start at the first trial.
+            let mut on = if stations {
+                let a = crate::session_cli::study_stations_args(&study.scenario_path, &out)?;
+                Some(super::live::OnStations::new(&study, &out, a)?)
+            } else {
+                None
+            };
             let ran = match serve {
                 None => {
                     if study.file.questionnaire.is_some() {
@@ -119,9 +114,16 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                             study.file.name
                         );
                     }
-                    super::run::run_sim(&study, &out, resume, &mut |done, total| {
-                        eprintln!("  {done}/{total} trials");
-                    })?
+                    match on.take() {
+                        Some(on) => {
+                            super::live::run_stations(&study, &out, resume, on, &mut |l| {
+                                eprintln!("  {l}");
+                            })?
+                        }
+                        None => super::run::run_sim(&study, &out, resume, &mut |done, total| {
+                            eprintln!("  {done}/{total} trials");
+                        })?,
+                    }
                 }
                 Some(addr) => {
                     let shared = std::sync::Arc::new(super::board::Shared::new(
@@ -146,16 +148,41 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                         addr = server.addr,
                         key = server.key
                     );
-                    let ran = super::run::run_served(&study, &out, resume, &shared)?;
+                    let ran = match on.take() {
+                        Some(mut on) => {
+                            let ran = super::run::run_served(
+                                &study,
+                                &out,
+                                resume,
+                                &shared,
+                                &mut super::run::Runner::Stations(&mut on),
+                            );
+                            // The stations stop at the run's end, before the page waits.
+                            let said = on.finish();
+                            let ran = ran?;
+                            for line in said? {
+                                eprintln!("  {line}");
+                            }
+                            ran
+                        }
+                        None => super::run::run_served(
+                            &study,
+                            &out,
+                            resume,
+                            &shared,
+                            &mut super::run::Runner::Sim,
+                        )?,
+                    };
                     eprintln!("study {}: finished; the page stays until Close is pressed on it (or Ctrl-C)", study.file.name);
                     shared.wait_closed();
                     ran
                 }
             };
             println!(
-                "study {}: {} trials run, {} kept from before, in {:.0} s; table {}",
+                "study {}: {} trials run{}, {} kept from before, in {:.0} s; table {}",
                 study.file.name,
                 ran.ran,
+                if stations { " on stations" } else { "" },
                 ran.kept,
                 ran.seconds,
                 out.join("trials.csv").display()

@@ -8,7 +8,7 @@
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
@@ -16,11 +16,13 @@ use coop_transport::network::trial::TrialFigures;
 
 use super::run::{attempt_seed, Ran, Tables};
 use super::{level_text, Study, Trial};
+use coop_model::scenario::Scenario;
+
 use crate::session::trials::{StudyStations, TrialRun};
 use crate::session::RunArgs;
 
-/// The name a trial's recordings carry: its group and number.
-pub fn trial_name(t: &Trial) -> String {
+/// The name a trial's recordings carry: its group and number (and its attempt, after the first).
+pub fn trial_name(t: &Trial, attempt: u32) -> String {
     let safe: String = t
         .group_id
         .chars()
@@ -32,11 +34,199 @@ pub fn trial_name(t: &Trial) -> String {
             }
         })
         .collect();
-    format!("{safe}-t{:03}", t.trial)
+    if attempt > 1 {
+        format!("{safe}-t{:03}-a{attempt}", t.trial)
+    } else {
+        format!("{safe}-t{:03}", t.trial)
+    }
 }
 
-/// Runs `study`'s trials (those `trials.csv` does not hold yet, with `resume`) on stations
-/// started once from `a` (its scenario the study's), into `out`; `outcome` gets a line per trial.
+/// A study's stations, as a run drives them: started at its first trial (so a run that has
+/// nothing left to do, or whose table cannot be opened, starts none), each trial run on them and
+/// its rows appended, stopped at the end with what they did said.
+#[derive(Debug)]
+pub struct OnStations {
+    a: RunArgs,
+    out: PathBuf,
+    /// The first trial's scenario: the stations' world.
+    sc: Scenario,
+    timeout: Duration,
+    stations: Option<StudyStations>,
+    /// A trial's number on the stations: rising through the run (stations started afresh, by a
+    /// resumed run too, count from 1).
+    k: u64,
+    /// Per trial, seconds from asking for it to its time 0.
+    gaps: Vec<f64>,
+    /// Per site, the processes (servo, physics, network) that ran its trials.
+    processes: BTreeMap<String, Vec<Vec<u64>>>,
+}
+
+impl OnStations {
+    /// Checks that every condition of `study` can run on the stations of its first (same sites,
+    /// objects and kind of method, which each station checks again): said here, before anything
+    /// starts. The stations start with `a` (its scenario the study's) at the first trial.
+    ///
+    /// # Errors
+    /// A condition that cannot share the stations, naming it and the rule.
+    pub fn new(study: &Study, out: &Path, a: RunArgs) -> anyhow::Result<Self> {
+        let plan = study.plan();
+        let Some(first) = plan.first() else {
+            bail!("study file {}: no trials", study.path.display());
+        };
+        let (_, sc) = study.scenario_text_for(&first.levels, first.seed, 0)?;
+        for levels in study.all_level_combinations() {
+            let (_, other) = study.scenario_text_for(&levels, first.seed, 0)?;
+            coop_actors::station::trials::fits(&sc, &other).map_err(|why| {
+                anyhow::anyhow!(
+                    "study file {}: the condition {} cannot run on the stations of {}: {why}",
+                    study.path.display(),
+                    study.condition_name(&levels),
+                    study.condition_name(&first.levels)
+                )
+            })?;
+        }
+        let timeout = Duration::from_secs_f64(study.file.timeout_s.unwrap_or(sc.duration_s) + 1.0);
+        Ok(Self {
+            a,
+            out: out.to_owned(),
+            sc,
+            timeout,
+            stations: None,
+            k: 0,
+            gaps: Vec::new(),
+            processes: BTreeMap::new(),
+        })
+    }
+
+    /// The stations, started if they are not yet.
+    fn stations(&mut self, study: &Study) -> anyhow::Result<&mut StudyStations> {
+        if self.stations.is_none() {
+            let session: String = format!("study-{}-{}", std::process::id(), study.file.name)
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' {
+                        c
+                    } else {
+                        '-'
+                    }
+                })
+                .collect();
+            let st = StudyStations::start(&self.a, &self.sc, &session, &self.out.join("stations"))?;
+            self.stations = Some(st);
+        }
+        self.stations.as_mut().context("the study's stations")
+    }
+
+    /// Runs `t`'s `attempt` on the stations (`cut`: an earlier run began it), appends its rows to
+    /// `tables`, and gives its line for the log.
+    ///
+    /// # Errors
+    /// A station that does not start, refuses the trial or exits; interrupted; a file.
+    pub(super) fn run(
+        &mut self,
+        tables: &mut Tables,
+        study: &Study,
+        t: &Trial,
+        attempt: u32,
+        cut: bool,
+    ) -> anyhow::Result<String> {
+        if self.a.stop.is_raised() {
+            bail!("interrupted");
+        }
+        let (text, trial_sc) = study.scenario_text_for(
+            &t.levels,
+            attempt_seed(t, attempt),
+            study.people_seed(t.group),
+        )?;
+        self.k += 1;
+        let name = trial_name(t, attempt);
+        let (k, timeout) = (self.k, self.timeout);
+        let a = self.a.clone();
+        let stations = self.stations(study)?;
+        let r = stations.trial(&a, k, &name, &text, timeout)?;
+        let divergence = recorded_divergence(stations, &name, &trial_sc)?;
+        self.gaps
+            .push(r.setup_s + Duration::from_millis(500).as_secs_f64());
+        self.log(t, &name, &r)?;
+        let (rows, line) = rows(study, t, &trial_sc, &r, divergence, cut, attempt);
+        tables.append(t, &rows, attempt)?;
+        Ok(line)
+    }
+
+    /// Notes in `stations/trials.csv` how long the stations took to be ready for trial `name`
+    /// and which processes ran it: a lab's evidence that nothing restarted between trials.
+    fn log(&mut self, t: &Trial, name: &str, r: &TrialRun) -> anyhow::Result<()> {
+        let path = self.out.join("stations").join("trials.csv");
+        let fresh = !path.exists();
+        let mut log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .with_context(|| format!("opening {}", path.display()))?;
+        if fresh {
+            writeln!(
+                log,
+                "group,trial,name,site,setup_s,run_s,servo_pid,physics_pid,network_pid,clock_offset_ms"
+            )?;
+        }
+        for (site, f) in &r.sites {
+            let seen = self.processes.entry(site.clone()).or_default();
+            if !seen.contains(&f.pids) {
+                seen.push(f.pids.clone());
+            }
+            let pid = |i: usize| f.pids.get(i).copied().unwrap_or(0);
+            writeln!(
+                log,
+                "{},{},{name},{site},{:.3},{:.3},{},{},{},{:.3}",
+                t.group_id,
+                t.trial,
+                r.setup_s,
+                r.run_s,
+                pid(0),
+                pid(1),
+                pid(2),
+                f.clock_offset_ns as f64 * 1e-6
+            )?;
+        }
+        log.flush()?;
+        Ok(())
+    }
+
+    /// Stops the stations (if they started), and gives what they did: the time between trials,
+    /// and whether any process was restarted.
+    ///
+    /// # Errors
+    /// A station that did not stop cleanly.
+    pub fn finish(self) -> anyhow::Result<Vec<String>> {
+        if let Some(st) = self.stations {
+            st.stop()?;
+        }
+        let mut lines = Vec::new();
+        let gaps = &self.gaps;
+        if !gaps.is_empty() {
+            let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
+            let max = gaps.iter().copied().fold(0.0, f64::max);
+            lines.push(format!(
+                "between trials (asking for a trial to its time 0): mean {mean:.2} s, max {max:.2} s over {} trials",
+                gaps.len()
+            ));
+            for (site, seen) in &self.processes {
+                lines.push(format!(
+                    "station {site}: {} set{} of servo, physics and network processes ran its {} trials{}",
+                    seen.len(),
+                    if seen.len() == 1 { "" } else { "s" },
+                    gaps.len(),
+                    if seen.len() == 1 { " (none restarted)" } else { " (a process was restarted)" }
+                ));
+            }
+        }
+        Ok(lines)
+    }
+}
+
+/// Runs `study`'s trials (those `trials.csv` does not hold yet, with `resume`) on its stations
+/// `on` (started at the first trial, stopped at the end), into `out`; `outcome` gets a line per
+/// trial and what the stations did.
 ///
 /// # Errors
 /// As `run_sim`; a station that does not start, refuses a trial or exits.
@@ -44,133 +234,23 @@ pub fn run_stations(
     study: &Study,
     out: &Path,
     resume: bool,
-    a: &RunArgs,
+    mut on: OnStations,
     outcome: &mut dyn FnMut(String),
 ) -> anyhow::Result<Ran> {
     let started = Instant::now();
     let plan = study.plan();
-    // The stations are made for the first trial's world; every condition must fit it (same
-    // sites, objects and kind of method), which each station checks again: said here, before
-    // anything starts.
-    let Some(first) = plan.first() else {
-        bail!("study file {}: no trials", study.path.display());
-    };
-    let (_, sc) = study.scenario_text_for(&first.levels, first.seed, 0)?;
-    for levels in study.all_level_combinations() {
-        let (_, other) = study.scenario_text_for(&levels, first.seed, 0)?;
-        coop_actors::station::trials::fits(&sc, &other).map_err(|why| {
-            anyhow::anyhow!(
-                "study file {}: the condition {} cannot run on the stations of {}: {why}",
-                study.path.display(),
-                study.condition_name(&levels),
-                study.condition_name(&first.levels)
-            )
-        })?;
-    }
     let mut tables = Tables::open(study, out, resume, plan.len())?;
     let todo: Vec<&Trial> = plan.iter().filter(|t| !tables.holds(t)).collect();
     let kept = plan.len() - todo.len();
-    if todo.is_empty() {
-        return Ok(Ran {
-            ran: 0,
-            kept,
-            seconds: 0.0,
-        });
-    }
-    let session = format!("study-{}-{}", std::process::id(), study.file.name);
-    let session: String = session
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '-'
-            }
-        })
-        .collect();
-    let mut stations = StudyStations::start(a, &sc, &session, &out.join("stations"))?;
-    let timeout = Duration::from_secs_f64(study.file.timeout_s.unwrap_or(sc.duration_s) + 1.0);
-    let mut gaps = Vec::new();
-    // Per site, the processes (servo, physics, network) that ran each trial.
-    let mut processes: BTreeMap<String, Vec<Vec<u64>>> = BTreeMap::new();
-    // Per trial, how long the stations took to be ready and which processes ran it: a lab's
-    // evidence that nothing restarted between trials.
-    let log_path = out.join("stations").join("trials.csv");
-    let fresh = !log_path.exists();
-    let mut log = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(&log_path)?;
-    if fresh {
-        writeln!(
-            log,
-            "group,trial,name,site,setup_s,run_s,servo_pid,physics_pid,network_pid,clock_offset_ms"
-        )?;
-    }
-    // A trial's number on the stations rises through the run (resumed or not: stations started
-    // afresh count from 1).
-    let mut k = 0u64;
-    let run = (|| -> anyhow::Result<()> {
-        for t in &todo {
-            if a.stop.is_raised() {
-                bail!("interrupted");
-            }
-            let cut = tables.begin(t)?;
-            let (text, trial_sc) = study.scenario_text_for(
-                &t.levels,
-                attempt_seed(t, 1),
-                study.people_seed(t.group),
-            )?;
-            k += 1;
-            let name = trial_name(t);
-            let r = stations.trial(a, k, &name, &text, timeout)?;
-            let divergence = recorded_divergence(&stations, &name, &trial_sc)?;
-            gaps.push(r.setup_s + Duration::from_millis(500).as_secs_f64());
-            for (site, f) in &r.sites {
-                let seen = processes.entry(site.clone()).or_default();
-                if !seen.contains(&f.pids) {
-                    seen.push(f.pids.clone());
-                }
-                let pid = |i: usize| f.pids.get(i).copied().unwrap_or(0);
-                writeln!(
-                    log,
-                    "{},{},{name},{site},{:.3},{:.3},{},{},{},{:.3}",
-                    t.group_id,
-                    t.trial,
-                    r.setup_s,
-                    r.run_s,
-                    pid(0),
-                    pid(1),
-                    pid(2),
-                    f.clock_offset_ns as f64 * 1e-6
-                )?;
-            }
-            log.flush()?;
-            let (rows, line) = rows(study, t, &trial_sc, &r, divergence, cut);
-            tables.append(t, &rows)?;
-            outcome(line);
-        }
-        Ok(())
-    })();
-    let stopped = stations.stop();
+    let run = todo.iter().try_for_each(|t| {
+        let cut = tables.begin(t)?;
+        outcome(on.run(&mut tables, study, t, 1, cut)?);
+        anyhow::Ok(())
+    });
+    let said = on.finish();
     run?;
-    stopped?;
-    if !gaps.is_empty() {
-        let mean = gaps.iter().sum::<f64>() / gaps.len() as f64;
-        let max = gaps.iter().copied().fold(0.0, f64::max);
-        outcome(format!(
-            "between trials (asking for a trial to its time 0): mean {mean:.2} s, max {max:.2} s over {} trials",
-            gaps.len()
-        ));
-        for (site, seen) in &processes {
-            outcome(format!(
-                "station {site}: {} set{} of servo, physics and network processes ran its {} trials{}",
-                seen.len(),
-                if seen.len() == 1 { "" } else { "s" },
-                gaps.len(),
-                if seen.len() == 1 { " (none restarted)" } else { " (a process was restarted)" }
-            ));
-        }
+    for line in said? {
+        outcome(line);
     }
     Ok(Ran {
         ran: todo.len(),
@@ -216,6 +296,7 @@ fn rows(
     r: &TrialRun,
     divergence_m: f64,
     cut: bool,
+    attempt: u32,
 ) -> (String, String) {
     let group = &study.groups[t.group];
     let none = TrialFigures::default();
@@ -270,7 +351,7 @@ fn rows(
                 .map(|(f, &l)| level_text(&f.levels[l])),
         );
         cells.extend([
-            attempt_seed(t, 1).to_string(),
+            attempt_seed(t, attempt).to_string(),
             outcome,
             failed_by,
             u8::from(done(f)).to_string(),
@@ -296,17 +377,22 @@ fn rows(
             rollback.map_or(String::new(), |f| num(ms(f.unfelt_contact_ticks), 1)),
             r.sent_bytes.get(*site).copied().unwrap_or(0).to_string(),
             u8::from(cut).to_string(),
-            "1".to_owned(),
+            attempt.to_string(),
         ]);
         out.push_str(&super::csv::line(&cells));
         out.push('\n');
     }
     let line = format!(
-        "{} trial {} ({}{}) on stations: {}",
+        "{} trial {} ({}{}{}) on stations: {}",
         t.group_id,
         t.trial,
         study.condition_name(&t.levels),
         if t.practice { ", practice" } else { "" },
+        if attempt > 1 {
+            format!(", attempt {attempt}")
+        } else {
+            String::new()
+        },
         if trial_done {
             format!("done in {completion:.2} s")
         } else {

@@ -129,16 +129,28 @@ impl Tables {
         Ok(self.begun.contains(&format!("{} {}", t.group_id, t.trial)))
     }
 
-    /// Appends `t`'s `rows` (its first attempt) and flushes them.
-    pub(super) fn append(&mut self, t: &Trial, rows: &str) -> anyhow::Result<()> {
+    /// Appends `t`'s `rows` of its `attempt` and flushes them.
+    pub(super) fn append(&mut self, t: &Trial, rows: &str, attempt: u32) -> anyhow::Result<()> {
         self.file.write_all(rows.as_bytes())?;
         self.file.flush()?;
         self.file.sync_data()?;
         self.done
             .entry((t.group_id.clone(), t.trial))
             .or_default()
-            .push(1);
+            .push(attempt);
         Ok(())
+    }
+
+    /// Notes that `t` is run again, and gives that attempt's number (the next after the table's).
+    pub(super) fn begin_repeat(&mut self, t: &Trial) -> anyhow::Result<u32> {
+        let attempt = self
+            .done
+            .get(&(t.group_id.clone(), t.trial))
+            .and_then(|a| a.iter().max())
+            .map_or(1, |a| a + 1);
+        writeln!(self.begun_log, "{} {} {attempt}", t.group_id, t.trial)?;
+        self.begun_log.sync_data()?;
+        Ok(attempt)
     }
 
     /// Runs `t` again (its next attempt, a new run of the same people) and appends its rows.
@@ -148,19 +160,9 @@ impl Tables {
         t: &Trial,
         outcome: &mut dyn FnMut(String),
     ) -> anyhow::Result<()> {
-        let key = (t.group_id.clone(), t.trial);
-        let attempt = self
-            .done
-            .get(&key)
-            .and_then(|a| a.iter().max())
-            .map_or(1, |a| a + 1);
-        writeln!(self.begun_log, "{} {} {attempt}", t.group_id, t.trial)?;
-        self.begun_log.sync_data()?;
+        let attempt = self.begin_repeat(t)?;
         let (rows, line) = trial_rows(study, t, false, attempt)?;
-        self.file.write_all(rows.as_bytes())?;
-        self.file.flush()?;
-        self.file.sync_data()?;
-        self.done.entry(key).or_default().push(attempt);
+        self.append(t, &rows, attempt)?;
         outcome(line);
         Ok(())
     }
@@ -230,19 +232,81 @@ pub fn run_sim(
     })
 }
 
+/// Where a served run's trials run.
+#[derive(Debug)]
+pub enum Runner<'a> {
+    /// In the simulator: a block's trials on every core.
+    Sim,
+    /// On a study's live stations: one trial at a time, the experimenter's pause and abort heard
+    /// between trials.
+    Stations(&'a mut super::live::OnStations),
+}
+
+impl Runner<'_> {
+    /// Runs `t` again (its next attempt) and appends its rows; its line to `outcome`.
+    fn repeat(
+        &mut self,
+        tables: &mut Tables,
+        study: &Study,
+        t: &Trial,
+        outcome: &mut dyn FnMut(String),
+    ) -> anyhow::Result<()> {
+        match self {
+            Runner::Sim => tables.repeat(study, t, outcome),
+            Runner::Stations(on) => {
+                let attempt = tables.begin_repeat(t)?;
+                outcome(on.run(tables, study, t, attempt, false)?);
+                Ok(())
+            }
+        }
+    }
+
+    /// Runs a block's `trials` (first attempts) and appends their rows, each trial's line to
+    /// `outcome`; how many ran (on stations, fewer when `go_on` says stop between two).
+    fn block(
+        &mut self,
+        tables: &mut Tables,
+        study: &Study,
+        trials: &[&Trial],
+        go_on: &dyn Fn() -> bool,
+        outcome: &mut dyn FnMut(String),
+    ) -> anyhow::Result<usize> {
+        match self {
+            Runner::Sim => {
+                tables.run(study, trials, outcome)?;
+                Ok(trials.len())
+            }
+            Runner::Stations(on) => {
+                let mut ran = 0;
+                for t in trials {
+                    if ran > 0 && !go_on() {
+                        break;
+                    }
+                    let cut = tables.begin(t)?;
+                    outcome(on.run(tables, study, t, 1, cut)?);
+                    ran += 1;
+                }
+                Ok(ran)
+            }
+        }
+    }
+}
+
 /// [`run_sim`] as a lab's session goes, with the experimenter's page (`shared`, served by
-/// [`super::web`]): group by group and block by block (each block's trials on every core), the
-/// experimenter's pause holding the next block back and an abort ending the run after the block
+/// [`super::web`]): group by group and block by block (in the simulator each block's trials on
+/// every core; on stations one trial at a time), the experimenter's pause holding the next block
+/// back (on stations, the next trial) and an abort ending the run after the block (the trial)
 /// running, and after each block its questionnaire asked of each of the group's participants
 /// (waited for; one a resumed run finds unanswered is asked again).
 ///
 /// # Errors
-/// As [`run_sim`]; the answers cannot be read.
+/// As [`run_sim`]; the answers cannot be read; a station that fails.
 pub fn run_served(
     study: &Study,
     out: &Path,
     resume: bool,
     shared: &super::board::Shared,
+    runner: &mut Runner<'_>,
 ) -> anyhow::Result<Ran> {
     let started = Instant::now();
     let plan = study.plan();
@@ -276,7 +340,9 @@ pub fn run_served(
                 .collect();
             let levels = &trials[0].levels;
             if let (true, Some(t)) = (shared.take_repeat(), last) {
-                tables.repeat(study, t, &mut |line| shared.trial_repeated(line))?;
+                runner.repeat(&mut tables, study, t, &mut |line| {
+                    shared.trial_repeated(line)
+                })?;
                 ran += 1;
             }
             if !todo.is_empty() {
@@ -289,9 +355,18 @@ pub fn run_served(
                     study.condition_name(levels)
                 );
                 shared.update(|b| b.now = what);
-                tables.run(study, &todo, &mut |line| shared.trial_done(line))?;
-                ran += todo.len();
-                last = todo.last().copied();
+                let n = runner.block(
+                    &mut tables,
+                    study,
+                    &todo,
+                    &|| shared.may_go_on(),
+                    &mut |line| shared.trial_done(line),
+                )?;
+                ran += n;
+                last = todo.get(n.wrapping_sub(1)).copied();
+                if n < todo.len() {
+                    break 'groups;
+                }
             }
             if shared.questionnaire.is_some() {
                 let owed: Vec<super::board::Pending> = group
@@ -326,7 +401,7 @@ pub fn run_served(
                             super::board::Waited::Aborted => break 'groups,
                             super::board::Waited::Repeat => {
                                 if let Some(t) = last {
-                                    tables.repeat(study, t, &mut |line| {
+                                    runner.repeat(&mut tables, study, t, &mut |line| {
                                         shared.trial_repeated(line)
                                     })?;
                                     ran += 1;
