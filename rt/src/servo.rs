@@ -75,7 +75,8 @@ pub struct ServoLoop<D: CartesianDevice> {
     /// The task's outcome last published (none yet): published again only when it changes.
     published_task: Option<coop_model::task::Outcome>,
     /// The study's trial this loop runs (0: none, a station not started for a study). A later
-    /// one asked for in the control block ramps the force to zero as a stop does.
+    /// one asked for in the control block, or this one's end, ramps the force to zero as a stop
+    /// does.
     trial: u64,
 }
 
@@ -253,9 +254,11 @@ impl<D: CartesianDevice> ServoLoop<D> {
                 objects: &self.states[..self.n],
                 object_time_s: t_ns as f64 * 1e-9,
                 adopted,
-                // A stop, or the next trial: ramp to zero and go limp.
+                // A stop, the next trial, or the end of this one: ramp to zero and go limp.
                 stopping: control.is_some_and(|c| {
-                    c.run_state() == RunState::Stopping || c.trial.requested() > self.trial
+                    c.run_state() == RunState::Stopping
+                        || c.trial.requested() > self.trial
+                        || c.trial.is_ended(self.trial)
                 }),
             },
             &self.world.bodies()[..self.n],

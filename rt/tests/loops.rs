@@ -652,9 +652,10 @@ fn the_next_trial_ramps_the_force_out_and_nothing_of_the_last_one_crosses_over()
     k += 200;
     r.physics.step(k * MS);
     let first = r.servo.step(k * MS, Some(&ctl)).scale;
+    let tick_ms = coop_model::servo::ramp_in_tick_s(r.sc.site[0].servo_rate_hz) * 1e3;
     assert!(
-        first <= coop_model::servo::MAX_RAMP_IN_TICK_S * 1e3 / r.ramp_ms + 1e-9,
-        "the ramp-in skipped after a gap: scale {first}"
+        first > 0.0 && first <= tick_ms / r.ramp_ms + 1e-9,
+        "the ramp-in skipped after a gap, or did not begin: scale {first}"
     );
     // And runs: the states of the new trial reach the servo, whose display ramps in (never a
     // step to full force).
@@ -670,6 +671,18 @@ fn the_next_trial_ramps_the_force_out_and_nothing_of_the_last_one_crosses_over()
         last = scale;
     }
     assert!(scale > 0.0, "the new trial's world is displayed");
+    // Its end announced: the force ramps out and stays out until the next trial.
+    ctl.trial.set_ended(1);
+    let ended = k;
+    for _ in 0..300 {
+        k += 1;
+        r.physics.step(k * MS);
+        let out = r.servo.step(k * MS, Some(&ctl));
+        if k - ended > r.ramp_ms as u64 + 1 {
+            assert_eq!(out.f_command.norm(), 0.0, "a force after the trial's end");
+        }
+    }
+    assert!(r.servo.is_limp());
 }
 
 /// A report that passes every check a ring conversion makes (finite, unit quaternion) but whose

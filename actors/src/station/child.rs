@@ -325,38 +325,48 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
             return ended.map_err(Into::into);
         }
         // Limp, and physics sends nothing more of the last trial: rebuild for this one.
-        let now = monotonic_ns();
-        // Refused: the station's own world, held and judged by nobody (no time 0 comes for a
-        // refused trial).
-        let (sc, mut refused) = match trials::scenario(cfg, &ctl) {
-            Ok(sc) => (sc, String::new()),
-            Err(why) => (cfg.scenario.clone(), why),
-        };
-        // A simulated hand is the trial's participant: it is made again from the trial's
-        // scenario; a device the station opened stays open.
-        if refused.is_empty() && crate::station::device::made_per_trial(&cfg.device) {
-            match crate::station::device::open(&cfg.device, &sc, i, now) {
-                Ok(d) => *servo.device_mut() = d,
-                Err(e) => refused = format!("trial {trial}: its device: {e}"),
-            }
-        }
-        let (params, clamped) = servo_params(cfg, &sc, servo.device().info());
-        for l in clamped.into_iter().flatten() {
-            servo.guarded_mut().record(l, now);
-        }
-        let judge = if refused.is_empty() {
-            sc.task_judge().ok().flatten()
-        } else {
-            None
-        };
-        servo.begin_trial(trial, Servo::new(params), sc.world(), judge, now);
-        servo_rate_hz = sc.site[i].servo_rate_hz;
+        let (rate_hz, refused) = rebuild_servo(cfg, &ctl, &mut servo, trial);
+        servo_rate_hz = rate_hz;
         ctl.task
             .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
         ctl.trial.set_ready(Child::Servo, trial, &refused);
         // (A stop meanwhile: the loop's first tick sees it, and the servo is limp already.)
         trials::wait_network(&ctl, Child::Servo, trial);
     }
+}
+
+/// Rebuilds `servo` for study trial `trial` from its scenario (on its open device; a simulated
+/// hand made again as the trial's participant): its servo rate, and why it cannot run the trial
+/// (empty: it can). Refused, it holds the station's own world, judged by nobody (no time 0 comes
+/// for a refused trial).
+fn rebuild_servo(
+    cfg: &Resolved,
+    ctl: &ControlBlock,
+    servo: &mut ServoLoop<coop_rt::device::StationDevice>,
+    trial: u64,
+) -> (f64, String) {
+    let now = monotonic_ns();
+    let (sc, mut refused) = match trials::scenario(cfg, ctl) {
+        Ok(sc) => (sc, String::new()),
+        Err(why) => (cfg.scenario.clone(), why),
+    };
+    if refused.is_empty() && crate::station::device::made_per_trial(&cfg.device) {
+        match crate::station::device::open(&cfg.device, &sc, cfg.site, now) {
+            Ok(d) => *servo.device_mut() = d,
+            Err(e) => refused = format!("trial {trial}: its device: {e}"),
+        }
+    }
+    let (params, clamped) = servo_params(cfg, &sc, servo.device().info());
+    for l in clamped.into_iter().flatten() {
+        servo.guarded_mut().record(l, now);
+    }
+    let judge = if refused.is_empty() {
+        sc.task_judge().ok().flatten()
+    } else {
+        None
+    };
+    servo.begin_trial(trial, Servo::new(params), sc.world(), judge, now);
+    (sc.site[cfg.site].servo_rate_hz, refused)
 }
 
 /// The servo's parameters for site `cfg.site` of `sc`, its contact rendered no stiffer nor more

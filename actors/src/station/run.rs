@@ -103,6 +103,15 @@ pub struct RunOptions {
     pub exe_prefix: Vec<String>,
 }
 
+/// When a station started by its session's time 0 stops, ns after it: at its scenario's end
+/// (and a grace); never for one that waits for it otherwise, nor for a study's station, which
+/// outlives every trial's scenario (the runner stops it).
+fn session_end_ns(cfg: &Resolved) -> Option<u64> {
+    (cfg.config.start == super::config::StartMode::Session && !cfg.config.trials).then(|| {
+        ((cfg.scenario.duration_s * 1e9) as u64).saturating_add(SESSION_END_GRACE.as_nanos() as u64)
+    })
+}
+
 /// Runs the station until a signal, the duration, or a servo or physics failure the policy gave up
 /// on (network failures never end it: it runs on degraded while the network is retried).
 ///
@@ -380,12 +389,7 @@ async fn supervise(
         }
     };
     tokio::pin!(until);
-    // A study's station outlives every trial's scenario: the runner stops it.
-    let session_end_ns =
-        (cfg.config.start == super::config::StartMode::Session && !cfg.config.trials).then(|| {
-            ((cfg.scenario.duration_s * 1e9) as u64)
-                .saturating_add(SESSION_END_GRACE.as_nanos() as u64)
-        });
+    let session_end_ns = session_end_ns(cfg);
     let mut tick = tokio::time::interval(Duration::from_millis(100));
     let mut degraded: Vec<String> = Vec::new();
     let mut link = LinkTeller::default();

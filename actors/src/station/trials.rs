@@ -97,7 +97,8 @@ pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Option<Result<Scenar
 /// The scenario does not parse, breaks a rule, or does not fit the station (in words that name
 /// the trial and the field).
 pub fn scenario(cfg: &Resolved, ctl: &ControlBlock) -> Result<Scenario, String> {
-    // The texts are read whole: a trial asked for while they were read is read again.
+    // A trial asked for while the texts were read is read again (and a text torn by a rewrite
+    // that came between is superseded by the trial that rewrote it, asked for right after).
     let (k, name, text) = loop {
         let k = ctl.trial.requested();
         let (name, text) = (ctl.trial.name.load(), ctl.trial.scenario.load());

@@ -467,6 +467,7 @@ mod tests {
         };
         Servo::new(ServoParams {
             max_adoption_step_n: 0.5,
+            max_ramp_in_tick_s: crate::servo::MAX_RAMP_IN_TICK_S,
             tool_radius_m: 0.005,
             contact: ContactParams {
                 stiffness_n_per_m: 800.0,

@@ -35,6 +35,9 @@ pub struct ServoParams {
     pub stale_limit_s: f64,
     /// Time to ramp the displayed force to zero (and back), s.
     pub stale_ramp_s: f64,
+    /// The longest tick the ramp back counts, s: a later tick (a stall, the first of a study's
+    /// next trial) ramps in as if it were this long ([`ramp_in_tick_s`] of the servo's rate).
+    pub max_ramp_in_tick_s: f64,
     /// Largest displayed-force change per tick an adoption may cause, N (with the display stages
     /// off).
     pub max_adoption_step_n: f64,
@@ -83,9 +86,16 @@ pub struct ServoOutput {
     pub scale: f64,
 }
 
-/// The longest tick the display's ramp-in counts, s: a tick later than this (a stalled servo, the
-/// first of a study's next trial) ramps in as if it were this long. Ramping out is never slowed.
+/// The longest tick the display's ramp-in counts at rates of 300 Hz and above, s: a tick later
+/// than this (a stalled servo, the first of a study's next trial) ramps in as if it were this
+/// long. Ramping out is never slowed.
 pub const MAX_RAMP_IN_TICK_S: f64 = 0.005;
+
+/// [`ServoParams::max_ramp_in_tick_s`] for a servo at `rate_hz`: [`MAX_RAMP_IN_TICK_S`], or one
+/// and a half periods of a slower servo (whose every tick would be longer).
+pub fn ramp_in_tick_s(rate_hz: f64) -> f64 {
+    (1.5 / rate_hz).max(MAX_RAMP_IN_TICK_S)
+}
 
 /// A servo loop's state.
 #[derive(Debug, Clone, PartialEq)]
@@ -163,9 +173,9 @@ impl Servo {
         self.scale = if stale {
             (self.scale - inp.dt_s / ramp).max(0.0)
         } else {
-            // A late tick ramps in no further than one of [`MAX_RAMP_IN_TICK_S`]: the first tick
+            // A late tick ramps in no further than a tick of the longest counted: the first tick
             // after a stall, or of a study's next trial, never skips the ramp.
-            (self.scale + inp.dt_s.min(MAX_RAMP_IN_TICK_S) / ramp).min(1.0)
+            (self.scale + inp.dt_s.min(p.max_ramp_in_tick_s) / ramp).min(1.0)
         };
         if !p.display.enabled {
             return self.bounded_adoption_step(inp, total(&contacts), contacts);

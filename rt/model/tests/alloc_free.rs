@@ -59,6 +59,7 @@ fn servo_with_display_blending_physics_and_adoption_steps_allocate_nothing() {
         contact: contact(),
         stale_limit_s: 0.1,
         stale_ramp_s: 0.05,
+        max_ramp_in_tick_s: coop_model::servo::MAX_RAMP_IN_TICK_S,
         max_adoption_step_n: 0.5,
         display: coop_model::display::DisplayParams {
             enabled: true,

@@ -629,6 +629,9 @@ pub struct TrialShared {
     pub stopped: [AtomicU64; CHILDREN],
     /// Per child: the newest trial it has rebuilt itself for (and waits for its time 0).
     pub ready: [AtomicU64; CHILDREN],
+    /// The newest trial whose end the runner announced (the network process): the servo ramps
+    /// its force out and holds it there until the next trial.
+    pub ended: AtomicU64,
     /// Per child: why it could not rebuild for the requested trial (empty: it could).
     pub refused: [ShmText<FAILURE_WORDS>; CHILDREN],
     /// The trial's scenario, as TOML.
@@ -655,6 +658,16 @@ impl TrialShared {
         // SYNC: Release publishes the texts with the number; pairs with `requested`'s Acquire.
         self.requested.store(trial, Ordering::Release);
         true
+    }
+
+    /// The runner announced the end of `trial`.
+    pub fn set_ended(&self, trial: u64) {
+        self.ended.store(trial, Ordering::Release);
+    }
+
+    /// Whether the end of `trial` (not 0) was announced.
+    pub fn is_ended(&self, trial: u64) -> bool {
+        trial > 0 && self.ended.load(Ordering::Acquire) >= trial
     }
 
     /// `child` produces nothing more of the trial before `trial`.

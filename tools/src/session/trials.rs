@@ -1,7 +1,8 @@
 //! A study's stations on this machine, started once for all its trials: the runner's side of
 //! [`coop_transport::network::trial`]. Each trial is put (its scenario) until every station is
 //! ready for it, then put again with its time 0 until every station has taken it, and runs until
-//! every site's task is done or failed, or its timeout passes.
+//! every site's task is done or failed, or its timeout passes; then put once more, ended, until
+//! every station has finished its recording of it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -57,7 +58,8 @@ pub struct TrialRun {
     pub run_s: f64,
     /// Per site, the bytes it sent from being ready for the trial to its end.
     pub sent_bytes: BTreeMap<String, u64>,
-    /// Per site, its method's rollback figures over the trial (`timewarp`; none for the others).
+    /// Per site, its method's rollback figures over the trial (the grid's methods: `timewarp`,
+    /// and `coupled`, which rolls nothing back; none for the others).
     pub rollback: BTreeMap<String, Option<coop_rt::shm::rollback::RollbackFigures>>,
 }
 
@@ -211,6 +213,8 @@ impl StudyStations {
         let t0 = coop_rt::timer::monotonic_ns() + LEAD.as_nanos() as u64;
         m.epoch_ns = Some(t0);
         let end = t0 + timeout.as_nanos() as u64;
+        // The stations' figures when every task had ended, or at the timeout: the trial's.
+        let mut at_end = None;
         loop {
             self.check(a)?;
             let f = self.ask(k);
@@ -219,34 +223,66 @@ impl StudyStations {
             {
                 self.put(&m)?;
             }
-            let ended = f.is_some_and(|f| {
+            let ended = f.as_ref().is_some_and(|f| {
                 f.values()
                     .all(|(t, _)| t.started && matches!(t.task.as_str(), "done" | "failed"))
             });
+            if f.is_some() {
+                at_end = f;
+            }
             if ended || coop_rt::timer::monotonic_ns() >= end {
                 break;
             }
         }
         let run_s = coop_rt::timer::monotonic_ns().saturating_sub(t0) as f64 * 1e-9;
-        // Over: every station finishes its recording of it (what the runner then reads), and
-        // says so with its figures at the end.
+        let Some(at_end) = at_end else {
+            bail!(
+                "the stations did not answer during trial {k} ({name}) (logs in {})",
+                self.dir.display()
+            );
+        };
+        let late: Vec<&str> = at_end
+            .iter()
+            .filter(|(_, (t, _))| !t.started)
+            .map(|(s, _)| s.as_str())
+            .collect();
+        if !late.is_empty() {
+            bail!(
+                "station {} never took the time 0 of trial {k} ({name}) (logs in {})",
+                late.join(", "),
+                self.dir.display()
+            );
+        }
+        // Over: every station finishes its recording of it (what the runner then reads), says so
+        // with its figures, and ramps its force out until the next trial.
         m.end = true;
         let ending = Instant::now();
-        let last = loop {
+        loop {
             self.check(a)?;
             self.put(&m)?;
-            if let Some(f) = self.ask(k) {
-                if f.values().all(|(t, _)| t.recorded) || ending.elapsed() > READY_TIMEOUT {
-                    break f;
-                }
+            let f = self.ask(k);
+            if f.as_ref()
+                .is_some_and(|f| f.values().all(|(t, _)| t.recorded))
+            {
+                break;
             }
             if ending.elapsed() > READY_TIMEOUT {
+                let open: Vec<&str> = match &f {
+                    Some(f) => f
+                        .iter()
+                        .filter(|(_, (t, _))| !t.recorded)
+                        .map(|(s, _)| s.as_str())
+                        .collect(),
+                    None => vec!["(one did not answer)"],
+                };
                 bail!(
-                    "the stations did not answer for trial {k} ({name}) at its end (logs in {})",
+                    "station {} did not finish its recording of trial {k} ({name}) in {READY_TIMEOUT:?} (logs in {})",
+                    open.join(", "),
                     self.dir.display()
                 );
             }
-        };
+        }
+        let last = at_end;
         let sent_bytes = last
             .iter()
             .map(|(s, (t, _))| {

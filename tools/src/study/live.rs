@@ -144,7 +144,11 @@ impl OnStations {
         let a = self.a.clone();
         let stations = self.stations(study)?;
         let r = stations.trial(&a, k, &name, &text, timeout)?;
-        let divergence = recorded_divergence(stations, &name, &trial_sc)?;
+        // A recording that cannot be read leaves the cell empty, not the trial unrecorded.
+        let divergence = recorded_divergence(stations, &name, &trial_sc).unwrap_or_else(|e| {
+            eprintln!("study: trial {name}: no divergence from its recordings: {e:#}");
+            f64::NAN
+        });
         self.gaps
             .push(r.setup_s + Duration::from_millis(500).as_secs_f64());
         self.log(t, &name, &r)?;

@@ -363,7 +363,7 @@ pub fn run_served(
                     &mut |line| shared.trial_done(line),
                 )?;
                 ran += n;
-                last = todo.get(n.wrapping_sub(1)).copied();
+                last = todo[..n].last().copied().or(last);
                 if n < todo.len() {
                     break 'groups;
                 }

@@ -157,10 +157,12 @@ impl<'a> Sampler<'a> {
     }
 
     /// The launcher's clock thread: samples it until the session's time 0 is taken (afterwards
-    /// nothing needs it) or `stop`. A thread of its own: an exchange may wait up to its timeout
-    /// for a launcher not there yet, and the peers' sampling must not wait with it.
-    pub(super) fn run_launcher(&self, stop: &AtomicU64) {
-        while stop.load(Ordering::Relaxed) == 0 && self.ctl.epoch().is_none() {
+    /// nothing needs it), or with `through_run` (a study's station: each trial's time 0 is in the
+    /// runner's clock, and a restarted network process needs it again) until `stop`. A thread of
+    /// its own: an exchange may wait up to its timeout for a launcher not there yet, and the
+    /// peers' sampling must not wait with it.
+    pub(super) fn run_launcher(&self, stop: &AtomicU64, through_run: bool) {
+        while stop.load(Ordering::Relaxed) == 0 && (through_run || self.ctl.epoch().is_none()) {
             self.sample_launcher();
             std::thread::sleep(LOOK_EVERY);
         }

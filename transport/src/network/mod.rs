@@ -450,7 +450,8 @@ fn serve(
             scope.spawn(move || epoch::ask(session, name, ctx.ctl, epoch));
         }
         scope.spawn(move || clocks.run(stop));
-        scope.spawn(move || clocks.run_launcher(stop));
+        let through_run = trials.is_some();
+        scope.spawn(move || clocks.run_launcher(stop, through_run));
 
         let slot = ctx.ctl.child(Child::Network);
         slot.pid
@@ -481,6 +482,8 @@ fn serve(
                     Some(trial::Change::End) => {
                         let status = status_now(ctx.ctl, publish, receiver);
                         lp.end_trial(ctx.site, &status);
+                        // The servo ramps its force out until the next trial.
+                        ctx.ctl.trial.set_ended(t.asked());
                     }
                     Some(trial::Change::Started(t0)) => {
                         lock(receiver).gate =

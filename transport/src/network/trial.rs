@@ -10,7 +10,8 @@
 //! once its servo and physics are ready, translated by the launcher's clock offset, and opens the
 //! gate to what was sent from then on. When every site's task has ended (or the trial's timeout
 //! passed), the runner puts the trial once more, ended: each station finishes its recording of
-//! it, and records nothing until the next trial.
+//! it, records nothing until the next trial, and its servo ramps the force out (a pause or a
+//! questionnaire between trials displays nothing).
 //!
 //! Puts are repeated, and a station acts on a trial once (a number it has not seen yet), so a lost
 //! put or one that overtakes another changes nothing.
@@ -206,6 +207,11 @@ impl TrialListener {
             offset_ns: 0,
             said_bad: false,
         })
+    }
+
+    /// The trial asked for last (0: none).
+    pub(super) fn asked(&self) -> u64 {
+        self.asked
     }
 
     /// The trial being run's name (none before the first).

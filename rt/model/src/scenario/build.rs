@@ -255,6 +255,7 @@ impl Scenario {
             contact: self.contact,
             stale_limit_s: s.stale_limit_ms / 1e3,
             stale_ramp_s: s.stale_ramp_ms / 1e3,
+            max_ramp_in_tick_s: crate::servo::ramp_in_tick_s(s.servo_rate_hz),
             max_adoption_step_n: s.max_adoption_step_n,
             display: self.display.params(),
         }
