@@ -536,16 +536,21 @@ fn servo_steps_with_each_backend_under_the_safety_layer_allocate_nothing() {
     }
 }
 
-/// A cooperative stop (run state Stopping) ramps the commanded force to zero within the ramp time
-/// even while physics keeps running; only then is the servo limp and free to exit.
-#[test]
-fn a_cooperative_stop_ramps_the_force_to_zero_first() {
+/// The rig pressing the disk against the wall, stepped under a running station's control block
+/// for 1.5 s: the rig, the block, the last tick, the force commanded then (checked to hold).
+fn pressing_the_disk(
+    tag: &str,
+) -> (
+    Rig,
+    coop_rt::shm::BlockSegment<coop_rt::shm::control::ControlBlock>,
+    u64,
+    f64,
+) {
     use coop_rt::shm::control::{ControlBlock, RunState};
-    use coop_rt::shm::BlockSegment;
-    let mut r = rig("coop", true);
+    let mut r = rig(tag, true);
     let name =
-        SegmentName::new(&format!("lp{}coop", std::process::id()), "a", "ctl").expect("name");
-    let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
+        SegmentName::new(&format!("lp{}{tag}", std::process::id()), "a", "ctl").expect("name");
+    let ctl = coop_rt::shm::BlockSegment::<ControlBlock>::create(&name).expect("control");
     ctl.set_run_state(RunState::Running);
     let mut k = 0u64;
     let mut pressing = 0.0;
@@ -555,6 +560,15 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
         pressing = r.servo.step(k * MS, Some(&ctl)).f_command.norm();
     }
     assert!(pressing > 0.3, "holding the disk: {pressing} N");
+    (r, ctl, k, pressing)
+}
+
+/// A cooperative stop (run state Stopping) ramps the commanded force to zero within the ramp time
+/// even while physics keeps running; only then is the servo limp and free to exit.
+#[test]
+fn a_cooperative_stop_ramps_the_force_to_zero_first() {
+    use coop_rt::shm::control::{ControlBlock, RunState};
+    let (mut r, ctl, mut k, pressing) = pressing_the_disk("coop");
     assert!(!r.servo.is_limp());
     assert!(
         (ControlBlock::load_f64(&ctl.servo.command_n) - pressing).abs() < 1e-12,
@@ -581,21 +595,7 @@ fn a_cooperative_stop_ramps_the_force_to_zero_first() {
 /// servo's too) start from the new trial's world, with no state of the last one shown.
 #[test]
 fn the_next_trial_ramps_the_force_out_and_nothing_of_the_last_one_crosses_over() {
-    use coop_rt::shm::control::{ControlBlock, RunState};
-    use coop_rt::shm::BlockSegment;
-    let mut r = rig("trial", true);
-    let name =
-        SegmentName::new(&format!("lp{}trial", std::process::id()), "a", "ctl").expect("name");
-    let ctl = BlockSegment::<ControlBlock>::create(&name).expect("control");
-    ctl.set_run_state(RunState::Running);
-    let mut k = 0u64;
-    let mut pressing = 0.0;
-    while k < 1500 {
-        k += 1;
-        r.physics.step(k * MS);
-        pressing = r.servo.step(k * MS, Some(&ctl)).f_command.norm();
-    }
-    assert!(pressing > 0.3, "holding the disk: {pressing} N");
+    let (mut r, ctl, mut k, _) = pressing_the_disk("trial");
     let pushed = r.physics.copy().first().state.pos.x;
     assert!(
         pushed > 0.004,

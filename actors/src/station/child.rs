@@ -213,15 +213,8 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
     let tools = Producer::open(&names.tool, &opts).map_err(opening("tool"))?;
     let i = cfg.site;
     // A study's station restarted in the middle of a trial runs that trial's scenario.
-    let (mut trial, trial_sc) = trials::current(cfg, &ctl);
-    let sc = match &trial_sc {
-        Some(Ok(sc)) => sc,
-        _ => &cfg.scenario,
-    };
-    let refused = match &trial_sc {
-        Some(Err(why)) => why.as_str(),
-        _ => "",
-    };
+    let (mut trial, trial_sc, refused) = trials::current(cfg, &ctl);
+    let (sc, refused) = (&trial_sc, refused.as_str());
     let start = monotonic_ns();
     // A script or a recording runs on the session's clock: a restarted servo picks it up where it
     // is, and a station waiting for its session holds the first pose until the session starts.
@@ -414,15 +407,8 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     };
     let i = cfg.site;
     // A study's station restarted in the middle of a trial runs that trial's scenario.
-    let (mut trial, trial_sc) = trials::current(cfg, &ctl);
-    let sc = match &trial_sc {
-        Some(Ok(sc)) => sc,
-        _ => &cfg.scenario,
-    };
-    let refused = match &trial_sc {
-        Some(Err(why)) => why.as_str(),
-        _ => "",
-    };
+    let (mut trial, trial_sc, refused) = trials::current(cfg, &ctl);
+    let (sc, refused) = (&trial_sc, refused.as_str());
     let (method, join_after) = physics_method(sc, i);
     let mut rings = rings;
     // A method on the session's tick grid exchanges tool tracks (it says so: `join_after`).
@@ -563,13 +549,15 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     let (names, opts, ctl) = attach(cfg, parent)?;
     let sc = &cfg.scenario;
     let net = &cfg.config.network;
+    // What the scenario sets of the network process: as each of a study's trials sets it.
+    let own = trial_network(cfg, sc).map_err(|_| ChildError::NoSite(cfg.site))?;
     let args = coop_transport::network::NetworkArgs {
         session: &cfg.config.session,
         sites: sc.site.iter().map(|s| s.name.clone()).collect(),
         site_index: cfg.site,
-        scenario: sc.name.clone(),
-        scenario_hash: coop_transport::network::figures::scenario_hash(sc),
-        method: sc.method.as_str().to_owned(),
+        scenario: own.names.0,
+        scenario_hash: own.scenario_hash,
+        method: own.names.1,
         endpoints: net.clone(),
         control: &ctl,
         reports: Consumer::open(&names.report, &opts).map_err(opening("report"))?,
@@ -588,18 +576,10 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         // continues the recording its predecessor in the same run wrote.
         station_run: ctl.creator().map(|t| t.raw().to_string()),
         record_rotation: cfg.config.record_rotation(),
-        emulation: net.emulate.then(|| coop_transport::network::Emulation {
-            link: sc.network.clone(),
-            seed: sc.seed,
-        }),
-        bounds: coop_transport::admit::Bounds::from_scenario(sc, net.max_state_age_ms),
-        silence_ns: sc
-            .site
-            .iter()
-            .map(|s| net.silence_ns(s.report_rate_hz))
-            .collect(),
-        scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
-            .ok_or(ChildError::NoSite(cfg.site))?,
+        emulation: own.emulation,
+        bounds: own.bounds,
+        silence_ns: own.silence_ns,
+        scene: own.scene,
         record_foxglove: cfg.config.record_foxglove,
         live_view: cfg.config.live.clone(),
         ros2: cfg.config.ros2.publish.then(|| cfg.config.ros2.clone()),
@@ -630,19 +610,23 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
     Ok(())
 }
 
-/// What the network process needs of a study's trial of scenario `sc`.
+/// What the network process takes from scenario `sc`: the station's own, or a study's trial's.
 fn trial_network(
     cfg: &Resolved,
     sc: &Scenario,
 ) -> Result<coop_transport::network::trial::TrialSetup, String> {
     let net = &cfg.config.network;
+    let emulation = net.emulate.then(|| coop_transport::network::Emulation {
+        link: sc.network.clone(),
+        seed: sc.seed,
+    });
     Ok(coop_transport::network::trial::TrialSetup {
         names: (sc.name.clone(), sc.method.as_str().to_owned()),
         scenario_hash: coop_transport::network::figures::scenario_hash(sc),
-        emulation: net.emulate.then(|| coop_transport::network::Emulation {
-            link: sc.network.clone(),
-            seed: sc.seed,
-        }),
+        emulation_text: emulation
+            .as_ref()
+            .map_or("none".into(), coop_transport::network::Emulation::describe),
+        emulation,
         bounds: coop_transport::admit::Bounds::from_scenario(sc, net.max_state_age_ms),
         silence_ns: sc
             .site
@@ -651,15 +635,6 @@ fn trial_network(
             .collect(),
         scene: coop_transport::recording::Scene::from_scenario(sc, cfg.site)
             .ok_or_else(|| format!("the scenario has no site {}", cfg.site))?,
-        emulation_text: if net.emulate {
-            coop_transport::network::Emulation {
-                link: sc.network.clone(),
-                seed: sc.seed,
-            }
-            .describe()
-        } else {
-            "none".into()
-        },
     })
 }
 

@@ -80,12 +80,16 @@ pub fn joined(ctl: &ControlBlock, child: Child, trial: u64, refused: &str) {
     }
 }
 
-/// The trial asked for now, if any (a process restarted in the middle of one runs it), and its
-/// scenario, or why it does not fit this station.
-pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Option<Result<Scenario, String>>) {
+/// The trial asked for now (0: none; a process restarted in the middle of one runs it), the
+/// scenario to build from (the trial's, or the station's own when there is none or it does not
+/// fit), and why it does not fit (empty: it does).
+pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Scenario, String) {
     match ctl.trial.requested() {
-        0 => (0, None),
-        k => (k, Some(scenario(cfg, ctl))),
+        0 => (0, cfg.scenario.clone(), String::new()),
+        k => match scenario(cfg, ctl) {
+            Ok(sc) => (k, sc, String::new()),
+            Err(why) => (k, cfg.scenario.clone(), why),
+        },
     }
 }
 

@@ -15,7 +15,7 @@ use anyhow::{bail, Context};
 use coop_transport::network::trial::TrialFigures;
 
 use super::run::{attempt_seed, Ran, Tables};
-use super::{level_text, Study, Trial};
+use super::{Study, Trial};
 use coop_model::scenario::Scenario;
 
 use crate::session::trials::{StudyStations, TrialRun};
@@ -302,7 +302,6 @@ fn rows(
     cut: bool,
     attempt: u32,
 ) -> (String, String) {
-    let group = &study.groups[t.group];
     let none = TrialFigures::default();
     let sites: Vec<(&String, &TrialFigures)> = r.sites.iter().collect();
     let done = |f: &TrialFigures| f.task == "done";
@@ -336,24 +335,7 @@ fn rows(
             ("failed", k) => format!("fail[{}]", k - 1),
             _ => String::new(),
         };
-        let mut cells: Vec<String> = vec![
-            study.file.name.clone(),
-            t.group_id.clone(),
-            group.participants[*i].clone(),
-            (*site).to_owned(),
-            t.block.to_string(),
-            t.trial.to_string(),
-            u8::from(t.practice).to_string(),
-            t.block.to_string(),
-        ];
-        cells.extend(
-            study
-                .file
-                .factor
-                .iter()
-                .zip(&t.levels)
-                .map(|(f, &l)| level_text(&f.levels[l])),
-        );
+        let mut cells = super::run::row_head(study, t, *i, site);
         cells.extend([
             attempt_seed(t, attempt).to_string(),
             outcome,
@@ -386,22 +368,12 @@ fn rows(
         out.push_str(&super::csv::line(&cells));
         out.push('\n');
     }
-    let line = format!(
-        "{} trial {} ({}{}{}) on stations: {}",
-        t.group_id,
-        t.trial,
-        study.condition_name(&t.levels),
-        if t.practice { ", practice" } else { "" },
-        if attempt > 1 {
-            format!(", attempt {attempt}")
-        } else {
-            String::new()
-        },
-        if trial_done {
-            format!("done in {completion:.2} s")
-        } else {
-            "not done".to_owned()
-        }
+    let line = super::run::trial_line(
+        study,
+        t,
+        attempt,
+        trial_done.then_some(completion),
+        " on stations",
     );
     (out, line)
 }

@@ -542,7 +542,6 @@ fn trial_rows(
             String::new()
         }
     };
-    let group = &study.groups[t.group];
     let mut out = String::new();
     for (i, s) in m.sites.iter().enumerate() {
         let task = s.task.clone().unwrap_or(coop_model::task::TaskFigures {
@@ -555,24 +554,7 @@ fn trial_rows(
             slips: 0,
             steps: (0, 0),
         });
-        let mut cells: Vec<String> = vec![
-            study.file.name.clone(),
-            t.group_id.clone(),
-            group.participants[i].clone(),
-            s.name.clone(),
-            t.block.to_string(),
-            t.trial.to_string(),
-            u8::from(t.practice).to_string(),
-            t.block.to_string(),
-        ];
-        cells.extend(
-            study
-                .file
-                .factor
-                .iter()
-                .zip(&t.levels)
-                .map(|(f, &l)| level_text(&f.levels[l])),
-        );
+        let mut cells = row_head(study, t, i, &s.name);
         cells.extend([
             seed.to_string(),
             task.outcome.clone(),
@@ -598,8 +580,46 @@ fn trial_rows(
         ]);
         let _ = writeln!(out, "{}", super::csv::line(&cells));
     }
-    let line = format!(
-        "{} trial {} ({}{}{}): {}",
+    let line = trial_line(study, t, attempt, trial_done.then_some(completion), "");
+    Ok((out, line))
+}
+
+/// The first cells of a trial's row for site `i` named `site`: the study, the group, the
+/// participant, the site, the block, the trial, practice or not, its order position, and the
+/// condition's levels.
+pub(super) fn row_head(study: &Study, t: &Trial, i: usize, site: &str) -> Vec<String> {
+    let mut cells = vec![
+        study.file.name.clone(),
+        t.group_id.clone(),
+        study.groups[t.group].participants[i].clone(),
+        site.to_owned(),
+        t.block.to_string(),
+        t.trial.to_string(),
+        u8::from(t.practice).to_string(),
+        t.block.to_string(),
+    ];
+    cells.extend(
+        study
+            .file
+            .factor
+            .iter()
+            .zip(&t.levels)
+            .map(|(f, &l)| level_text(&f.levels[l])),
+    );
+    cells
+}
+
+/// A trial's line for the log and the experimenter's page: its group, number, condition, attempt,
+/// where it ran (`place`, e.g. " on stations") and its completion time if it was done.
+pub(super) fn trial_line(
+    study: &Study,
+    t: &Trial,
+    attempt: u32,
+    done_in_s: Option<f64>,
+    place: &str,
+) -> String {
+    format!(
+        "{} trial {} ({}{}{}){place}: {}",
         t.group_id,
         t.trial,
         study.condition_name(&t.levels),
@@ -609,13 +629,11 @@ fn trial_rows(
         } else {
             String::new()
         },
-        if trial_done {
-            format!("done in {completion:.2} s")
-        } else {
-            "not done".to_owned()
+        match done_in_s {
+            Some(s) => format!("done in {s:.2} s"),
+            None => "not done".to_owned(),
         }
-    );
-    Ok((out, line))
+    )
 }
 
 /// Per trial (group id, trial), its attempts whose every site's row `text` holds complete (a
