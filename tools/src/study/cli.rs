@@ -150,12 +150,12 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                     );
                     let ran = match on.take() {
                         Some(mut on) => {
-                            let ran = super::run::run_served(
+                            let ran = super::served::run_served(
                                 &study,
                                 &out,
                                 resume,
                                 &shared,
-                                &mut super::run::Runner::Stations(&mut on),
+                                &mut super::served::Runner::Stations(&mut on),
                             );
                             // The stations stop at the run's end, before the page waits.
                             let said = on.finish();
@@ -165,12 +165,12 @@ pub fn main(args: Args) -> anyhow::Result<()> {
                             }
                             ran
                         }
-                        None => super::run::run_served(
+                        None => super::served::run_served(
                             &study,
                             &out,
                             resume,
                             &shared,
-                            &mut super::run::Runner::Sim,
+                            &mut super::served::Runner::Sim,
                         )?,
                     };
                     eprintln!("study {}: finished; the page stays until Close is pressed on it (or Ctrl-C)", study.file.name);

@@ -23,6 +23,7 @@ pub mod questionnaire;
 pub mod report;
 pub mod run;
 pub mod scores;
+pub mod served;
 pub mod web;
 
 use std::collections::BTreeSet;
