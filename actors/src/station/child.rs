@@ -322,9 +322,7 @@ pub fn run_servo(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError> 
         servo_rate_hz = rate_hz;
         ctl.task
             .publish(coop_rt::shm::control::TaskState::None, 0.0, 0);
-        ctl.trial.set_ready(Child::Servo, trial, &refused);
-        // (A stop meanwhile: the loop's first tick sees it, and the servo is limp already.)
-        trials::wait_network(&ctl, Child::Servo, trial);
+        trials::rebuilt(&ctl, Child::Servo, trial, &refused);
     }
 }
 
@@ -339,10 +337,7 @@ fn rebuild_servo(
     trial: u64,
 ) -> (f64, String) {
     let now = monotonic_ns();
-    let (sc, mut refused) = match trials::scenario(cfg, ctl) {
-        Ok(sc) => (sc, String::new()),
-        Err(why) => (cfg.scenario.clone(), why),
-    };
+    let (sc, mut refused) = trials::scenario_or_own(cfg, ctl);
     if refused.is_empty() && crate::station::device::made_per_trial(&cfg.device) {
         match crate::station::device::open(&cfg.device, &sc, cfg.site, now) {
             Ok(d) => *servo.device_mut() = d,
@@ -505,11 +500,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         // dropped with the last trial's loop, and the next one starts from its scenario at its
         // time 0 (no state of the last trial crosses over).
         let rings = physics.into_rings();
-        let (sc, refused) = match trials::scenario(cfg, &ctl) {
-            Ok(sc) => (sc, String::new()),
-            // Refused: the station's own world, held (no time 0 comes for a refused trial).
-            Err(why) => (cfg.scenario.clone(), why),
-        };
+        let (sc, refused) = trials::scenario_or_own(cfg, &ctl);
         let (p, timing) = physics_timing(&sc, i, &ctl);
         step = p;
         last_report_seq = timing.report_seq;
@@ -521,8 +512,7 @@ pub fn run_physics(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         // A physics process restarted in this trial resumes from its world, not the last one's.
         let now = monotonic_ns();
         ctl.store_resume(physics.objects(), |k| physics.object_sample(now, k));
-        ctl.trial.set_ready(Child::Physics, trial, &refused);
-        trials::wait_network(&ctl, Child::Physics, trial);
+        trials::rebuilt(&ctl, Child::Physics, trial, &refused);
     }
 }
 
@@ -586,10 +576,7 @@ pub fn run_network(cfg: &Resolved, parent: Option<u32>) -> Result<(), ChildError
         trials: cfg.config.trials.then(|| {
             let cfg = cfg.clone();
             coop_transport::network::trial::TrialSetupFn(Box::new(move |text: &str| {
-                let sc =
-                    crate::scenario_file::parse(text).map_err(|e| format!("its scenario: {e}"))?;
-                trials::fits(&cfg.scenario, &sc)?;
-                trial_network(&cfg, &sc)
+                trial_network(&cfg, &trials::parse(&cfg.scenario, text)?)
             }))
         }),
     };

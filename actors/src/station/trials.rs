@@ -80,26 +80,40 @@ pub fn joined(ctl: &ControlBlock, child: Child, trial: u64, refused: &str) {
     }
 }
 
+/// `child` has rebuilt itself for `trial` (`refused`: why it could not; empty: it could): says so,
+/// then waits for the network process as [`wait_network`] does.
+pub fn rebuilt(ctl: &ControlBlock, child: Child, trial: u64, refused: &str) {
+    ctl.trial.set_ready(child, trial, refused);
+    // (A stop or a later trial meanwhile: the loop's first tick sees it.)
+    wait_network(ctl, child, trial);
+}
+
 /// The trial asked for now (0: none; a process restarted in the middle of one runs it), the
-/// scenario to build from (the trial's, or the station's own when there is none or it does not
-/// fit), and why it does not fit (empty: it does).
+/// scenario to build from, and why the trial's does not fit (see [`scenario_or_own`]).
 pub fn current(cfg: &Resolved, ctl: &ControlBlock) -> (u64, Scenario, String) {
     match ctl.trial.requested() {
         0 => (0, cfg.scenario.clone(), String::new()),
-        k => match scenario(cfg, ctl) {
-            Ok(sc) => (k, sc, String::new()),
-            Err(why) => (k, cfg.scenario.clone(), why),
-        },
+        k => {
+            let (sc, refused) = scenario_or_own(cfg, ctl);
+            (k, sc, refused)
+        }
     }
 }
 
-/// The scenario of the trial asked for, parsed and checked against the station's own: the rings
-/// were made for its sites, its objects and its kind of method, so a trial may change anything
-/// else (the method among those of the same kind, the network, the people, the rates).
+/// The scenario to build the trial asked for from: its own, or, when it does not fit, the
+/// station's (held: no time 0 comes for a refused trial), with why (empty: it fits).
+pub fn scenario_or_own(cfg: &Resolved, ctl: &ControlBlock) -> (Scenario, String) {
+    match scenario(cfg, ctl) {
+        Ok(sc) => (sc, String::new()),
+        Err(why) => (cfg.scenario.clone(), why),
+    }
+}
+
+/// The scenario of the trial asked for, parsed and checked against the station's own
+/// ([`parse`]).
 ///
 /// # Errors
-/// The scenario does not parse, breaks a rule, or does not fit the station (in words that name
-/// the trial and the field).
+/// As [`parse`], the trial named.
 pub fn scenario(cfg: &Resolved, ctl: &ControlBlock) -> Result<Scenario, String> {
     // A trial asked for while the texts were read is read again (and a text torn by a rewrite
     // that came between is superseded by the trial that rewrote it, asked for right after).
@@ -110,10 +124,19 @@ pub fn scenario(cfg: &Resolved, ctl: &ControlBlock) -> Result<Scenario, String> 
             break (k, name, text);
         }
     };
-    let what = format!("trial {k} ({name})");
-    let sc =
-        crate::scenario_file::parse(&text).map_err(|e| format!("{what}: its scenario: {e}"))?;
-    fits(&cfg.scenario, &sc).map_err(|e| format!("{what}: {e}"))?;
+    parse(&cfg.scenario, &text).map_err(|e| format!("trial {k} ({name}): {e}"))
+}
+
+/// A trial's scenario `text`, parsed and checked against the station's own, `station`: the rings
+/// were made for its sites, its objects and its kind of method, so a trial may change anything
+/// else (the method among those of the same kind, the network, the people, the rates).
+///
+/// # Errors
+/// The scenario does not parse, breaks a rule, or does not fit the station (in words that name
+/// the field).
+pub fn parse(station: &Scenario, text: &str) -> Result<Scenario, String> {
+    let sc = crate::scenario_file::parse(text).map_err(|e| format!("its scenario: {e}"))?;
+    fits(station, &sc)?;
     Ok(sc)
 }
 
