@@ -289,7 +289,7 @@ pub fn run(a: NetworkArgs<'_>) -> Result<StatusMsg, NetworkError> {
             runs,
             record,
             trials: a.trials,
-            emulation: None,
+            emulation: ctx.emulation.clone(),
         },
     )?;
     drop(publish);
@@ -393,8 +393,8 @@ struct Loop {
     record: RecordSpec,
     /// A study's station: what makes each trial's pieces.
     trials: Option<trial::TrialSetupFn>,
-    /// A study's station: the emulated link of the trial running (the station's own otherwise).
-    emulation: Option<String>,
+    /// The emulated link, as the recording says it: the station's own, or the trial's running.
+    emulation: String,
 }
 
 /// How a station's recording is made: where, with what metadata, in what parts, with which
@@ -557,21 +557,21 @@ impl Loop {
         if let Some((_, ring)) = &mut self.tracks {
             while ring.pop().is_ok() {}
         }
-        self.recording.drain_trace(&mut self.trace);
+        // (The last trial's recording, if its end was not heard.)
+        self.end_trial(ctx.site, status);
         lock(receiver).begin_trial(
             setup.emulation.as_ref(),
             setup.bounds,
             setup.silence_ns.clone(),
         );
         self.names.clone_from(&setup.names);
-        self.emulation = Some(setup.emulation_text.clone());
+        self.emulation.clone_from(&setup.emulation_text);
         self.runs = figures::StationRuns {
             scenario: setup.names.0.clone(),
             scenario_hash: setup.scenario_hash,
             method: setup.names.1.clone(),
             emulated: setup.emulation.is_some(),
         };
-        std::mem::replace(&mut self.recording, Recording::none()).finish(ctx.site, status);
         let mut metadata = self.record.metadata.clone();
         metadata.insert("scenario".into(), setup.names.0.clone());
         metadata.insert("method".into(), setup.names.1.clone());
@@ -702,10 +702,7 @@ impl Loop {
             scenario: self.names.0.clone(),
             method: self.names.1.clone(),
             epoch_ns,
-            emulation: self
-                .emulation
-                .clone()
-                .unwrap_or_else(|| ctx.emulation.clone()),
+            emulation: self.emulation.clone(),
         };
         self.recording.write(|w| w.session(&m));
         true
