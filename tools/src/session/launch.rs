@@ -92,17 +92,7 @@ pub fn run_method(
     let late: BTreeMap<&str, f64> = a.late.iter().map(|(s, t)| (s.as_str(), *t)).collect();
 
     // The launcher is a zenoh peer too: it watches presence and announces the session's time 0.
-    let endpoints = network::NetworkConfig {
-        listen: vec![ports[n].clone()],
-        connect: ports[..n].to_vec(),
-        mode: network::Mode::Peer,
-        tls: None,
-        emulate: false,
-        ..network::NetworkConfig::default()
-    };
-    let z = zenoh::open(network::config(&endpoints).map_err(anyhow::Error::msg)?)
-        .wait()
-        .map_err(|e| anyhow::anyhow!("opening the launcher's zenoh session: {e}"))?;
+    let z = stations::launcher_session(&ports)?;
     let held = Held::declare(a, &z, session, &sc)?;
 
     for st in stations
@@ -152,7 +142,7 @@ fn interrupted(dir: &Path) -> anyhow::Error {
 ///
 /// # Errors
 /// Interrupted; a station exited; a station not present in time (named).
-fn wait_present(
+pub(super) fn wait_present(
     a: &RunArgs,
     stations: &mut [Station],
     present: &Arc<Mutex<std::collections::BTreeSet<String>>>,

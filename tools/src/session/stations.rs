@@ -222,6 +222,28 @@ impl SiteConfig<'_> {
     }
 }
 
+/// The launcher's zenoh session among the stations on loopback `ports` (one per site, then the
+/// launcher's own, as [`loopback_ports`] gives them): a peer too, which watches presence and
+/// announces time 0.
+///
+/// # Errors
+/// The session does not open.
+pub(crate) fn launcher_session(ports: &[String]) -> anyhow::Result<zenoh::Session> {
+    let n = ports.len() - 1;
+    let endpoints = network::NetworkConfig {
+        listen: vec![ports[n].clone()],
+        connect: ports[..n].to_vec(),
+        mode: network::Mode::Peer,
+        tls: None,
+        emulate: false,
+        ..network::NetworkConfig::default()
+    };
+    zenoh::Wait::wait(zenoh::open(
+        network::config(&endpoints).map_err(anyhow::Error::msg)?,
+    ))
+    .map_err(|e| anyhow::anyhow!("opening the launcher's zenoh session: {e}"))
+}
+
 /// Fails, naming the station and showing its log, if one exited before its time.
 pub(crate) fn check_alive(stations: &mut [Station]) -> anyhow::Result<()> {
     for st in stations.iter_mut() {

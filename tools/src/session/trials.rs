@@ -16,10 +16,10 @@ use coop_transport::network::{self as net, EpochAnnouncer};
 use zenoh::Wait;
 
 use super::stations::{self, Station};
-use super::{lock, watch_presence, RunArgs};
+use super::{watch_presence, RunArgs};
 
 /// How far ahead of now a trial's time 0 is put: every station has it before it matters.
-const LEAD: Duration = Duration::from_millis(500);
+pub const LEAD: Duration = Duration::from_millis(500);
 /// How often a put is repeated and the stations asked, while waiting.
 const ASK_EVERY: Duration = Duration::from_millis(100);
 /// How long the stations have to get ready for a trial (the servo's ramp to zero, a rebuild).
@@ -78,43 +78,14 @@ impl StudyStations {
         let n = sc.site.len();
         let ports = stations::loopback_ports(n);
         let mut stations = stations::prepare(a, sc, session, &dir, &ports)?;
-        let endpoints = net::NetworkConfig {
-            listen: vec![ports[n].clone()],
-            connect: ports[..n].to_vec(),
-            mode: net::Mode::Peer,
-            tls: None,
-            emulate: false,
-            ..net::NetworkConfig::default()
-        };
-        let z = zenoh::open(net::config(&endpoints).map_err(anyhow::Error::msg)?)
-            .wait()
-            .map_err(|e| anyhow::anyhow!("opening the study runner's zenoh session: {e}"))?;
+        let z = stations::launcher_session(&ports)?;
         let (present, presence) = watch_presence(&z, session)?;
         let clock = EpochAnnouncer::declare(&z, session)?;
         for st in &mut stations {
             st.spawn(&a.station_bin)?;
         }
-        let waited = Instant::now();
-        loop {
-            stations::check_alive(&mut stations)?;
-            if a.stop.is_raised() {
-                stations::stop_all(&mut stations)?;
-                bail!("interrupted while the stations started");
-            }
-            let have = lock(&present).clone();
-            if stations.iter().all(|s| have.contains(&s.site)) {
-                break;
-            }
-            if waited.elapsed() > a.start_timeout {
-                let _ = stations::stop_all(&mut stations);
-                bail!(
-                    "stations not present after {:?} (logs in {})",
-                    a.start_timeout,
-                    dir.display()
-                );
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        // (An error drops the stations, each stopping with its own stop ladder.)
+        super::launch::wait_present(a, &mut stations, &present, &dir)?;
         Ok(Self {
             z,
             session: session.to_owned(),

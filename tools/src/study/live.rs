@@ -98,8 +98,8 @@ impl OnStations {
         })
     }
 
-    /// The stations, started if they are not yet.
-    fn stations(&mut self, study: &Study) -> anyhow::Result<&mut StudyStations> {
+    /// Starts the stations if they are not up yet.
+    fn start(&mut self, study: &Study) -> anyhow::Result<()> {
         if self.stations.is_none() {
             let session: String = format!("study-{}-{}", std::process::id(), study.file.name)
                 .chars()
@@ -114,7 +114,7 @@ impl OnStations {
             let st = StudyStations::start(&self.a, &self.sc, &session, &self.out.join("stations"))?;
             self.stations = Some(st);
         }
-        self.stations.as_mut().context("the study's stations")
+        Ok(())
     }
 
     /// Runs `t`'s `attempt` on the stations (`cut`: an earlier run began it), appends its rows to
@@ -140,17 +140,16 @@ impl OnStations {
         )?;
         self.k += 1;
         let name = trial_name(t, attempt);
-        let (k, timeout) = (self.k, self.timeout);
-        let a = self.a.clone();
-        let stations = self.stations(study)?;
-        let r = stations.trial(&a, k, &name, &text, timeout)?;
+        self.start(study)?;
+        let stations = self.stations.as_mut().context("the study's stations")?;
+        let r = stations.trial(&self.a, self.k, &name, &text, self.timeout)?;
         // A recording that cannot be read leaves the cell empty, not the trial unrecorded.
         let divergence = recorded_divergence(stations, &name, &trial_sc).unwrap_or_else(|e| {
             eprintln!("study: trial {name}: no divergence from its recordings: {e:#}");
             f64::NAN
         });
         self.gaps
-            .push(r.setup_s + Duration::from_millis(500).as_secs_f64());
+            .push(r.setup_s + crate::session::trials::LEAD.as_secs_f64());
         self.log(t, &name, &r)?;
         let (rows, line) = rows(study, t, &trial_sc, &r, divergence, cut, attempt);
         tables.append(t, &rows, attempt)?;
